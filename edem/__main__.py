@@ -1,0 +1,5 @@
+import sys
+
+from edem.cli import main
+
+sys.exit(main())

@@ -1,0 +1,91 @@
+"""The `edem` command line (SPEC 9). Exit status 0 success, 1 failed check, 2 bad input."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from edem.errors import InputError, SolverError
+
+
+def _run(args: argparse.Namespace) -> int:
+    from edem.results import write_results
+    from edem.scene import load_scene
+    from edem.solver import run
+
+    scene = load_scene(args.scene)
+    method = args.method or scene.method
+    out = Path(args.out) if args.out else Path("results") / f"{scene.name}-{method}"
+    n = len(scene.load.time_s)
+    bar = None
+    if n > 1 and sys.stderr.isatty():
+        from tqdm import tqdm
+
+        bar = tqdm(total=n, desc=f"{scene.name} ({method})", unit="step", file=sys.stderr)
+    try:
+        result = run(scene, method, progress=None if bar is None else (lambda k: bar.update(1)))
+    finally:
+        if bar is not None:
+            bar.close()
+    write_results(result, out)
+    last = result.steps[-1]
+    print(
+        f"{scene.name}: {method.upper()}, {len(result.steps)} time point(s), {result.n_springs} springs, "
+        f"{result.wall_time_s:.3f} s\n"
+        f"  peak pressure {max(s.peak_pressure_mpa for s in result.steps):.4g} MPa, "
+        f"max contact area {max(s.contact_area_mm2 for s in result.steps):.4g} mm^2, "
+        f"final displacement [{', '.join(f'{x:.4g}' for x in last.displacement_mm)}] mm\n"
+        f"  results: {out}/ (summary.json, timeseries.csv, pressure.pvd)"
+    )
+    return 0
+
+
+def _scenes(args: argparse.Namespace) -> int:
+    from edem.scene import builtin_scene_names, resolve_scene_path
+
+    names = builtin_scene_names()
+    if args.write:
+        target = Path(args.write)
+        target.mkdir(parents=True, exist_ok=True)
+        for name in names:
+            (target / f"{name}.toml").write_text(resolve_scene_path(name).read_text(encoding="utf-8"), encoding="utf-8")
+        print(f"wrote {len(names)} scene files to {target}/")
+        return 0
+    import tomllib
+
+    for name in names:
+        data = tomllib.loads(resolve_scene_path(name).read_text(encoding="utf-8"))
+        summary = data.get("scene", {}).get("description", "").strip().splitlines()
+        print(f"{name:28s} {summary[0] if summary else ''}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="edem", description="Discrete-element (DEM/EDEM) joint contact solver.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("run", help="solve a scene with the discrete method")
+    p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
+    p.add_argument("--method", choices=("edem", "dem"), help="overrides [solver] method")
+    p.add_argument("--out", help="result directory (default results/<scene>-<method>)")
+    p.set_defaults(func=_run)
+    p = sub.add_parser("scenes", help="list the built-in scenes")
+    p.add_argument("--write", metavar="DIR", help="write their TOML files to DIR for editing")
+    p.set_defaults(func=_scenes)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except InputError as exc:
+        print(f"edem {args.command}: bad input: {exc}", file=sys.stderr)
+        return 2
+    except SolverError as exc:
+        print(f"edem {args.command}: no solution: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

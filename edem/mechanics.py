@@ -1,0 +1,316 @@
+"""Rigid-body mechanics of the spring bed: operators, stiffness and the unilateral solve.
+
+Notation of SPEC 2 and thesis chapter 3. The mobile body M has the generalised displacement
+u = (u_G, q) in R^6 about its reference point G. A point c of M moves by B u = u_G + q x (c - G)
+(eq. 3.1-3.3). Every load-carrying element j (a contact spring or a ligament) is reduced to
+
+    a unit generalised direction g_j in R^6, with the element's approach delta_j = g_j . u, and
+    a scalar force s_j(delta_j) (compression for springs, tension for ligaments),
+
+so that the element resists the motion with the generalised force max(s_j, 0) g_j. For a contact
+spring g = B^T n = (n, (c - G) x n); for a ligament pulling M towards F along e, g = -B^T e.
+Contact springs may also carry shear: f_t = f_t0 + A k_s (I - n n^T) B u while in contact.
+
+Static equilibrium (eq. 3.13, 3.18 with the push-back folded into s_j and f_t0) is the
+stationarity of the convex energy Pi(u) = sum_j phi_j(g_j . u) + shear - T . u with
+phi_j' = max(s_j, 0). ``solve_unilateral`` minimises it by a semismooth Newton method (a
+primal-dual active set that adds and removes elements), globalised by an Armijo line search,
+and ends with the KKT check of SPEC 2.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from edem.errors import SolverError
+
+DOF_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+
+def confined_modulus_mpa(youngs_modulus_mpa: float, poissons_ratio: float) -> float:
+    """E' = E (1 - nu) / ((1 + nu)(1 - 2 nu)): the normal spring modulus of eq. 3.7."""
+    nu = poissons_ratio
+    return youngs_modulus_mpa * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """W_v with W_v a = v x a (eq. 3.2)."""
+    x, y, z = v
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def rotation_matrix(rotation_vector_rad: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula: the finite rotation whose axis-angle vector is ``rotation_vector_rad``."""
+    angle = float(np.linalg.norm(rotation_vector_rad))
+    if angle < 1e-300:
+        return np.eye(3)
+    k = skew(np.asarray(rotation_vector_rad, float) / angle)
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+
+
+def rotation_vector(rotation: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`rotation_matrix` (axis-angle vector of a rotation matrix, angle < pi)."""
+    cos_angle = np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0)
+    angle = float(np.arccos(cos_angle))
+    axial = np.array(
+        [rotation[2, 1] - rotation[1, 2], rotation[0, 2] - rotation[2, 0], rotation[1, 0] - rotation[0, 1]]
+    )
+    if angle < 1e-8:
+        return 0.5 * axial
+    return angle / (2.0 * np.sin(angle)) * axial
+
+
+def generalised_directions(points_mm: np.ndarray, directions: np.ndarray, reference_point_mm: np.ndarray) -> np.ndarray:
+    """Rows B_i^T d_i = (d_i, (c_i - G) x d_i): the rigid motion seen along d_i at c_i (eq. 3.3)."""
+    arm = points_mm - reference_point_mm
+    return np.hstack([directions, np.cross(arm, directions)])
+
+
+@dataclass(frozen=True)
+class NormalLaw:
+    """Scalar force of every element as a function of its approach delta (SPEC 2-3).
+
+    Linear elements: s = s0 + c delta (the threshold law with the EDEM push-back in s0, the
+    linear gap law with s0 = A E' (t - h) / t, ligaments). Logarithmic elements (the gap-log law,
+    Blankevoort) have a thickness t > 0: with compression d = d0 + delta and a = c t = A E',
+    s = -a ln(1 - d / t) for d > 0 and its linear extension s = c d for d <= 0.
+    """
+
+    offset: np.ndarray  # s0 in N (linear) or d0 in mm (log)
+    stiffness_n_per_mm: np.ndarray  # c (for log elements: the stiffness at d = 0)
+    log_thickness_mm: np.ndarray  # t for log elements, 0 for linear ones
+
+    @staticmethod
+    def linear(offset_n: np.ndarray, stiffness_n_per_mm: np.ndarray) -> "NormalLaw":
+        return NormalLaw(np.asarray(offset_n, float), np.asarray(stiffness_n_per_mm, float), np.zeros(len(offset_n)))
+
+    @staticmethod
+    def concatenate(*laws: "NormalLaw") -> "NormalLaw":
+        return NormalLaw(*(np.concatenate([getattr(law, f) for law in laws]) for f in ("offset", "stiffness_n_per_mm", "log_thickness_mm")))
+
+    def _log_parts(self, approach_mm: np.ndarray):
+        t = self.log_thickness_mm
+        is_log = t > 0
+        d = self.offset + approach_mm
+        compressed = is_log & (d > 0)
+        ratio = np.where(compressed, d / np.where(is_log, t, 1.0), 0.0)
+        return is_log, compressed, d, ratio
+
+    def force_and_stiffness(self, approach_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        c = self.stiffness_n_per_mm
+        is_log, compressed, d, ratio = self._log_parts(approach_mm)
+        force = np.where(is_log, c * d, self.offset + c * approach_mm)
+        stiffness = c.copy()
+        if np.any(compressed):
+            inside = np.minimum(ratio[compressed], 1.0)
+            t = self.log_thickness_mm[compressed]
+            with np.errstate(divide="ignore"):
+                force[compressed] = -c[compressed] * t * np.log1p(-inside)
+                stiffness[compressed] = c[compressed] / (1.0 - inside)
+        return force, stiffness
+
+    def energy(self, approach_mm: np.ndarray) -> np.ndarray:
+        """phi_j with phi_j' = max(s_j, 0); +inf where a log element is compressed past t."""
+        c = self.stiffness_n_per_mm
+        is_log, compressed, d, ratio = self._log_parts(approach_mm)
+        linear_force = self.offset + c * approach_mm
+        out = np.where(is_log, 0.0, np.maximum(linear_force, 0.0) ** 2 / (2.0 * c))
+        if np.any(compressed):
+            inside = ratio[compressed]
+            t = self.log_thickness_mm[compressed]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                e = c[compressed] * t * t * ((1.0 - inside) * np.log1p(-np.minimum(inside, 1.0)) + inside)
+            out[compressed] = np.where(inside < 1.0, e, np.inf)
+        return out
+
+    def max_approach_mm(self) -> np.ndarray:
+        """Largest admissible approach: a log element cannot be compressed past its thickness."""
+        is_log = self.log_thickness_mm > 0
+        return np.where(is_log, self.log_thickness_mm - self.offset, np.inf)
+
+
+@dataclass(frozen=True)
+class ShearTerms:
+    """Shear of the contact springs, active only while the spring is in compression (eq. 3.6)."""
+
+    arm_mm: np.ndarray  # (n, 3) c_i - G
+    normals: np.ndarray  # (n, 3)
+    stiffness_n_per_mm: np.ndarray  # (n,) A_i k_s
+    stored_force_n: np.ndarray  # (n, 3) tangential stored force (EDEM push-back)
+
+    def stiffness(self, active: np.ndarray) -> np.ndarray:
+        """sum over active springs of A k_s B^T (I - n n^T) B = A k_s (B^T B - g g^T)."""
+        w = self.stiffness_n_per_mm * active
+        if not np.any(w):
+            return np.zeros((6, 6))
+        r = self.arm_mm
+        wr = (w[:, None] * r).sum(axis=0)
+        k = np.zeros((6, 6))
+        k[:3, :3] = w.sum() * np.eye(3)
+        k[:3, 3:] = -skew(wr)
+        k[3:, :3] = skew(wr)
+        k[3:, 3:] = (w * np.einsum("ij,ij->i", r, r)).sum() * np.eye(3) - np.einsum("i,ij,ik->jk", w, r, r)
+        g = generalised_directions(r, self.normals, np.zeros(3))
+        return k - np.einsum("i,ij,ik->jk", w, g, g)
+
+    def force(self, u: np.ndarray, active: np.ndarray) -> np.ndarray:
+        """Tangential spring forces (n, 3): stored part plus A k_s (I - n n^T) B u, zero if inactive."""
+        displacement = u[:3] + np.cross(u[3:], self.arm_mm)
+        tangential = displacement - np.einsum("ij,ij->i", displacement, self.normals)[:, None] * self.normals
+        f = self.stored_force_n + self.stiffness_n_per_mm[:, None] * tangential
+        return f * active[:, None]
+
+    def generalised_force(self, u: np.ndarray, active: np.ndarray) -> np.ndarray:
+        f = self.force(u, active)
+        return np.concatenate([f.sum(axis=0), np.cross(self.arm_mm, f).sum(axis=0)])
+
+
+@dataclass
+class UnilateralSolution:
+    """Outcome of one static solve (SPEC 2): displacement, element forces and the KKT figures."""
+
+    displacement: np.ndarray  # (6,) u = (u_G mm, q rad)
+    element_force_n: np.ndarray  # (m,) s_j(u); the element carries max(s_j, 0)
+    active: np.ndarray  # (m,) bool, s_j > 0
+    iterations: int
+    force_residual_n: float  # |sum of element forces - applied force| over the free DOFs
+    moment_residual_nmm: float
+
+
+def _free_mask(fixed_dofs: tuple[str, ...]) -> np.ndarray:
+    free = np.ones(6, bool)
+    for name in fixed_dofs:
+        free[DOF_NAMES.index(name)] = False
+    return free
+
+
+def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: float, rtol: float = 1e-10) -> list[str]:
+    """Names of the free DOFs along which the 6x6 stiffness vanishes (the null space of K_free).
+
+    Rotations are scaled by a characteristic length so that all blocks are in N/mm before the
+    eigenvalues are compared (SPEC 2: detect rank deficiency, say which DOFs are unrestrained).
+    """
+    scale = np.array([1.0, 1.0, 1.0, length_scale_mm, length_scale_mm, length_scale_mm])[free]
+    k = stiffness[np.ix_(free, free)] / np.outer(scale, scale)
+    values, vectors = np.linalg.eigh(k)
+    top = float(np.abs(values).max(initial=0.0))
+    null = vectors[:, values <= rtol * top] if top > 0 else np.eye(k.shape[0])
+    if null.size == 0:
+        return []
+    weight = np.sqrt((null**2).sum(axis=1))
+    return [str(n) for n in np.array(DOF_NAMES)[free][weight > 0.3]]
+
+
+def solve_unilateral(
+    directions: np.ndarray,
+    law: NormalLaw,
+    load: np.ndarray,
+    *,
+    fixed_dofs: tuple[str, ...] = (),
+    shear: ShearTerms | None = None,
+    length_scale_mm: float = 1.0,
+    rtol: float = 1e-10,
+    max_iterations: int = 60,
+) -> UnilateralSolution:
+    """Equilibrium sum_j max(s_j(g_j . u), 0) g_j + shear(u) = T of the unilateral elements.
+
+    ``directions`` (m, 6) are the rows g_j and ``law`` gives s_j. ``shear`` applies to the first
+    ``len(shear.normals)`` elements (the contact springs; ligaments carry no shear). This is the
+    minimisation of the convex energy Pi by a semismooth Newton iteration: each step solves with
+    the stiffness of the current active set, which adds elements as well as removes them (the
+    thesis's removal-only loop can stop on a wrong set), damped by an Armijo line search on Pi and
+    a fraction-to-boundary rule for log-law elements. The first step takes every element as
+    active, as DEM does. On return the KKT conditions hold: active elements are compressed,
+    inactive ones are not, and the residual of force and moment balance is at round-off.
+
+    Raises SolverError when no equilibrium exists (the load pulls the bodies apart) or a free DOF
+    is unrestrained (singular stiffness), naming the DOFs.
+    """
+    m = directions.shape[0]
+    free = _free_mask(fixed_dofs)
+    load = np.where(free, np.asarray(load, float), 0.0)
+    to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)  # moments in N
+    n_shear = 0 if shear is None else shear.normals.shape[0]
+
+    def forces(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return law.force_and_stiffness(directions @ u)
+
+    def gradient(u: np.ndarray, s: np.ndarray, active: np.ndarray) -> np.ndarray:
+        grad = directions.T @ np.where(active, s, 0.0) - load
+        if shear is not None:
+            grad = grad + shear.generalised_force(u, active[:n_shear])
+        return np.where(free, grad, 0.0)
+
+    def energy(u: np.ndarray, active: np.ndarray) -> float:
+        e = float(law.energy(directions @ u).sum()) - float(load @ u)
+        if shear is not None:
+            f = shear.force(u, active[:n_shear])
+            e += 0.5 * float((np.einsum("ij,ij->i", f, f) / np.maximum(shear.stiffness_n_per_mm, 1e-300)).sum())
+        return e
+
+    def stiffness(k: np.ndarray, active: np.ndarray) -> np.ndarray:
+        hessian = directions.T @ (directions * (k * active)[:, None])
+        if shear is not None:
+            hessian = hessian + shear.stiffness(active[:n_shear])
+        return hessian
+
+    u = np.zeros(6)
+    s, k = forces(u)
+    active = np.ones(m, bool)
+    for iteration in range(1, max_iterations + 1):
+        hessian = stiffness(k, active)
+        if unrestrained_dofs(hessian, free, length_scale_mm):
+            everything = stiffness(k, np.ones(m, bool))
+            missing = unrestrained_dofs(everything, free, length_scale_mm)
+            if missing:
+                raise SolverError(
+                    f"the stiffness matrix is singular: nothing resists motion along {', '.join(missing)}; "
+                    "fix these DOFs in [constraints] fixed_dofs, or give the cartilage shear stiffness "
+                    "(cartilage.shear_modulus_mpa) or ligaments"
+                )
+            if not np.any(active):
+                raise SolverError(
+                    "no equilibrium: no spring stays in compression under this load, so the load pulls "
+                    "the bodies apart (or pushes along a direction no spring resists)"
+                )
+            # A transiently small active set: regularise with a trace of every element's stiffness.
+            hessian = hessian + 1e-8 * everything
+        step = np.zeros(6)
+        step[free] = -np.linalg.solve(hessian[np.ix_(free, free)], gradient(u, s, active)[free])
+        approach, rate = directions @ u, directions @ step
+        room = law.max_approach_mm() - approach
+        alpha = min(1.0, float(np.min(0.99 * room[rate > 0] / rate[rate > 0], initial=np.inf)))
+        slope = float(gradient(u, s, s > 0) @ step)
+        if slope < 0.0:
+            e0 = energy(u, s > 0)
+            while alpha > 1e-12 and energy(u + alpha * step, s > 0) > e0 + 1e-4 * alpha * slope:
+                alpha *= 0.5
+        u = u + alpha * step
+        s, k = forces(u)
+        new_active = s > 0
+        residual = gradient(u, s, new_active)
+        reference = np.linalg.norm(load * to_newton) + float(np.abs(np.where(new_active, s, 0.0)).sum())
+        if np.linalg.norm(residual * to_newton) <= rtol * max(reference, 1e-300):
+            active = new_active
+            break
+        if not np.any(new_active):
+            raise SolverError(
+                "no equilibrium: no spring stays in compression under this load, so the load pulls "
+                "the bodies apart"
+            )
+        active = new_active
+    else:
+        raise SolverError(
+            f"the active-set iteration did not converge in {max_iterations} iterations "
+            f"(residual {np.linalg.norm(residual * to_newton):.3e} N)"
+        )
+    return UnilateralSolution(
+        displacement=u,
+        element_force_n=s,
+        active=active,
+        iterations=iteration,
+        force_residual_n=float(np.linalg.norm(residual[:3])),
+        moment_residual_nmm=float(np.linalg.norm(residual[3:])),
+    )

@@ -1,0 +1,347 @@
+"""Scene files (SPEC 9): TOML -> a validated, immutable Scene.
+
+Every section but geometry, cartilage and load is optional and its absence switches the feature
+off. Bad input raises InputError naming the file, the key and what was expected.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from edem.errors import InputError
+from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, load_series_from_table
+from edem.mechanics import DOF_NAMES
+from edem.springs import Cartilage, Ligament
+from geometries.surface import TriangleSurface
+
+SECTIONS = {
+    "scene": {"name", "description"},
+    "geometry": None,  # builtin parameters are checked by the builder
+    "cartilage": {
+        "youngs_modulus_mpa",
+        "poissons_ratio",
+        "law",
+        "max_spring_length_mm",
+        "thickness_mm",
+        "shear_modulus_mpa",
+    },
+    "load": None,  # checked by edem.loads
+    "kinematics": None,  # checked by edem.loads
+    "constraints": {"fixed_dofs"},
+    "ligaments": {"name", "mobile_point_mm", "fixed_point_mm", "youngs_modulus_mpa", "area_mm2", "rest_length_mm"},
+    "viscoelastic": {"relaxation_time_s", "integrator", "allow_unstable"},
+    "solver": {"method"},
+    "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness"},
+}
+FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm"}
+LAWS = ("threshold", "gap", "gap-log")
+
+
+@dataclass(frozen=True)
+class Viscoelastic:
+    """Kelvin-Voigt springs, damping = tau * stiffness (SPEC 4, eq. 6.13)."""
+
+    relaxation_time_s: float
+    integrator: str = "exact"  # exact | rk2
+    allow_unstable: bool = False  # run RK2 beyond dt > 2 tau (with a warning) instead of refusing
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """Everything one run needs, validated. Springs: one per non-degenerate mobile triangle."""
+
+    name: str
+    description: str
+    source: str
+    mobile: TriangleSurface
+    fixed: TriangleSurface
+    reference_point_mm: np.ndarray
+    cartilage: Cartilage
+    load: LoadSeries
+    kinematics: JointKinematics | None = None
+    fixed_dofs: tuple[str, ...] = ()
+    ligaments: tuple[Ligament, ...] = ()
+    viscoelastic: Viscoelastic | None = None
+    method: str = "edem"
+    fe: dict | None = None
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def spring_triangle(self) -> np.ndarray:
+        """Index of the mobile triangle that carries each spring (degenerate ones carry none)."""
+        return np.flatnonzero(self.mobile.areas_mm2 > 0.0)
+
+    @property
+    def spring_centroid_mm(self) -> np.ndarray:
+        return self.mobile.centroids_mm[self.spring_triangle]
+
+    @property
+    def spring_normal(self) -> np.ndarray:
+        return self.mobile.unit_normals[self.spring_triangle]
+
+    @property
+    def spring_area_mm2(self) -> np.ndarray:
+        return self.mobile.areas_mm2[self.spring_triangle]
+
+
+# ---------------------------------------------------------------------------------------------
+# Small typed readers: each names the file, the key and what it expected.
+
+
+class _Reader:
+    def __init__(self, table: dict[str, Any], file: str, section: str, allowed: set[str] | None) -> None:
+        self.table, self.file, self.section = table, file, section
+        if allowed is not None:
+            unknown = sorted(set(table) - allowed)
+            if unknown:
+                raise InputError(
+                    f"unknown key(s) {', '.join(unknown)} in [{section}]",
+                    file=file,
+                    key=f"{section}.{unknown[0]}",
+                    expected="one of " + ", ".join(sorted(allowed)),
+                )
+
+    def key(self, name: str) -> str:
+        return f"{self.section}.{name}"
+
+    def number(self, name: str, default: float | None = None, *, positive: bool = False, low: float | None = None, high: float | None = None, what: str = "") -> float | None:
+        if name not in self.table:
+            if default is None:
+                return None
+            return float(default)
+        value = self.table[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise InputError(f"{value!r} is not a finite number", file=self.file, key=self.key(name), expected=what or "a number")
+        value = float(value)
+        if positive and value <= 0:
+            raise InputError(f"{value:g} is not positive", file=self.file, key=self.key(name), expected=what or "a number > 0")
+        if (low is not None and value <= low) or (high is not None and value >= high):
+            raise InputError(f"{value:g} is out of range", file=self.file, key=self.key(name), expected=what)
+        return value
+
+    def required_number(self, name: str, **kw: Any) -> float:
+        if name not in self.table:
+            raise InputError(f"[{self.section}] has no '{name}'", file=self.file, key=self.key(name), expected=kw.get("what") or "a number")
+        return self.number(name, **kw)  # type: ignore[return-value]
+
+    def string(self, name: str, default: str | None = None, choices: tuple[str, ...] | None = None) -> str | None:
+        value = self.table.get(name, default)
+        if value is None:
+            return None
+        if not isinstance(value, str):
+            raise InputError(f"{value!r} is not a string", file=self.file, key=self.key(name), expected="a string")
+        if choices is not None and value not in choices:
+            raise InputError(f"'{value}' is not allowed", file=self.file, key=self.key(name), expected="one of " + ", ".join(choices))
+        return value
+
+    def vector(self, name: str, default: Any = None) -> np.ndarray | None:
+        value = self.table.get(name, default)
+        if value is None:
+            return None
+        ok = isinstance(value, list) and len(value) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value)
+        if not ok or not all(math.isfinite(x) for x in value):
+            raise InputError(f"{value!r} is not a point", file=self.file, key=self.key(name), expected="three finite numbers [x, y, z]")
+        return np.array(value, float)
+
+
+def _parse_toml(path: Path) -> dict[str, Any]:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("scene file not found", file=path, expected="a TOML scene file or a built-in scene name (edem scenes)") from None
+    except OSError as exc:
+        raise InputError(f"cannot read the scene file: {exc.strerror}", file=path) from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"malformed TOML: {exc}", file=path, expected="valid TOML (https://toml.io)") from None
+
+
+def builtin_scene_names() -> list[str]:
+    return sorted(p.name[: -len(".toml")] for p in resources.files("edem.scenes").iterdir() if p.name.endswith(".toml"))
+
+
+def resolve_scene_path(scene: str | Path) -> Path:
+    """A scene argument is a TOML path or the name of a built-in scene."""
+    path = Path(scene)
+    if path.exists() or str(scene).endswith(".toml"):
+        return path
+    names = builtin_scene_names()
+    if str(scene) in names:
+        return Path(str(resources.files("edem.scenes").joinpath(f"{scene}.toml")))
+    raise InputError(f"'{scene}' is neither a scene file nor a built-in scene", expected="a .toml path or one of " + ", ".join(names))
+
+
+def load_scene(scene: str | Path) -> Scene:
+    """Read, validate and build a scene (geometry, springs, loads) from a TOML file or built-in name."""
+    path = resolve_scene_path(scene)
+    data = _parse_toml(path)
+    file = str(path)
+    unknown = sorted(set(data) - set(SECTIONS))
+    if unknown:
+        raise InputError(f"unknown section [{unknown[0]}]", file=file, key=unknown[0], expected="sections " + ", ".join(SECTIONS))
+    for section in ("geometry", "cartilage", "load"):
+        if not isinstance(data.get(section), dict):
+            raise InputError(f"missing section [{section}]", file=file, key=section, expected=f"a [{section}] table (SPEC 9)")
+    warnings: list[str] = []
+
+    meta = _Reader(data.get("scene", {}), file, "scene", SECTIONS["scene"])
+    name = meta.string("name", path.stem)
+    description = meta.string("description", "")
+
+    cart = _Reader(data["cartilage"], file, "cartilage", SECTIONS["cartilage"])
+    law = cart.string("law", "threshold", LAWS)
+    thickness = cart.number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
+    if law != "threshold" and thickness is None:
+        raise InputError(f"the '{law}' law needs the undeformed thickness", file=file, key="cartilage.thickness_mm", expected="a thickness in mm > 0")
+    window = cart.number("max_spring_length_mm", 3.5 if law == "threshold" else 2.0 * (thickness or 0.0), positive=True, what="h_max in mm (> 0)")
+    if law != "threshold" and window < thickness:
+        raise InputError(
+            f"the ray window h_max = {window:g} mm is shorter than the thickness {thickness:g} mm",
+            file=file,
+            key="cartilage.max_spring_length_mm",
+            expected="h_max >= thickness_mm for the gap laws (springs beyond h_max are not seen)",
+        )
+    cartilage = Cartilage(
+        youngs_modulus_mpa=cart.required_number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
+        poissons_ratio=cart.required_number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
+        law=law,
+        max_spring_length_mm=window,
+        thickness_mm=thickness,
+        shear_modulus_mpa=cart.number("shear_modulus_mpa", 0.0, what="a shear modulus in MPa (>= 0)"),
+    )
+    if cartilage.shear_modulus_mpa < 0:
+        raise InputError("negative shear modulus", file=file, key="cartilage.shear_modulus_mpa", expected="a shear modulus in MPa (>= 0)")
+
+    mobile, fixed, reference_point, attachments, geo_description = _load_geometry(data["geometry"], path, cartilage)
+    description = description or geo_description
+
+    load = load_series_from_table(data["load"], path)
+    kinematics = None
+    if "kinematics" in data:
+        kinematics = angle_series_from_table(data["kinematics"], path, load.time_s)
+
+    constraints = _Reader(data.get("constraints", {}), file, "constraints", SECTIONS["constraints"])
+    fixed_dofs = constraints.table.get("fixed_dofs", [])
+    if not isinstance(fixed_dofs, list) or not all(isinstance(d, str) and d in DOF_NAMES for d in fixed_dofs):
+        raise InputError(f"{fixed_dofs!r} is not a list of DOF names", file=file, key="constraints.fixed_dofs", expected="a subset of " + ", ".join(DOF_NAMES))
+
+    ligaments = tuple(_ligament(entry, i, file, attachments) for i, entry in enumerate(_table_list(data, "ligaments", file)))
+
+    viscoelastic = None
+    if "viscoelastic" in data:
+        ve = _Reader(data["viscoelastic"], file, "viscoelastic", SECTIONS["viscoelastic"])
+        allow = ve.table.get("allow_unstable", False)
+        if not isinstance(allow, bool):
+            raise InputError(f"{allow!r} is not true/false", file=file, key="viscoelastic.allow_unstable", expected="true or false")
+        viscoelastic = Viscoelastic(
+            relaxation_time_s=ve.required_number("relaxation_time_s", positive=True, what="the relaxation time tau in s (> 0)"),
+            integrator=ve.string("integrator", "exact", ("exact", "rk2")),
+            allow_unstable=allow,
+        )
+
+    solver = _Reader(data.get("solver", {}), file, "solver", SECTIONS["solver"])
+    method = solver.string("method", "edem", ("edem", "dem"))
+    fe = data.get("fe")
+    if fe is not None:
+        _Reader(fe, file, "fe", SECTIONS["fe"])
+
+    return Scene(
+        name=name,
+        description=description,
+        source=file,
+        mobile=mobile,
+        fixed=fixed,
+        reference_point_mm=reference_point,
+        cartilage=cartilage,
+        load=load,
+        kinematics=kinematics,
+        fixed_dofs=tuple(fixed_dofs),
+        ligaments=ligaments,
+        viscoelastic=viscoelastic,
+        method=method,
+        fe=fe,
+        warnings=tuple(warnings),
+    )
+
+
+def _table_list(data: dict[str, Any], name: str, file: str) -> list[dict[str, Any]]:
+    value = data.get(name, [])
+    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+        raise InputError(f"[{name}] must be an array of tables", file=file, key=name, expected=f"[[{name}]] entries")
+    return value
+
+
+def _ligament(entry: dict[str, Any], index: int, file: str, attachments: dict[str, tuple[np.ndarray, np.ndarray]]) -> Ligament:
+    r = _Reader(entry, file, f"ligaments[{index}]", SECTIONS["ligaments"])
+    name = r.string("name", f"ligament-{index}")
+    mobile_point = r.vector("mobile_point_mm")
+    fixed_point = r.vector("fixed_point_mm")
+    if mobile_point is None or fixed_point is None:
+        if name not in attachments:
+            raise InputError(
+                f"ligament '{name}' has no attachment points",
+                file=file,
+                key=r.key("mobile_point_mm"),
+                expected="mobile_point_mm and fixed_point_mm, or the name of a ligament of the built-in geometry"
+                + (f" ({', '.join(attachments)})" if attachments else ""),
+            )
+        mobile_point = attachments[name][0] if mobile_point is None else mobile_point
+        fixed_point = attachments[name][1] if fixed_point is None else fixed_point
+    initial = float(np.linalg.norm(fixed_point - mobile_point))
+    if initial == 0.0:
+        raise InputError(f"ligament '{name}' has coincident attachment points", file=file, key=r.key("fixed_point_mm"), expected="two distinct points")
+    return Ligament(
+        name=name,
+        mobile_point_mm=mobile_point,
+        fixed_point_mm=fixed_point,
+        youngs_modulus_mpa=r.required_number("youngs_modulus_mpa", positive=True, what="the ligament's Young's modulus in MPa (> 0)"),
+        area_mm2=r.required_number("area_mm2", positive=True, what="the cross-section area in mm^2 (> 0)"),
+        rest_length_mm=r.number("rest_length_mm", initial, positive=True, what="the slack length in mm (default: the initial distance)"),
+    )
+
+
+def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage):
+    """Mobile and fixed surfaces from a built-in generator or mesh files, oriented and checked."""
+    from geometries.mesh_io import check_pair_distance, orient_pair, read_surface
+
+    file = str(path)
+    reference_point = None
+    if "builtin" in table:
+        from geometries.builders import build_geometry
+
+        params = {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm")}
+        if not isinstance(table["builtin"], str):
+            raise InputError(f"{table['builtin']!r} is not a builder name", file=file, key="geometry.builtin", expected="a string")
+        built = build_geometry(table["builtin"], params, file=file)
+        mobile, fixed = built.mobile, built.fixed
+        reference_point = built.reference_point_mm
+        attachments = {lig.name: (lig.mobile_point_mm, lig.fixed_point_mm) for lig in built.ligaments}
+        description = built.description
+    else:
+        r = _Reader(table, file, "geometry", FILE_GEOMETRY_KEYS)
+        units = r.string("units", "mm", ("mm", "m"))
+        meshes = []
+        for key in ("mobile", "fixed"):
+            rel = r.string(key)
+            if rel is None:
+                raise InputError(f"[geometry] has neither 'builtin' nor '{key}'", file=file, key=f"geometry.{key}", expected="a mesh file (STL/OBJ/PLY/VTK/VTP) or builtin = \"<generator>\"")
+            meshes.append(read_surface(path.parent / rel, units=units, key=f"geometry.{key}", name=key))
+        mobile, fixed = orient_pair(*meshes)
+        attachments, description = {}, ""
+    check_pair_distance(mobile, fixed, cartilage.max_spring_length_mm)
+    given = _Reader({"reference_point_mm": table.get("reference_point_mm")} if "reference_point_mm" in table else {}, file, "geometry", None).vector("reference_point_mm")
+    if given is not None:
+        reference_point = given
+    if reference_point is None:
+        # Area-weighted centroid of the articular surface (SPEC 2 default for G).
+        areas = mobile.areas_mm2
+        reference_point = (mobile.centroids_mm * areas[:, None]).sum(axis=0) / areas.sum()
+    return mobile, fixed, np.asarray(reference_point, float), attachments, description

@@ -1,0 +1,174 @@
+"""The geometry stage and the contact laws: springs and ligaments at one pose (SPEC 2-3).
+
+Pure functions on arrays. ``spring_geometry`` places the mobile springs at a pose, casts their
+rays against the fixed body and returns lengths and candidates; ``contact_law`` turns lengths,
+the cartilage and any stored (push-back) forces into the scalar law of ``edem.mechanics``;
+``ligament_elements`` does the same for the tension-only ligaments.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from edem.mechanics import NormalLaw, ShearTerms, confined_modulus_mpa, generalised_directions
+from edem.raycast import RayCaster
+
+
+@dataclass(frozen=True)
+class Placement:
+    """A rigid placement x = R (X - pivot) + pivot + t of a body's reference-frame points X."""
+
+    rotation: np.ndarray  # (3, 3)
+    translation_mm: np.ndarray  # (3,)
+    pivot_mm: np.ndarray  # (3,)
+
+    @staticmethod
+    def identity(pivot_mm: np.ndarray | None = None) -> "Placement":
+        return Placement(np.eye(3), np.zeros(3), np.zeros(3) if pivot_mm is None else np.asarray(pivot_mm, float))
+
+    def points(self, x_mm: np.ndarray) -> np.ndarray:
+        return (x_mm - self.pivot_mm) @ self.rotation.T + self.pivot_mm + self.translation_mm
+
+    def vectors(self, v: np.ndarray) -> np.ndarray:
+        return v @ self.rotation.T
+
+    def affine(self) -> tuple[np.ndarray, np.ndarray]:
+        """(R, b) with x = R X + b."""
+        return self.rotation, self.pivot_mm + self.translation_mm - self.rotation @ self.pivot_mm
+
+
+@dataclass(frozen=True)
+class Cartilage:
+    """Spring-bed material and law (SPEC 2-3, eq. 3.7-3.8)."""
+
+    youngs_modulus_mpa: float
+    poissons_ratio: float
+    law: str = "threshold"  # threshold | gap | gap-log
+    max_spring_length_mm: float = 3.5  # h_max: candidates (threshold) and ray window (all laws)
+    thickness_mm: float | None = None  # undeformed combined thickness t (gap laws)
+    shear_modulus_mpa: float = 0.0
+
+    @property
+    def confined_modulus_mpa(self) -> float:
+        return confined_modulus_mpa(self.youngs_modulus_mpa, self.poissons_ratio)
+
+
+@dataclass(frozen=True)
+class SpringGeometry:
+    """Springs of the mobile body at one pose: one per non-degenerate triangle (SPEC 2)."""
+
+    centroid_mm: np.ndarray  # (n, 3)
+    normal: np.ndarray  # (n, 3) unit, out of M towards F
+    area_mm2: np.ndarray  # (n,)
+    spring_length_mm: np.ndarray  # (n,) signed ray length, +inf where no hit in the window
+    candidate: np.ndarray  # (n,) bool
+
+    def directions(self, reference_point_mm: np.ndarray) -> np.ndarray:
+        return generalised_directions(self.centroid_mm, self.normal, reference_point_mm)
+
+
+def spring_geometry(
+    centroid_mm: np.ndarray,
+    normal: np.ndarray,
+    area_mm2: np.ndarray,
+    mobile: Placement,
+    caster: RayCaster,
+    fixed: Placement,
+    cartilage: Cartilage,
+) -> SpringGeometry:
+    """Geometry stage (SPEC 2, thesis 4.2.1): place M's springs and measure them against F.
+
+    Rays are cast along the springs' normals in a signed window of +-h_max (so touching or
+    interpenetrating bodies still see each other), in F's own frame. Candidates: the threshold
+    law takes every spring with a hit and h <= h_max (eq. 4.4); the gap laws take every spring
+    with a hit in the window, and the law decides whether it is compressed.
+    """
+    c = mobile.points(centroid_mm)
+    n = mobile.vectors(normal)
+    rotation, translation = fixed.affine()
+    hits = caster.cast(c, n, cartilage.max_spring_length_mm, rotation=rotation, translation=translation)
+    length = hits.spring_length_mm
+    candidate = np.isfinite(length)
+    if cartilage.law == "threshold":
+        candidate &= length <= cartilage.max_spring_length_mm
+    return SpringGeometry(c, n, area_mm2, length, candidate)
+
+
+def contact_law(
+    geometry: SpringGeometry,
+    cartilage: Cartilage,
+    stored_normal_force_n: np.ndarray,
+) -> NormalLaw:
+    """Normal law of the candidate springs (SPEC 3, eq. 3.7 and 3.19).
+
+    threshold: s = s_stored + A E' / h * delta (incremental; the stiffness follows the current h);
+    gap: s = A E' (t - h + delta) / t; gap-log: s = -A E' ln(1 - (t - h + delta) / t).
+    ``stored_normal_force_n`` is the EDEM push-back per candidate spring (zero for DEM).
+    """
+    sel = geometry.candidate
+    area = geometry.area_mm2[sel]
+    length = geometry.spring_length_mm[sel]
+    e_conf = cartilage.confined_modulus_mpa
+    if cartilage.law == "threshold":
+        return NormalLaw.linear(stored_normal_force_n, area * e_conf / length)
+    t = float(cartilage.thickness_mm)
+    if cartilage.law == "gap":
+        return NormalLaw.linear(area * e_conf * (t - length) / t, area * e_conf / t)
+    return NormalLaw(t - length, area * e_conf / t, np.full(length.shape, t))
+
+
+def shear_terms(
+    geometry: SpringGeometry,
+    cartilage: Cartilage,
+    reference_point_mm: np.ndarray,
+    stored_tangential_force_n: np.ndarray,
+) -> ShearTerms | None:
+    """Shear springs k_s = G / h (eq. 3.8; the gap laws use G / t) of the candidates, or None."""
+    if cartilage.shear_modulus_mpa == 0.0 and not np.any(stored_tangential_force_n):
+        return None
+    sel = geometry.candidate
+    h = geometry.spring_length_mm[sel] if cartilage.law == "threshold" else np.full(int(sel.sum()), float(cartilage.thickness_mm))
+    return ShearTerms(
+        arm_mm=geometry.centroid_mm[sel] - reference_point_mm,
+        normals=geometry.normal[sel],
+        stiffness_n_per_mm=geometry.area_mm2[sel] * cartilage.shear_modulus_mpa / h,
+        stored_force_n=stored_tangential_force_n,
+    )
+
+
+@dataclass(frozen=True)
+class Ligament:
+    """A tension-only linear spring between a point of M and a point of F (SPEC 2)."""
+
+    name: str
+    mobile_point_mm: np.ndarray
+    fixed_point_mm: np.ndarray
+    youngs_modulus_mpa: float
+    area_mm2: float
+    rest_length_mm: float
+
+    @property
+    def stiffness_n_per_mm(self) -> float:
+        return self.youngs_modulus_mpa * self.area_mm2 / self.rest_length_mm
+
+
+def ligament_elements(
+    ligaments: tuple[Ligament, ...], mobile: Placement, fixed: Placement, reference_point_mm: np.ndarray
+) -> tuple[np.ndarray, NormalLaw, np.ndarray]:
+    """Rows g = -B^T e, law s = k (L - L0) + k delta and current lengths (mm) of the ligaments.
+
+    e is the unit vector from the ligament's point on M to its point on F; moving M by w changes
+    the length by -e . w, so the tension grows with the approach delta = -e . w.
+    """
+    if not ligaments:
+        return np.zeros((0, 6)), NormalLaw.linear(np.zeros(0), np.zeros(0)), np.zeros(0)
+    pm = mobile.points(np.array([lig.mobile_point_mm for lig in ligaments]))
+    pf = fixed.points(np.array([lig.fixed_point_mm for lig in ligaments]))
+    span = pf - pm
+    length = np.linalg.norm(span, axis=1)
+    e = span / length[:, None]
+    k = np.array([lig.stiffness_n_per_mm for lig in ligaments])
+    rest = np.array([lig.rest_length_mm for lig in ligaments])
+    return generalised_directions(pm, -e, reference_point_mm), NormalLaw.linear(k * (length - rest), k), length

@@ -1,0 +1,85 @@
+"""Small exact geometries and scene builders shared by the tests (numpy only)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from edem.loads import LoadSeries
+from edem.scene import Scene
+from edem.springs import Cartilage
+from geometries.surface import TriangleSurface
+
+
+def grid_plate(width_mm: float, depth_mm: float, n: int, z_mm: float = 0.0, facing_up: bool = True) -> TriangleSurface:
+    """A square-gridded plate centred on the z axis, triangle normals +z (or -z)."""
+    x = np.linspace(-width_mm / 2, width_mm / 2, n + 1)
+    y = np.linspace(-depth_mm / 2, depth_mm / 2, n + 1)
+    xx, yy = np.meshgrid(x, y, indexing="ij")
+    vertices = np.column_stack([xx.ravel(), yy.ravel(), np.full(xx.size, z_mm)])
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    tris = np.vstack([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    if not facing_up:
+        tris = tris[:, ::-1]
+    return TriangleSurface(vertices, tris)
+
+
+def plane(z_of_xy, size_mm: float = 200.0) -> TriangleSurface:
+    """Two large triangles of the plane z = z_of_xy(x, y) (affine), facing down (-z)."""
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], float) * size_mm
+    vertices = np.column_stack([corners, [z_of_xy(x, y) for x, y in corners]])
+    return TriangleSurface(vertices, np.array([[0, 2, 1], [0, 3, 2]]))
+
+
+def cylinder_patch(radius_mm: float, width_mm: float, arc_deg: float, n_arc: int, n_width: int) -> TriangleSurface:
+    """Cylinder patch, axis along x through (0, 0, -R), arc centred on the top (z = 0); normals outward."""
+    theta = np.radians(np.linspace(-arc_deg / 2, arc_deg / 2, n_arc + 1))
+    x = np.linspace(-width_mm / 2, width_mm / 2, n_width + 1)
+    xx, tt = np.meshgrid(x, theta, indexing="ij")
+    vertices = np.column_stack([xx.ravel(), radius_mm * np.sin(tt.ravel()), radius_mm * np.cos(tt.ravel()) - radius_mm])
+    idx = np.arange(xx.size).reshape(xx.shape)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    tris = np.vstack([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    surface = TriangleSurface(vertices, tris)
+    # Outward = away from the axis: flip if the first triangle points inward.
+    axis_to_c = surface.centroids_mm[0] - np.array([surface.centroids_mm[0, 0], 0.0, -radius_mm])
+    if surface.unit_normals[0] @ axis_to_c < 0:
+        surface = TriangleSurface(vertices, tris[:, ::-1])
+    return surface
+
+
+def make_scene(
+    mobile: TriangleSurface,
+    fixed: TriangleSurface,
+    force_n,
+    *,
+    time_s=None,
+    moment_nmm=None,
+    youngs_modulus_mpa: float = 10.35,
+    poissons_ratio: float = 0.42,
+    law: str = "threshold",
+    max_spring_length_mm: float = 3.5,
+    thickness_mm: float | None = None,
+    shear_modulus_mpa: float = 0.0,
+    fixed_dofs=(),
+    reference_point_mm=None,
+    **extra,
+) -> Scene:
+    force = np.atleast_2d(np.asarray(force_n, float))
+    time = np.arange(len(force), dtype=float) if time_s is None else np.asarray(time_s, float)
+    moment = np.zeros_like(force) if moment_nmm is None else np.atleast_2d(np.asarray(moment_nmm, float))
+    if reference_point_mm is None:
+        a = mobile.areas_mm2
+        reference_point_mm = (mobile.centroids_mm * a[:, None]).sum(axis=0) / a.sum()
+    return Scene(
+        name="test",
+        description="",
+        source="<test>",
+        mobile=mobile,
+        fixed=fixed,
+        reference_point_mm=np.asarray(reference_point_mm, float),
+        cartilage=Cartilage(youngs_modulus_mpa, poissons_ratio, law, max_spring_length_mm, thickness_mm, shear_modulus_mpa),
+        load=LoadSeries(time, force, moment),
+        fixed_dofs=tuple(fixed_dofs),
+        **extra,
+    )
