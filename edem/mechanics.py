@@ -203,6 +203,16 @@ def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: 
     return [str(n) for n in np.array(DOF_NAMES)[free][weight > 0.3]]
 
 
+def _balanceable(directions: np.ndarray, load: np.ndarray, free: np.ndarray, to_newton: np.ndarray) -> bool:
+    """Whether T = sum_j lambda_j g_j has a solution with every lambda_j >= 0 (non-negative least squares)."""
+    from scipy.optimize import nnls
+
+    a = (directions * to_newton)[:, free].T
+    b = (load * to_newton)[free]
+    _, misfit = nnls(a, b)
+    return misfit <= 1e-6 * max(float(np.linalg.norm(b)), 1e-300)
+
+
 def solve_unilateral(
     directions: np.ndarray,
     law: NormalLaw,
@@ -291,7 +301,8 @@ def solve_unilateral(
         s, k = forces(u)
         new_active = s > 0
         residual = gradient(u, s, new_active)
-        reference = np.linalg.norm(load * to_newton) + float(np.abs(np.where(new_active, s, 0.0)).sum())
+        # Force scale of the problem: the load and every element force (incl. the stored ones).
+        reference = np.linalg.norm(load * to_newton) + float(np.abs(s).sum())
         if np.linalg.norm(residual * to_newton) <= rtol * max(reference, 1e-300):
             active = new_active
             break
@@ -302,6 +313,11 @@ def solve_unilateral(
             )
         active = new_active
     else:
+        if not _balanceable(directions, load, free, to_newton):
+            raise SolverError(
+                "no equilibrium: compression-only springs cannot balance this load (its line of "
+                "action passes outside the region where the bodies can touch, or it pulls them apart)"
+            )
         raise SolverError(
             f"the active-set iteration did not converge in {max_iterations} iterations "
             f"(residual {np.linalg.norm(residual * to_newton):.3e} N)"

@@ -1,0 +1,534 @@
+"""Time-dependent loads and joint angles read from a scene's `[load]` and `[kinematics]` tables.
+
+Pure data I/O (SPEC 9, scene file): the scene loader hands over already-parsed TOML tables and
+the scene file path (for messages and relative paths); this module returns validated float64
+arrays. The solver applies them per time point as in SPEC 3 step 1 (place the fixed body by the
+joint angle, apply the load T_k). Every bad input raises `InputError` naming the file, the scene
+key and what was expected (SPEC 9).
+
+Units: time in s, force in N, moment in N·mm, lengths in mm, angles in degrees in files and
+scene tables, radians in `JointKinematics.angle_rad`. OpenSim writes moments in N·m: they are
+converted to N·mm (x 1000) when read from .sto/.mot unless the table says `moment_unit = "nmm"`.
+
+OpenSim axes are X anterior, Y superior, Z right. No axis mapping is applied here: users map them
+onto the scene's axes by naming the columns in `force_columns` / `moment_columns` in scene-axis
+order, a leading "-" negating a column (e.g. `force_columns = ["..._fz", "..._fx", "..._fy"]`).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from edem.errors import InputError
+
+NM_TO_NMM = 1000.0
+"""N·m -> N·mm."""
+
+LOAD_KEYS = (
+    "force_n", "moment_nmm", "time_s", "file", "time_column", "force_columns",
+    "moment_columns", "moment_unit", "force_scale", "time_range_s",
+)
+"""Keys allowed in the `[load]` table."""
+
+KINEMATICS_KEYS = ("axis_point_mm", "axis_direction", "angle_deg", "file", "angle_column", "time_column")
+"""Keys allowed in the `[kinematics]` table."""
+
+_FILE_ONLY_LOAD_KEYS = ("time_column", "force_columns", "moment_columns", "moment_unit")
+_CSV_DEFAULT_TIME = "time_s"
+_CSV_DEFAULT_FORCE = ("force_x_n", "force_y_n", "force_z_n")
+_CSV_DEFAULT_MOMENT = ("moment_x_nmm", "moment_y_nmm", "moment_z_nmm")
+_OPENSIM_DEFAULT_TIME = "time"
+_OPENSIM_SUFFIXES = (".sto", ".mot")
+
+
+def _readonly(values: np.ndarray) -> np.ndarray:
+    out = np.array(values, dtype=np.float64)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class LoadSeries:
+    """Applied load of the mobile body per time point (SPEC 3 step 4: T_k).
+
+    time_s (n,) strictly increasing, force_n (n, 3) in N, moment_nmm (n, 3) in N·mm about the
+    reference point G; all finite float64, n >= 1. Arrays are read-only.
+    """
+
+    time_s: np.ndarray
+    force_n: np.ndarray
+    moment_nmm: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.time_s, dtype=np.float64)
+        f = np.asarray(self.force_n, dtype=np.float64)
+        m = np.asarray(self.moment_nmm, dtype=np.float64)
+        if t.ndim != 1 or t.size < 1:
+            raise ValueError(f"time_s must be a 1-D array with at least one value, got shape {t.shape}")
+        n = t.size
+        if f.shape != (n, 3) or m.shape != (n, 3):
+            raise ValueError(f"force_n and moment_nmm must have shape ({n}, 3), got {f.shape} and {m.shape}")
+        if not (np.isfinite(t).all() and np.isfinite(f).all() and np.isfinite(m).all()):
+            raise ValueError("load series contains non-finite values")
+        if np.any(np.diff(t) <= 0.0):
+            raise ValueError("time_s must be strictly increasing")
+        object.__setattr__(self, "time_s", _readonly(t))
+        object.__setattr__(self, "force_n", _readonly(f))
+        object.__setattr__(self, "moment_nmm", _readonly(m))
+
+
+@dataclass(frozen=True, eq=False)
+class JointKinematics:
+    """Joint rotation of the fixed body per time point (SPEC 3 step 1, SPEC 9 `[kinematics]`).
+
+    axis_point_mm (3,) a point on the joint axis, axis_direction (3,) unit vector,
+    angle_rad (n,) the joint angle at each load time point, in radians.
+    """
+
+    axis_point_mm: np.ndarray
+    axis_direction: np.ndarray
+    angle_rad: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("axis_point_mm", "axis_direction", "angle_rad"):
+            object.__setattr__(self, name, _readonly(getattr(self, name)))
+
+
+# --------------------------------------------------------------------------- scene tables
+
+
+class _Table:
+    """A scene TOML table with typed, error-reporting accessors (keys shown as `section.key`)."""
+
+    def __init__(self, table: dict[str, Any], scene_file: Path, section: str, allowed: tuple[str, ...]) -> None:
+        if not isinstance(table, dict):
+            raise InputError(f"[{section}] must be a table", file=scene_file, key=section,
+                             expected=f"a table with keys {', '.join(allowed)}")
+        self.table = table
+        self.scene_file = Path(scene_file)
+        self.section = section
+        unknown = sorted(set(table) - set(allowed))
+        if unknown:
+            raise self.error(unknown[0], f"unknown key(s) {', '.join(map(repr, unknown))} in [{section}]",
+                             f"only {', '.join(allowed)}")
+
+    def key(self, key: str) -> str:
+        return f"{self.section}.{key}"
+
+    def error(self, key: str, problem: str, expected: str | None = None) -> InputError:
+        return InputError(problem, file=self.scene_file, key=self.key(key), expected=expected)
+
+    def has(self, key: str) -> bool:
+        return key in self.table
+
+    def number(self, key: str, default: float | None = None) -> float:
+        value = self.table.get(key, default)
+        if not _is_number(value) or not math.isfinite(value):
+            raise self.error(key, f"got {value!r}", "a finite number")
+        return float(value)
+
+    def numbers(self, key: str, length: int | None = None, what: str = "a list of finite numbers") -> np.ndarray:
+        value = self.table[key]
+        if (not isinstance(value, list) or not all(_is_number(v) and math.isfinite(v) for v in value)
+                or (length is not None and len(value) != length) or len(value) == 0):
+            raise self.error(key, f"got {value!r}", what)
+        return np.array(value, dtype=np.float64)
+
+    def triple(self, key: str, what: str = "3 finite numbers [x, y, z]") -> np.ndarray:
+        return self.numbers(key, 3, what)
+
+    def triples(self, key: str, n: int) -> np.ndarray:
+        value = self.table[key]
+        what = f"a list of {n} triples [[x, y, z], ...], one per time_s value"
+        if not isinstance(value, list) or len(value) != n:
+            got = f"{len(value)} entries" if isinstance(value, list) else repr(value)
+            raise self.error(key, f"got {got}", what)
+        for i, row in enumerate(value):
+            if not (isinstance(row, list) and len(row) == 3 and all(_is_number(v) and math.isfinite(v) for v in row)):
+                raise self.error(key, f"entry {i} is {row!r}", what)
+        return np.array(value, dtype=np.float64)
+
+    def string(self, key: str, default: str | None = None) -> str:
+        value = self.table.get(key, default)
+        if not isinstance(value, str) or not value:
+            raise self.error(key, f"got {value!r}", "a non-empty string")
+        return value
+
+    def strings(self, key: str, length: int) -> list[str]:
+        value = self.table[key]
+        if not (isinstance(value, list) and len(value) == length and all(isinstance(v, str) and v for v in value)):
+            raise self.error(key, f"got {value!r}", f"a list of {length} column names (prefix '-' to negate)")
+        return list(value)
+
+    def path(self, key: str, what: str) -> Path:
+        path = Path(self.string(key))
+        if not path.is_absolute():
+            path = self.scene_file.parent / path
+        if not path.is_file():
+            raise self.error(key, f"file not found: {path}", f"{what}, relative to the scene file")
+        return path
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+# --------------------------------------------------------------------------- data files
+
+
+@dataclass
+class _DataFile:
+    """A numeric table read from a CSV or OpenSim file (values may hold NaN until a column is used)."""
+
+    path: Path
+    columns: list[str]
+    values: np.ndarray  # (rows, columns)
+    line_numbers: list[int]  # 1-based line of each row, for messages
+    in_degrees: bool | None  # OpenSim header flag, None when absent or CSV
+    key: str  # scene key naming the file, e.g. "load.file"
+
+    def error(self, key: str, problem: str, expected: str | None = None) -> InputError:
+        return InputError(problem, file=self.path, key=key, expected=expected)
+
+    def column(self, spec: str, key: str) -> np.ndarray:
+        """Column `spec` (leading '-' negates); finite values checked."""
+        name, sign = (spec[1:], -1.0) if spec.startswith("-") else (spec, 1.0)
+        if name not in self.columns:
+            raise self.error(key, f"column '{name}' not found; available columns: {', '.join(self.columns)}",
+                             "a column name from the file's header row")
+        values = self.values[:, self.columns.index(name)]
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            i = bad[0]
+            raise self.error(key, f"value {values[i]} in column '{name}' at line {self.line_numbers[i]}",
+                             "finite numbers")
+        return sign * values
+
+    def check_time(self, time_s: np.ndarray, key: str) -> None:
+        if time_s.size == 0:
+            raise self.error(self.key, "no data rows", "at least one row after the header")
+        back = np.flatnonzero(np.diff(time_s) <= 0.0)
+        if back.size:
+            i = back[0] + 1
+            raise self.error(key, f"time {time_s[i]} at line {self.line_numbers[i]} does not increase "
+                                  f"(previous {time_s[i - 1]})", "strictly increasing time")
+
+
+def _parse_rows(path: Path, key: str, header: list[str], rows: list[tuple[int, list[str]]],
+                in_degrees: bool | None) -> _DataFile:
+    values = np.empty((len(rows), len(header)))
+    for r, (line, fields) in enumerate(rows):
+        if len(fields) != len(header):
+            raise InputError(f"line {line} has {len(fields)} values but the header has {len(header)} columns",
+                             file=path, key=key, expected="one value per header column")
+        for c, field in enumerate(fields):
+            try:
+                values[r, c] = float(field)
+            except ValueError:
+                raise InputError(f"line {line}, column '{header[c]}': {field!r} is not a number",
+                                 file=path, key=key, expected="numbers") from None
+    return _DataFile(path, header, values, [line for line, _ in rows], in_degrees, key)
+
+
+def _read_csv(path: Path, key: str) -> _DataFile:
+    """CSV with one header row of column names; blank lines skipped."""
+    with path.open(newline="") as handle:
+        rows = [(i, [f.strip() for f in row]) for i, row in enumerate(csv.reader(handle), start=1)
+                if any(f.strip() for f in row)]
+    if not rows:
+        raise InputError("empty file", file=path, key=key, expected="a header row of column names, then data rows")
+    return _parse_rows(path, key, rows[0][1], rows[1:], None)
+
+
+def _read_opensim(path: Path, key: str) -> _DataFile:
+    """OpenSim .sto/.mot: header lines up to `endheader` (`inDegrees=yes|no` read), then a
+    whitespace-separated table whose first row names the columns (`time`, ...)."""
+    lines = path.read_text().splitlines()
+    in_degrees: bool | None = None
+    end = None
+    for i, line in enumerate(lines):
+        text = line.strip()
+        if text.lower() == "endheader":
+            end = i
+            break
+        name, sep, value = text.partition("=")
+        if sep and name.strip().lower() == "indegrees":
+            flag = value.strip().lower()
+            if flag not in ("yes", "no"):
+                raise InputError(f"line {i + 1}: inDegrees={value.strip()}", file=path, key=key,
+                                 expected="inDegrees=yes or inDegrees=no")
+            in_degrees = flag == "yes"
+    if end is None:
+        raise InputError("no 'endheader' line", file=path, key=key,
+                         expected="an OpenSim storage file: header lines, 'endheader', then a column-name row")
+    rows = [(i, line.split()) for i, line in enumerate(lines[end + 1:], start=end + 2) if line.strip()]
+    if not rows:
+        raise InputError("no column-name row after 'endheader'", file=path, key=key,
+                         expected="a row of column names such as 'time\\t...'")
+    return _parse_rows(path, key, rows[0][1], rows[1:], in_degrees)
+
+
+def _read_data_file(path: Path, key: str) -> _DataFile:
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        return _read_csv(path, key)
+    if suffix in _OPENSIM_SUFFIXES:
+        return _read_opensim(path, key)
+    raise InputError(f"unsupported file type '{path.suffix}'", file=path, key=key, expected=".csv, .sto or .mot")
+
+
+def _jointreaction_prefixes(columns: list[str]) -> list[str]:
+    """Prefixes p with columns p_fx, p_fy, p_fz all present (OpenSim JointReaction force triples)."""
+    return [c[:-3] for c in columns
+            if c.endswith("_fx") and c[:-3] + "_fy" in columns and c[:-3] + "_fz" in columns]
+
+
+# --------------------------------------------------------------------------- [load]
+
+
+def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSeries:
+    """Build the applied load series from a scene's `[load]` table (SPEC 9).
+
+    Exactly one of:
+    - static: `force_n = [fx, fy, fz]`, optional `moment_nmm = [mx, my, mz]`; one point at t = 0;
+    - inline series: `time_s = [...]`, `force_n = [[fx, fy, fz], ...]`, optional `moment_nmm`
+      (same length);
+    - `file = "path"` (relative to the scene file): CSV with a header row (default columns
+      `time_s, force_x_n, force_y_n, force_z_n`, optional `moment_x_nmm, moment_y_nmm,
+      moment_z_nmm`), or OpenSim .sto/.mot (default time column `time`). Columns are chosen with
+      `time_column`, `force_columns = [3 names]`, `moment_columns = [3 names]`, a leading "-"
+      negating a column. For .sto/.mot without `force_columns`, the single JointReaction triple
+      `<p>_fx, <p>_fy, <p>_fz` is used with its `<p>_mx, <p>_my, <p>_mz` moments (zero when absent).
+      OpenSim moments are N·m and are multiplied by 1000 to N·mm unless `moment_unit = "nmm"`;
+      CSV moments are N·mm unless `moment_unit = "nm"`.
+    Optional in all forms: `force_scale` (multiplies the force only; default 1) and
+    `time_range_s = [t0, t1]` (keeps the time points with t0 <= t <= t1).
+    """
+    tab = _Table(table, scene_file, "load", LOAD_KEYS)
+    if tab.has("file") and tab.has("force_n"):
+        raise tab.error("file", "both 'file' and 'force_n' are given", "exactly one of 'force_n' or 'file'")
+    if tab.has("file"):
+        for key in ("time_s", "moment_nmm"):
+            if tab.has(key):
+                raise tab.error(key, f"'{key}' cannot be combined with 'file'",
+                                "column names in time_column / moment_columns instead")
+        time_s, force_n, moment_nmm = _load_from_file(tab)
+    elif tab.has("force_n"):
+        for key in _FILE_ONLY_LOAD_KEYS:
+            if tab.has(key):
+                raise tab.error(key, f"'{key}' only applies with 'file'", "no column keys for inline loads")
+        time_s, force_n, moment_nmm = _load_inline(tab)
+    else:
+        raise tab.error("force_n", "no load given", "'force_n' (static or with 'time_s') or 'file'")
+
+    force_n = force_n * tab.number("force_scale", 1.0)
+    if tab.has("time_range_s"):
+        t0, t1 = tab.numbers("time_range_s", 2, "[t0, t1] in s with t0 <= t1")
+        if t0 > t1:
+            raise tab.error("time_range_s", f"t0 = {t0} > t1 = {t1}", "[t0, t1] with t0 <= t1")
+        keep = (time_s >= t0) & (time_s <= t1)
+        if not keep.any():
+            raise tab.error("time_range_s", f"no time point in [{t0}, {t1}]; the load spans "
+                                            f"[{time_s[0]}, {time_s[-1]}] s", "a range containing load time points")
+        time_s, force_n, moment_nmm = time_s[keep], force_n[keep], moment_nmm[keep]
+    return LoadSeries(time_s, force_n, moment_nmm)
+
+
+def _load_inline(tab: _Table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    if not tab.has("time_s"):
+        force = tab.triple("force_n", "3 finite numbers [fx, fy, fz] (for a series, also give time_s)")
+        moment = tab.triple("moment_nmm", "3 finite numbers [mx, my, mz]") if tab.has("moment_nmm") else np.zeros(3)
+        return np.zeros(1), force[None, :], moment[None, :]
+    time_s = tab.numbers("time_s", what="a non-empty list of finite times in s")
+    back = np.flatnonzero(np.diff(time_s) <= 0.0)
+    if back.size:
+        i = back[0] + 1
+        raise tab.error("time_s", f"time_s[{i}] = {time_s[i]} does not increase (previous {time_s[i - 1]})",
+                        "strictly increasing times")
+    n = time_s.size
+    force = tab.triples("force_n", n)
+    moment = tab.triples("moment_nmm", n) if tab.has("moment_nmm") else np.zeros((n, 3))
+    return time_s, force, moment
+
+
+def _load_from_file(tab: _Table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    path = tab.path("file", "a .csv, .sto or .mot file")
+    data = _read_data_file(path, tab.key("file"))
+    opensim = path.suffix.lower() in _OPENSIM_SUFFIXES
+
+    time_key = tab.key("time_column") if tab.has("time_column") else tab.key("file")
+    time_s = data.column(tab.string("time_column", _OPENSIM_DEFAULT_TIME if opensim else _CSV_DEFAULT_TIME),
+                         time_key)
+    data.check_time(time_s, time_key)
+
+    moment_names: list[str] | None
+    if tab.has("force_columns"):
+        force_key = tab.key("force_columns")
+        force_names = tab.strings("force_columns", 3)
+        moment_names = None
+    elif opensim:
+        force_key = tab.key("file")
+        prefixes = _jointreaction_prefixes(data.columns)
+        if len(prefixes) != 1:
+            candidates = [c for c in data.columns if c.endswith(("_fx", "_fy", "_fz"))]
+            raise data.error(force_key,
+                             f"found {len(prefixes)} JointReaction force triples (candidate columns: "
+                             f"{', '.join(candidates) or 'none'}; all columns: {', '.join(data.columns)})",
+                             "exactly one '<name>_fx, _fy, _fz' triple, or force_columns = [3 names] in [load]")
+        p = prefixes[0]
+        force_names = [p + "_fx", p + "_fy", p + "_fz"]
+        moment_names = [p + "_mx", p + "_my", p + "_mz"]
+    else:
+        force_key = tab.key("file")
+        force_names = list(_CSV_DEFAULT_FORCE)
+        moment_names = list(_CSV_DEFAULT_MOMENT)
+    force = np.column_stack([data.column(name, force_key) for name in force_names])
+
+    if tab.has("moment_columns"):
+        moment_key = tab.key("moment_columns")
+        moment_names = tab.strings("moment_columns", 3)
+    else:
+        moment_key = tab.key("file")
+        # default moment columns are optional: used only when all three are present
+        if moment_names is not None and not all(name in data.columns for name in moment_names):
+            moment_names = None
+    moment = (np.column_stack([data.column(name, moment_key) for name in moment_names])
+              if moment_names is not None else np.zeros_like(force))
+
+    unit = tab.string("moment_unit", "nm" if opensim else "nmm")
+    if unit not in ("nm", "nmm"):
+        raise tab.error("moment_unit", f"got {unit!r}", "'nm' (N·m) or 'nmm' (N·mm)")
+    if unit == "nm":
+        moment = moment * NM_TO_NMM
+    return time_s, force, moment
+
+
+# --------------------------------------------------------------------------- [kinematics]
+
+
+def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.ndarray) -> JointKinematics:
+    """Build the joint rotation from a scene's `[kinematics]` table at the load times `time_s`
+    (SPEC 3 step 1, SPEC 9).
+
+    `axis_point_mm = [x, y, z]`, `axis_direction = [x, y, z]` (normalised; must be non-zero), and
+    either `angle_deg` (one value per load time point, or a single value for all) or
+    `file = "ik.mot"` (OpenSim .mot/.sto) with `angle_column` (leading "-" negates) and optional
+    `time_column` (default `time`). The file's angle is in degrees when its header says
+    `inDegrees=yes`, radians when `inDegrees=no`; it is linearly interpolated onto `time_s`,
+    which must lie within the file's time range.
+    """
+    tab = _Table(table, scene_file, "kinematics", KINEMATICS_KEYS)
+    time_s = np.asarray(time_s, dtype=np.float64).reshape(-1)
+    for key in ("axis_point_mm", "axis_direction"):
+        if not tab.has(key):
+            raise tab.error(key, f"missing '{key}'", "3 finite numbers [x, y, z]")
+    axis_point = tab.triple("axis_point_mm")
+    axis = tab.triple("axis_direction")
+    norm = float(np.linalg.norm(axis))
+    if norm == 0.0:
+        raise tab.error("axis_direction", "zero vector", "a non-zero direction [x, y, z]")
+
+    if tab.has("file") == tab.has("angle_deg"):
+        raise tab.error("angle_deg", "give exactly one of 'angle_deg' or 'file'",
+                        "'angle_deg' (list or single value) or 'file' with 'angle_column'")
+    if tab.has("angle_deg"):
+        for key in ("angle_column", "time_column"):
+            if tab.has(key):
+                raise tab.error(key, f"'{key}' only applies with 'file'", "no column keys with angle_deg")
+        angle_deg = _inline_angles(tab, time_s.size)
+    else:
+        angle_deg = _file_angles(tab, time_s)
+    return JointKinematics(axis_point, axis / norm, np.deg2rad(angle_deg))
+
+
+def _inline_angles(tab: _Table, n: int) -> np.ndarray:
+    value = tab.table["angle_deg"]
+    what = f"a number or a list of 1 or {n} numbers (one per load time point)"
+    if _is_number(value):
+        angles = np.array([tab.number("angle_deg")])
+    else:
+        angles = tab.numbers("angle_deg", what=what)
+    if angles.size == 1:
+        return np.full(n, angles[0])
+    if angles.size != n:
+        raise tab.error("angle_deg", f"{angles.size} values for {n} load time points", what)
+    return angles
+
+
+def _file_angles(tab: _Table, time_s: np.ndarray) -> np.ndarray:
+    path = tab.path("file", "an OpenSim .mot or .sto file")
+    if path.suffix.lower() not in _OPENSIM_SUFFIXES:
+        raise tab.error("file", f"unsupported file type '{path.suffix}'", "an OpenSim .mot or .sto file")
+    if not tab.has("angle_column"):
+        raise tab.error("angle_column", "missing 'angle_column'", "the name of the angle column, e.g. 'ankle_angle_r'")
+    data = _read_opensim(path, tab.key("file"))
+    if data.in_degrees is None:
+        raise data.error(tab.key("file"), "no 'inDegrees' header line", "inDegrees=yes or inDegrees=no before endheader")
+    time_key = tab.key("time_column") if tab.has("time_column") else tab.key("file")
+    file_time = data.column(tab.string("time_column", _OPENSIM_DEFAULT_TIME), time_key)
+    data.check_time(file_time, time_key)
+    angle = data.column(tab.string("angle_column"), tab.key("angle_column"))
+    if not data.in_degrees:
+        angle = np.rad2deg(angle)
+    tol = 1e-9 * max(1.0, file_time[-1] - file_time[0])
+    if time_s.min() < file_time[0] - tol or time_s.max() > file_time[-1] + tol:
+        raise data.error(tab.key("file"),
+                         f"load times [{time_s.min()}, {time_s.max()}] s fall outside the file's time range "
+                         f"[{file_time[0]}, {file_time[-1]}] s", "angle data covering every load time point")
+    return np.interp(np.clip(time_s, file_time[0], file_time[-1]), file_time, angle)
+
+
+# --------------------------------------------------------------------------- stance (SPEC 7)
+
+
+def resample_pchip(time_s: np.ndarray, values: np.ndarray, new_time_s: np.ndarray) -> np.ndarray:
+    """Shape-preserving piecewise-cubic Hermite (PCHIP) interpolation of `values` (n,) or (n, k)
+    from strictly increasing `time_s` onto `new_time_s` (SPEC 7: the built-in stance is built
+    through the 7 published points this way). Passes exactly through the given points and does
+    not overshoot: monotone data stay monotone between points. No extrapolation: `new_time_s`
+    must lie within [time_s[0], time_s[-1]].
+    """
+    t = np.asarray(time_s, dtype=np.float64)
+    v = np.asarray(values, dtype=np.float64)
+    new_t = np.asarray(new_time_s, dtype=np.float64)
+    if t.ndim != 1 or t.size < 2 or np.any(np.diff(t) <= 0.0):
+        raise ValueError("time_s must be 1-D, strictly increasing, with at least 2 points")
+    if v.shape[:1] != t.shape:
+        raise ValueError(f"values must have {t.size} rows, got shape {v.shape}")
+    if new_t.size and (new_t.min() < t[0] or new_t.max() > t[-1]):
+        raise ValueError(f"new_time_s must lie within [{t[0]}, {t[-1]}]")
+    return PchipInterpolator(t, v, axis=0, extrapolate=False)(new_t)
+
+
+class ThesisStanceTable(NamedTuple):
+    """Published stance data (SPEC 7; thesis section 4.3.4, table 4.3.4.1): ankle angle and
+    force on the talus at 7 instants of stance. Only these numbers are published; the 0 % and
+    100 % end values of the built-in scene are assumptions stated in its scene file."""
+
+    percent_stance: np.ndarray  # % of stance
+    angle_deg: np.ndarray  # ankle angle, degrees
+    force_ml_n: np.ndarray  # medio-lateral force on the talus, N
+    force_pa_n: np.ndarray  # postero-anterior force on the talus, N
+    force_si_n: np.ndarray  # supero-inferior force on the talus, N
+
+
+def thesis_stance_table() -> ThesisStanceTable:
+    """The 7 published stance points of SPEC 7 (table 4.3.4.1), as float64 arrays."""
+    rows = np.array([
+        # % stance, angle deg, ML N, PA N, SI N
+        [12.0, -0.57, 13.64, 21.7, 72.5],
+        [20.0, 5.37, 65.25, 143.87, 1071.0],
+        [55.0, 10.7, 106.86, -22.14, 2047.0],
+        [69.0, 12.92, 158.82, -35.45, 3209.7],
+        [78.0, 16.31, 159.94, -52.52, 4078.26],
+        [87.0, 17.1, 89.32, -33.88, 3714.94],
+        [92.0, 15.1, 28.2, -29.24, 2741.62],
+    ])
+    return ThesisStanceTable(*(rows[:, j].copy() for j in range(5)))

@@ -1,0 +1,464 @@
+"""Spring lengths by ray casting against the fixed body F (SPEC 2; thesis section 4.2.1).
+
+Every spring i of the mobile body M sits at the centroid c_i of one of M's triangles and points
+along that triangle's unit normal n_i, towards F. Its length is where the ray c_i + s n_i meets F
+(Moller-Trumbore ray/triangle intersection, thesis section 4.2.1), nearest hit first.
+
+What is computed here, for a window half-width h = ``max_length_mm``:
+
+* the ray is cast over the *signed window* s in (-h, h] (origin c_i - h n_i, parameter 0..2h), so
+  surfaces that touch or interpenetrate M are still found; the signed length s is negative where
+  F has crossed M's surface (interpenetration) and positive across an open gap;
+* only triangles of F facing the ray count: F's triangle normals (right-hand rule) point out of F
+  towards M, so a valid hit has dot(n_F, n_i) < 0. Hits on wrong-facing triangles (for example
+  the tibial walls behind the talus) are skipped and the ray continues past them;
+* the nearest valid hit in the window gives ``spring_length_mm`` (= s) and ``triangle`` (index into
+  F's triangles); no valid hit gives ``inf`` and ``-1``.
+
+Two interchangeable backends sit behind :class:`RayCaster`:
+
+``"embree"``
+    Intel Embree through ``embreex`` (a BVH built once per fixed surface, in F's own frame, with
+    Embree's robust scene flag). Embree traverses in float32; every returned hit is re-measured in
+    float64 with one vectorised Moller-Trumbore test on the returned triangle, so lengths are exact
+    to round-off wherever Embree picked the right triangle. The rare float32 failures are re-solved
+    exactly: a returned triangle the ray misses in float64 (by more than 1e-6 in barycentric
+    units), or a ray still crossing wrong-facing sheets after a few re-casts, goes to the exact
+    brute-force caster; a ray Embree lost on an edge or vertex is found again from the triangles
+    around a slightly shifted probe ray's hit; a skipped wrong-facing hit first has the triangles
+    around it checked (a fold ties a back-facing and a front-facing triangle at the same point).
+    Limits: two sheets of F closer than ~2e-6 x (size of F) along a ray count as one; a hit Embree
+    loses while it reports a farther one is not detected (never seen with the robust flag).
+``"numpy"``
+    A brute-force float64 Moller-Trumbore over all rays x all triangles (chunked to bound memory).
+    Exact, and the reference the tests check Embree against; fine for small meshes only.
+
+Kinematics moves F, but the acceleration structure is not rebuilt: ``cast(..., rotation=R,
+translation=t)`` says F currently sits at x_world = R x_local + t, and the rays are moved into F's
+local frame instead (lengths are invariant under the rigid motion).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+Backend = Literal["embree", "numpy"]
+
+# A float64 Moller-Trumbore test that misses the triangle Embree returned by less than this (in
+# barycentric units) is a float32 tie at a shared edge or vertex: the plane distance of the
+# returned triangle is then kept, it is the hit point to round-off.
+_BARYCENTRIC_SLACK = 1e-6
+# The exact reference counts hits that land on an edge or vertex up to this barycentric round-off,
+# so a ray aimed exactly at a shared vertex cannot slip between the triangles around it.
+_REFERENCE_SLACK = 1e-12
+# Rounds of "skip the wrong-facing (or out-of-window) hit and cast again" before the few rays left
+# are handed to the exact brute-force caster.
+_MAX_ROUNDS = 8
+# Upper bound on rays x triangles handled at once by the brute-force caster (about 15 float64
+# arrays of this size are alive at a time: ~ 60 MB).
+_CHUNK_PAIRS = 1 << 19
+# Directions must be unit vectors (a length is measured in units of |direction|).
+_UNIT_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class RayHits:
+    """Result of one :meth:`RayCaster.cast` (SPEC 2): one entry per ray."""
+
+    # (n,) float64 signed length in (-h_max, h_max]; np.inf where no valid hit
+    spring_length_mm: np.ndarray
+    # (n,) int64 index of the hit triangle of F; -1 where none
+    triangle: np.ndarray
+
+
+def _moller_trumbore(
+    origins: np.ndarray,
+    directions: np.ndarray,
+    v0: np.ndarray,
+    edge1: np.ndarray,
+    edge2: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Moller-Trumbore (thesis 4.2.1) for matched rows of rays and triangles, in float64.
+
+    All arguments broadcast against each other with the xyz axis last. Returns (t, u, v, det):
+    the ray parameter of the hit on the triangle's plane, the barycentric coordinates of the hit,
+    and det = -dot(direction, edge1 x edge2), so det > 0 exactly when the ray meets the front
+    (right-hand-rule) side of the triangle. Where det == 0 the ray is parallel to the plane and t,
+    u, v are nan or inf.
+    """
+    dx, dy, dz = directions[..., 0], directions[..., 1], directions[..., 2]
+    e1x, e1y, e1z = edge1[..., 0], edge1[..., 1], edge1[..., 2]
+    e2x, e2y, e2z = edge2[..., 0], edge2[..., 1], edge2[..., 2]
+    # p = d x e2
+    px = dy * e2z - dz * e2y
+    py = dz * e2x - dx * e2z
+    pz = dx * e2y - dy * e2x
+    det = e1x * px + e1y * py + e1z * pz
+    sx = origins[..., 0] - v0[..., 0]
+    sy = origins[..., 1] - v0[..., 1]
+    sz = origins[..., 2] - v0[..., 2]
+    # q = s x e1
+    qx = sy * e1z - sz * e1y
+    qy = sz * e1x - sx * e1z
+    qz = sx * e1y - sy * e1x
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / det
+        u = (sx * px + sy * py + sz * pz) * inv
+        v = (dx * qx + dy * qy + dz * qz) * inv
+        t = (e2x * qx + e2y * qy + e2z * qz) * inv
+    return t, u, v, det
+
+
+def _inside(u: np.ndarray, v: np.ndarray, slack: float) -> np.ndarray:
+    """Barycentric point inside the triangle, edges and vertices included, up to ``slack``."""
+    return (u >= -slack) & (v >= -slack) & (u + v <= 1.0 + slack)
+
+
+def _nearest_per_ray(
+    ray: np.ndarray, t: np.ndarray, triangle: np.ndarray, n_rays: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Smallest t per ray over (ray, t, triangle) candidate rows; ties go to the lowest index."""
+    length = np.full(n_rays, np.inf)
+    hit = np.full(n_rays, -1, dtype=np.int64)
+    if ray.size:
+        order = np.lexsort((triangle, t, ray))
+        first_rows = order[np.unique(ray[order], return_index=True)[1]]
+        length[ray[first_rows]] = t[first_rows]
+        hit[ray[first_rows]] = triangle[first_rows]
+    return length, hit
+
+
+class RayCaster:
+    """Casts spring rays against one fixed triangulated surface F (SPEC 2; thesis 4.2.1).
+
+    Built once per fixed surface, in F's own frame: the Embree BVH is never rebuilt when F moves,
+    the rays are moved into F's frame instead (see :meth:`cast`).
+
+    Parameters
+    ----------
+    vertices_mm
+        (m, 3) vertex coordinates of F in its local frame, mm.
+    triangles
+        (k, 3) vertex indices; right-hand-rule normals must point out of F, towards M.
+        Degenerate (zero-area) triangles are never hit.
+    backend
+        ``"embree"`` (Embree BVH, float64 re-measurement of every hit) or ``"numpy"`` (exact
+        brute force over all triangles; small meshes and tests).
+    """
+
+    def __init__(
+        self, vertices_mm: np.ndarray, triangles: np.ndarray, backend: Backend = "embree"
+    ) -> None:
+        vertices = np.asarray(vertices_mm, dtype=np.float64)
+        tri = np.asarray(triangles)
+        if vertices.ndim != 2 or vertices.shape[1] != 3:
+            raise ValueError(f"vertices_mm must have shape (m, 3), got {vertices.shape}")
+        if not np.all(np.isfinite(vertices)):
+            raise ValueError("vertices_mm contains non-finite coordinates")
+        if tri.ndim != 2 or tri.shape[1] != 3:
+            raise ValueError(f"triangles must have shape (k, 3), got {tri.shape}")
+        if tri.size and not np.issubdtype(tri.dtype, np.integer):
+            raise ValueError(f"triangles must hold integer vertex indices, got dtype {tri.dtype}")
+        tri = tri.astype(np.int64, copy=False)
+        if tri.size and (tri.min() < 0 or tri.max() >= len(vertices)):
+            raise ValueError(
+                f"triangles index vertices outside 0..{len(vertices) - 1} "
+                f"(found {tri.min()}..{tri.max()})"
+            )
+        if backend not in ("embree", "numpy"):
+            raise ValueError(f"backend must be 'embree' or 'numpy', got {backend!r}")
+
+        self.backend: Backend = backend
+        self.vertices_mm = vertices
+        self.triangles = tri
+        self._v0 = vertices[tri[:, 0]]
+        self._edge1 = vertices[tri[:, 1]] - self._v0
+        self._edge2 = vertices[tri[:, 2]] - self._v0
+
+        if len(vertices):
+            lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        else:
+            lo = hi = np.zeros(3)
+        # Embree sees coordinates relative to the box centre: float32 resolution is best near 0.
+        self._centre_mm = 0.5 * (lo + hi)
+        self._extent_mm = float(np.max(hi - lo)) if len(vertices) else 0.0
+        self._scene = None
+        if backend == "embree" and len(tri):
+            self._build_embree()
+
+    # -- Embree scene ----------------------------------------------------------------------------
+
+    def _build_embree(self) -> None:
+        from embreex import mesh_construction, rtcore_scene
+
+        # robust=True sets RTC_SCENE_FLAG_ROBUST: without it Embree's fast traversal lets rays
+        # aimed at shared edges and vertices slip through (measured here: up to ~10 % of them).
+        self._scene = rtcore_scene.EmbreeScene(robust=True)
+        local32 = np.ascontiguousarray(self.vertices_mm - self._centre_mm, dtype=np.float32)
+        # Held for as long as the scene, which it was attached to.
+        self._mesh = mesh_construction.TriangleMesh(
+            self._scene, local32, np.ascontiguousarray(self.triangles, dtype=np.int32)
+        )
+        # embreex builds the BVH lazily on the first query; pay for it here, once.
+        empty = np.zeros((0, 3), dtype=np.float32)
+        self._scene.run(empty, empty, dists=np.zeros(0, dtype=np.float32), output=1)
+
+        # Star (incident triangles) of every vertex, CSR, on vertices welded by position so that
+        # triangle soups (STL) have stars too: lets a near-miss or a tie at a shared edge/vertex
+        # be re-solved exactly against the few triangles around that point.
+        _, weld = np.unique(self.vertices_mm, axis=0, return_inverse=True)
+        self._welded_corners = weld.reshape(-1)[self.triangles]
+        flat = self._welded_corners.ravel()
+        order = np.argsort(flat, kind="stable")
+        self._star_triangles = order // 3
+        self._star_start = np.searchsorted(flat[order], np.arange(int(weld.max()) + 2))
+        edges = np.concatenate([self._edge1, self._edge2, self._edge2 - self._edge1])
+        edge_len = np.linalg.norm(edges, axis=1)
+        edge_len = edge_len[edge_len > 0]
+        median_edge = float(np.median(edge_len)) if edge_len.size else 1.0
+        scale = max(self._extent_mm, median_edge, 1.0)
+        # Step past a rejected hit, and padding of the float32 window: well above Embree's float32
+        # error on coordinates of size `scale` (~1e-7 relative), far below any cartilage length.
+        self._step_mm = 2e-6 * scale
+        # Sideways shift of the probe ray used to find the triangles around a missed vertex/edge
+        # hit: small against the triangles, large against float32 round-off.
+        self._probe_shift_mm = max(1e-4 * median_edge, 4e-6 * scale)
+
+    def _embree_run(
+        self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray
+    ) -> np.ndarray:
+        """One Embree pass: hit triangle per ray (-1 = none), rays already in F's local frame."""
+        result = self._scene.run(
+            np.ascontiguousarray(origins - self._centre_mm, dtype=np.float32),
+            np.ascontiguousarray(directions, dtype=np.float32),
+            # embreex writes the hit distances into this array in place: always pass a fresh one.
+            dists=np.ascontiguousarray(tfar, dtype=np.float32),
+            output=1,
+        )
+        return result["primID"].astype(np.int64)
+
+    # -- public ----------------------------------------------------------------------------------
+
+    def cast(
+        self,
+        origins_mm: np.ndarray,
+        directions: np.ndarray,
+        max_length_mm: float,
+        rotation: np.ndarray | None = None,
+        translation: np.ndarray | None = None,
+    ) -> RayHits:
+        """Signed spring lengths: nearest front-facing hit on F along each ray (SPEC 2, 4.2.1).
+
+        Parameters
+        ----------
+        origins_mm
+            (n, 3) spring origins c_i (centroids of M's triangles), world frame, mm.
+        directions
+            (n, 3) unit directions n_i (M's outward normals, towards F), world frame. Zero rows
+            (degenerate triangles of M) get no hit.
+        max_length_mm
+            Window half-width h_max: hits are searched for over signed lengths s in (-h, h].
+        rotation, translation
+            F's current placement, x_world = rotation @ x_local + translation (defaults: identity,
+            zero). The rays are moved into F's local frame, where the BVH was built.
+
+        Returns
+        -------
+        RayHits
+            Signed length s_i (negative = interpenetration; ``inf`` if no valid hit in the
+            window) and the hit triangle of F (-1 if none).
+        """
+        origins = np.asarray(origins_mm, dtype=np.float64)
+        dirs = np.asarray(directions, dtype=np.float64)
+        if origins.ndim != 2 or origins.shape[1] != 3:
+            raise ValueError(f"origins_mm must have shape (n, 3), got {origins.shape}")
+        if dirs.shape != origins.shape:
+            raise ValueError(f"directions must have shape {origins.shape}, got {dirs.shape}")
+        if not (np.all(np.isfinite(origins)) and np.all(np.isfinite(dirs))):
+            raise ValueError("origins_mm and directions must be finite")
+        h = float(max_length_mm)
+        if not (np.isfinite(h) and h > 0):
+            raise ValueError(f"max_length_mm must be finite and > 0, got {max_length_mm}")
+        norms = np.sqrt(np.einsum("ij,ij->i", dirs, dirs))
+        has_direction = norms > 0
+        if np.any(np.abs(norms[has_direction] - 1.0) > _UNIT_TOLERANCE):
+            raise ValueError("directions must be unit vectors (or zero rows for no spring)")
+
+        if rotation is not None or translation is not None:
+            rot = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
+            shift = np.zeros(3) if translation is None else np.asarray(translation, float)
+            if rot.shape != (3, 3) or not np.allclose(rot.T @ rot, np.eye(3), atol=1e-9, rtol=0):
+                raise ValueError("rotation must be a 3x3 orthogonal matrix")
+            if np.linalg.det(rot) < 0:
+                raise ValueError("rotation must be proper (det = +1), not a reflection")
+            if shift.shape != (3,):
+                raise ValueError(f"translation must have shape (3,), got {shift.shape}")
+            # Row-vector form of x_local = R^T (x_world - t).
+            origins = (origins - shift) @ rot
+            dirs = dirs @ rot
+
+        n = len(origins)
+        length = np.full(n, np.inf)
+        hit = np.full(n, -1, dtype=np.int64)
+        live = np.flatnonzero(has_direction)
+        if live.size and len(self.triangles):
+            if self.backend == "numpy":
+                sub_len, sub_hit = self._cast_bruteforce(origins[live], dirs[live], h)
+            else:
+                sub_len, sub_hit = self._cast_embree(origins[live], dirs[live], h)
+            length[live] = sub_len
+            hit[live] = sub_hit
+        return RayHits(spring_length_mm=length, triangle=hit)
+
+    # -- backends --------------------------------------------------------------------------------
+
+    def _cast_bruteforce(
+        self, origins: np.ndarray, dirs: np.ndarray, h: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Exact reference: float64 Moller-Trumbore of every ray against every triangle."""
+        n, k = len(origins), len(self.triangles)
+        length = np.full(n, np.inf)
+        hit = np.full(n, -1, dtype=np.int64)
+        rows = max(1, _CHUNK_PAIRS // max(k, 1))
+        v0, e1, e2 = self._v0[None], self._edge1[None], self._edge2[None]
+        for start in range(0, n, rows):  # chunks bound memory; each chunk is fully vectorised
+            stop = min(start + rows, n)
+            t, u, v, det = _moller_trumbore(
+                origins[start:stop, None], dirs[start:stop, None], v0, e1, e2
+            )
+            valid = (det > 0) & _inside(u, v, _REFERENCE_SLACK) & (t > -h) & (t <= h)
+            t = np.where(valid, t, np.inf)
+            best = np.argmin(t, axis=1)
+            best_t = t[np.arange(stop - start), best]
+            found = np.isfinite(best_t)
+            length[start:stop][found] = best_t[found]
+            hit[start:stop][found] = best[found]
+        return length, hit
+
+    def _cast_embree(
+        self, origins: np.ndarray, dirs: np.ndarray, h: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Embree traversal, float64 re-measurement, wrong-facing skipping, exact repairs."""
+        n = len(origins)
+        length = np.full(n, np.inf)
+        hit = np.full(n, -1, dtype=np.int64)
+        step = self._step_mm
+        # Where each ray's remaining search segment starts (signed length); the window end is h.
+        # The padding keeps float32 round-off at both ends from hiding a hit inside the window;
+        # hits in the padding are filtered out in float64 below.
+        seg_start = np.full(n, -h - step)
+        active = np.arange(n)
+        missed: list[np.ndarray] = []
+        hard: list[np.ndarray] = []
+
+        for _ in range(_MAX_ROUNDS):
+            if not active.size:
+                break
+            o, d, s0 = origins[active], dirs[active], seg_start[active]
+            prim = self._embree_run(o + s0[:, None] * d, d, (h + step) - s0)
+            none = prim < 0
+            missed.append(active[none])
+            found = ~none
+            idx, k, o, d, s0 = active[found], prim[found], o[found], d[found], s0[found]
+            # Re-measure in float64 from the true origin (signed length directly, no subtraction).
+            t, u, v, det = _moller_trumbore(o, d, self._v0[k], self._edge1[k], self._edge2[k])
+            facing = det > 0
+            on_triangle = _inside(u, v, _BARYCENTRIC_SLACK)  # False where det == 0 (nan)
+            accept = facing & on_triangle & (t > -h) & (t <= h)
+            # Wrong-facing, or in the padding before the window: skip it and continue past it.
+            # (Any hit beyond the window ends the search: nothing nearer was found.)
+            skip = on_triangle & (t <= h) & (~facing | (t <= -h))
+            # Embree's float32 triangle is not where float64 puts the ray: re-solve exactly.
+            wrong = ~on_triangle
+            length[idx[accept]] = t[accept]
+            hit[idx[accept]] = k[accept]
+            hard.append(idx[wrong])
+            # Before resuming past a skipped hit, look at the triangles around it: where F folds
+            # (a ridge between a front- and a back-facing triangle) Embree may have returned the
+            # back-facing one of a tie, and the valid hit sits at the same point.
+            sk, t_sk = idx[skip], t[skip]
+            resume = np.maximum(t_sk, s0[skip]) + step
+            tie_t, tie_tri = self._star_hits(o[skip], d[skip], h, k[skip], t_sk - step, resume)
+            tie = np.isfinite(tie_t)
+            length[sk[tie]] = tie_t[tie]
+            hit[sk[tie]] = tie_tri[tie]
+            seg_start[sk[~tie]] = resume[~tie]
+            active = sk[~tie]
+        hard.append(active)  # still bouncing between wrong-facing sheets after _MAX_ROUNDS
+
+        missed_idx = np.concatenate(missed)
+        if missed_idx.size:
+            self._repair_misses(origins, dirs, h, missed_idx, seg_start, length, hit)
+        hard_idx = np.concatenate(hard)
+        if hard_idx.size:
+            length[hard_idx], hit[hard_idx] = self._cast_bruteforce(
+                origins[hard_idx], dirs[hard_idx], h
+            )
+        return length, hit
+
+    def _repair_misses(
+        self,
+        origins: np.ndarray,
+        dirs: np.ndarray,
+        h: float,
+        missed: np.ndarray,
+        seg_start: np.ndarray,
+        length: np.ndarray,
+        hit: np.ndarray,
+    ) -> None:
+        """Recover hits Embree's float32 traversal lost exactly on an edge or vertex of F.
+
+        Each missed ray is re-cast shifted sideways by a tiny amount; if the shifted probe hits a
+        triangle, the true ray passed within that shift of it, so its hit (if any) lies on a
+        triangle sharing a vertex with it. Those few candidates are tested exactly in float64.
+        Rays that genuinely miss stay missed (the probe misses too, or no candidate is valid).
+        """
+        o, d = origins[missed], dirs[missed]
+        # A sideways direction that never lines up with a mesh's axes or diagonals.
+        oblique = np.array([0.5377, 0.8326, 0.1329])
+        side = np.cross(d, oblique)
+        fallback = np.cross(d, np.array([0.1329, -0.5377, 0.8326]))
+        small = np.einsum("ij,ij->i", side, side) < 0.09  # d nearly along `oblique`
+        side[small] = fallback[small]
+        side /= np.sqrt(np.einsum("ij,ij->i", side, side))[:, None]
+        s0 = seg_start[missed]
+        probe = o + s0[:, None] * d + self._probe_shift_mm * side
+        prim = self._embree_run(probe, d, (h + self._step_mm) - s0)
+        near = np.flatnonzero(prim >= 0)
+        if not near.size:
+            return
+        unbounded = np.full(near.size, np.inf)
+        best_t, best_tri = self._star_hits(o[near], d[near], h, prim[near], -unbounded, unbounded)
+        got = np.isfinite(best_t)
+        length[missed[near[got]]] = best_t[got]
+        hit[missed[near[got]]] = best_tri[got]
+
+    def _star_hits(
+        self,
+        origins: np.ndarray,
+        dirs: np.ndarray,
+        h: float,
+        triangle: np.ndarray,
+        t_low: np.ndarray,
+        t_high: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Exact nearest valid hit of ray i among the triangles sharing a vertex with triangle[i].
+
+        Valid: front-facing, on the triangle (edges and vertices included), inside the window
+        (-h, h] and inside [t_low[i], t_high[i]]. Returns (inf, -1) where there is none.
+        """
+        corner = self._welded_corners[triangle].ravel()
+        counts = self._star_start[corner + 1] - self._star_start[corner]
+        total = int(counts.sum())
+        offsets = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
+        cand = self._star_triangles[np.repeat(self._star_start[corner], counts) + offsets]
+        ray = np.repeat(np.repeat(np.arange(len(triangle)), 3), counts)
+        t, u, v, det = _moller_trumbore(
+            origins[ray], dirs[ray], self._v0[cand], self._edge1[cand], self._edge2[cand]
+        )
+        valid = (det > 0) & _inside(u, v, _REFERENCE_SLACK) & (t > -h) & (t <= h)
+        valid &= (t >= t_low[ray]) & (t <= t_high[ray])
+        return _nearest_per_ray(ray[valid], t[valid], cand[valid], len(triangle))

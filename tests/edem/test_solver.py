@@ -1,0 +1,257 @@
+"""DEM/EDEM against closed forms and invariants (SPEC 2-3, thesis chapter 3)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from support import cylinder_patch, grid_plate, make_scene, plane
+
+from edem.errors import SolverError
+from edem.mechanics import confined_modulus_mpa, generalised_directions
+from edem.solver import StepResult, run
+from edem.springs import Ligament
+
+E, NU = 10.35, 0.42
+E_CONF = confined_modulus_mpa(E, NU)
+IN_PLANE = ("tx", "ty", "rz")  # a frictionless flat plate cannot resist these
+
+
+def assert_kkt(scene, step: StepResult, displacement: np.ndarray, rtol: float = 1e-9) -> None:
+    """KKT of the unilateral problem, recomputed from the outputs (SPEC 2).
+
+    Pressures are non-negative; an out-of-contact candidate would not be compressed by the
+    solved motion; spring forces balance the applied force and moment about G.
+    """
+    c, n, a = scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2
+    g = generalised_directions(c, n, scene.reference_point_mm)
+    approach = g @ displacement
+    candidate = np.isfinite(step.spring_length_mm) & (step.spring_length_mm <= scene.cartilage.max_spring_length_mm)
+    assert np.all(step.pressure_mpa >= 0.0)
+    assert np.all(step.pressure_mpa[~step.in_contact] == 0.0)
+    assert np.all(approach[candidate & ~step.in_contact] <= 1e-12 * np.abs(approach).max())
+    force = (step.pressure_mpa * a)[:, None] * n
+    resultant = np.concatenate([force.sum(axis=0), np.cross(c - scene.reference_point_mm, force).sum(axis=0)])
+    applied = np.concatenate([step.force_n, step.moment_nmm])
+    free = [i for i, d in enumerate(("tx", "ty", "tz", "rx", "ry", "rz")) if d not in scene.fixed_dofs]
+    scale = max(np.abs(applied).max(), 1.0)
+    np.testing.assert_allclose(resultant[free], applied[free], atol=rtol * scale * 30)
+
+
+def test_flat_plates_uniform_pressure_and_displacement():
+    """Parallel plates: p = F/A everywhere and d = F h / (E' A) (eq. 3.7, 3.13)."""
+    h, force = 2.0, 333.0
+    scene = make_scene(grid_plate(20, 20, 16), plane(lambda x, y: h), [0, 0, force], fixed_dofs=IN_PLANE)
+    step = run(scene, "dem").steps[0]
+    np.testing.assert_allclose(step.pressure_mpa, force / 400.0, rtol=1e-12)
+    np.testing.assert_allclose(step.displacement_mm, [0, 0, force * h / (E_CONF * 400.0)], rtol=1e-12, atol=1e-15)
+    assert step.contact_area_mm2 == pytest.approx(400.0, rel=1e-12)
+    assert_kkt(scene, step, np.concatenate([step.displacement_mm, step.rotation_rad]))
+
+
+def test_tilted_plane_pressure_follows_local_thickness():
+    """Plate under a tilted plane, only tz free: p = E' d / h(x), d = F / (E' sum A / h)."""
+    h0, slope, force = 2.0, 0.05, 500.0
+    fixed_dofs = ("tx", "ty", "rx", "ry", "rz")
+    mobile = grid_plate(20, 20, 40)
+    scene = make_scene(mobile, plane(lambda x, y: h0 + slope * x), [0, 0, force], fixed_dofs=fixed_dofs)
+    step = run(scene, "dem").steps[0]
+    h = h0 + slope * mobile.centroids_mm[:, 0]
+    np.testing.assert_allclose(step.spring_length_mm, h, rtol=1e-12)
+    d_discrete = force / (E_CONF * (mobile.areas_mm2 / h).sum())
+    np.testing.assert_allclose(step.pressure_mpa, E_CONF * d_discrete / h, rtol=1e-10)
+    # Continuum closed form: d = F slope / (E' W ln(h(a) / h(-a))), midpoint-rule close.
+    d_exact = force * slope / (E_CONF * 20.0 * np.log((h0 + 10 * slope) / (h0 - 10 * slope)))
+    assert step.displacement_mm[2] == pytest.approx(d_exact, rel=1e-4)
+
+
+def test_cylinder_on_plane_matches_discrete_foundation_solution():
+    """Cylinder under a plane, vertical load, rotations and tx fixed (the thesis's ideal ankle).
+
+    Each candidate spring's ray meets z = g at h = (g - c_z) / n_z; the approach is d n_z, so the
+    discrete foundation solution is d = F / sum(A E' n_z^2 / h), p = E' d n_z / h (eq. 3.7-3.14).
+    """
+    radius, gap, h_max, force = 20.0, 1.5, 3.5, 333.0
+    mobile = cylinder_patch(radius, 28.0, 114.0, 120, 20)
+    scene = make_scene(mobile, plane(lambda x, y: gap), [0, 0, force], fixed_dofs=("tx", "rx", "ry", "rz"))
+    step = run(scene, "dem").steps[0]
+    c, n = mobile.centroids_mm, mobile.unit_normals
+    h = (gap - c[:, 2]) / n[:, 2]
+    candidate = h <= h_max
+    np.testing.assert_allclose(step.spring_length_mm[candidate], h[candidate], rtol=1e-10)
+    stiffness = (mobile.areas_mm2 * E_CONF * n[:, 2] ** 2 / h)[candidate].sum()
+    d = force / stiffness
+    expected = np.where(candidate, E_CONF * d * n[:, 2] / h, 0.0)
+    np.testing.assert_allclose(step.pressure_mpa, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(step.displacement_mm, [0, 0, d], atol=1e-12)
+    # Candidate fraction: closed form cos(theta) >= (R + g) / (R + h_max) -> 2 theta / arc = 41.8 %.
+    theta = np.degrees(np.arccos((radius + gap) / (radius + h_max)))
+    fraction = mobile.areas_mm2[candidate].sum() / mobile.areas_mm2.sum()
+    assert fraction == pytest.approx(2 * theta / 114.0, abs=0.01)
+
+
+def test_off_centre_load_with_free_rotations_balances_the_moment():
+    """Off-centre load inside the kern, rotations free: the rigid plate on a uniform bed has
+    p = a + b x + c y with sum A p (1, y, -x) = (F, M_x, M_y); all springs stay compressed."""
+    force, moment = np.array([0, 0, 400.0]), np.array([300.0, -450.0, 0.0])
+    mobile = grid_plate(20, 20, 20)
+    scene = make_scene(mobile, plane(lambda x, y: 2.0), force, moment_nmm=moment, fixed_dofs=IN_PLANE)
+    step = run(scene, "dem").steps[0]
+    assert step.in_contact.all()
+    assert_kkt(scene, step, np.concatenate([step.displacement_mm, step.rotation_rad]))
+    c, a = mobile.centroids_mm, mobile.areas_mm2
+    basis = np.column_stack([np.ones(len(a)), c[:, 0], c[:, 1]])
+    moments = np.column_stack([np.ones(len(a)), c[:, 1], -c[:, 0]])
+    coefficients = np.linalg.solve(moments.T @ (a[:, None] * basis), [force[2], moment[0], moment[1]])
+    np.testing.assert_allclose(step.pressure_mpa, basis @ coefficients, rtol=1e-9)
+
+
+def test_active_set_reactivates_springs_where_removal_only_fails():
+    """A load near a corner of a coarse plate: the thesis's removal-only loop ends on a wrong set.
+
+    Removal-only (remove every spring in tension, re-solve, never add back) stops, with a regular
+    stiffness matrix, on a set that leaves a spring out of contact although the final motion
+    compresses it: a KKT violation. Our semismooth Newton re-activates it and ends on the set that
+    satisfies KKT, the unique optimum of this strictly convex problem.
+    """
+    mobile = grid_plate(20, 20, 6)
+    force, moment = np.array([0, 0, 100.0]), np.array([825.0, -750.0, 0.0])  # resultant at (7.5, 8.25) mm
+    scene = make_scene(mobile, plane(lambda x, y: 2.0), force, moment_nmm=moment, fixed_dofs=IN_PLANE)
+    g = generalised_directions(mobile.centroids_mm, mobile.unit_normals, scene.reference_point_mm)
+    stiffness = mobile.areas_mm2 * E_CONF / 2.0
+    free = np.array([False, False, True, True, True, False])
+    load = np.concatenate([force, moment])
+    active = np.ones(len(stiffness), bool)
+    while True:
+        k = g.T @ (g * (stiffness * active)[:, None])
+        assert np.linalg.cond(k[np.ix_(free, free)]) < 1e8
+        u = np.zeros(6)
+        u[free] = np.linalg.solve(k[np.ix_(free, free)], load[free])
+        tension = active & (stiffness * (g @ u) <= 0)
+        if not tension.any():
+            break
+        active &= ~tension
+    compressed_but_removed = ~active & (g @ u > 1e-9 * np.abs(g @ u).max())
+    assert compressed_but_removed.sum() == 1
+
+    step = run(scene, "dem").steps[0]
+    assert_kkt(scene, step, np.concatenate([step.displacement_mm, step.rotation_rad]))
+    assert step.in_contact.sum() == active.sum() + 1
+    assert step.in_contact[compressed_but_removed].all()
+
+
+def test_singular_system_names_the_unrestrained_dofs():
+    """Frictionless cylinder (k_s = 0): nothing resists sliding along its axis, tx (SPEC 2)."""
+    scene = make_scene(cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), [0, 0, 333.0], fixed_dofs=("rx", "ry", "rz"))
+    with pytest.raises(SolverError, match=r"nothing resists motion along tx"):
+        run(scene, "dem")
+
+
+def test_shear_stiffness_restrains_the_axis():
+    """With k_s = G/h > 0 the same cylinder is determinate and a pure vertical load moves it vertically."""
+    scene = make_scene(
+        cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), [0, 0, 333.0], fixed_dofs=("rx", "ry", "rz"), shear_modulus_mpa=3.6
+    )
+    step = run(scene, "dem").steps[0]
+    assert abs(step.displacement_mm[0]) < 1e-12 and step.displacement_mm[2] > 0
+
+
+def test_load_pulling_apart_is_reported():
+    """A load pulling M away from F has no equilibrium with compression-only springs."""
+    scene = make_scene(grid_plate(20, 20, 8), plane(lambda x, y: 2.0), [0, 0, -100.0], fixed_dofs=IN_PLANE)
+    with pytest.raises(SolverError, match="pulls the bodies apart"):
+        run(scene, "dem")
+
+
+def test_zero_load_leaves_no_contact():
+    """T = 0: u = 0 and no spring is loaded (the trivial KKT point)."""
+    scene = make_scene(grid_plate(20, 20, 8), plane(lambda x, y: 2.0), [0, 0, 0.0], fixed_dofs=IN_PLANE)
+    step = run(scene, "dem").steps[0]
+    assert step.contact_area_mm2 == 0.0 and not np.any(step.displacement_mm)
+
+
+def ramp(peak_n: float, n_up: int, n_down: int = 0) -> np.ndarray:
+    up = np.linspace(0.0, peak_n, n_up + 1)[1:]
+    down = np.linspace(peak_n, 0.0, n_down + 1)[1:]
+    return np.column_stack([np.zeros(n_up + n_down), np.zeros(n_up + n_down), np.concatenate([up, down])])
+
+
+def test_edem_ramp_converges_to_log_law():
+    """Flat plates, slow monotonic ramp: EDEM integrates dF = E' A dd / h, i.e. d = h0 (1 - exp(-F / (E' A))).
+
+    The explicit increment is first order in the step: halving it halves the error (SPEC 3).
+    """
+    h0, area = 2.0, 400.0
+    peak = 0.5 * E_CONF * area  # F / (E' A) = 0.5: clearly non-linear
+    exact = h0 * (1.0 - np.exp(-peak / (E_CONF * area)))
+    errors = []
+    for n in (10, 20, 40, 80):
+        scene = make_scene(grid_plate(20, 20, 4), plane(lambda x, y: h0), ramp(peak, n), fixed_dofs=IN_PLANE)
+        errors.append(abs(run(scene, "edem").steps[-1].displacement_mm[2] - exact) / exact)
+    ratios = np.array(errors[:-1]) / np.array(errors[1:])
+    assert errors[-1] < 0.01
+    np.testing.assert_allclose(ratios, 2.0, rtol=0.15)
+
+
+def test_edem_load_then_unload_returns_to_start():
+    """Load to 2 kN and back to zero on a cylinder: M returns to its start and no force is left."""
+    scene = make_scene(cylinder_patch(20.0, 28.0, 114.0, 60, 10), plane(lambda x, y: 1.5), ramp(2000.0, 40, 40), fixed_dofs=("tx", "rx", "ry", "rz"))
+    result = run(scene, "edem")
+    peak_disp = max(abs(s.displacement_mm[2]) for s in result.steps)
+    last = result.steps[-1]
+    assert peak_disp > 0.1
+    assert abs(last.displacement_mm[2]) < 0.02 * peak_disp
+    assert last.peak_pressure_mpa * last.contact_area_mm2 < 1e-6 * 2000.0
+
+
+def test_dem_and_edem_agree_on_the_first_step():
+    """From rest, the first EDEM increment is the DEM solve (no push-back yet, SPEC 3)."""
+    scene = make_scene(cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), ramp(800.0, 3), fixed_dofs=("tx", "rx", "ry", "rz"))
+    dem, edem = run(scene, "dem").steps[0], run(scene, "edem").steps[0]
+    np.testing.assert_allclose(edem.pressure_mpa, dem.pressure_mpa, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(edem.displacement_mm, dem.displacement_mm, rtol=1e-12, atol=1e-15)
+
+
+def test_edem_every_step_balances_the_load():
+    """Force balance at every EDEM step: the springs in contact carry exactly T_k (eq. 3.18)."""
+    scene = make_scene(cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), ramp(3000.0, 10, 5), fixed_dofs=("tx", "rx", "ry", "rz"))
+    for step in run(scene, "edem").steps:
+        total = step.pressure_mpa * step.area_mm2
+        normals = scene.mobile.unit_normals
+        resultant = (total[:, None] * normals).sum(axis=0)
+        assert resultant[2] == pytest.approx(step.force_n[2], rel=1e-9)
+        assert step.force_residual_n < 1e-8 * (1.0 + step.force_n[2])
+
+
+def ligament(mobile_point, fixed_point, stiffness_area=10.0) -> Ligament:
+    length = float(np.linalg.norm(np.subtract(fixed_point, mobile_point)))
+    return Ligament("lig", np.array(mobile_point, float), np.array(fixed_point, float), 255.0, stiffness_area, length)
+
+
+def test_ligaments_pull_but_never_push():
+    """Tension-only ligaments (SPEC 2): stretched -> T = E A / L0 * dL along the ligament; shortened -> 0."""
+    mobile, fixed = grid_plate(20, 20, 8), plane(lambda x, y: 2.0)
+    # Below the plate, pulling down: the upward load stretches it.
+    below = ligament([0, 0, 0.0], [0, 0, -20.0])
+    step = run(make_scene(mobile, fixed, [0, 0, 300.0], fixed_dofs=IN_PLANE, ligaments=(below,)), "dem").steps[0]
+    d = step.displacement_mm[2]
+    tension = 255.0 * 10.0 / 20.0 * d
+    assert step.ligament_force_n[0] == pytest.approx(tension, rel=1e-9)
+    assert (step.pressure_mpa * step.area_mm2).sum() == pytest.approx(300.0 - tension, rel=1e-9)  # the ligament holds part of the load
+    # Above the plate, the same motion shortens it: it carries nothing.
+    above = ligament([0, 0, 0.0], [0, 0, 30.0])
+    step = run(make_scene(mobile, fixed, [0, 0, 300.0], fixed_dofs=IN_PLANE, ligaments=(above,)), "dem").steps[0]
+    assert step.ligament_force_n[0] == 0.0
+    assert (step.pressure_mpa * step.area_mm2).sum() == pytest.approx(300.0, rel=1e-9)
+
+
+def test_kinematics_rotates_the_fixed_body():
+    """A plane rotated about an axis through the plate's edge: h(x) = (h0 + x tan a) exactly."""
+    from edem.loads import JointKinematics
+
+    h0, angle = 2.0, np.radians(2.0)
+    kin = JointKinematics(np.array([0.0, 0.0, h0]), np.array([0.0, -1.0, 0.0]), np.array([0.0, angle]))
+    scene = make_scene(grid_plate(20, 20, 10), plane(lambda x, y: h0), [[0, 0, 100.0], [0, 0, 100.0]], fixed_dofs=IN_PLANE + ("rx", "ry"), kinematics=kin)
+    steps = run(scene, "dem").steps
+    x = scene.mobile.centroids_mm[:, 0]
+    np.testing.assert_allclose(steps[0].spring_length_mm, h0, rtol=1e-12)
+    np.testing.assert_allclose(steps[1].spring_length_mm, h0 + x * np.tan(angle), rtol=1e-10)
