@@ -203,6 +203,14 @@ def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: 
     return [str(n) for n in np.array(DOF_NAMES)[free][weight > 0.3]]
 
 
+def assemble_stiffness(directions: np.ndarray, stiffness_n_per_mm: np.ndarray, active: np.ndarray, shear: ShearTerms | None = None) -> np.ndarray:
+    """K = sum over active elements of c_j g_j g_j^T plus their shear: the 6x6 of eq. 3.12."""
+    k = directions.T @ (directions * (stiffness_n_per_mm * active)[:, None])
+    if shear is not None:
+        k = k + shear.stiffness(active[: shear.normals.shape[0]])
+    return k
+
+
 def _balanceable(directions: np.ndarray, load: np.ndarray, free: np.ndarray, to_newton: np.ndarray) -> bool:
     """Whether T = sum_j lambda_j g_j has a solution with every lambda_j >= 0 (non-negative least squares)."""
     from scipy.optimize import nnls
@@ -261,10 +269,7 @@ def solve_unilateral(
         return e
 
     def stiffness(k: np.ndarray, active: np.ndarray) -> np.ndarray:
-        hessian = directions.T @ (directions * (k * active)[:, None])
-        if shear is not None:
-            hessian = hessian + shear.stiffness(active[:n_shear])
-        return hessian
+        return assemble_stiffness(directions, k, active, shear)
 
     u = np.zeros(6)
     s, k = forces(u)

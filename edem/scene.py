@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+import warnings
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -190,7 +191,7 @@ def load_scene(scene: str | Path) -> Scene:
     for section in ("geometry", "cartilage", "load"):
         if not isinstance(data.get(section), dict):
             raise InputError(f"missing section [{section}]", file=file, key=section, expected=f"a [{section}] table (SPEC 9)")
-    warnings: list[str] = []
+    notes: list[str] = []
 
     meta = _Reader(data.get("scene", {}), file, "scene", SECTIONS["scene"])
     name = meta.string("name", path.stem)
@@ -220,7 +221,7 @@ def load_scene(scene: str | Path) -> Scene:
     if cartilage.shear_modulus_mpa < 0:
         raise InputError("negative shear modulus", file=file, key="cartilage.shear_modulus_mpa", expected="a shear modulus in MPa (>= 0)")
 
-    mobile, fixed, reference_point, attachments, geo_description = _load_geometry(data["geometry"], path, cartilage)
+    mobile, fixed, reference_point, attachments, geo_description = _load_geometry(data["geometry"], path, cartilage, notes)
     description = description or geo_description
 
     load = load_series_from_table(data["load"], path)
@@ -268,7 +269,7 @@ def load_scene(scene: str | Path) -> Scene:
         viscoelastic=viscoelastic,
         method=method,
         fe=fe,
-        warnings=tuple(warnings),
+        warnings=tuple(notes),
     )
 
 
@@ -308,36 +309,45 @@ def _ligament(entry: dict[str, Any], index: int, file: str, attachments: dict[st
     )
 
 
-def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage):
+def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warnings_out: list[str]):
     """Mobile and fixed surfaces from a built-in generator or mesh files, oriented and checked."""
-    from geometries.mesh_io import check_pair_distance, orient_pair, read_surface
-
     file = str(path)
     reference_point = None
-    if "builtin" in table:
-        from geometries.builders import build_geometry
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if "builtin" in table:
+            from geometries.builders import build_geometry
+            from geometries.mesh_io import check_pair_distance
 
-        params = {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm")}
-        if not isinstance(table["builtin"], str):
-            raise InputError(f"{table['builtin']!r} is not a builder name", file=file, key="geometry.builtin", expected="a string")
-        built = build_geometry(table["builtin"], params, file=file)
-        mobile, fixed = built.mobile, built.fixed
-        reference_point = built.reference_point_mm
-        attachments = {lig.name: (lig.mobile_point_mm, lig.fixed_point_mm) for lig in built.ligaments}
-        description = built.description
-    else:
-        r = _Reader(table, file, "geometry", FILE_GEOMETRY_KEYS)
-        units = r.string("units", "mm", ("mm", "m"))
-        meshes = []
-        for key in ("mobile", "fixed"):
-            rel = r.string(key)
-            if rel is None:
-                raise InputError(f"[geometry] has neither 'builtin' nor '{key}'", file=file, key=f"geometry.{key}", expected="a mesh file (STL/OBJ/PLY/VTK/VTP) or builtin = \"<generator>\"")
-            meshes.append(read_surface(path.parent / rel, units=units, key=f"geometry.{key}", name=key))
-        mobile, fixed = orient_pair(*meshes)
-        attachments, description = {}, ""
-    check_pair_distance(mobile, fixed, cartilage.max_spring_length_mm)
-    given = _Reader({"reference_point_mm": table.get("reference_point_mm")} if "reference_point_mm" in table else {}, file, "geometry", None).vector("reference_point_mm")
+            if not isinstance(table["builtin"], str):
+                raise InputError(f"{table['builtin']!r} is not a builder name", file=file, key="geometry.builtin", expected="a string")
+            params = {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm")}
+            built = build_geometry(table["builtin"], params, file=file)
+            mobile, fixed = built.mobile, built.fixed
+            check_pair_distance(mobile, fixed, cartilage.max_spring_length_mm, key="geometry")
+            reference_point = built.reference_point_mm
+            attachments = {lig.name: (lig.mobile_point_mm, lig.fixed_point_mm) for lig in built.ligaments}
+            description = built.description
+        else:
+            from geometries.mesh_io import prepare_pair
+
+            r = _Reader(table, file, "geometry", FILE_GEOMETRY_KEYS)
+            units = r.string("units", "mm", ("mm", "m"))
+            paths = []
+            for key in ("mobile", "fixed"):
+                rel = r.string(key)
+                if rel is None:
+                    raise InputError(
+                        f"[geometry] has neither 'builtin' nor '{key}'",
+                        file=file,
+                        key=f"geometry.{key}",
+                        expected='a mesh file (STL/OBJ/PLY/VTK/VTP) or builtin = "<generator>"',
+                    )
+                paths.append(path.parent / rel)
+            mobile, fixed = prepare_pair(*paths, units=units, max_spring_length_mm=cartilage.max_spring_length_mm)
+            attachments, description = {}, ""
+    warnings_out.extend(str(w.message) for w in caught)
+    given = _Reader(table, file, "geometry", None).vector("reference_point_mm")
     if given is not None:
         reference_point = given
     if reference_point is None:

@@ -9,10 +9,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from edem.errors import SolverError
-from edem.mechanics import NormalLaw, rotation_matrix, rotation_vector, solve_unilateral
+from edem.mechanics import (
+    DOF_NAMES,
+    NormalLaw,
+    ShearTerms,
+    UnilateralSolution,
+    assemble_stiffness,
+    rotation_matrix,
+    rotation_vector,
+    solve_unilateral,
+)
 from edem.raycast import RayCaster
-from edem.scene import Scene
+from edem.scene import Scene, Viscoelastic
 from edem.springs import Placement, contact_law, ligament_elements, shear_terms, spring_geometry
+from edem.viscoelastic import check_rk2_stability, integrator_weights
 
 
 @dataclass
@@ -25,7 +35,8 @@ class StepResult:
     moment_nmm: np.ndarray
     displacement_mm: np.ndarray  # of G from its initial pose (EDEM: accumulated; DEM: this point)
     rotation_rad: np.ndarray  # rotation vector of M from its initial pose
-    pressure_mpa: np.ndarray  # (n_springs,) normal contact pressure, 0 out of contact
+    pressure_mpa: np.ndarray  # (n_springs,) normal contact pressure (elastic + viscous), 0 out of contact
+    viscous_pressure_mpa: np.ndarray  # (n_springs,) the dashpots' share of it (0 without [viscoelastic])
     spring_length_mm: np.ndarray  # (n_springs,) at the start of the step, +inf where no hit
     in_contact: np.ndarray  # (n_springs,) bool
     ligament_force_n: np.ndarray  # (n_ligaments,) tension
@@ -58,6 +69,7 @@ class RunResult:
     steps: list[StepResult]
     wall_time_s: float
     warnings: list[str]
+    seconds: dict[str, float]  # wall time of the geometry stage (ray casting) and of the solves
 
     @property
     def n_springs(self) -> int:
@@ -95,20 +107,30 @@ def run(
     cartilage = scene.cartilage
     g0 = scene.reference_point_mm
     n_springs = scene.spring_area_mm2.shape[0]
-    length_scale = float(np.sqrt(((scene.spring_centroid_mm - g0) ** 2).sum(axis=1).mean()))
-    stored = np.zeros((n_springs, 3))
+    spring_centroid, spring_normal, spring_area = scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2
+    length_scale = float(np.sqrt(((spring_centroid - g0) ** 2).sum(axis=1).mean()))
+    load = scene.load
+    loads = np.hstack([load.force_n, load.moment_nmm])
+    warnings: list[str] = []
+    viscous = scene.viscoelastic if method == "edem" else None
+    if scene.viscoelastic is not None and viscous is None:
+        warnings.append("[viscoelastic] is ignored by DEM, a static method: use --method edem")
+    if viscous is not None and viscous.integrator == "rk2":
+        warnings += check_rk2_stability(load.time_s, viscous.relaxation_time_s, viscous.allow_unstable, scene.source)
+    stored = np.zeros((n_springs, 3))  # committed (elastic) spring forces: the EDEM push-back
     pose = Placement.identity(g0)
     steps: list[StepResult] = []
-    warnings: list[str] = []
-    load = scene.load
+    seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
+        clock = time.perf_counter()
         if method == "dem":
             pose, stored = Placement.identity(g0), np.zeros((n_springs, 3))
         f_pose = fixed_placement(scene, k)
-        geometry = spring_geometry(
-            scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2, pose, caster, f_pose, cartilage
-        )
+        geometry = spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, f_pose, cartilage)
+        seconds["geometry"] += time.perf_counter() - clock
+        clock = time.perf_counter()
         cand = geometry.candidate
+        n_c = int(cand.sum())
         if cartilage.law == "threshold" and np.any(geometry.spring_length_mm[cand] <= 0.0):
             bad = int((geometry.spring_length_mm[cand] <= 0.0).sum())
             raise SolverError(
@@ -116,40 +138,49 @@ def run(
                 "(h <= 0, the bodies interpenetrate); the threshold law needs h > 0: "
                 + ("use more time points so each increment is small, or the gap-log law" if k else "separate the bodies or use the gap-log law")
             )
+        if n_c == 0 and not scene.ligaments and np.any(loads[k]):
+            raise SolverError(
+                f"time point {k} (t = {t:g} s): no spring is a candidate: no part of the fixed body lies "
+                f"within h_max = {cartilage.max_spring_length_mm:g} mm of the mobile body along its normals"
+            )
         g_current = pose.points(g0[None])[0]
         normals = geometry.normal[cand]
         stored_c = stored[cand]
         stored_normal = np.einsum("ij,ij->i", stored_c, normals)
-        law = contact_law(geometry, cartilage, stored_normal)
         shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals)
         lig_rows, lig_law, _ = ligament_elements(scene.ligaments, pose, f_pose, g_current)
+        law = NormalLaw.concatenate(contact_law(geometry, cartilage, stored_normal), lig_law)
         directions = np.vstack([geometry.directions(g_current)[cand], lig_rows])
         try:
             solution = solve_unilateral(
-                directions,
-                NormalLaw.concatenate(law, lig_law),
-                np.concatenate([load.force_n[k], load.moment_nmm[k]]),
-                fixed_dofs=scene.fixed_dofs,
-                shear=shear,
-                length_scale_mm=length_scale,
+                directions, law, loads[k], fixed_dofs=scene.fixed_dofs, shear=shear, length_scale_mm=length_scale
             )
         except SolverError as exc:
-            raise SolverError(f"time point {k} (t = {t:g} s, {int(cand.sum())} candidate springs): {exc}") from None
-        n_c = int(cand.sum())
-        s = solution.element_force_n
-        active = solution.active
-        spring_force = np.where(active[:n_c], s[:n_c], 0.0)
-        committed = spring_force[:, None] * normals
+            raise SolverError(f"time point {k} (t = {t:g} s, {n_c} candidate springs): {exc}") from None
+        total_force = np.where(solution.active, solution.element_force_n, 0.0)
+        if viscous is None:
+            u, elastic_force = solution.displacement, total_force
+        else:
+            dt = float(t - load.time_s[k - 1]) if k else 0.0
+            previous = loads[k - 1] if k else np.zeros(6)
+            u, elastic_force = viscoelastic_increment(
+                directions, law, shear, solution, previous, loads[k], dt, viscous, scene.fixed_dofs
+            )
+            if not np.all(np.isfinite(u)):
+                raise SolverError(f"time point {k} (t = {t:g} s): the viscoelastic integration diverged (non-finite displacement)")
+        committed = elastic_force[:n_c, None] * normals
         if shear is not None:
-            committed = committed + shear.force(solution.displacement, active[:n_c])
+            committed = committed + shear.force(u, solution.active[:n_c])
         stored = np.zeros((n_springs, 3))
         stored[cand] = committed
-        u = solution.displacement
         pose = Placement(rotation_matrix(u[3:]) @ pose.rotation, pose.translation_mm + u[:3], g0)
         pressure = np.zeros(n_springs)
-        pressure[cand] = spring_force / geometry.area_mm2[cand]
+        pressure[cand] = total_force[:n_c] / spring_area[cand]
+        viscous_pressure = np.zeros(n_springs)
+        viscous_pressure[cand] = (total_force[:n_c] - elastic_force[:n_c]) / spring_area[cand]
         in_contact = np.zeros(n_springs, bool)
-        in_contact[cand] = active[:n_c]
+        in_contact[cand] = solution.active[:n_c]
+        seconds["solve"] += time.perf_counter() - clock
         steps.append(
             StepResult(
                 step=k,
@@ -159,17 +190,54 @@ def run(
                 displacement_mm=pose.translation_mm.copy(),
                 rotation_rad=rotation_vector(pose.rotation),
                 pressure_mpa=pressure,
+                viscous_pressure_mpa=viscous_pressure,
                 spring_length_mm=geometry.spring_length_mm,
                 in_contact=in_contact,
-                ligament_force_n=np.where(active[n_c:], s[n_c:], 0.0),
+                ligament_force_n=total_force[n_c:],
                 iterations=solution.iterations,
                 force_residual_n=solution.force_residual_n,
                 moment_residual_nmm=solution.moment_residual_nmm,
                 mobile_placement=pose,
                 fixed_placement=f_pose,
-                area_mm2=scene.spring_area_mm2,
+                area_mm2=spring_area,
             )
         )
         if progress is not None:
             progress(k)
-    return RunResult(scene, method, steps, time.perf_counter() - started, warnings)
+    return RunResult(scene, method, steps, time.perf_counter() - started, warnings, seconds)
+
+
+def viscoelastic_increment(
+    directions: np.ndarray,
+    law: NormalLaw,
+    shear: ShearTerms | None,
+    elastic: UnilateralSolution,
+    previous_load: np.ndarray,
+    load: np.ndarray,
+    dt_s: float,
+    viscous: Viscoelastic,
+    fixed_dofs: tuple[str, ...],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Kelvin-Voigt increment u = K^-1 [phi (T_{k-1} - p) + psi (T_k - T_{k-1})] (SPEC 4, eq. 6.18).
+
+    ``elastic`` is the quasi-static solve under T_k: its forces are the total (elastic + viscous)
+    spring forces at the end of the step and its active set is the contact set. Springs that still
+    hold an elastic force while the total force has vanished (the load went to zero) stay in the set
+    so they can creep back. Returns the increment and the elastic element forces to commit.
+    """
+    phi, psi = integrator_weights(dt_s, viscous.relaxation_time_s, viscous.integrator)
+    force0, stiffness0 = law.force_and_stiffness(np.zeros(directions.shape[0]))
+    scale = 1e-9 * max(float(np.abs(force0).max(initial=0.0)), float(np.abs(load).max()), 1e-300)
+    active = elastic.active | ((force0 > 0) & (elastic.element_force_n >= -scale))
+    free = np.array([d not in fixed_dofs for d in DOF_NAMES])
+    u = np.zeros(6)
+    if np.any(active) and (phi or psi):
+        n_shear = 0 if shear is None else shear.normals.shape[0]
+        pushback = directions.T @ np.where(active, force0, 0.0)
+        if shear is not None:
+            pushback = pushback + shear.generalised_force(np.zeros(6), active[:n_shear])
+        k = assemble_stiffness(directions, stiffness0, active, shear)
+        rhs = phi * (previous_load - pushback) + psi * (load - previous_load)
+        u[free] = np.linalg.lstsq(k[np.ix_(free, free)], rhs[free], rcond=None)[0]
+    force, _ = law.force_and_stiffness(directions @ u)
+    return u, np.where(active, np.maximum(force, 0.0), 0.0)

@@ -1,0 +1,34 @@
+# Two commands on a fresh machine (see README):
+#   make demo   installs everything into .venv/ and runs the main job
+#   make test   installs everything into .venv/ and runs the tests
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+PYTHON ?= $(shell scripts/find-python.sh)
+
+.PHONY: demo test install bench clean
+
+$(PY):
+	@test -n "$(PYTHON)" || { echo "no Python >= 3.12: see the message above" >&2; exit 1; }
+	$(PYTHON) -m venv $(VENV)
+
+$(STAMP): pyproject.toml | $(PY)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[fe,dev]'
+	@touch $(STAMP)
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/edem run ideal-stance --method edem --out results/ideal-stance-edem
+	$(VENV)/bin/edem run ideal-stance --method dem --out results/ideal-stance-dem
+
+test: $(STAMP)
+	$(PY) -m pytest -q -m "not slow"
+
+bench: $(STAMP)
+	$(PY) benchmarks/bench_edem.py
+	$(PY) benchmarks/bench_raycast.py
+
+clean:
+	rm -rf $(VENV) results .pytest_cache
