@@ -11,10 +11,10 @@ from edem.errors import InputError, SolverError
 
 def _run(args: argparse.Namespace) -> int:
     from edem.results import write_results
-    from edem.scene import load_scene
+    from edem.scene import load_scene, parse_override
     from edem.solver import run
 
-    scene = load_scene(args.scene)
+    scene = load_scene(args.scene, dict(parse_override(o) for o in args.set))
     method = args.method or scene.method
     out = Path(args.out) if args.out else Path("results") / f"{scene.name}-{method}"
     n = len(scene.load.time_s)
@@ -68,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
     p.add_argument("--method", choices=("edem", "dem"), help="overrides [solver] method")
     p.add_argument("--out", help="result directory (default results/<scene>-<method>)")
+    p.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene value, e.g. --set cartilage.poissons_ratio=0.3"
+    )
     p.set_defaults(func=_run)
     p = sub.add_parser("scenes", help="list the built-in scenes")
     p.add_argument("--write", metavar="DIR", help="write their TOML files to DIR for editing")

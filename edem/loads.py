@@ -33,7 +33,7 @@ NM_TO_NMM = 1000.0
 
 LOAD_KEYS = (
     "force_n", "moment_nmm", "time_s", "file", "time_column", "force_columns",
-    "moment_columns", "moment_unit", "force_scale", "time_range_s",
+    "moment_columns", "moment_unit", "force_scale", "time_range_s", "frame",
 )
 """Keys allowed in the `[load]` table."""
 
@@ -59,12 +59,15 @@ class LoadSeries:
     """Applied load of the mobile body per time point (SPEC 3 step 4: T_k).
 
     time_s (n,) strictly increasing, force_n (n, 3) in N, moment_nmm (n, 3) in N·mm about the
-    reference point G; all finite float64, n >= 1. Arrays are read-only.
+    reference point G; all finite float64, n >= 1. Arrays are read-only. ``frame`` says in which
+    axes the components are given: "global", or "fixed" (the fixed body's axes, so the load turns
+    with the joint angle of `[kinematics]`, as a joint reaction expressed in the tibial frame does).
     """
 
     time_s: np.ndarray
     force_n: np.ndarray
     moment_nmm: np.ndarray
+    frame: str = "global"
 
     def __post_init__(self) -> None:
         t = np.asarray(self.time_s, dtype=np.float64)
@@ -79,6 +82,8 @@ class LoadSeries:
             raise ValueError("load series contains non-finite values")
         if np.any(np.diff(t) <= 0.0):
             raise ValueError("time_s must be strictly increasing")
+        if self.frame not in ("global", "fixed"):
+            raise ValueError(f"frame must be 'global' or 'fixed', got {self.frame!r}")
         object.__setattr__(self, "time_s", _readonly(t))
         object.__setattr__(self, "force_n", _readonly(f))
         object.__setattr__(self, "moment_nmm", _readonly(m))
@@ -338,7 +343,10 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
             raise tab.error("time_range_s", f"no time point in [{t0}, {t1}]; the load spans "
                                             f"[{time_s[0]}, {time_s[-1]}] s", "a range containing load time points")
         time_s, force_n, moment_nmm = time_s[keep], force_n[keep], moment_nmm[keep]
-    return LoadSeries(time_s, force_n, moment_nmm)
+    frame = tab.string("frame", "global")
+    if frame not in ("global", "fixed"):
+        raise tab.error("frame", f"'{frame}' is not a frame", "'global' or 'fixed' (the fixed body's axes, turning with [kinematics])")
+    return LoadSeries(time_s, force_n, moment_nmm, frame)
 
 
 def _load_inline(tab: _Table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

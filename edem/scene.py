@@ -180,11 +180,40 @@ def resolve_scene_path(scene: str | Path) -> Path:
     raise InputError(f"'{scene}' is neither a scene file nor a built-in scene", expected="a .toml path or one of " + ", ".join(names))
 
 
-def load_scene(scene: str | Path) -> Scene:
-    """Read, validate and build a scene (geometry, springs, loads) from a TOML file or built-in name."""
+def parse_override(text: str) -> tuple[str, Any]:
+    """'section.key=value' with a TOML value (a bare word is taken as a string)."""
+    key, sep, value = text.partition("=")
+    if not sep or "." not in key.strip():
+        raise InputError(f"cannot read the override '{text}'", key="--set", expected="section.key=value, e.g. viscoelastic.relaxation_time_s=7")
+    try:
+        parsed = tomllib.loads(f"v = {value.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        parsed = value.strip()
+    return key.strip(), parsed
+
+
+def apply_overrides(data: dict[str, Any], overrides: dict[str, Any]) -> None:
+    """Set dotted keys in the parsed scene, creating sections as needed."""
+    for dotted, value in overrides.items():
+        *sections, key = dotted.split(".")
+        table = data
+        for name in sections:
+            table = table.setdefault(name, {})
+            if not isinstance(table, dict):
+                raise InputError(f"'{name}' is not a table", key=dotted, expected="a section.key path")
+        table[key] = value
+
+
+def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
+    """Read, validate and build a scene (geometry, springs, loads) from a TOML file or built-in name.
+
+    ``overrides`` maps dotted keys ('cartilage.poissons_ratio') to values set before validation.
+    """
     path = resolve_scene_path(scene)
     data = _parse_toml(path)
     file = str(path)
+    if overrides:
+        apply_overrides(data, overrides)
     unknown = sorted(set(data) - set(SECTIONS))
     if unknown:
         raise InputError(f"unknown section [{unknown[0]}]", file=file, key=unknown[0], expected="sections " + ", ".join(SECTIONS))

@@ -85,6 +85,17 @@ def fixed_placement(scene: Scene, step: int) -> Placement:
     return Placement(rotation, np.zeros(3), kin.axis_point_mm)
 
 
+def applied_loads(scene: Scene) -> np.ndarray:
+    """(n, 6) force and moment per time point in global axes (turned with F for frame = "fixed")."""
+    load = scene.load
+    force, moment = load.force_n, load.moment_nmm
+    if load.frame == "fixed" and scene.kinematics is not None:
+        rotations = [fixed_placement(scene, k).rotation for k in range(len(load.time_s))]
+        force = np.einsum("kij,kj->ki", rotations, force)
+        moment = np.einsum("kij,kj->ki", rotations, moment)
+    return np.hstack([force, moment])
+
+
 def run(
     scene: Scene,
     method: str | None = None,
@@ -110,7 +121,7 @@ def run(
     spring_centroid, spring_normal, spring_area = scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2
     length_scale = float(np.sqrt(((spring_centroid - g0) ** 2).sum(axis=1).mean()))
     load = scene.load
-    loads = np.hstack([load.force_n, load.moment_nmm])
+    loads = applied_loads(scene)
     warnings: list[str] = []
     viscous = scene.viscoelastic if method == "edem" else None
     if scene.viscoelastic is not None and viscous is None:
@@ -185,8 +196,8 @@ def run(
             StepResult(
                 step=k,
                 time_s=float(t),
-                force_n=load.force_n[k].copy(),
-                moment_nmm=load.moment_nmm[k].copy(),
+                force_n=loads[k, :3].copy(),
+                moment_nmm=loads[k, 3:].copy(),
                 displacement_mm=pose.translation_mm.copy(),
                 rotation_rad=rotation_vector(pose.rotation),
                 pressure_mpa=pressure,

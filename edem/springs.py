@@ -125,8 +125,11 @@ def shear_terms(
     reference_point_mm: np.ndarray,
     stored_tangential_force_n: np.ndarray,
 ) -> ShearTerms | None:
-    """Shear springs k_s = G / h (eq. 3.8; the gap laws use G / t) of the candidates, or None."""
-    if cartilage.shear_modulus_mpa == 0.0 and not np.any(stored_tangential_force_n):
+    """Shear springs k_s = G / h (eq. 3.8; the gap laws use G / t) of the candidates, or None.
+
+    Frictionless cartilage (G = 0) stores no tangential force: None.
+    """
+    if cartilage.shear_modulus_mpa == 0.0:
         return None
     sel = geometry.candidate
     h = geometry.spring_length_mm[sel] if cartilage.law == "threshold" else np.full(int(sel.sum()), float(cartilage.thickness_mm))
