@@ -45,6 +45,8 @@ def _scenes(args: argparse.Namespace) -> int:
     from edem.scene import builtin_scene_names, resolve_scene_path
 
     names = builtin_scene_names()
+    if args.render:
+        return _render(names, Path(args.render))
     if args.write:
         target = Path(args.write)
         target.mkdir(parents=True, exist_ok=True)
@@ -61,6 +63,49 @@ def _scenes(args: argparse.Namespace) -> int:
     return 0
 
 
+def _render(names: list[str], target: Path) -> int:
+    """PNG of each built-in scene's geometry, springs coloured by length at the first time point."""
+    import dataclasses
+    import tomllib
+
+    import numpy as np
+
+    from edem.raycast import RayCaster
+    from edem.scene import load_scene, resolve_scene_path
+    from edem.solver import fixed_placement
+    from geometries.builders import build_geometry
+    from geometries.render import render_geometry_png
+
+    target.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        table = tomllib.loads(resolve_scene_path(name).read_text(encoding="utf-8"))["geometry"]
+        built = build_geometry(table["builtin"], {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm")})
+        scene = load_scene(name)
+        rotation, translation = fixed_placement(scene, 0).affine()
+        hits = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles).cast(
+            scene.mobile.centroids_mm, scene.mobile.unit_normals, scene.cartilage.max_spring_length_mm, rotation, translation
+        )
+        # Draw the tibia (and the ligaments' tibial ends) where the first time point puts them.
+        placed = dataclasses.replace(
+            built,
+            fixed=dataclasses.replace(built.fixed, vertices_mm=built.fixed.vertices_mm @ rotation.T + translation, _cache={}),
+            ligaments=tuple(dataclasses.replace(lig, fixed_point_mm=rotation @ lig.fixed_point_mm + translation) for lig in built.ligaments),
+        )
+        path = render_geometry_png(
+            placed, target / f"{name}.png", np.where(np.isfinite(hits.spring_length_mm), hits.spring_length_mm, np.nan),
+            scene.cartilage.max_spring_length_mm, title=name,
+        )
+        print(path)
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from reports.plots import plot_timeseries
+
+    print(plot_timeseries(args.result_dirs, args.column, args.out, args.label))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="edem", description="Discrete-element (DEM/EDEM) joint contact solver.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -74,7 +119,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_run)
     p = sub.add_parser("scenes", help="list the built-in scenes")
     p.add_argument("--write", metavar="DIR", help="write their TOML files to DIR for editing")
+    p.add_argument("--render", metavar="DIR", help="render each scene's geometry to DIR/<scene>.png (pyvista, off-screen)")
     p.set_defaults(func=_scenes)
+    p = sub.add_parser("plot", help="plot a timeseries.csv column of result directories against time")
+    p.add_argument("result_dirs", nargs="+", help="result directories of edem run")
+    p.add_argument("--column", default="disp_norm_mm", help="a timeseries.csv column, or disp_norm_mm (default)")
+    p.add_argument("--label", action="append", help="legend label per directory (repeat)")
+    p.add_argument("--out", required=True, help="PNG file to write")
+    p.set_defaults(func=_plot)
     return parser
 
 

@@ -310,6 +310,7 @@ def solve_unilateral(
         alpha = min(1.0, float(np.min(0.99 * room[rate > 0] / rate[rate > 0], initial=np.inf)))
         slope = float(gradient(u, s, s > 0) @ step)
         if slope < 0.0:
+            # Armijo on Pi (the first, all-active step of DEM is taken whole: it need not descend).
             e0 = energy(u, s > 0)
             while alpha > 1e-12 and energy(u + alpha * step, s > 0) > e0 + 1e-4 * alpha * slope:
                 alpha *= 0.5

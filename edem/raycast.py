@@ -112,6 +112,11 @@ def _moller_trumbore(
     return t, u, v, det
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product (np.cross is slow on small arrays)."""
+    return np.stack([a[:, 1] * b[..., 2] - a[:, 2] * b[..., 1], a[:, 2] * b[..., 0] - a[:, 0] * b[..., 2], a[:, 0] * b[..., 1] - a[:, 1] * b[..., 0]], axis=1)
+
+
 def _inside(u: np.ndarray, v: np.ndarray, slack: float) -> np.ndarray:
     """Barycentric point inside the triangle, edges and vertices included, up to ``slack``."""
     return (u >= -slack) & (v >= -slack) & (u + v <= 1.0 + slack)
@@ -226,6 +231,8 @@ class RayCaster:
         # Sideways shift of the probe ray used to find the triangles around a missed vertex/edge
         # hit: small against the triangles, large against float32 round-off.
         self._probe_shift_mm = max(1e-4 * median_edge, 4e-6 * scale)
+        # Far enough to cross all of F from anywhere near it.
+        self._reach_mm = 4.0 * scale
 
     def _embree_run(
         self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray
@@ -358,7 +365,9 @@ class RayCaster:
             if not active.size:
                 break
             o, d, s0 = origins[active], dirs[active], seg_start[active]
-            prim = self._embree_run(o + s0[:, None] * d, d, (h + step) - s0)
+            # Traverse past the window end (up to the far side of F): a ray whose nearest hit
+            # lies beyond the window is then a plain 'no spring', not a miss worth a repair probe.
+            prim = self._embree_run(o + s0[:, None] * d, d, (h + self._reach_mm) - s0)
             none = prim < 0
             missed.append(active[none])
             found = ~none
@@ -419,8 +428,8 @@ class RayCaster:
         o, d = origins[missed], dirs[missed]
         # A sideways direction that never lines up with a mesh's axes or diagonals.
         oblique = np.array([0.5377, 0.8326, 0.1329])
-        side = np.cross(d, oblique)
-        fallback = np.cross(d, np.array([0.1329, -0.5377, 0.8326]))
+        side = _cross(d, oblique)
+        fallback = _cross(d, np.array([0.1329, -0.5377, 0.8326]))
         small = np.einsum("ij,ij->i", side, side) < 0.09  # d nearly along `oblique`
         side[small] = fallback[small]
         side /= np.sqrt(np.einsum("ij,ij->i", side, side))[:, None]

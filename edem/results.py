@@ -11,6 +11,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from edem.solver import RunResult
+from geometries.mesh_io import write_vtp
 
 TIMESERIES_COLUMNS = (
     "step",
@@ -130,38 +131,6 @@ def _write_pressure_maps(run: RunResult, out: Path) -> None:
         entries.append((s.time_s, name))
     write_pvd(out / "pressure.pvd", entries)
     write_vtp(out / "fixed.vtp", scene.fixed.vertices_mm, scene.fixed.triangles, {})
-
-
-def write_vtp(path: Path, points: np.ndarray, triangles: np.ndarray, cell_data: dict[str, np.ndarray]) -> None:
-    """A triangulated surface with cell arrays, through VTK's own XML PolyData writer."""
-    from vtkmodules.util import numpy_support
-    from vtkmodules.vtkCommonCore import vtkPoints
-    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
-    from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
-
-    poly = vtkPolyData()
-    vtk_points = vtkPoints()
-    vtk_points.SetData(numpy_support.numpy_to_vtk(np.ascontiguousarray(points, dtype=np.float64), deep=True))
-    poly.SetPoints(vtk_points)
-    cells = vtkCellArray()
-    offsets = np.arange(0, 3 * triangles.shape[0] + 1, 3, dtype=np.int64)
-    cells.SetData(
-        numpy_support.numpy_to_vtk(offsets, deep=True, array_type=numpy_support.get_vtk_array_type(np.int64)),
-        numpy_support.numpy_to_vtk(
-            np.ascontiguousarray(triangles.ravel(), dtype=np.int64), deep=True, array_type=numpy_support.get_vtk_array_type(np.int64)
-        ),
-    )
-    poly.SetPolys(cells)
-    for name, values in cell_data.items():
-        array = numpy_support.numpy_to_vtk(np.ascontiguousarray(values), deep=True)
-        array.SetName(name)
-        poly.GetCellData().AddArray(array)
-    writer = vtkXMLPolyDataWriter()
-    writer.SetFileName(str(path))
-    writer.SetInputData(poly)
-    writer.SetDataModeToBinary()
-    if not writer.Write():
-        raise OSError(f"could not write {path}")
 
 
 def write_pvd(path: Path, entries: list[tuple[float, str]]) -> None:

@@ -15,6 +15,7 @@ from edem.mechanics import (
     ShearTerms,
     UnilateralSolution,
     assemble_stiffness,
+    generalised_directions,
     rotation_matrix,
     rotation_vector,
     solve_unilateral,
@@ -161,7 +162,7 @@ def run(
         shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals)
         lig_rows, lig_law, _ = ligament_elements(scene.ligaments, pose, f_pose, g_current)
         law = NormalLaw.concatenate(contact_law(geometry, cartilage, stored_normal), lig_law)
-        directions = np.vstack([geometry.directions(g_current)[cand], lig_rows])
+        directions = np.vstack([generalised_directions(geometry.centroid_mm[cand], normals, g_current), lig_rows])
         try:
             solution = solve_unilateral(
                 directions, law, loads[k], fixed_dofs=scene.fixed_dofs, shear=shear, length_scale_mm=length_scale

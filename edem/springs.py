@@ -65,9 +65,6 @@ class SpringGeometry:
     spring_length_mm: np.ndarray  # (n,) signed ray length, +inf where no hit in the window
     candidate: np.ndarray  # (n,) bool
 
-    def directions(self, reference_point_mm: np.ndarray) -> np.ndarray:
-        return generalised_directions(self.centroid_mm, self.normal, reference_point_mm)
-
 
 def spring_geometry(
     centroid_mm: np.ndarray,

@@ -208,3 +208,19 @@ def test_set_overrides_a_scene_value(tmp_path):
     scene = write_plates_scene(tmp_path)
     assert main(["run", str(scene), "--out", str(tmp_path / "o"), "--set", "load.force_n=[0.0, 0.0, 800.0]"]) == 0
     assert json.loads((tmp_path / "o" / "summary.json").read_text())["peak_pressure_mpa"] == pytest.approx(2.0, rel=1e-9)
+
+
+def test_plot_draws_one_curve_per_result_directory(tmp_path):
+    """`edem plot` reads timeseries.csv (with the derived disp_norm_mm) and writes a non-blank PNG."""
+    from reports.plots import read_timeseries
+
+    scene = write_plates_scene(tmp_path, load="time_s = [0.0, 1.0]\nforce_n = [[0.0, 0.0, 200.0], [0.0, 0.0, 400.0]]")
+    for method in ("edem", "dem"):
+        assert main(["run", str(scene), "--method", method, "--out", str(tmp_path / method)]) == 0
+    series = read_timeseries(tmp_path / "edem")
+    np.testing.assert_allclose(series["disp_norm_mm"], np.abs(series["disp_z_mm"]), rtol=1e-12)
+    out = tmp_path / "fig.png"
+    assert main(["plot", str(tmp_path / "edem"), str(tmp_path / "dem"), "--column", "disp_z_mm", "--out", str(out)]) == 0
+    import matplotlib.image
+
+    assert matplotlib.image.imread(out).std() > 0

@@ -1,0 +1,906 @@
+"""Import, cleaning and orientation of triangulated bone surfaces (SPEC 2 and 6).
+
+SPEC 6: real meshes (STL/OBJ/PLY/VTK/VTU/VTP) load through meshio "with clear errors for
+non-manifold, unoriented, degenerate or unit-mismatched input". SPEC 2: every triangle of the
+mobile surface M carries one spring along its unit normal, which must point out of M towards the
+fixed body F; normals are oriented "from mesh topology, not from the sign of a dot product with
+the position vector". This module turns a mesh file into a :class:`TriangleSurface` that meets
+those requirements:
+
+1. :func:`read_surface` reads the file (VTK's own readers for legacy VTK, VTP and VTU; meshio
+   for STL, OBJ and PLY), keeps triangles (quads, polygons and strips are triangulated by VTK),
+   converts metres to mm. :func:`write_surface` and :func:`write_vtp` write meshes back.
+2. :func:`clean_surface` merges duplicate vertices, drops degenerate and duplicate triangles and
+   unused vertices, refuses non-manifold edges, and orients every connected component
+   consistently from its edge topology (:func:`orient_consistently`); closed components are
+   turned outward (positive signed volume).
+3. :func:`orient_pair` / :func:`orient_towards` choose the global sign of open patches (an
+   articular surface) from the other body: normals point towards it.
+4. :func:`check_units` and :func:`check_pair_distance` catch unit mismatches and bodies placed
+   too far apart for any spring (h <= h_max) to exist.
+
+:func:`prepare_surface` (one file) and :func:`prepare_pair` (mobile + fixed) run the whole chain;
+the scene loader calls these. Every bad-input error is an :class:`InputError` naming the file,
+the scene key, what is wrong and what was expected. Repairs that change the mesh are reported
+with ``warnings.warn`` (category :class:`MeshWarning`) so the caller can collect them.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from edem.errors import InputError
+from geometries.surface import TriangleSurface
+
+__all__ = [
+    "MeshWarning",
+    "SUPPORTED_FORMATS",
+    "read_surface",
+    "write_surface",
+    "write_vtp",
+    "merge_duplicate_vertices",
+    "drop_degenerate_triangles",
+    "check_manifold",
+    "orient_consistently",
+    "orient_towards",
+    "orient_pair",
+    "clean_surface",
+    "check_units",
+    "check_pair_distance",
+    "prepare_surface",
+    "prepare_pair",
+    "signed_volume_mm3",
+    "component_labels",
+]
+
+SUPPORTED_FORMATS = "STL (ascii or binary), OBJ, PLY, VTK (legacy), VTU or VTP"
+
+#: bounding-box diagonal (mm) below which a mesh is taken to be in metres
+SMALL_DIAGONAL_MM = 1.0
+#: bounding-box diagonal (mm) above which a mesh is taken to be in micrometres or similar
+LARGE_DIAGONAL_MM = 2000.0
+#: a component whose area vectors sum to less than this fraction of its area is closed
+_CLOSED_REL_TOL = 1e-9
+
+
+class MeshWarning(UserWarning):
+    """A repair or suspicion about an input mesh (flipped, dropped triangles, units...)."""
+
+
+# --------------------------------------------------------------------------------------------
+# small helpers
+# --------------------------------------------------------------------------------------------
+
+
+def _where(surface: TriangleSurface) -> str:
+    return surface.source or surface.name or "surface"
+
+
+def _warn(text: str) -> None:
+    warnings.warn(text, MeshWarning, stacklevel=3)
+
+
+def _new(
+    surface: TriangleSurface, vertices_mm: np.ndarray, triangles: np.ndarray
+) -> TriangleSurface:
+    return TriangleSurface(
+        vertices_mm=np.ascontiguousarray(vertices_mm, dtype=np.float64),
+        triangles=np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3),
+        name=surface.name,
+        source=surface.source,
+    )
+
+
+def _fmt_point(p: np.ndarray) -> str:
+    return "(" + ", ".join(f"{float(x):.4g}" for x in p) + ") mm"
+
+
+def _flip(triangles: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Reverse the corner order (and so the normal) of the triangles selected by ``mask``."""
+    out = triangles.copy()
+    out[mask, 1], out[mask, 2] = triangles[mask, 2], triangles[mask, 1]
+    return out
+
+
+def _bbox_diagonal_mm(vertices_mm: np.ndarray) -> float:
+    if len(vertices_mm) == 0:
+        return 0.0
+    return float(np.linalg.norm(vertices_mm.max(axis=0) - vertices_mm.min(axis=0)))
+
+
+# --------------------------------------------------------------------------------------------
+# reading and writing: VTK's readers and writer for the VTK family, meshio for the rest
+# --------------------------------------------------------------------------------------------
+
+#: read and written through meshio's public API, format named explicitly
+_MESHIO_READ = {".stl": "stl", ".obj": "obj", ".ply": "ply"}
+_MESHIO_WRITE = {**_MESHIO_READ, ".vtk": "vtk", ".vtu": "vtu"}
+#: VTK cell types of the 2D cells kept as polygons, with their corner nodes in polygon order:
+#: triangle, quad, pixel (reordered into a quad), then higher-order triangles (quadratic,
+#: biquadratic, Lagrange, Bezier) and quads (quadratic, biquadratic, quadratic-linear,
+#: Lagrange, Bezier) through their corner nodes only. Strips (6) and polygons (7) are kept
+#: whole; vtkTriangleFilter triangulates them all.
+_CORNERS = {5: (0, 1, 2), 9: (0, 1, 2, 3), 8: (0, 1, 3, 2)}
+_CORNERS.update(dict.fromkeys((22, 34, 69, 76), (0, 1, 2)))
+_CORNERS.update(dict.fromkeys((23, 28, 30, 70, 77), (0, 1, 2, 3)))
+_LINEAR_2D = (5, 6, 7, 8, 9)
+
+#: cells as (size of every cell, their vertex indices concatenated)
+_Cells = tuple[np.ndarray, np.ndarray]
+
+
+def _unreadable(detail: str, file: str, key: str | None) -> InputError:
+    return InputError(f"could not read the mesh ({detail})", file=file, key=key,
+                      expected=f"a valid {SUPPORTED_FORMATS} file")
+
+
+def _cells_of(offsets: np.ndarray, connectivity: np.ndarray, ids: np.ndarray) -> _Cells:
+    """The cells ``ids`` of an offsets/connectivity cell array."""
+    start = offsets[ids]
+    size = offsets[ids + 1] - start
+    first = np.cumsum(size) - size  # start of each cell in the output
+    return size, connectivity[np.repeat(start - first, size) + np.arange(size.sum())]
+
+
+def _block(cells: np.ndarray) -> _Cells:
+    """An (n, k) array of cells of k vertices."""
+    cells = np.asarray(cells, dtype=np.int64)
+    return np.full(len(cells), cells.shape[1], dtype=np.int64), cells.ravel()
+
+
+def _vtk_polydata(points: np.ndarray, polys: _Cells, strips: _Cells | None = None):
+    """A vtkPolyData of float64 points, polygons and triangle strips (int64 vertex indices)."""
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+
+    poly = vtkPolyData()
+    vtk_points = vtkPoints()
+    vtk_points.SetData(numpy_to_vtk(np.ascontiguousarray(points, dtype=np.float64), deep=True))
+    poly.SetPoints(vtk_points)
+    for cells, setter in ((polys, poly.SetPolys), (strips, poly.SetStrips)):
+        if cells is None:
+            continue
+        sizes, connectivity = cells
+        offsets = np.concatenate([[0], np.cumsum(sizes, dtype=np.int64)])
+        array = vtkCellArray()
+        array.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True),
+                      numpy_to_vtkIdTypeArray(np.ascontiguousarray(connectivity, dtype=np.int64),
+                                              deep=True))
+        setter(array)
+    return poly
+
+
+def _triangulate(points: np.ndarray, polys: list[_Cells], strips: list[_Cells]) -> np.ndarray:
+    """Triangles of polygons and triangle strips, by VTK's vtkTriangleFilter.
+
+    Triangles pass unchanged; larger polygons are triangulated keeping their winding (quads
+    along the shorter diagonal); strips are unrolled with VTK's alternating-winding rule.
+    """
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkFiltersCore import vtkTriangleFilter
+
+    def joined(cells: list[_Cells]) -> _Cells | None:
+        if not cells:
+            return None
+        return np.concatenate([s for s, _ in cells]), np.concatenate([c for _, c in cells])
+
+    if not any(len(sizes) for sizes, _ in polys + strips):
+        return np.empty((0, 3), dtype=np.int64)
+    triangle_filter = vtkTriangleFilter()
+    triangle_filter.PassVertsOff()
+    triangle_filter.PassLinesOff()
+    triangle_filter.SetInputData(_vtk_polydata(points, joined(polys), joined(strips)))
+    triangle_filter.Update()
+    connectivity = triangle_filter.GetOutput().GetPolys().GetConnectivityArray()
+    return vtk_to_numpy(connectivity).astype(np.int64).reshape(-1, 3)
+
+
+def _read_vtk(path: Path, key: str | None):
+    """The dataset of a VTK file, read by VTK's own readers: legacy .vtk of any dataset type,
+    XML .vtp (PolyData) and .vtu (UnstructuredGrid).
+
+    VTK readers do not raise: they report failures as error events, collected here from the
+    reader and its executive and raised as InputError.
+    """
+    from vtkmodules.util import vtkConstants as vtk_type
+    from vtkmodules.util.misc import calldata_type
+    from vtkmodules.vtkIOLegacy import (
+        vtkGenericDataObjectReader,
+        vtkPolyDataReader,
+        vtkRectilinearGridReader,
+        vtkStructuredGridReader,
+        vtkStructuredPointsReader,
+        vtkUnstructuredGridReader,
+    )
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataReader, vtkXMLUnstructuredGridReader
+
+    file = str(path)
+    errors: list[str] = []
+
+    @calldata_type(vtk_type.VTK_STRING)
+    def on_error(_obj, _event, text: str) -> None:
+        # text: "ERROR: In <source>, line <n>\n<class> (<address>): <message>"
+        errors.append(" ".join(str(text).split("): ", 1)[-1].split()))
+
+    def watched(obj):
+        obj.AddObserver("ErrorEvent", on_error)
+        return obj
+
+    if path.suffix.lower() == ".vtk":
+        # the generic legacy reader names the dataset type; that type's own reader reads it
+        # (the generic one would swallow its delegate's errors)
+        sniffer = watched(vtkGenericDataObjectReader())
+        sniffer.SetFileName(file)
+        reader_class = {
+            vtk_type.VTK_POLY_DATA: vtkPolyDataReader,
+            vtk_type.VTK_UNSTRUCTURED_GRID: vtkUnstructuredGridReader,
+            vtk_type.VTK_STRUCTURED_GRID: vtkStructuredGridReader,
+            vtk_type.VTK_RECTILINEAR_GRID: vtkRectilinearGridReader,
+            vtk_type.VTK_STRUCTURED_POINTS: vtkStructuredPointsReader,
+            vtk_type.VTK_IMAGE_DATA: vtkStructuredPointsReader,
+        }.get(sniffer.ReadOutputType())
+    elif path.suffix.lower() == ".vtp":
+        reader_class = vtkXMLPolyDataReader
+    else:
+        reader_class = vtkXMLUnstructuredGridReader
+    if reader_class is not None and not errors:
+        reader = reader_class()
+        tag = reader.AddObserver("ErrorEvent", on_error)
+        watched(reader.GetExecutive())
+        if path.suffix.lower() != ".vtk":  # the XML reader's parser reports to it as well
+            reader.SetParserErrorObserver(reader.GetCommand(tag))
+        reader.SetFileName(file)
+        reader.Update()
+    if errors:
+        raise _unreadable(errors[0], file, key)
+    if reader_class is None:
+        raise _unreadable("not a legacy VTK dataset file", file, key)
+    return reader.GetOutput()
+
+
+def _vtk_cells(data, file: str) -> tuple[np.ndarray, list[_Cells], list[_Cells], list[str]]:
+    """Points, polygons, triangle strips and cell type names of a VTK dataset.
+
+    PolyData: its polygons and strips (vertices and lines ignored). Other datasets: their 2D
+    cells (a volume mesh's 3D cells are ignored, not turned into a boundary surface); higher-
+    order triangles and quads keep their corner nodes (warning); other 2D cells are dropped
+    (warning).
+    """
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkCommonDataModel import vtkCellTypes, vtkCellTypeUtilities
+    from vtkmodules.vtkFiltersCore import vtkAppendFilter
+
+    def name(cell_type: int) -> str:
+        return vtkCellTypeUtilities.GetClassNameFromTypeId(int(cell_type))[3:].lower()
+
+    def arrays(cells) -> tuple[np.ndarray, np.ndarray]:
+        return (vtk_to_numpy(cells.GetOffsetsArray()).astype(np.int64),
+                vtk_to_numpy(cells.GetConnectivityArray()).astype(np.int64))
+
+    if not data.IsA("vtkPolyData") and not data.IsA("vtkUnstructuredGrid"):
+        to_grid = vtkAppendFilter()  # structured grids and images: as an unstructured grid
+        to_grid.SetInputData(data)
+        to_grid.Update()
+        data = to_grid.GetOutput()
+    distinct = vtkCellTypes()
+    data.GetDistinctCellTypes(distinct)
+    types = [name(distinct.GetCellType(i)) for i in range(distinct.GetNumberOfTypes())]
+    if data.GetNumberOfPoints() == 0:
+        points = np.empty((0, 3))
+    else:
+        points = vtk_to_numpy(data.GetPoints().GetData()).astype(np.float64)
+    if data.IsA("vtkPolyData"):
+        polys, strips = [], []
+        for cells, out in ((data.GetPolys(), polys), (data.GetStrips(), strips)):
+            offsets, connectivity = arrays(cells)
+            out.append((np.diff(offsets), connectivity))
+        return points, polys, strips, types
+
+    polys, strips, dropped, corner_only = [], [], set(), set()
+    if data.GetNumberOfCells():
+        cell_types = vtk_to_numpy(data.GetCellTypes())
+        offsets, connectivity = arrays(data.GetCells())
+        for cell_type in np.unique(cell_types):
+            ids = np.flatnonzero(cell_types == cell_type)
+            if cell_type in (6, 7):  # triangle strip, polygon
+                cells = _cells_of(offsets, connectivity, ids)
+                (strips if cell_type == 6 else polys).append(cells)
+            elif cell_type in _CORNERS:
+                corners = offsets[ids][:, None] + np.asarray(_CORNERS[cell_type])
+                polys.append(_block(connectivity[corners]))
+                if cell_type not in _LINEAR_2D:
+                    corner_only.add(name(cell_type))
+            elif vtkCellTypeUtilities.GetDimension(int(cell_type)) == 2:
+                dropped.add(name(cell_type))
+    if corner_only:
+        _warn(f"{file}: higher-order cells ({', '.join(sorted(corner_only))}) were read as "
+              "flat triangles through their corner nodes; mid-side nodes ignored")
+    if dropped:
+        _warn(f"{file}: non-triangle 2D cells dropped ({', '.join(sorted(dropped))})")
+    return points, polys, strips, types
+
+
+def _read_meshio(path: Path, key: str | None) -> tuple[np.ndarray, list[_Cells], list[str]]:
+    """Points, polygons (triangles, quads, larger polygons) and cell type names of an STL, OBJ
+    or PLY file, read by ``meshio.read`` with the format named by the extension."""
+    import meshio
+
+    file = str(path)
+    file_format = _MESHIO_READ[path.suffix.lower()]
+    try:
+        with warnings.catch_warnings():
+            # meshio's STL reader can overflow harmlessly while telling ascii from binary
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mesh = meshio.read(path, file_format=file_format)
+    except SystemExit:  # meshio.read prints a reader's ReadError and calls sys.exit(1)
+        raise _unreadable(f"not a readable {file_format.upper()} file", file, key) from None
+    except Exception as exc:  # the readers also raise ValueError, IndexError, UnicodeError...
+        raise _unreadable(str(exc).strip() or type(exc).__name__, file, key) from None
+    points = np.asarray(mesh.points, dtype=np.float64)
+    if points.ndim == 2 and points.shape[1] == 2:
+        points = np.column_stack([points, np.zeros(len(points))])
+    polys = [_block(block.data) for block in mesh.cells
+             if block.type in ("triangle", "quad", "polygon") and np.ndim(block.data) == 2]
+    return points, polys, [block.type for block in mesh.cells]
+
+
+def read_surface(
+    path: str | Path, *, units: str = "mm", key: str | None = None, name: str = ""
+) -> TriangleSurface:
+    """Read the triangles of a surface mesh file, in mm, without cleaning (SPEC 6).
+
+    Formats: STL (ascii/binary), OBJ and PLY through meshio; legacy VTK (any dataset type, e.g.
+    POLYDATA or UNSTRUCTURED_GRID), VTP and VTU through VTK's own readers. Triangles are kept,
+    quads and polygons are triangulated and triangle strips unrolled (vtkTriangleFilter),
+    higher-order triangles/quads keep their corner nodes (warning); other 2D cells are dropped
+    with a warning; 0D, 1D and 3D cells are ignored. ``units`` is "mm" (default) or "m"
+    (coordinates multiplied by 1000).
+
+    Raises InputError (naming ``path`` and the scene ``key``) for a missing file, an unknown or
+    unreadable format, a file without triangles, indices out of range and NaN/inf coordinates.
+    """
+    path = Path(path)
+    file = str(path)
+    if units not in ("mm", "m"):
+        raise InputError(f"unknown length unit '{units}'", file=file, key=key,
+                         expected='units = "mm" or "m"')
+    if not path.exists():
+        raise InputError("mesh file not found", file=file, key=key,
+                         expected=f"an existing {SUPPORTED_FORMATS} file (paths are relative "
+                         "to the scene file)")
+    if not path.is_file():
+        raise InputError("mesh path is not a file", file=file, key=key,
+                         expected=f"a {SUPPORTED_FORMATS} file")
+
+    suffix = path.suffix.lower()
+    strips: list[_Cells] = []
+    if suffix in (".vtk", ".vtp", ".vtu"):
+        points, polys, strips, types = _vtk_cells(_read_vtk(path, key), file)
+    elif suffix in _MESHIO_READ:
+        points, polys, types = _read_meshio(path, key)
+    else:
+        raise InputError(f"unknown mesh format '{path.suffix}'", file=file, key=key,
+                         expected=f"a {SUPPORTED_FORMATS} file (by extension)")
+
+    indices = np.concatenate([c for _, c in polys + strips] + [np.empty(0, dtype=np.int64)])
+    tri = np.empty((0, 3), dtype=np.int64)
+    if len(indices):  # checked before VTK triangulates: it trusts indices and coordinates
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise InputError(f"points have shape {points.shape}", file=file, key=key,
+                             expected="3D point coordinates")
+        if indices.min() < 0 or indices.max() >= len(points):
+            raise InputError(f"cell vertex indices out of range (0..{len(points) - 1})",
+                             file=file, key=key, expected="indices of existing points")
+        bad = ~np.isfinite(points).all(axis=1)
+        if bad.any():
+            first = int(np.flatnonzero(bad)[0])
+            raise InputError(f"{int(bad.sum())} vertices have NaN or infinite coordinates "
+                             f"(first: vertex {first})", file=file, key=key,
+                             expected="finite coordinates")
+        tri = _triangulate(points, polys, strips)
+    if len(tri) == 0:
+        found = ", ".join(sorted(set(types))) or "none"
+        raise InputError(f"the mesh has no triangles (cell types found: {found})", file=file,
+                         key=key, expected="a triangulated surface mesh (extract the bone "
+                         "surface first if this is a volume mesh)")
+    scale = 1000.0 if units == "m" else 1.0
+    return TriangleSurface(
+        vertices_mm=np.ascontiguousarray(points * scale, dtype=np.float64),
+        triangles=np.ascontiguousarray(tri, dtype=np.int64),
+        name=name or path.stem,
+        source=file,
+    )
+
+
+def write_vtp(
+    path: str | Path, points_mm: np.ndarray, triangles: np.ndarray,
+    cell_data: dict[str, np.ndarray] | None = None,
+) -> None:
+    """Write a triangulated surface, with optional per-triangle arrays, as VTK XML PolyData.
+
+    VTK's own vtkXMLPolyDataWriter, binary: float64 points and int64 connectivity, so a
+    round trip is exact (SPEC 6). The result directory's pressure maps use it too (SPEC 9).
+    Raises OSError if VTK cannot write the file.
+    """
+    from vtkmodules.util.numpy_support import numpy_to_vtk
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
+
+    poly = _vtk_polydata(points_mm, _block(np.asarray(triangles).reshape(-1, 3)))
+    for name, values in (cell_data or {}).items():
+        array = numpy_to_vtk(np.ascontiguousarray(values), deep=True)
+        array.SetName(name)
+        poly.GetCellData().AddArray(array)
+    writer = vtkXMLPolyDataWriter()
+    writer.SetFileName(str(path))
+    writer.SetInputData(poly)
+    writer.SetDataModeToBinary()
+    if not writer.Write():
+        raise OSError(f"could not write {path}")
+
+
+def write_surface(
+    path: str | Path, surface: TriangleSurface, *, binary: bool | None = None
+) -> None:
+    """Write the surface's triangles to ``path``; the format follows the extension (SPEC 6).
+
+    VTP through :func:`write_vtp` (VTK, binary float64); STL, OBJ, PLY, VTK and VTU through
+    ``meshio.write``. ``binary=None`` picks the lossless variant: ascii STL (binary STL stores
+    float32), binary PLY/VTK/VTU (float64). OBJ is always ascii (full float repr).
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".vtp":
+        write_vtp(path, surface.vertices_mm, surface.triangles)
+        return
+    if suffix not in _MESHIO_WRITE:
+        raise InputError(f"unknown mesh format '{path.suffix}'", file=str(path),
+                         expected=f"a {SUPPORTED_FORMATS} file name")
+    import meshio
+
+    kwargs = {}
+    if suffix == ".stl":
+        kwargs["binary"] = False if binary is None else binary
+    elif suffix in (".ply", ".vtk", ".vtu"):
+        kwargs["binary"] = True if binary is None else binary
+    mesh = meshio.Mesh(np.asarray(surface.vertices_mm, dtype=np.float64),
+                       [("triangle", np.asarray(surface.triangles, dtype=np.int64))])
+    meshio.write(path, mesh, file_format=_MESHIO_WRITE[suffix], **kwargs)
+
+
+# --------------------------------------------------------------------------------------------
+# cleaning
+# --------------------------------------------------------------------------------------------
+
+
+def merge_duplicate_vertices(surface: TriangleSurface, rel_tol: float = 1e-9) -> TriangleSurface:
+    """Merge vertices closer than ``rel_tol`` x bounding-box diagonal; drop unused vertices.
+
+    STL stores every triangle with its own three corners, so shared vertices (and with them any
+    topology: edges, components, orientation, SPEC 2) exist only after this merge. Clusters of
+    near-coincident vertices (found with a k-d tree; chained pairs merge transitively, via
+    connected components) collapse onto their lowest-index member, whose coordinates are kept
+    unchanged. Vertex order is otherwise preserved.
+    """
+    v, t = surface.vertices_mm, surface.triangles
+    n = len(v)
+    tol = float(rel_tol) * _bbox_diagonal_mm(v)
+    if n > 1:
+        # exact duplicates first (cheap, and the only kind in STL), then near-coincident ones
+        _, first, inv = np.unique(v, axis=0, return_index=True, return_inverse=True)
+        rep = first[inv.ravel()]
+        if tol > 0:
+            pairs = cKDTree(v).query_pairs(r=tol, output_type="ndarray")
+            if len(pairs):
+                ij = np.concatenate([pairs, np.stack([np.arange(n), rep], axis=1)])
+                graph = coo_matrix((np.ones(len(ij)), (ij[:, 0], ij[:, 1])), shape=(n, n))
+                _, labels = connected_components(graph, directed=False)
+                lowest = np.full(labels.max() + 1, n, dtype=np.int64)
+                np.minimum.at(lowest, labels, np.arange(n))
+                rep = lowest[labels]
+        t = rep[t]
+    used, t_new = np.unique(t, return_inverse=True)
+    return _new(surface, v[used], t_new.reshape(-1, 3))
+
+
+def drop_degenerate_triangles(
+    surface: TriangleSurface, rel_area_tol: float = 1e-12
+) -> TriangleSurface:
+    """Drop triangles that cannot carry a spring (SPEC 2) and duplicated triangles.
+
+    Dropped: repeated vertex indices, area <= ``rel_area_tol`` x mean triangle area (includes
+    zero area), and second copies of a triangle over the same three vertices (either winding).
+    Warns with the counts. Unused vertices are removed.
+    """
+    t = surface.triangles
+    if len(t) == 0:
+        return surface
+    repeated = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
+    areas = surface.areas_mm2
+    mean_area = float(areas.mean())
+    tiny = areas <= rel_area_tol * mean_area
+    degenerate = repeated | tiny
+    keep = ~degenerate
+    _, first = np.unique(np.sort(t, axis=1), axis=0, return_index=True)
+    unique_mask = np.zeros(len(t), dtype=bool)
+    unique_mask[first] = True
+    duplicate = keep & ~unique_mask
+    # a duplicate whose first copy is degenerate would be degenerate too: counted there
+    keep &= unique_mask
+    n_deg, n_dup = int(degenerate.sum()), int(duplicate.sum())
+    if n_deg:
+        _warn(f"{_where(surface)}: {n_deg} degenerate triangles (zero area or repeated "
+              "vertices) dropped; they carry no spring")
+    if n_dup:
+        _warn(f"{_where(surface)}: {n_dup} duplicate triangles (same three vertices) dropped")
+    if n_deg == 0 and n_dup == 0:
+        return surface
+    kept = t[keep]
+    used, t_new = np.unique(kept, return_inverse=True)
+    return _new(surface, surface.vertices_mm[used], t_new.reshape(-1, 3))
+
+
+class _Topology:
+    """Edge table of a triangle mesh: undirected edges, their use count and the triangle graph.
+
+    Half-edge h = 3 t + k runs from corner k to corner k+1 (mod 3) of triangle t.
+    """
+
+    def __init__(self, triangles: np.ndarray, n_vertices: int) -> None:
+        n_tri = len(triangles)
+        self.n_triangles = n_tri
+        he = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)
+        lo, hi = he.min(axis=1), he.max(axis=1)
+        self.forward = he[:, 0] < he[:, 1]
+        keys = lo.astype(np.int64) * max(int(n_vertices), 1) + hi
+        uniq, inv, counts = np.unique(keys, return_inverse=True, return_counts=True)
+        inv = inv.ravel()
+        self.edge_of_half = inv
+        self.edge_count = counts
+        self.edge_vertices = np.stack([uniq // max(int(n_vertices), 1),
+                                       uniq % max(int(n_vertices), 1)], axis=1)
+        order = np.argsort(inv, kind="stable")
+        first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        self.half_sorted = order
+        self.edge_first = first
+        interior = np.flatnonzero(counts == 2)
+        h1, h2 = order[first[interior]], order[first[interior] + 1]
+        self.pair_a = h1 // 3
+        self.pair_b = h2 // 3
+        # the two triangles agree when they run the shared edge in opposite directions
+        self.pair_disagree = self.forward[h1] == self.forward[h2]
+        graph = coo_matrix((np.ones(len(interior)), (self.pair_a, self.pair_b)),
+                           shape=(n_tri, n_tri))
+        self.n_components, self.component = connected_components(graph, directed=False)
+        boundary_half = order[first[counts == 1]]
+        self.component_open = np.bincount(self.component[boundary_half // 3],
+                                          minlength=self.n_components) > 0
+
+
+def component_labels(surface: TriangleSurface) -> np.ndarray:
+    """Connected component (through shared edges) of every triangle, 0..n_components-1."""
+    return _Topology(surface.triangles, len(surface.vertices_mm)).component
+
+
+def check_manifold(surface: TriangleSurface, *, key: str | None = None) -> None:
+    """Raise InputError if an edge is shared by more than two triangles (SPEC 6).
+
+    A spring bed needs a surface with one side towards the other body; non-manifold edges
+    (T-junction sheets, internal walls) have no consistent sides. The message names how many
+    such edges there are and the location of one.
+    """
+    t = surface.triangles
+    n_v = max(len(surface.vertices_mm), 1)
+    he = np.stack([t, np.roll(t, -1, axis=1)], axis=2).reshape(-1, 2)
+    keys = he.min(axis=1).astype(np.int64) * n_v + he.max(axis=1)
+    uniq, counts = np.unique(keys, return_counts=True)
+    bad = counts > 2
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        mid = surface.vertices_mm[[uniq[i] // n_v, uniq[i] % n_v]].mean(axis=0)
+        raise InputError(
+            f"{int(bad.sum())} non-manifold edges (shared by more than two triangles); "
+            f"e.g. the edge at {_fmt_point(mid)} is shared by {int(counts[i])} triangles",
+            file=surface.source or None, key=key,
+            expected="a manifold surface: every edge shared by one or two triangles",
+        )
+
+
+def _component_sums(values: np.ndarray, component: np.ndarray, n: int) -> np.ndarray:
+    if values.ndim == 1:
+        return np.bincount(component, weights=values, minlength=n)
+    return np.stack([np.bincount(component, weights=values[:, j], minlength=n)
+                     for j in range(values.shape[1])], axis=1)
+
+
+def _closed_components(surface: TriangleSurface, topo: _Topology) -> np.ndarray:
+    """Closed: no boundary edge, or boundary loops enclosing no area (sum of area vectors zero,
+    e.g. after a zero-area triangle was dropped). Signed volume is well defined for these."""
+    av = surface.area_vectors_mm2
+    total = _component_sums(surface.areas_mm2, topo.component, topo.n_components)
+    vec = np.linalg.norm(_component_sums(av, topo.component, topo.n_components), axis=1)
+    return (~topo.component_open) | (vec <= _CLOSED_REL_TOL * total)
+
+
+def signed_volume_mm3(surface: TriangleSurface) -> float:
+    """Signed enclosed volume, sum of (a . (b x c)) / 6 about the vertex centroid.
+
+    Positive when a closed surface's normals point outward.
+    """
+    v = surface.vertices_mm - surface.vertices_mm.mean(axis=0)
+    a, b, c = (v[surface.triangles[:, k]] for k in range(3))
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def orient_consistently(surface: TriangleSurface, *, key: str | None = None) -> TriangleSurface:
+    """Orient every connected component consistently from its topology (SPEC 2).
+
+    Two triangles sharing an edge agree when they traverse it in opposite directions. The
+    orientation problem is solved on the double cover of the triangle adjacency graph (node
+    (t, s): triangle t with flip state s; an agreeing pair links equal states, a disagreeing
+    pair opposite states): a component is orientable iff (t, 0) and (t, 1) fall in different
+    connected components of the cover, otherwise InputError (Moebius-like surface). Within a
+    component the minority orientation is flipped (warning with the count). A closed component
+    is then turned outward (positive signed volume); an open patch keeps its majority
+    orientation until :func:`orient_towards` / :func:`orient_pair` choose its global sign.
+    Non-manifold edges raise InputError (see :func:`check_manifold`).
+    """
+    t = surface.triangles
+    n = len(t)
+    if n == 0:
+        return surface
+    topo = _Topology(t, len(surface.vertices_mm))
+    if (topo.edge_count > 2).any():
+        check_manifold(surface, key=key)  # raises, naming the edges
+    a, b, dis = topo.pair_a, topo.pair_b, topo.pair_disagree
+    rows = np.concatenate([a, a + n])
+    cols = np.concatenate([np.where(dis, b + n, b), np.where(dis, b, b + n)])
+    cover = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(2 * n, 2 * n))
+    _, lab = connected_components(cover, directed=False)
+    comp = topo.component
+    bad = lab[:n] == lab[n:]
+    if bad.any():
+        bad_comps = np.unique(comp[bad])
+        c0 = bad_comps[0]
+        members = comp == c0
+        where = surface.centroids_mm[np.flatnonzero(members)[0]]
+        raise InputError(
+            f"{len(bad_comps)} connected piece(s) of the surface cannot be oriented "
+            f"consistently (Moebius-like); e.g. the piece of {int(members.sum())} triangles "
+            f"near {_fmt_point(where)}",
+            file=surface.source or None, key=key,
+            expected="an orientable surface (a consistent inside and outside)",
+        )
+    _, root = np.unique(comp, return_index=True)
+    state = lab[:n] != lab[root[comp]]  # True: opposite orientation to the component's root
+    n_flip_state = np.bincount(comp, weights=state, minlength=topo.n_components)
+    size = np.bincount(comp, minlength=topo.n_components)
+    invert = n_flip_state > size - n_flip_state  # flip the minority, not the majority
+    flip = state ^ invert[comp]
+    n_flipped = int(flip.sum())
+    if n_flipped:
+        _warn(f"{_where(surface)}: {n_flipped} triangles were oriented against their "
+              "neighbours and have been flipped")
+        surface = _new(surface, surface.vertices_mm, _flip(t, flip))
+
+    closed = _closed_components(surface, topo)
+    if closed.any():
+        v = surface.vertices_mm - surface.vertices_mm.mean(axis=0)
+        tt = surface.triangles
+        vol = np.einsum("ij,ij->i", v[tt[:, 0]], np.cross(v[tt[:, 1]], v[tt[:, 2]])) / 6.0
+        comp_vol = np.bincount(comp, weights=vol, minlength=topo.n_components)
+        turn = closed & (comp_vol < 0)
+        if turn.any():
+            surface = _new(surface, surface.vertices_mm, _flip(tt, turn[comp]))
+    return surface
+
+
+def _winding_numbers(surface: TriangleSurface, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Generalised winding number of ``points`` w.r.t. the triangles selected by ``mask``
+    (solid angles, Van Oosterom-Strackee): about 1 inside an outward closed surface, 0 outside."""
+    tri = surface.triangles[mask]
+    v = surface.vertices_mm
+    out = np.empty(len(points))
+    chunk = max(1, 2_000_000 // max(len(tri), 1))
+    for s in range(0, len(points), chunk):
+        p = points[s:s + chunk, None, :]
+        a, b, c = (v[tri[:, k]][None, :, :] - p for k in range(3))
+        la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
+        num = np.einsum("pti,pti->pt", a, np.cross(b, c))
+        den = (la * lb * lc + np.einsum("pti,pti->pt", a, b) * lc
+               + np.einsum("pti,pti->pt", a, c) * lb + np.einsum("pti,pti->pt", b, c) * la)
+        out[s:s + chunk] = 2.0 * np.arctan2(num, den).sum(axis=1) / (4.0 * np.pi)
+    return out
+
+
+def _sample_per_component(comp: np.ndarray, n_comp: int, n_max: int) -> np.ndarray:
+    """Indices of at most about ``n_max`` evenly spaced triangles of every component."""
+    order = np.argsort(comp, kind="stable")
+    size = np.bincount(comp, minlength=n_comp)
+    start = np.concatenate([[0], np.cumsum(size)[:-1]])
+    rank = np.arange(len(comp)) - start[comp[order]]
+    step = np.maximum(1, -(-size // max(int(n_max), 1)))
+    return order[rank % step[comp[order]] == 0]
+
+
+def orient_towards(
+    surface: TriangleSurface, points_mm: np.ndarray, *, key: str | None = None,
+    n_score_samples: int = 4096, n_winding_samples: int = 15,
+) -> TriangleSurface:
+    """Give every connected component the global sign that makes its normals face ``points_mm``.
+
+    The surface is first oriented consistently (:func:`orient_consistently`). Then, per
+    component:
+    - open patch: flipped as a whole if sum_t A_t n_t . (p_t - c_t) < 0, where c_t is the
+      triangle centroid and p_t the point of ``points_mm`` nearest to it (k-d tree), i.e. the
+      area-weighted mean of n . (towards the other body) is made positive; the sum runs over
+      every triangle of components up to ``n_score_samples`` triangles and over an evenly
+      spaced subset of that many for larger ones (a sign decision; keeps big meshes fast);
+    - closed surface: outward (positive signed volume), unless the points lie inside it
+      (median generalised winding number of up to ``n_winding_samples`` of them > 1/2: a
+      fixed shell around the mobile body), then inward. The dot-product rule is not used for
+      closed surfaces: it is negative for any outward closed surface seen from outside.
+    SPEC 2: the spring normals of M point towards F; F's normals point towards M.
+    """
+    points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
+    surface = orient_consistently(surface, key=key)
+    if len(points) == 0 or surface.n_triangles == 0:
+        return surface
+    topo = _Topology(surface.triangles, len(surface.vertices_mm))
+    comp, nc = topo.component, topo.n_components
+    closed = _closed_components(surface, topo)
+    turn = np.zeros(nc, dtype=bool)
+    if (~closed).any():
+        sel = _sample_per_component(comp, nc, n_score_samples)
+        sel = sel[~closed[comp[sel]]]
+        cent = surface.centroids_mm[sel]
+        _, idx = cKDTree(points).query(cent)
+        score_t = np.einsum("ij,ij->i", surface.area_vectors_mm2[sel], points[idx] - cent)
+        score = np.bincount(comp[sel], weights=score_t, minlength=nc)
+        turn |= (~closed) & (score < 0)
+    if closed.any():
+        sample = points[np.unique(np.linspace(0, len(points) - 1, n_winding_samples).astype(int))]
+        for c in np.flatnonzero(closed):
+            w = _winding_numbers(surface, comp == c, sample)
+            turn[c] = np.median(w) > 0.5
+    if turn.any():
+        surface = _new(surface, surface.vertices_mm, _flip(surface.triangles, turn[comp]))
+    return surface
+
+
+def orient_pair(
+    mobile: TriangleSurface, fixed: TriangleSurface, *, mobile_key: str | None = None,
+    fixed_key: str | None = None,
+) -> tuple[TriangleSurface, TriangleSurface]:
+    """Orient M's normals towards F and F's normals towards M (SPEC 2), per component.
+
+    Each body is oriented with :func:`orient_towards` against the other body's vertices: open
+    patches by the nearest other-body vertex of every triangle, closed surfaces outward (inward
+    if they enclose the other body). Returns ``(mobile, fixed)``.
+    """
+    mobile_out = orient_towards(mobile, fixed.vertices_mm, key=mobile_key)
+    fixed_out = orient_towards(fixed, mobile.vertices_mm, key=fixed_key)
+    return mobile_out, fixed_out
+
+
+def clean_surface(
+    surface: TriangleSurface, *, key: str | None = None, merge_rel_tol: float = 1e-9,
+    degenerate_rel_area: float = 1e-12,
+) -> TriangleSurface:
+    """Merge duplicate vertices, drop degenerate/duplicate triangles, refuse non-manifold
+    edges, orient consistently (closed components outward). SPEC 2 and 6.
+
+    Raises InputError if nothing is left, for non-manifold edges and for non-orientable pieces.
+    """
+    s = merge_duplicate_vertices(surface, rel_tol=merge_rel_tol)
+    s = drop_degenerate_triangles(s, rel_area_tol=degenerate_rel_area)
+    if s.n_triangles == 0:
+        raise InputError("every triangle of the mesh is degenerate (zero area)",
+                         file=surface.source or None, key=key,
+                         expected="a surface with non-degenerate triangles")
+    check_manifold(s, key=key)
+    return orient_consistently(s, key=key)
+
+
+def check_units(surface: TriangleSurface, units: str = "mm") -> float:
+    """Warn when the bounding-box diagonal (in mm) suggests the wrong length unit (SPEC 6).
+
+    Below 1 mm the mesh most likely is in metres (suggest ``units = "m"``); above 2000 mm it
+    is larger than any joint, most likely micrometres or another unit. Returns the diagonal.
+    """
+    diag = _bbox_diagonal_mm(surface.vertices_mm)
+    where = _where(surface)
+    if diag < SMALL_DIAGONAL_MM:
+        if units == "m":
+            _warn(f"{where}: the mesh is only {diag:.4g} mm across even after converting "
+                  "from metres; check the units of the file")
+        else:
+            _warn(f"{where}: the mesh is only {diag:.4g} mm across; it looks like it is in "
+                  'metres: set units = "m" in the [geometry] section')
+    elif diag > LARGE_DIAGONAL_MM:
+        _warn(f"{where}: the mesh is {diag:.4g} mm across, larger than any joint; it looks "
+              "like micrometres or another unit (lengths are read in mm, or in m with "
+              'units = "m")')
+    return diag
+
+
+def _max_edge_mm(surface: TriangleSurface) -> float:
+    if surface.n_triangles == 0:
+        return 0.0
+    v, t = surface.vertices_mm, surface.triangles
+    e = v[np.roll(t, -1, axis=1)] - v[t]
+    return float(np.sqrt((e * e).sum(axis=2)).max())
+
+
+def check_pair_distance(
+    mobile: TriangleSurface, fixed: TriangleSurface, max_spring_length_mm: float, *,
+    key: str | None = None,
+) -> float:
+    """Smallest vertex-to-vertex distance between the bodies (mm), checked against h_max.
+
+    No spring can be a candidate (SPEC 2: ray length h <= h_max) when the bodies are further
+    apart than 10 h_max + the longest triangle edge of either body (the edge term covers the
+    gap between vertex-to-vertex and surface-to-surface distance). Raises InputError then;
+    the distance it quotes is then taken over evenly spaced subsets of the vertices (an upper
+    estimate, enough to see a unit or frame mismatch). Returns the exact smallest distance
+    otherwise.
+    """
+    bound = 10.0 * float(max_spring_length_mm) + max(_max_edge_mm(mobile), _max_edge_mm(fixed))
+    vm, vf = mobile.vertices_mm, fixed.vertices_mm
+    # an upper estimate from evenly spaced subsets, then an exact search pruned by it
+    sub_f, sub_m = vf[:: max(1, len(vf) // 2000)], vm[:: max(1, len(vm) // 2000)]
+    estimate = float(cKDTree(sub_f).query(sub_m)[0].min())
+    limit = min(estimate, bound)
+    d, _ = cKDTree(vf).query(vm, distance_upper_bound=limit * (1 + 1e-9) + 1e-12)
+    dist = float(d.min())  # exact when finite; inf only when estimate > bound
+    if not np.isfinite(dist):
+        dist = estimate
+    if dist > bound:
+        files = " and ".join(x for x in (mobile.source, fixed.source) if x) or None
+        raise InputError(
+            f"bodies too far apart: no spring can be a candidate (closest vertices about "
+            f"{dist:.4g} mm apart, max_spring_length_mm = {max_spring_length_mm:g})",
+            file=files, key=key,
+            expected=f"surfaces within about {bound:.4g} mm of each other, in the same "
+            "coordinate frame and units",
+        )
+    return dist
+
+
+def prepare_surface(
+    path: str | Path, *, units: str = "mm", key: str | None = None, name: str = "",
+    merge_rel_tol: float = 1e-9,
+) -> TriangleSurface:
+    """Read a mesh file and clean it: the entry point for one scene mesh (SPEC 6).
+
+    read (:func:`read_surface`) -> unit check (:func:`check_units`) -> clean and orient
+    (:func:`clean_surface`). Open patches come back with consistent but not yet globally
+    signed normals: call :func:`orient_pair` (or use :func:`prepare_pair`).
+    """
+    s = read_surface(path, units=units, key=key, name=name)
+    check_units(s, units)
+    return clean_surface(s, key=key, merge_rel_tol=merge_rel_tol)
+
+
+def prepare_pair(
+    mobile_path: str | Path, fixed_path: str | Path, *, units: str = "mm",
+    max_spring_length_mm: float | None = None, mobile_key: str | None = "geometry.mobile",
+    fixed_key: str | None = "geometry.fixed",
+) -> tuple[TriangleSurface, TriangleSurface]:
+    """Read, clean and orient the mobile and fixed surfaces of a scene (SPEC 2 and 6).
+
+    Returns ``(mobile, fixed)`` with M's normals towards F and F's towards M. With
+    ``max_spring_length_mm`` the bodies are also checked to be close enough for springs.
+    """
+    mobile = prepare_surface(mobile_path, units=units, key=mobile_key, name="mobile")
+    fixed = prepare_surface(fixed_path, units=units, key=fixed_key, name="fixed")
+    mobile, fixed = orient_pair(mobile, fixed, mobile_key=mobile_key, fixed_key=fixed_key)
+    if max_spring_length_mm is not None:
+        check_pair_distance(mobile, fixed, max_spring_length_mm, key="geometry")
+    return mobile, fixed

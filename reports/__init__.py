@@ -1,0 +1,1 @@
+"""Figures, pressure-map renders and HTML reports."""

@@ -1,0 +1,62 @@
+"""Time-series figures from result directories (matplotlib, imported only here)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+from edem.errors import InputError
+
+DERIVED = {"disp_norm_mm": ("disp_x_mm", "disp_y_mm", "disp_z_mm")}
+
+
+def read_timeseries(result_dir: str | Path) -> dict[str, np.ndarray]:
+    """Columns of a result directory's timeseries.csv (SPEC 9) as float arrays."""
+    path = Path(result_dir) / "timeseries.csv"
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = list(csv.reader(f))
+    except FileNotFoundError:
+        raise InputError("no timeseries.csv here", file=path, expected="a result directory of edem run / edem fe") from None
+    header, data = rows[0], np.array(rows[1:], dtype=float).reshape(-1, len(rows[0]))
+    columns = {name: data[:, i] for i, name in enumerate(header)}
+    for name, parts in DERIVED.items():
+        if all(p in columns for p in parts):
+            columns[name] = np.sqrt(sum(columns[p] ** 2 for p in parts))
+    return columns
+
+
+def plot_timeseries(result_dirs: list[str | Path], column: str, out_png: str | Path, labels: list[str] | None = None) -> Path:
+    """One curve of ``column`` against time per result directory, on one figure (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.2), constrained_layout=True)
+    for i, directory in enumerate(result_dirs):
+        series = read_timeseries(directory)
+        if column not in series:
+            raise InputError(f"no column '{column}'", file=Path(directory) / "timeseries.csv", key="--column", expected="one of " + ", ".join(series))
+        label = labels[i] if labels and i < len(labels) else _default_label(Path(directory))
+        ax.plot(series["time_s"], series[column], label=label)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(column.replace("_", " "))
+    ax.grid(alpha=0.3)
+    ax.legend()
+    out = Path(out_png)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=150)
+    plt.close(fig)
+    return out
+
+
+def _default_label(directory: Path) -> str:
+    try:
+        summary = json.loads((directory / "summary.json").read_text(encoding="utf-8"))
+        return f"{summary['scene']} ({summary['method']})"
+    except (OSError, KeyError, ValueError):
+        return directory.name

@@ -1,0 +1,1 @@
+"""Verification campaigns, metrics and regression checks (SPEC 7-8)."""
