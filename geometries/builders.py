@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from edem.errors import InputError
-from geometries.surface import TriangleSurface
+from geometries.surface import TriangleSurface, midpoint_subdivision
 
 __all__ = [
     "BuiltGeometry",
@@ -636,18 +636,9 @@ def icosphere(subdivisions: int, radius: float = 1.0) -> tuple[np.ndarray, np.nd
     rot = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
     v = v @ rot.T
     for _ in range(subdivisions):
-        edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-        uniq, inv = np.unique(edges, axis=0, return_inverse=True)
-        mid = v[uniq[:, 0]] + v[uniq[:, 1]]
-        mid /= np.linalg.norm(mid, axis=1)[:, None]
-        m = inv.reshape(3, -1).T + len(v)
-        ab, bc, ca = m[:, 0], m[:, 1], m[:, 2]
-        fa, fb, fc = f[:, 0], f[:, 1], f[:, 2]
-        f = np.stack([
-            np.column_stack([fa, ab, ca]), np.column_stack([ab, fb, bc]),
-            np.column_stack([ca, bc, fc]), np.column_stack([ab, bc, ca]),
-        ], axis=1).reshape(-1, 3)
-        v = np.vstack([v, mid])
+        f, pairs = midpoint_subdivision(f, len(v))
+        mid = v[pairs[:, 0]] + v[pairs[:, 1]]
+        v = np.vstack([v, mid / np.linalg.norm(mid, axis=1)[:, None]])
     # outward orientation check (a convex polyhedron around the origin)
     cen = v[f].mean(axis=1)
     n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])

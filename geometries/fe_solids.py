@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from geometries.surface import TriangleSurface
+from geometries.surface import TriangleSurface, midpoint_subdivision
 
 __all__ = [
     "FESolid",
@@ -300,24 +300,15 @@ def _refine(vertices: np.ndarray, triangles: np.ndarray, vertex_fields: list[np.
     """Midpoint subdivision (1 -> 4), fields interpolated linearly; vector fields renormalised
     when they are unit normals (shape (n, 3))."""
     for _ in range(levels):
-        e = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
-                                    triangles[:, [2, 0]]]), axis=1)
-        uniq, inv = np.unique(e, axis=0, return_inverse=True)
-        m = inv.reshape(3, -1).T + len(vertices)
-        vertices = np.vstack([vertices, 0.5 * (vertices[uniq[:, 0]] + vertices[uniq[:, 1]])])
+        triangles, pairs = midpoint_subdivision(triangles, len(vertices))
+        vertices = np.vstack([vertices, 0.5 * (vertices[pairs[:, 0]] + vertices[pairs[:, 1]])])
         new_fields = []
         for f in vertex_fields:
-            mid = 0.5 * (f[uniq[:, 0]] + f[uniq[:, 1]])
+            mid = 0.5 * (f[pairs[:, 0]] + f[pairs[:, 1]])
             if f.ndim == 2:
                 mid /= np.linalg.norm(mid, axis=1)[:, None]
             new_fields.append(np.concatenate([f, mid]))
         vertex_fields = new_fields
-        t0, t1, t2 = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-        ab, bc, ca = m[:, 0], m[:, 1], m[:, 2]
-        triangles = np.stack([
-            np.column_stack([t0, ab, ca]), np.column_stack([ab, t1, bc]),
-            np.column_stack([ca, bc, t2]), np.column_stack([ab, bc, ca]),
-        ], axis=1).reshape(-1, 3)
     return vertices, triangles, vertex_fields
 
 

@@ -58,3 +58,22 @@ class TriangleSurface:
         ok = area > 0
         out[ok] = av[ok] / area[ok, None]
         return out
+
+
+def midpoint_subdivision(triangles: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """One 1 -> 4 midpoint subdivision of a triangulation, orientation kept.
+
+    Returns the new triangles and the (n_edges, 2) vertex pairs of the unique edges: the caller
+    appends one new vertex per edge, in that order, after the ``n_vertices`` existing ones (the
+    edge midpoint, projected or interpolated as the caller needs).
+    """
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    pairs, inverse = np.unique(edges, axis=0, return_inverse=True)
+    mid = inverse.reshape(3, -1).T + n_vertices
+    ab, bc, ca = mid[:, 0], mid[:, 1], mid[:, 2]
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    children = np.stack(
+        [np.column_stack([a, ab, ca]), np.column_stack([ab, b, bc]), np.column_stack([ca, bc, c]), np.column_stack([ab, bc, ca])],
+        axis=1,
+    )
+    return children.reshape(-1, 3), pairs

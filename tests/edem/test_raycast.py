@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 from edem.raycast import RayCaster, RayHits
+from geometries.builders import icosphere
 
 BACKENDS = ["embree", "numpy"]
 
 
-# -- small geometry helpers (numpy only; the real geometry builders live in geometries/) ---------
+# -- small geometry helpers (numpy only) ----------------------------------------------------------
 
 
 def grid_plane(
@@ -57,36 +58,6 @@ def merge(*meshes: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarra
         triangles.append(t + offset)
         offset += len(v)
     return np.concatenate(vertices), np.concatenate(triangles)
-
-
-def icosphere(subdivisions: int, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Icosahedron subdivided ``subdivisions`` times, vertices on the sphere, normals outward."""
-    g = (1.0 + 5.0**0.5) / 2.0
-    vertices = np.array(
-        [[-1, g, 0], [1, g, 0], [-1, -g, 0], [1, -g, 0], [0, -1, g], [0, 1, g],
-         [0, -1, -g], [0, 1, -g], [g, 0, -1], [g, 0, 1], [-g, 0, -1], [-g, 0, 1]],
-        dtype=float,
-    )
-    faces = np.array(
-        [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-         [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-         [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
-    )
-    vertices /= np.linalg.norm(vertices, axis=1)[:, None]
-    for _ in range(subdivisions):
-        edges = np.sort(np.r_[faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1)
-        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
-        mid = len(vertices) + inverse.reshape(3, -1).T  # midpoint of edges ab, bc, ca per face
-        points = vertices[unique[:, 0]] + vertices[unique[:, 1]]
-        vertices = np.r_[vertices, points / np.linalg.norm(points, axis=1)[:, None]]
-        a, b, c = faces.T
-        ab, bc, ca = mid.T
-        faces = np.r_[np.c_[a, ab, ca], np.c_[b, bc, ab], np.c_[c, ca, bc], np.c_[ab, bc, ca]]
-    # A sphere centred at 0: the outward test by position is legitimate here (test geometry only).
-    normals = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
-                       vertices[faces[:, 2]] - vertices[faces[:, 0]])
-    assert np.all(np.einsum("ij,ij->i", normals, vertices[faces].mean(axis=1)) > 0)
-    return vertices * radius, faces
 
 
 def unit(v: np.ndarray) -> np.ndarray:
