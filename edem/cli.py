@@ -29,6 +29,8 @@ def _run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     write_results(result, out)
+    for warning in list(scene.warnings) + result.warnings:
+        print(f"edem run: warning: {warning}", file=sys.stderr)
     last = result.steps[-1]
     print(
         f"{scene.name}: {method.upper()}, {len(result.steps)} time point(s), {result.n_springs} springs, "

@@ -255,3 +255,44 @@ def test_kinematics_rotates_the_fixed_body():
     x = scene.mobile.centroids_mm[:, 0]
     np.testing.assert_allclose(steps[0].spring_length_mm, h0, rtol=1e-12)
     np.testing.assert_allclose(steps[1].spring_length_mm, h0 + x * np.tan(angle), rtol=1e-10)
+
+
+def test_gap_law_closes_the_gap_before_carrying_load():
+    """Linear gap law, plates 0.5 mm further apart than the thickness: d = g0 + F t / (A E') (SPEC 3)."""
+    t, g0, force = 2.0, 0.5, 400.0
+    scene = make_scene(grid_plate(20, 20, 10), plane(lambda x, y: t + g0), [0, 0, force], law="gap", thickness_mm=t, max_spring_length_mm=2 * t + g0, fixed_dofs=IN_PLANE)
+    step = run(scene, "dem").steps[0]
+    assert step.displacement_mm[2] == pytest.approx(g0 + force * t / (400.0 * E_CONF), rel=1e-10)
+    np.testing.assert_allclose(step.pressure_mpa, force / 400.0, rtol=1e-10)
+
+
+def test_gap_log_law_matches_blankevoort_and_edem_does_not_depend_on_steps():
+    """gap-log: F = -A E' ln(1 - d/t), so d = t (1 - exp(-F / (A E'))); a total law, hence EDEM's
+    final state is the same for 1 or 20 increments (SPEC 3)."""
+    t, area = 2.0, 400.0
+    force = 0.8 * E_CONF * area
+    exact = t * (1.0 - np.exp(-force / (E_CONF * area)))
+    common = dict(law="gap-log", thickness_mm=t, max_spring_length_mm=2 * t, fixed_dofs=IN_PLANE)
+    mobile, fixed = grid_plate(20, 20, 10), plane(lambda x, y: t)
+    dem = run(make_scene(mobile, fixed, [0, 0, force], **common), "dem").steps[0]
+    assert dem.displacement_mm[2] == pytest.approx(exact, rel=1e-9)
+    for n in (1, 20):
+        edem = run(make_scene(mobile, fixed, ramp(force, n), **common), "edem").steps[-1]
+        assert edem.displacement_mm[2] == pytest.approx(exact, rel=1e-9)
+
+
+def test_gap_law_contact_area_grows_with_load_on_a_tilted_plane():
+    """Gap law against a plane tilted by s: only the strip where h(x) - d < t is in contact, so the
+    contact edge sits at x_c = (t + d - h0) / s and moves out as the load grows (SPEC 3)."""
+    t, h0, s = 2.0, 2.0, 0.05  # touching at x = 0, gap opening towards +x
+    fixed_dofs = ("tx", "ty", "rx", "ry", "rz")
+    mobile = grid_plate(20, 20, 80)
+    areas = []
+    for force in (50.0, 200.0, 800.0):
+        scene = make_scene(mobile, plane(lambda x, y: h0 + s * x), [0, 0, force], law="gap", thickness_mm=t, max_spring_length_mm=2 * t, fixed_dofs=fixed_dofs)
+        step = run(scene, "dem").steps[0]
+        d = step.displacement_mm[2]
+        x = mobile.centroids_mm[:, 0]
+        np.testing.assert_array_equal(step.in_contact, h0 + s * x - d < t)
+        areas.append(step.contact_area_mm2)
+    assert areas[0] < areas[1] < areas[2]
