@@ -205,6 +205,12 @@ def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: 
     """
     scale = np.array([1.0, 1.0, 1.0, length_scale_mm, length_scale_mm, length_scale_mm])[free]
     k = stiffness[np.ix_(free, free)] / np.outer(scale, scale)
+    try:  # the common, regular case: Cholesky pivots all well above round-off, no eigensolve
+        pivots = np.diagonal(np.linalg.cholesky(k)) ** 2
+        if pivots.min() > 1e3 * rtol * np.abs(k).max():
+            return []
+    except np.linalg.LinAlgError:
+        pass
     values, vectors = np.linalg.eigh(k)
     top = float(np.abs(values).max(initial=0.0))
     null = vectors[:, values <= rtol * top] if top > 0 else np.eye(k.shape[0])
@@ -308,9 +314,10 @@ def solve_unilateral(
         approach, rate = directions @ u, directions @ step
         room = law.max_approach_mm() - approach
         alpha = min(1.0, float(np.min(0.99 * room[rate > 0] / rate[rate > 0], initial=np.inf)))
-        slope = float(gradient(u, s, s > 0) @ step)
+        slope = float(gradient(u, s, s > 0) @ step) if iteration > 1 else 0.0
         if slope < 0.0:
-            # Armijo on Pi (the first, all-active step of DEM is taken whole: it need not descend).
+            # Armijo on Pi. The first, all-active step (DEM's) is taken whole: with non-negative
+            # offsets it descends anyway (Pi <= the all-active quadratic it minimises).
             e0 = energy(u, s > 0)
             while alpha > 1e-12 and energy(u + alpha * step, s > 0) > e0 + 1e-4 * alpha * slope:
                 alpha *= 0.5

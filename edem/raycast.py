@@ -297,7 +297,7 @@ class RayCaster:
         if rotation is not None or translation is not None:
             rot = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
             shift = np.zeros(3) if translation is None else np.asarray(translation, float)
-            if rot.shape != (3, 3) or not np.allclose(rot.T @ rot, np.eye(3), atol=1e-9, rtol=0):
+            if rot.shape != (3, 3) or np.abs(rot.T @ rot - np.eye(3)).max() > 1e-9:
                 raise ValueError("rotation must be a 3x3 orthogonal matrix")
             if np.linalg.det(rot) < 0:
                 raise ValueError("rotation must be proper (det = +1), not a reflection")
@@ -364,7 +364,10 @@ class RayCaster:
         for _ in range(_MAX_ROUNDS):
             if not active.size:
                 break
-            o, d, s0 = origins[active], dirs[active], seg_start[active]
+            if active.size == n:  # first round: every ray, no gather needed
+                o, d, s0 = origins, dirs, seg_start
+            else:
+                o, d, s0 = origins[active], dirs[active], seg_start[active]
             # Traverse past the window end (up to the far side of F): a ray whose nearest hit
             # lies beyond the window is then a plain 'no spring', not a miss worth a repair probe.
             prim = self._embree_run(o + s0[:, None] * d, d, (h + self._reach_mm) - s0)
@@ -388,6 +391,9 @@ class RayCaster:
             # Before resuming past a skipped hit, look at the triangles around it: where F folds
             # (a ridge between a front- and a back-facing triangle) Embree may have returned the
             # back-facing one of a tie, and the valid hit sits at the same point.
+            if not skip.any():
+                active = idx[:0]
+                break
             sk, t_sk = idx[skip], t[skip]
             resume = np.maximum(t_sk, s0[skip]) + step
             tie_t, tie_tri = self._star_hits(o[skip], d[skip], h, k[skip], t_sk - step, resume)
