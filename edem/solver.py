@@ -22,7 +22,7 @@ from edem.mechanics import (
 )
 from edem.raycast import RayCaster
 from edem.scene import Scene, Viscoelastic
-from edem.springs import Placement, contact_law, ligament_elements, shear_terms, spring_geometry
+from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, shear_terms, spring_geometry
 from edem.viscoelastic import check_rk2_stability, integrator_weights
 
 
@@ -84,6 +84,15 @@ def fixed_placement(scene: Scene, step: int) -> Placement:
         return Placement.identity()
     rotation = rotation_matrix(kin.axis_direction * kin.angle_rad[step])
     return Placement(rotation, np.zeros(3), kin.axis_point_mm)
+
+
+def compression_ratio(geometry: SpringGeometry, cartilage: Cartilage, approach_mm: np.ndarray) -> np.ndarray:
+    """Compression over undeformed length of the candidate springs after an approach (strain)."""
+    length = geometry.spring_length_mm[geometry.candidate]
+    if cartilage.law == "threshold":
+        return approach_mm / length
+    t = float(cartilage.thickness_mm)
+    return (t - length + approach_mm) / t
 
 
 def applied_loads(scene: Scene) -> np.ndarray:
@@ -170,6 +179,12 @@ def run(
         except SolverError as exc:
             raise SolverError(f"time point {k} (t = {t:g} s, {n_c} candidate springs): {exc}") from None
         total_force = np.where(solution.active, solution.element_force_n, 0.0)
+        overstrained = int((solution.active[:n_c] & (compression_ratio(geometry, cartilage, directions[:n_c] @ solution.displacement) >= 1.0)).sum())
+        if overstrained:
+            warnings.append(
+                f"time point {k} (t = {t:g} s): {overstrained} springs compressed past their length "
+                "(strain >= 100 %): the spring bed is outside its range" + (", use more time points" if method == "edem" else "")
+            )
         if viscous is None:
             u, elastic_force = solution.displacement, total_force
         else:
