@@ -1,0 +1,52 @@
+"""FEniCSx (dolfinx) reference models: linear-elastic frictionless contact with force control.
+
+Importing this package does not import dolfinx; the solvers import the FE stack on first use.
+
+* :mod:`fem_reference.problem`: :class:`FEContactProblem` (mesh source, material, element,
+  obstacle, load, free translations, rollers, Nitsche and solver options) and
+  :class:`FEContactResult`; obstacles :class:`RigidPlane`, :class:`RigidCylinder`,
+  :class:`RigidSurface` (triangulated; gap along the nearest triangle's normal).
+* :mod:`fem_reference.contact`: :func:`solve_contact` (Nitsche, force control by a bordered
+  semi-smooth Newton in PETSc SNES; P1, P2, Taylor-Hood) and :func:`solve_contact_vi`
+  (variational-inequality cross-check, P1, axis-aligned plane).
+* :mod:`fem_reference.closed_forms`: Hertz line contact, confined compression, observed orders.
+* :mod:`fem_reference.meshes`: small tagged verification meshes (slab, Hertz block, cylinder
+  layer). Facet tags: 1 bonded, 2 contact, 3 free, 4/5/6 zero x/y/z displacement.
+
+Units: mm, N, MPa.
+"""
+
+from .problem import (
+    FEContactProblem,
+    FEContactResult,
+    FEConvergenceError,
+    FEMesh,
+    NitscheParameters,
+    RigidCylinder,
+    RigidPlane,
+    RigidSurface,
+    Roller,
+    SolverOptions,
+)
+
+
+def solve_contact(*args, **kwargs):  # noqa: D103 - thin lazy wrapper
+    from .contact import solve_contact as _solve
+
+    return _solve(*args, **kwargs)
+
+
+def solve_contact_vi(*args, **kwargs):  # noqa: D103 - thin lazy wrapper
+    from .contact import solve_contact_vi as _solve
+
+    return _solve(*args, **kwargs)
+
+
+solve_contact.__doc__ = "Nitsche contact, force control: see fem_reference.contact.solve_contact."
+solve_contact_vi.__doc__ = "VI cross-check; see fem_reference.contact.solve_contact_vi."
+
+__all__ = [
+    "FEContactProblem", "FEContactResult", "FEConvergenceError", "FEMesh", "NitscheParameters",
+    "RigidCylinder", "RigidPlane", "RigidSurface", "Roller", "SolverOptions", "solve_contact",
+    "solve_contact_vi",
+]
