@@ -108,6 +108,43 @@ def _plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _compare(args: argparse.Namespace) -> int:
+    """SPEC 8 metrics of result directory A against the reference B; writes metrics.json."""
+    from verification.metrics import compare_result_dirs, format_metrics_table
+    from verification.runner import write_json
+
+    comparison = compare_result_dirs(args.a_dir, args.b_dir)
+    out = Path(args.out) if args.out else Path("results") / "compare" / f"{Path(args.a_dir).name}-vs-{Path(args.b_dir).name}"
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "metrics.json", comparison)
+    print(format_metrics_table(comparison))
+    if args.maps:
+        from reports.maps import render_pressure_maps
+
+        print(f"pressure maps: {render_pressure_maps(args.a_dir, args.b_dir, out / 'pressure_maps.png')}")
+    print(f"metrics: {out / 'metrics.json'}")
+    return 0
+
+
+def _verify(args: argparse.Namespace) -> int:
+    """Run a verification campaign (or list them); exit 1 when a case fails its tolerance."""
+    from verification.campaigns import describe_campaigns, get_campaign
+
+    if args.list:
+        print(describe_campaigns(), end="")
+        return 0
+    if not args.campaign:
+        raise InputError("no campaign given", key="CAMPAIGN", expected="a campaign name (edem verify --list)")
+    from verification.runner import format_summary, run_campaign
+
+    campaign = get_campaign(args.campaign)
+    out = Path(args.out) if args.out else Path("results") / "verify" / campaign.name
+    summary = run_campaign(campaign, out, jobs=args.jobs, scheduler=args.scheduler)
+    print(format_summary(summary))
+    print(f"report: {summary['report']}")
+    return summary["exit_status"]
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="edem", description="Discrete-element (DEM/EDEM) joint contact solver.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -129,6 +166,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--label", action="append", help="legend label per directory (repeat)")
     p.add_argument("--out", required=True, help="PNG file to write")
     p.set_defaults(func=_plot)
+    p = sub.add_parser("compare", help="SPEC 8 metrics between two result directories (B is the reference)")
+    p.add_argument("a_dir", metavar="A_DIR", help="result directory of the method under test (edem run)")
+    p.add_argument("b_dir", metavar="B_DIR", help="result directory of the reference (edem fe, or another run)")
+    p.add_argument("--out", help="where metrics.json goes (default results/compare/<A>-vs-<B>)")
+    p.add_argument("--maps", action="store_true", help="also render pressure maps of A, B and A - B (pyvista, off-screen)")
+    p.set_defaults(func=_compare)
+    p = sub.add_parser("verify", help="run a verification campaign, ending in an HTML report")
+    p.add_argument("campaign", nargs="?", metavar="CAMPAIGN", help="a campaign name (see --list)")
+    p.add_argument("--list", action="store_true", help="list the campaigns and their cases")
+    p.add_argument("--out", help="output directory (default results/verify/<campaign>); finished cases are cached there")
+    p.add_argument("--jobs", type=int, help="worker processes (default: the CPU count; 1 runs in this process)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on a Dask distributed cluster, e.g. tcp://host:8786")
+    p.set_defaults(func=_verify)
     return parser
 
 

@@ -1,0 +1,307 @@
+"""One HTML page per campaign (SPEC 1, 9): cases, verdicts, figures, scenes, versions, run times.
+
+:func:`write_campaign_report` takes the campaign summary of :func:`verification.runner.run_campaign`
+(the content of the campaign's metrics.json) and writes ``report.html`` next to it, with its
+figures as PNG files under ``figures/`` and relative links to every case's metrics.json, result
+directories and ``pressure.pvd`` (open those in ParaView). Figures are redrawn only when their
+inputs changed (``figures/index.json``). matplotlib and pyvista are imported only here.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import html
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+STATUS_COLOURS = {"passed": "#1b7f3a", "failed": "#b3261e", "error": "#b3261e", "unavailable": "#8a6d00"}
+
+
+def _value(v: Any) -> float:
+    return float(v) if v is not None else math.nan
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "–"
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return html.escape(str(v))
+    if math.isnan(x):
+        return "nan"
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return f"{x:.4g}"
+
+
+def _matplotlib():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+# ---------------------------------------------------------------------------------------------
+# Figures
+
+
+def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
+    """Metrics of a series of cases against one of their parameters, one panel per metric."""
+    plt = _matplotlib()
+    names = [n for n in spec["cases"] if n in rows]
+    xs = np.array([_value(rows[n]["params"].get(spec["x"])) for n in names])
+    panels = list(spec["y"])
+    logy = spec["logy"] if isinstance(spec["logy"], (list, tuple)) else [spec["logy"]] * len(panels)
+    exact = spec.get("exact") or {}
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 3.6), constrained_layout=True, squeeze=False)
+    for ax, metric, log in zip(axes[0], panels, logy):
+        ys = np.array([_value(rows[n]["metrics"].get(metric)) for n in names])
+        ok = np.isfinite(xs) & np.isfinite(ys) & ((ys > 0) if log else True)
+        ax.plot(xs[ok], ys[ok], "o-", label=metric.replace("_", " "))
+        tols = [(x, rows[n]["tolerance"].get(metric)) for x, n in zip(xs, names)]
+        tols = [(x, t) for x, t in tols if t is not None]
+        if tols:
+            ax.plot([x for x, _ in tols], [t for _, t in tols], "k_", markersize=14, mew=2, label="tolerance")
+        if metric in exact:
+            ax.axhline(exact[metric], color="grey", ls=":", label=f"exact {exact[metric]:g}")
+        slope = spec.get("reference_slope")
+        if slope is not None and ok.sum() >= 1:
+            x0, y0 = xs[ok][0], ys[ok][0]
+            xr = np.array([xs[ok].min(), xs[ok].max()])
+            ax.plot(xr, y0 * (xr / x0) ** slope, ":", color="grey", label=f"slope {slope:g}")
+        if spec["logx"]:
+            ax.set_xscale("log")
+        if log:
+            ax.set_yscale("log")
+        ax.set_xlabel(spec["x"].replace("_", " "))
+        ax.set_ylabel(metric.replace("_", " "))
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    fig.suptitle(spec["title"], fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _timeseries_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], out_dir: Path, path: Path) -> None:
+    from reports.plots import plot_timeseries
+
+    dirs, labels = [], []
+    for name in spec["cases"]:
+        row = rows.get(name)
+        if row is None:
+            continue
+        for rel, side in zip(row["result_dirs"], [s for s in row["sides"] if s.get("result_dir")]):
+            dirs.append(out_dir / rel)
+            labels.append(f"{name}: {side['side']}")
+    if not dirs:
+        raise ValueError("no result directory to plot")
+    plot_timeseries(dirs, spec["column"], path, labels)
+
+
+def _wall_time_figure(rows: list[dict[str, Any]], path: Path) -> None:
+    plt = _matplotlib()
+    names = [r["name"] for r in rows]
+    times = [max(r["wall_time_s"], 1e-4) for r in rows]
+    colours = [STATUS_COLOURS.get(r["status"], "grey") for r in rows]
+    fig, ax = plt.subplots(figsize=(7, 0.9 + 0.18 * len(rows)), constrained_layout=True)
+    ax.barh(np.arange(len(rows)), times, color=colours)
+    ax.set_yticks(np.arange(len(rows)), names, fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xscale("log")
+    ax.set_xlabel("wall time of the case (s; green passed, red failed)")
+    ax.grid(alpha=0.3, axis="x", which="both")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _figure_key(*parts: Any) -> str:
+    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]]:
+    """Draw (or reuse) every figure; returns [{"file", "title", "error"}] in report order."""
+    fig_dir = out_dir / "figures"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    index_path = fig_dir / "index.json"
+    try:
+        index = json.loads(index_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        index = {}
+    rows = {r["name"]: r for r in summary["cases"]}
+    keys = {r["name"]: (r["metrics"], r["status"], r["wall_time_s"] if not r["cached"] else None) for r in summary["cases"]}
+    jobs = []
+    for spec in summary.get("figures", []):
+        involved = [keys.get(n) for n in spec["cases"]]
+        jobs.append((spec["name"], spec["title"], spec, involved))
+    for row in summary["cases"]:
+        if row.get("maps") and len(row["result_dirs"]) == 2:
+            jobs.append((f"{row['name']}-maps", f"{row['name']}: pressure maps, {' vs '.join(s['side'] for s in row['sides'])}", {"kind": "maps", "case": row["name"]}, [keys[row["name"]]]))
+    jobs.append(("wall-times", "Wall time per case", {"kind": "wall-times"}, [(r["name"], r["wall_time_s"], r["status"]) for r in summary["cases"]]))
+
+    figures = []
+    for name, title, spec, inputs in jobs:
+        file = f"{name}.png"
+        path = fig_dir / file
+        key = _figure_key(spec, inputs)
+        error = ""
+        if not (path.is_file() and index.get(name) == key):
+            try:
+                if spec["kind"] == "sweep":
+                    _sweep_figure(spec, rows, path)
+                elif spec["kind"] == "timeseries":
+                    _timeseries_figure(spec, rows, out_dir, path)
+                elif spec["kind"] == "maps":
+                    from reports.maps import render_pressure_maps
+
+                    row = rows[spec["case"]]
+                    render_pressure_maps(out_dir / row["result_dirs"][0], out_dir / row["result_dirs"][1], path, labels=tuple(s["side"] for s in row["sides"][:2]))
+                elif spec["kind"] == "wall-times":
+                    _wall_time_figure(summary["cases"], path)
+                else:
+                    raise ValueError(f"unknown figure kind {spec['kind']!r}")
+                index[name] = key
+            except Exception as exc:  # a figure must not sink the report: say what went wrong
+                error = f"{type(exc).__name__}: {exc}"
+                index.pop(name, None)
+                path.unlink(missing_ok=True)
+        figures.append({"file": f"figures/{file}", "title": title, "error": error})
+    index_path.write_text(json.dumps(index, indent=1) + "\n", encoding="utf-8")
+    return figures
+
+
+# ---------------------------------------------------------------------------------------------
+# The page
+
+CSS = """
+body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1250px; color: #222; }
+h1 { font-size: 1.5em; } h2 { font-size: 1.2em; margin-top: 1.6em; border-bottom: 1px solid #ccc; }
+table { border-collapse: collapse; font-size: 0.85em; }
+td, th { border: 1px solid #ddd; padding: 3px 6px; vertical-align: top; text-align: left; }
+th { background: #f3f3f3; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; }
+.pass { color: #1b7f3a; } .fail { color: #b3261e; font-weight: bold; } .na { color: #777; }
+.status { font-weight: bold; } figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #eee; }
+code { font-size: 0.95em; } .small { font-size: 0.8em; color: #555; }
+td.metrics { min-width: 24em; font-size: 0.95em; } td.links { font-size: 0.9em; }
+"""
+
+
+def _status_cell(status: str) -> str:
+    colour = STATUS_COLOURS.get(status, "#444")
+    return f'<td class="status" style="color:{colour}">{html.escape(status)}</td>'
+
+
+def _metrics_cell(row: dict[str, Any]) -> str:
+    parts = []
+    for metric, value in row["metrics"].items():
+        verdict = row["verdicts"].get(metric)
+        if verdict is None:
+            parts.append(f'<span class="na">{html.escape(metric)} = {_fmt(value)}</span>')
+        else:
+            cls = {"pass": "pass", "fail": "fail"}.get(verdict["verdict"], "na")
+            mark = {"pass": "&le;", "fail": "&gt;"}.get(verdict["verdict"], "vs")
+            parts.append(f'<span class="{cls}">{html.escape(metric)} = {_fmt(value)} {mark} {_fmt(verdict["tolerance"])}</span>')
+    for metric, verdict in row["verdicts"].items():
+        if metric not in row["metrics"]:
+            cls = "na" if verdict["verdict"] == "n/a" else "fail"
+            parts.append(f'<span class="{cls}">{html.escape(metric)}: {html.escape(verdict["verdict"])} (tolerance {_fmt(verdict["tolerance"])})</span>')
+    return '<td class="metrics">' + "<br>".join(parts) + "</td>"
+
+
+def _links_cell(row: dict[str, Any]) -> str:
+    links = [f'<a href="{html.escape(row["case_dir"])}/metrics.json">metrics.json</a>']
+    for side in row["sides"]:
+        if side.get("result_dir"):
+            rel = f"{row['case_dir']}/{side['result_dir']}"
+            links.append(
+                f'{html.escape(side["side"])}: <a href="{html.escape(rel)}/">{html.escape(side["result_dir"])}</a> '
+                f'(<a href="{html.escape(rel)}/pressure.pvd">pressure.pvd</a>, <a href="{html.escape(rel)}/summary.json">summary</a>)'
+            )
+        elif side["status"] != "ok":
+            first = side["message"].splitlines()[0] if side["message"] else ""
+            links.append(f'{html.escape(side["side"])}: <i>{html.escape(side["status"])}</i> {html.escape(first)}')
+    return '<td class="links">' + "<br>".join(links) + "</td>"
+
+
+def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
+    """Write ``out_dir/report.html`` (and its figures) for a campaign summary; returns its path."""
+    out = Path(out_dir)
+    figures = _make_figures(summary, out)
+    counts, outcomes = summary["counts"], summary["outcomes"]
+    h = html.escape
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>edem verify {h(summary['campaign'])}</title>",
+        f"<style>{CSS}</style></head><body>",
+        f"<h1>Campaign <code>{h(summary['campaign'])}</code></h1>",
+        f"<p>{h(summary['description'])}</p>",
+        "<p>"
+        + f"{len(summary['cases'])} cases: <b>{counts['passed']} passed</b>, {counts['failed']} failed, {counts['error']} crashed, "
+        + f"{counts['unavailable']} unavailable; outcomes {outcomes['converges']} converge, {outcomes['refused']} refused. "
+        + f"Finished {h(summary['finished_at'])}, wall time {summary['wall_time_s']:.1f} s "
+        + f"({summary['computed']} cases run, {summary['cached']} from the cache; the cases' own wall times add up to {summary['cases_wall_time_s']:.1f} s); "
+        + (f"Dask scheduler {h(str(summary['scheduler']))}." if summary.get("scheduler") else f"{summary.get('jobs')} worker process(es).")
+        + ' Campaign data: <a href="metrics.json">metrics.json</a>.</p>',
+        "<h2>Cases</h2>",
+        "<table><tr><th>case</th><th>sides (a vs reference b)</th><th>status</th><th>outcome (declared)</th>"
+        "<th>metrics (value vs tolerance)</th><th>wall time (s)</th><th>results</th></tr>",
+    ]
+    for row in summary["cases"]:
+        declared = f" ({h(row['expected_outcome'])})" if row.get("expected_outcome") else ""
+        side_times = ", ".join(f"{h(s['side'])} {s['wall_time_s']:.3g}" for s in row["sides"])
+        parts.append(
+            "<tr>"
+            f"<td><b>{h(row['name'])}</b><br><span class=\"small\">{h(row['description'])}</span></td>"
+            f"<td>{h(' vs '.join(s['side'] for s in row['sides']))}</td>"
+            + _status_cell(row["status"])
+            + f"<td>{h(row['outcome'])}{declared}</td>"
+            + _metrics_cell(row)
+            + f"<td class=\"num\">{row['wall_time_s']:.3g}{' (cached)' if row['cached'] else ''}<br><span class=\"small\">{side_times}</span></td>"
+            + _links_cell(row)
+            + "</tr>"
+        )
+    parts.append("</table>")
+
+    parts.append("<h2>Figures</h2>")
+    for fig in figures:
+        if fig["error"]:
+            parts.append(f"<p><b>{h(fig['title'])}</b>: not drawn ({h(fig['error'])})</p>")
+        else:
+            parts.append(f'<figure><img src="{h(fig["file"])}" alt="{h(fig["title"])}"><figcaption>{h(fig["title"])}</figcaption></figure>')
+
+    parts.append("<h2>Scenes</h2><table><tr><th>scene</th><th>description</th><th>cases (overrides)</th></tr>")
+    scenes: dict[str, list[dict[str, Any]]] = {}
+    for row in summary["cases"]:
+        scenes.setdefault(row["scene"], []).append(row)
+    for scene, rows in scenes.items():
+        uses = "<br>".join(
+            f"{h(r['name'])}" + (f": <code>{h(_overrides_text(r['overrides']))}</code>" if r["overrides"] else "") for r in rows
+        )
+        parts.append(f"<tr><td><code>{h(scene)}</code></td><td>{h(rows[0]['scene_description'])}</td><td class=\"small\">{uses}</td></tr>")
+    parts.append("</table>")
+
+    parts.append("<h2>Software</h2><table>")
+    for name, version in summary["versions"].items():
+        parts.append(f"<tr><th>{h(name)}</th><td>{h(str(version))}</td></tr>")
+    parts.append("</table></body></html>")
+    path = out / "report.html"
+    path.write_text("\n".join(parts) + "\n", encoding="utf-8")
+    return path
+
+
+def _overrides_text(overrides: dict[str, Any]) -> str:
+    text = []
+    for key, value in overrides.items():
+        shown = json.dumps(value)
+        if len(shown) > 80:
+            shown = shown[:77] + "..."
+        text.append(f"{key}={shown}")
+    return "; ".join(text)

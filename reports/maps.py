@@ -1,0 +1,156 @@
+"""Pressure maps of two result directories side by side (pyvista off-screen, imported only here).
+
+Three panels: side a (EDEM/DEM), side b (the FE reference, or another run) and their difference
+a - b on a's surface (b at a's spring centroids, paired as in the SPEC 8 L2 metric). a and b
+share one colour scale [0, p_max]; the difference uses the same span, [-p_max, p_max], on a
+diverging map, so colours compare across the three panels. The contact outline (edges between
+triangles in and out of contact) is drawn on each panel.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def contact_outline_edges(triangles: np.ndarray, in_contact: np.ndarray) -> np.ndarray:
+    """(n, 2) vertex pairs of the edges bounding the contact region of a triangulated surface.
+
+    An edge is on the outline when exactly one of the triangles sharing it is in contact: the
+    edges between contact and no contact, and the surface's boundary edges of contact triangles.
+    """
+    tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    contact = np.asarray(in_contact, dtype=bool).reshape(-1)
+    edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    owner_in_contact = np.tile(contact, 3)
+    unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+    count = np.bincount(inverse.reshape(-1), weights=owner_in_contact.astype(float), minlength=len(unique))
+    return unique[count == 1]
+
+
+def _polydata(frame, cell_scalars: dict[str, np.ndarray] | None = None, point_scalars: dict[str, np.ndarray] | None = None):
+    import pyvista as pv
+
+    tris = frame.triangles
+    faces = np.hstack([np.full((len(tris), 1), 3, dtype=np.int64), tris]).ravel()
+    mesh = pv.PolyData(frame.points_mm, faces)
+    for name, values in (cell_scalars or {}).items():
+        mesh.cell_data[name] = values
+    for name, values in (point_scalars or {}).items():
+        mesh.point_data[name] = values
+    return mesh
+
+
+def _outline(frame, contact: np.ndarray, towards_viewer: np.ndarray):
+    """The contact outline as lines, lifted slightly towards the viewer so the surface does not hide it."""
+    import pyvista as pv
+
+    edges = contact_outline_edges(frame.triangles, contact)
+    if edges.size == 0:
+        return None
+    lines = np.hstack([np.full((len(edges), 1), 2, dtype=np.int64), edges]).ravel()
+    size = float(np.linalg.norm(np.ptp(frame.points_mm, axis=0)))
+    return pv.PolyData(frame.points_mm + 2e-3 * size * towards_viewer, lines=lines)
+
+
+def _contact(frame, pressure_cells: np.ndarray) -> np.ndarray:
+    if "in_contact" in frame.cell_data:
+        return frame.cell_data["in_contact"] > 0
+    return pressure_cells > 0
+
+
+def render_pressure_maps(
+    a_dir: str | Path,
+    b_dir: str | Path,
+    out_png: str | Path,
+    *,
+    time_index: int = -1,
+    labels: tuple[str, str] | None = None,
+    window_size: tuple[int, int] = (1500, 520),
+) -> Path:
+    """PNG of a's pressure, b's pressure and a - b at one time point (default: the last one).
+
+    When both directories have the same time points, ``time_index`` picks the same one in both;
+    otherwise each directory's last time point is drawn. b's nodal pressure (FE point data) is
+    drawn interpolated, cell pressure piecewise constant. The view looks at a's contact region
+    along its mean normal.
+    """
+    import pyvista as pv
+
+    from verification.metrics import pressure_at_cells, project_onto_surface, same_mesh
+    from verification.resultdirs import read_result_dir
+
+    a, b = read_result_dir(a_dir), read_result_dir(b_dir)
+    same = a.time_s.shape == b.time_s.shape and np.allclose(a.time_s, b.time_s)
+    ka = time_index if same else -1
+    kb = time_index if same else -1
+    frame_a, frame_b = a.frame(ka), b.frame(kb)
+    label_a, label_b = labels or (str(a.summary.get("method", "a")), str(b.summary.get("method", "b")))
+    if label_a == label_b:  # scalar bars are told apart by their titles
+        label_a, label_b = f"{label_a} (a)", f"{label_b} (b)"
+
+    p_a = pressure_at_cells(frame_a)
+    b_nodal = "pressure_mpa" in frame_b.point_data
+    if not b_nodal and same_mesh(frame_a, frame_b):
+        p_b_at_a = frame_b.cell_data["pressure_mpa"]  # the same springs (as in the L2 metric)
+    else:
+        proj = project_onto_surface(frame_b.points_mm, frame_b.triangles, frame_a.centroids_mm)
+        if b_nodal:
+            p_b_at_a = np.einsum("ij,ij->i", proj.barycentric, frame_b.point_data["pressure_mpa"][frame_b.triangles[proj.triangle]])
+        else:
+            p_b_at_a = frame_b.cell_data["pressure_mpa"][proj.triangle]
+    p_b_cells = pressure_at_cells(frame_b)
+    p_max = float(max(np.max(p_a, initial=0.0), np.max(p_b_cells, initial=0.0), 1e-12))
+    if b_nodal:
+        p_max = max(p_max, float(np.max(frame_b.point_data["pressure_mpa"], initial=0.0)))
+
+    contact_a = _contact(frame_a, p_a)
+    contact_b = _contact(frame_b, p_b_cells)
+    areas = frame_a.areas_mm2
+    normals = np.cross(
+        frame_a.points_mm[frame_a.triangles[:, 1]] - frame_a.points_mm[frame_a.triangles[:, 0]],
+        frame_a.points_mm[frame_a.triangles[:, 2]] - frame_a.points_mm[frame_a.triangles[:, 0]],
+    )
+    region = contact_a if contact_a.any() else areas > 0
+    view = normals[region].sum(axis=0)
+    view = view / np.linalg.norm(view) if np.linalg.norm(view) > 0 else np.array([0.0, 0.0, 1.0])
+    up = np.eye(3)[int(np.argmin(np.abs(view)))]
+    up = up - (up @ view) * view
+
+    from vtkmodules.vtkCommonCore import vtkLogger
+
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)  # not the "no X server" notice of off-screen VTK
+    pv.OFF_SCREEN = True
+    plotter = pv.Plotter(shape=(1, 3), off_screen=True, window_size=list(window_size), border=False)
+    plotter.set_background("white")
+    bar = {"color": "black", "vertical": False, "position_x": 0.15, "position_y": 0.04, "width": 0.7, "height": 0.08, "fmt": "%.3g"}
+    panels = [
+        (frame_a, {"pressure_mpa": p_a}, None, "pressure_mpa", (0.0, p_max), "viridis", f"{label_a}: pressure (MPa)", contact_a),
+        (
+            frame_b,
+            None if b_nodal else {"pressure_mpa": p_b_cells},
+            {"pressure_mpa": frame_b.point_data["pressure_mpa"]} if b_nodal else None,
+            "pressure_mpa",
+            (0.0, p_max),
+            "viridis",
+            f"{label_b}: pressure (MPa)",
+            contact_b,
+        ),
+        (frame_a, {"difference_mpa": p_a - p_b_at_a}, None, "difference_mpa", (-p_max, p_max), "RdBu_r", f"{label_a} - {label_b} (MPa)", contact_a),
+    ]
+    for column, (frame, cells, points, scalars, clim, cmap, title, contact) in enumerate(panels):
+        plotter.subplot(0, column)
+        mesh = _polydata(frame, cells, points)
+        plotter.add_mesh(mesh, scalars=scalars, clim=clim, cmap=cmap, preference="point" if points else "cell", scalar_bar_args={**bar, "title": title})
+        outline = _outline(frame, contact, view)
+        if outline is not None:
+            plotter.add_mesh(outline, color="black", line_width=2)
+        plotter.view_vector(view, viewup=up)
+        plotter.reset_camera()
+    plotter.link_views()
+    out = Path(out_png)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    plotter.screenshot(str(out))
+    plotter.close()
+    return out

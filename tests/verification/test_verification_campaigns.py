@@ -1,0 +1,91 @@
+"""Campaign definitions (data) and the campaigns themselves: every case ends in its declared
+outcome / within its tolerance; `edem verify --list` shows one line per case."""
+
+from __future__ import annotations
+
+import pytest
+
+from edem.cli import main
+from edem.errors import InputError
+from verification.campaigns import METRICS, campaigns, describe_campaigns, get_campaign, validate_campaign
+from verification.runner import run_campaign
+from verification.sides import side_names
+
+
+def test_every_campaign_is_valid_data():
+    for campaign in campaigns().values():
+        validate_campaign(campaign)
+        for case in campaign.cases:
+            assert case.description and "\n" not in case.description
+            assert set(case.tolerance) <= set(case.metrics) <= set(METRICS)
+            assert all(side in side_names() for side in case.sides)
+
+
+def test_stability_cases_declare_outcomes_and_cover_the_extremes():
+    stability = get_campaign("stability")
+    assert all(case.expect is not None for case in stability.cases)
+    overrides = [case.overrides for case in stability.cases]
+    assert {o.get("cartilage.poissons_ratio") for o in overrides} >= {0.4999}
+    assert {o.get("cartilage.youngs_modulus_mpa") for o in overrides} >= {0.01, 1e4}
+    # loads that push the linear springs past their length must converge *with a warning*
+    assert stability.case("load-100000").expect.warning and stability.case("E-0.01").expect.warning
+    assert not stability.case("load-1e-06").expect.warning
+    taus = {o.get("viscoelastic.relaxation_time_s") for o in overrides}
+    assert {1e-4, 1e4} <= taus
+    rk2_refusals = [c for c in stability.cases if c.expect.outcome == "refused" and c.overrides.get("viscoelastic.integrator") == "rk2"]
+    for case in rk2_refusals:  # refused exactly where dt > 2 tau
+        dt = case.overrides["load.time_s"][1]
+        assert dt > 2 * case.overrides["viscoelastic.relaxation_time_s"]
+
+
+def test_quick_is_a_subset_of_the_other_campaigns_plus_ideal_standing():
+    known = {c.name: c for name in ("edem-analytic", "stability") for c in get_campaign(name).cases}
+    quick = get_campaign("quick")
+    for case in quick.cases:
+        if case.name != "ideal-standing-edem-vs-dem":
+            assert known[case.name] == case
+    assert quick.case("ideal-standing-edem-vs-dem").sides == ("edem", "dem")
+
+
+def test_verify_list_prints_each_campaign_with_one_line_per_case(capsys):
+    assert main(["verify", "--list"]) == 0
+    out = capsys.readouterr().out
+    assert out == describe_campaigns()
+    for campaign in campaigns().values():
+        assert f"{campaign.name} ({len(campaign.cases)} cases)" in out
+        for case in campaign.cases:
+            assert sum(1 for line in out.splitlines() if line.split()[:1] == [case.name]) >= 1
+
+
+def test_unknown_campaign_is_bad_input(capsys):
+    with pytest.raises(InputError):
+        get_campaign("no-such-campaign")
+    assert main(["verify", "no-such-campaign"]) == 2
+    assert "unknown campaign" in capsys.readouterr().err
+
+
+def test_stability_campaign_every_case_ends_in_its_declared_outcome(tmp_path):
+    """Converges (residual below 1e-8 of the load, pressure = F/A where the plates allow it) or is
+    refused with the declared message, and no output holds a NaN."""
+    campaign = get_campaign("stability")
+    summary = run_campaign(campaign, tmp_path / "stability", jobs=2, report=False)
+    failures = [(r["name"], r["outcome"], r["verdicts"]) for r in summary["cases"] if r["status"] != "passed"]
+    assert not failures
+    declared = {o: sum(1 for c in campaign.cases if c.expect.outcome == o) for o in ("converges", "refused")}
+    assert summary["outcomes"] == declared
+    for row in summary["cases"]:
+        assert row["metrics"]["outcome_mismatch"] == 0.0
+        assert row["metrics"]["non_finite_outputs"] == 0.0
+
+
+def test_edem_analytic_campaign_passes_its_closed_forms(tmp_path):
+    summary = run_campaign(get_campaign("edem-analytic"), tmp_path / "analytic", jobs=2, report=False)
+    assert summary["exit_status"] == 0, [(r["name"], r["verdicts"]) for r in summary["cases"] if r["status"] != "passed"]
+    rows = {r["name"]: r for r in summary["cases"]}
+    # convergence: the log-law error halves as the step count doubles (first order)
+    errors = [rows[f"log-law-n{n}"]["metrics"]["displacement_rel_error"] for n in (4, 8, 16, 32, 64, 128)]
+    ratios = [a / b for a, b in zip(errors, errors[1:])]
+    assert all(1.8 < r < 2.2 for r in ratios)
+    # the hemisphere mean thickness approaches 0.5 as the target is refined
+    gaps = [abs(rows[f"hemisphere-L{k}"]["metrics"]["thickness_mean_mm"] - 0.5) for k in range(1, 7)]
+    assert gaps[-1] < 1e-3 < gaps[0]

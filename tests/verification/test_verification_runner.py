@@ -1,0 +1,250 @@
+"""The campaign runner: parallel run, cache keyed by the inputs (instant re-run), metrics.json,
+verdicts and exit status, FE sides reported unavailable (never faked), and the Dask path."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import verification.runner as runner
+import verification.sides as sides
+from edem.cli import main
+from verification.campaigns import SCENES_DIR, Campaign, Case, Expect, get_campaign
+from verification.metrics import SPEC8_METRICS
+from verification.runner import case_key, run_campaign
+
+
+def tiny_campaign(**changes) -> Campaign:
+    """Two tiny cases: DEM plates against p = F/A, and a load pulling the plates apart (refused)."""
+    quick = get_campaign("quick")
+    plates = quick.case("flat-plates-dem")
+    pull = quick.case("pull-apart")
+    for name, value in changes.items():
+        plates = Case(**{**plates.__dict__, name: value})
+    return Campaign("tiny", "two tiny cases", (plates, pull))
+
+
+def file_mtimes(root: Path) -> dict[str, int]:
+    return {str(p.relative_to(root)): p.stat().st_mtime_ns for p in root.rglob("*") if p.is_file() and p.suffix in (".vtp", ".csv", ".pvd")}
+
+
+def test_campaign_end_to_end_then_cache_hit(tmp_path):
+    out = tmp_path / "tiny"
+    first = run_campaign(tiny_campaign(), out, jobs=2, report=False)
+    assert first["computed"] == 2 and first["exit_status"] == 0
+    assert first["counts"]["passed"] == 2 and first["outcomes"] == {"converges": 1, "refused": 1}
+
+    data = json.loads((out / "metrics.json").read_text())
+    plates = next(r for r in data["cases"] if r["name"] == "flat-plates-dem")
+    assert set(plates["metrics"]) == set(SPEC8_METRICS)
+    assert all(v["verdict"] == "pass" and v["tolerance"] == 1e-9 for v in plates["verdicts"].values())
+    assert plates["wall_time_s"] > 0 and [s["side"] for s in plates["sides"]] == ["dem", "closed-form:flat-plates"]
+    for rel in plates["result_dirs"]:
+        assert (out / rel / "pressure.pvd").is_file() and (out / rel / "summary.json").is_file()
+    case_json = json.loads((out / "cases" / "flat-plates-dem" / "metrics.json").read_text())
+    assert case_json["key"] == case_key(tiny_campaign().cases[0])
+    assert case_json["status"] == "passed" and case_json["verdicts"]["displacement_rel_error"]["verdict"] == "pass"
+    pull = next(r for r in data["cases"] if r["name"] == "pull-apart")
+    assert pull["outcome"] == "refused" and "no equilibrium" in pull["sides"][0]["message"]
+
+    before = file_mtimes(out / "cases")
+    seen = []
+    start = time.perf_counter()
+    second = run_campaign(tiny_campaign(), out, jobs=2, report=False, on_case=lambda name, cached: seen.append(cached))
+    assert time.perf_counter() - start < 2.0
+    assert second["computed"] == 0 and second["cached"] == 2 and seen == [True, True]
+    assert file_mtimes(out / "cases") == before  # nothing rewritten
+    assert [r["metrics"] for r in second["cases"]] == [r["metrics"] for r in first["cases"]]
+
+
+def test_cache_counts_executions_and_tolerance_changes_need_no_rerun(tmp_path, monkeypatch):
+    calls = []
+    real = runner.execute_case
+
+    def counting(case, case_dir, key):
+        calls.append(case.name)
+        return real(case, case_dir, key)
+
+    monkeypatch.setattr(runner, "execute_case", counting)
+    out = tmp_path / "tiny"
+    run_campaign(tiny_campaign(), out, jobs=1, report=False)
+    assert sorted(calls) == ["flat-plates-dem", "pull-apart"]
+    calls.clear()
+    strict = tiny_campaign(tolerance={**{m: 1e-9 for m in SPEC8_METRICS}, "displacement_rel_error": 0.0, "pressure_l2_rel_error": -1.0})
+    judged = run_campaign(strict, out, jobs=1, report=False)
+    assert calls == []  # the tolerance is judged, not hashed
+    row = next(r for r in judged["cases"] if r["name"] == "flat-plates-dem")
+    assert row["status"] == "failed" and judged["exit_status"] == 1
+    assert row["verdicts"]["pressure_l2_rel_error"]["verdict"] == "fail"
+    assert "pressure_l2_rel_error" in runner.format_summary(judged)
+    rerun = run_campaign(tiny_campaign(overrides={"load.force_n": [0.0, 0.0, 200.0]}), out, jobs=1, report=False)
+    assert calls == ["flat-plates-dem"] and rerun["exit_status"] == 0
+
+
+def test_case_key_follows_scene_file_and_mesh_contents(tmp_path):
+    from geometries.mesh_io import write_surface
+    from support import grid_plate, plane
+
+    write_surface(tmp_path / "talus.stl", grid_plate(10, 10, 4))
+    write_surface(tmp_path / "tibia.stl", plane(lambda x, y: 2.0, size_mm=20.0))
+    scene = tmp_path / "mesh.toml"
+    scene.write_text(
+        '[geometry]\nmobile = "talus.stl"\nfixed = "tibia.stl"\n[cartilage]\nyoungs_modulus_mpa = 10.0\npoissons_ratio = 0.4\n'
+        '[load]\nforce_n = [0.0, 0.0, 10.0]\n[constraints]\nfixed_dofs = ["tx", "ty", "rx", "ry", "rz"]\n',
+        encoding="utf-8",
+    )
+    case = Case("mesh", "mesh files", str(scene), ("dem",), ("non_finite_outputs",))
+    key = case_key(case)
+    assert case_key(case) == key
+    write_surface(tmp_path / "tibia.stl", plane(lambda x, y: 2.5, size_mm=20.0))
+    key_mesh = case_key(case)
+    assert key_mesh != key
+    scene.write_text(scene.read_text().replace("10.0]", "11.0]"), encoding="utf-8")
+    assert case_key(case) != key_mesh
+    assert case_key(Case("mesh", "mesh files", str(scene), ("edem",), ("non_finite_outputs",))) != case_key(case)
+
+
+def test_source_digest_covers_the_solver_package():
+    digest = runner._source_digest(("edem",))
+    assert len(digest) == 64 and digest != runner._source_digest(("geometries",))
+
+
+def test_fe_side_is_reported_unavailable_not_faked(tmp_path, monkeypatch):
+    monkeypatch.setattr(sides, "fe_availability", lambda: "FE reference not available: test")
+    fe_case = Case("vs-fe", "DEM against the FE slab", "flat-plates.toml", ("dem", "fe-slab"), SPEC8_METRICS, {m: 0.1 for m in SPEC8_METRICS})
+    summary = run_campaign(Campaign("fe", "FE", (fe_case,)), tmp_path / "fe", jobs=1, report=False)
+    row = summary["cases"][0]
+    assert row["status"] == "unavailable" and summary["exit_status"] == 0
+    assert row["sides"][1]["message"] == "FE reference not available: test" and row["metrics"] == {}
+    assert "FE reference not available" in runner.format_summary(summary)
+    again = run_campaign(Campaign("fe", "FE", (fe_case,)), tmp_path / "fe", jobs=1, report=False)
+    assert again["computed"] == 1  # unavailable outcomes are not cached
+
+
+def test_fe_availability_needs_run_scene(monkeypatch):
+    import importlib.util
+
+    import fem_reference
+
+    if importlib.util.find_spec("dolfinx") is None:
+        assert "dolfinx" in sides.fe_availability()
+        return
+    monkeypatch.delattr(fem_reference, "run_scene", raising=False)
+    assert "fem_reference.run_scene" in sides.fe_availability()
+
+
+def test_fe_side_calls_run_scene_and_compares_nodal_pressure(tmp_path, monkeypatch):
+    """The FE plumbing with a stand-in for fem_reference.run_scene (a test double: it writes the
+    FE layout, nodal pressure F/A on a surface 2 mm above the plate) and the metrics read it."""
+    import fem_reference
+
+    from edem.results import write_pvd
+    from verification.resultdirs import write_surface_frame
+
+    calls = {}
+
+    def stand_in(scene, model, out_dir, mesh_size_mm=None, degree=None):
+        calls.update(model=model, mesh_size_mm=mesh_size_mm, degree=degree)
+        src = Path(tmp_path / "dem-copy")
+        shutil.copytree(src, out_dir)
+        points = scene.mobile.vertices_mm + np.array([0.0, 0.0, 2.0])
+        p = np.full(len(points), 1.0)
+        write_surface_frame(Path(out_dir) / "pressure_0000.vtp", points, scene.mobile.triangles, {"pressure_mpa": p}, {"pressure_mpa": np.full(scene.mobile.n_triangles, 5.0)})
+        write_pvd(Path(out_dir) / "pressure.pvd", [(0.0, "pressure_0000.vtp")])
+
+    from edem.results import write_results
+    from edem.scene import load_scene
+    from edem.solver import run
+
+    write_results(run(load_scene(SCENES_DIR / "flat-plates.toml"), "dem"), tmp_path / "dem-copy")
+    monkeypatch.setattr(fem_reference, "run_scene", stand_in, raising=False)
+    monkeypatch.setattr(sides, "fe_availability", lambda: None)
+    case = Case("vs-fe", "DEM against FE", "flat-plates.toml", ("dem", "fe-layer"), SPEC8_METRICS, {m: 1e-9 for m in SPEC8_METRICS}, options={"mesh_size_mm": 0.5, "degree": 2})
+    summary = run_campaign(Campaign("fe", "FE", (case,)), tmp_path / "fe", jobs=1, report=False)
+    assert calls == {"model": "layer", "mesh_size_mm": 0.5, "degree": 2}
+    row = summary["cases"][0]
+    assert row["status"] == "passed", row["verdicts"]
+    assert row["metrics"]["pressure_l2_rel_error"] < 1e-12  # point data (1 MPa) used, not the cells (5 MPa)
+
+
+def test_a_crashing_side_is_an_error_with_exit_status_1(tmp_path, monkeypatch):
+    def broken(*args):
+        raise RuntimeError("boom")
+
+    monkeypatch.setitem(sides.SIDES, "dem", broken)
+    summary = run_campaign(tiny_campaign(), tmp_path / "crash", jobs=1, report=False)
+    assert summary["counts"]["error"] == 2 and summary["exit_status"] == 1
+    assert "boom" in summary["cases"][0]["sides"][0]["message"]
+    assert "crashed" in runner.format_summary(summary)
+
+
+def test_cli_verify_exit_status_follows_the_verdicts(tmp_path, monkeypatch, capsys):
+    tiny, failing = tiny_campaign(), tiny_campaign(tolerance={m: -1.0 for m in SPEC8_METRICS})
+    monkeypatch.setattr("verification.campaigns.campaigns", lambda: {"tiny": tiny, "tiny-failing": failing})
+    assert main(["verify", "tiny", "--out", str(tmp_path / "ok"), "--jobs", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "2 passed" in out and f"report: {tmp_path / 'ok' / 'report.html'}" in out
+    assert main(["verify", "tiny-failing", "--out", str(tmp_path / "bad"), "--jobs", "1"]) == 1
+    out = capsys.readouterr().out
+    assert "flat-plates-dem" in out and "peak_pressure_rel_error" in out
+    assert main(["verify", "tiny", "--out", str(tmp_path / "ok"), "--jobs", "0"]) == 2
+
+
+def test_cli_compare_prints_the_table_and_writes_metrics_json(tmp_path, capsys):
+    from edem.results import write_results
+    from edem.scene import load_scene
+    from edem.solver import run
+    from verification.closed_forms import solve_closed_form, write_closed_form_results
+
+    scene, solution = solve_closed_form("tilted-plane", str(SCENES_DIR / "tilted-plane.toml"))
+    a = write_results(run(scene, "dem"), tmp_path / "dem")
+    b = write_closed_form_results(scene, solution, tmp_path / "cf")
+    assert main(["compare", str(a), str(b), "--out", str(tmp_path / "cmp")]) == 0
+    out = capsys.readouterr().out
+    assert "peak pressure (MPa)" in out and "pressure field (L2)" in out
+    data = json.loads((tmp_path / "cmp" / "metrics.json").read_text())
+    assert set(data["metrics"]) == set(SPEC8_METRICS) and data["metrics"]["displacement_rel_error"] < 1e-3
+    assert main(["compare", str(tmp_path / "nothing"), str(b)]) == 2
+
+
+def test_dask_scheduler_runs_the_cases(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=1, processes=False, threads_per_worker=2, dashboard_address=None) as cluster:
+        summary = run_campaign(tiny_campaign(), tmp_path / "dask", scheduler=cluster.scheduler_address, report=False)
+    assert summary["computed"] == 2 and summary["exit_status"] == 0 and summary["scheduler"] == cluster.scheduler_address
+    assert all(Path(tmp_path / "dask" / rel / "summary.json").is_file() for r in summary["cases"] for rel in r["result_dirs"])
+    cached = run_campaign(tiny_campaign(), tmp_path / "dask", jobs=1, report=False)
+    assert cached["cached"] == 2  # the same cache, whoever computed it
+
+
+def test_dask_with_worker_processes(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=1, processes=True, threads_per_worker=1, dashboard_address=None) as cluster:
+        summary = run_campaign(tiny_campaign(), tmp_path / "dask", scheduler=cluster.scheduler_address, report=False)
+    assert summary["computed"] == 2 and summary["exit_status"] == 0
+
+
+def test_declared_outcomes_are_checked_not_assumed(tmp_path):
+    """A case that converges but was declared refused, a refusal with another message and a run
+    without the declared warning each fail on outcome_mismatch."""
+    checks = ("outcome_mismatch", "non_finite_outputs")
+    tol = {"outcome_mismatch": 0.0}
+    cases = (
+        Case("wrongly-refused", "", "flat-plates.toml", ("dem",), checks, tol, expect=Expect("refused", "anything")),
+        Case("wrong-message", "", "flat-plates.toml", ("dem",), checks, tol, {"load.force_n": [0.0, 0.0, -1.0]}, Expect("refused", "singular")),
+        Case("missing-warning", "", "flat-plates.toml", ("dem",), checks, tol, expect=Expect("converges", warning="compressed past")),
+        Case("right", "", "flat-plates.toml", ("dem",), checks, tol, {"load.force_n": [0.0, 0.0, -1.0]}, Expect("refused", "no equilibrium")),
+    )
+    summary = run_campaign(Campaign("outcomes", "", cases), tmp_path / "o", jobs=1, report=False)
+    status = {r["name"]: (r["status"], r["metrics"]["outcome_mismatch"]) for r in summary["cases"]}
+    assert status == {
+        "wrongly-refused": ("failed", 1.0),
+        "wrong-message": ("failed", 1.0),
+        "missing-warning": ("failed", 1.0),
+        "right": ("passed", 0.0),
+    }

@@ -1,0 +1,501 @@
+"""Verification campaigns as data (SPEC 1, 8): named lists of cases, each comparing two sides.
+
+A :class:`Case` names a scene (a built-in scene or a TOML file of ``verification/scenes/``) with
+``--set``-like overrides, the sides it runs (a subject and, optionally, the reference it is judged
+against: ``edem``, ``dem``, ``fe-slab``, ``fe-layer``, ``closed-form:<name>``), the metrics it
+reports and the tolerance it is judged by (metric -> largest admissible value). Stability cases
+also declare their expected outcome (:class:`Expect`): "converges" or "refused" with a message
+matching a pattern. A :class:`Campaign` adds the figures of its HTML report.
+
+Campaigns: ``edem-analytic`` (EDEM/DEM against closed forms), ``stability`` (stiff and extreme
+input, each ending in its declared outcome, no NaN anywhere) and ``quick`` (a subset for CI).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from edem.errors import InputError
+from verification.closed_forms import confined_modulus_mpa, log_law_edem_max_error
+from verification.metrics import SPEC8_METRICS
+
+SCENES_DIR = Path(__file__).resolve().parent / "scenes"
+
+#: every metric a case may report, with what it measures
+METRICS: dict[str, str] = {
+    "peak_pressure_rel_error": "|peak_a - peak_b| / peak_b (max over compared time points), SPEC 8",
+    "mean_pressure_rel_error": "relative error of the mean pressure (contact force / contact area), SPEC 8",
+    "contact_area_rel_error": "relative error of the contact area, SPEC 8",
+    "displacement_rel_error": "|u_a - u_b| / |u_b| of the bone displacement, SPEC 8",
+    "pressure_l2_rel_error": "area-weighted L2 relative error of the pressure at a's spring centroids, SPEC 8",
+    "thickness_mean_mm": "mean ray-cast spring length of side a (springs with a hit)",
+    "thickness_sd_mm": "standard deviation of those lengths",
+    "thickness_mean_rel_error": "|mean length - exact thickness| / exact thickness",
+    "thickness_faceting_ratio": "|mean length - exact thickness| / faceting bound of the meshes (<= 1 expected)",
+    "outcome_mismatch": "0 when side a ended in the declared outcome (converges / refused with the message), else 1",
+    "non_finite_outputs": "number of NaN/inf values in side a's result directory",
+    "force_residual_rel": "largest force residual of side a over the largest applied force",
+}
+
+OUTCOMES = ("converges", "refused")
+
+
+@dataclass(frozen=True)
+class Expect:
+    """The declared outcome of a stability case: "converges", or "refused" with a message pattern."""
+
+    outcome: str
+    message: str = ""  # regular expression (re.search) the refusal message must match
+    warning: str = ""  # for "converges": a regular expression one of the run's warnings must match
+
+    def __post_init__(self) -> None:
+        if self.outcome not in OUTCOMES:
+            raise ValueError(f"unknown outcome {self.outcome!r}: expected one of {OUTCOMES}")
+
+
+@dataclass(frozen=True)
+class Case:
+    """One comparison: a scene, the sides it runs, the metrics it reports and its tolerance."""
+
+    name: str
+    description: str
+    scene: str  # built-in scene name, or a TOML file name in verification/scenes/ (or a path)
+    sides: tuple[str, ...]  # (a,) or (a, b): a is judged against the reference b
+    metrics: tuple[str, ...]
+    tolerance: dict[str, float] = field(default_factory=dict)  # metric -> max value
+    overrides: dict[str, Any] = field(default_factory=dict)  # dotted scene keys, as --set
+    expect: Expect | None = None
+    options: dict[str, Any] = field(default_factory=dict)  # side options (FE: mesh_size_mm, degree)
+    params: dict[str, float] = field(default_factory=dict)  # x values for the report's figures
+    maps: bool = False  # render pressure maps of a against b in the report
+
+    def scene_ref(self) -> str:
+        """The argument for edem.scene.load_scene: a built-in name or an absolute TOML path."""
+        if self.scene.endswith(".toml"):
+            path = Path(self.scene)
+            return str(path if path.is_absolute() else SCENES_DIR / path)
+        return self.scene
+
+    def definition(self) -> dict[str, Any]:
+        """The JSON-able inputs that determine the case's results (its cache key hashes these)."""
+        return {
+            "name": self.name,
+            "scene": self.scene,
+            "sides": list(self.sides),
+            "metrics": list(self.metrics),
+            "overrides": self.overrides,
+            "expect": None if self.expect is None else {"outcome": self.expect.outcome, "message": self.expect.message, "warning": self.expect.warning},
+            "options": self.options,
+        }
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A figure of the campaign's HTML report.
+
+    kind "sweep": the metrics ``y`` of ``cases`` against their ``params[x]`` (one panel per
+    metric); kind "timeseries": timeseries.csv ``column`` of both sides of each case.
+    """
+
+    name: str
+    title: str
+    kind: str
+    cases: tuple[str, ...]
+    x: str = ""
+    y: tuple[str, ...] = ()
+    column: str = ""
+    logx: bool = False
+    logy: bool | tuple[bool, ...] = False  # one for all panels, or one per metric of y
+    reference_slope: float | None = None  # draw a line of this slope (log-log convergence order)
+    exact: dict[str, float] = field(default_factory=dict)  # metric -> exact value, drawn as a line
+
+
+@dataclass(frozen=True)
+class Campaign:
+    name: str
+    description: str
+    cases: tuple[Case, ...]
+    figures: tuple[Figure, ...] = ()
+
+    def case(self, name: str) -> Case:
+        for case in self.cases:
+            if case.name == name:
+                return case
+        raise KeyError(name)
+
+
+# ---------------------------------------------------------------------------------------------
+# Building blocks
+
+
+def _tol(value: float, names: tuple[str, ...] = SPEC8_METRICS) -> dict[str, float]:
+    return {name: value for name in names}
+
+
+def ramp_overrides(n_steps: int, force_n: float, duration_s: float = 1.0) -> dict[str, Any]:
+    """load.time_s and load.force_n for a linear ramp 0 -> force_n along z in n_steps equal increments."""
+    times = [duration_s * k / n_steps for k in range(n_steps + 1)]
+    forces = [[0.0, 0.0, force_n * k / n_steps] for k in range(n_steps + 1)]
+    return {"load.time_s": times, "load.force_n": forces}
+
+
+PLATES = "flat-plates.toml"  # 20 x 20 mm, gap 2 mm, E 10.35 MPa, nu 0.42, threshold, 400 N
+PLATE_AREA_MM2 = 400.0
+LOG_LAW_FORCE_N = 10_000.0
+LOG_LAW_STEPS = (4, 8, 16, 32, 64, 128)
+HEMISPHERE_LEVELS = (1, 2, 3, 4, 5, 6)
+STABILITY_CHECKS = ("outcome_mismatch", "non_finite_outputs", "force_residual_rel")
+STABILITY_TOL = {"outcome_mismatch": 0.0, "non_finite_outputs": 0.0, "force_residual_rel": 1e-8}
+
+
+def _analytic_cases() -> list[Case]:
+    cases = [
+        Case(
+            "flat-plates-dem",
+            "DEM, parallel plates 2 mm apart, 400 N: p = F/A, d = F h/(E' A)",
+            PLATES,
+            ("dem", "closed-form:flat-plates"),
+            SPEC8_METRICS,
+            _tol(1e-9),
+        ),
+        Case(
+            "flat-plates-edem",
+            "EDEM (one step from the initial pose) on the same plates: same closed form",
+            PLATES,
+            ("edem", "closed-form:flat-plates"),
+            SPEC8_METRICS,
+            _tol(1e-9),
+        ),
+        Case(
+            "flat-plates-dem-series",
+            "DEM over 100, 200, 400 N (each time point static): p = F/A, d = F h/(E' A) per point",
+            PLATES,
+            ("dem", "closed-form:flat-plates"),
+            SPEC8_METRICS,
+            _tol(1e-9),
+            overrides={"load.time_s": [0.0, 1.0, 2.0], "load.force_n": [[0.0, 0.0, 100.0], [0.0, 0.0, 200.0], [0.0, 0.0, 400.0]]},
+        ),
+        Case(
+            "tilted-plane-dem",
+            "DEM, plate under a plane tilted 3 deg, rotations fixed: p(x) = E' d / h(x) (midpoint-rule O(dx^2) from the integral)",
+            "tilted-plane.toml",
+            ("dem", "closed-form:tilted-plane"),
+            SPEC8_METRICS,
+            _tol(1e-3),
+        ),
+        Case(
+            "cylinder-plane-dem",
+            "DEM, cylinder R 20 mm under a plane (mesh 0.94 mm): discrete foundation p = E' d cos(phi)/h(phi); "
+            "L2 dominated by the faceted candidate boundary",
+            "cylinder-plane.toml",
+            ("dem", "closed-form:cylinder-plane"),
+            SPEC8_METRICS,
+            {**_tol(0.01), "pressure_l2_rel_error": 0.05},
+            params={"mesh_size_mm": 0.94},
+        ),
+        Case(
+            "cylinder-plane-dem-fine",
+            "the same cylinder meshed at 0.47 mm: the faceting errors shrink",
+            "cylinder-plane.toml",
+            ("dem", "closed-form:cylinder-plane"),
+            SPEC8_METRICS,
+            {**_tol(0.002), "pressure_l2_rel_error": 0.005},
+            overrides={"geometry.mesh_size_mm": 0.47},
+            params={"mesh_size_mm": 0.47},
+        ),
+    ]
+    # Log law: EDEM after k of n equal increments gives h0 (1 - (1 - x/n)^k), x = F / (E' A),
+    # whose error against the log law is known exactly (closed_forms.log_law_edem_error); the
+    # case tolerance is its largest value over the ramp's time points + 1 %: first order in 1/n.
+    x = LOG_LAW_FORCE_N / (confined_modulus_mpa(10.35, 0.42) * PLATE_AREA_MM2)
+    for n in LOG_LAW_STEPS:
+        cases.append(
+            Case(
+                f"log-law-n{n}",
+                f"EDEM, flat plates, ramp 0 -> {LOG_LAW_FORCE_N:g} N in {n} increments against d = h0 (1 - exp(-F/(E' A)))",
+                "log-law-ramp.toml",
+                ("edem", "closed-form:log-law"),
+                ("displacement_rel_error", "peak_pressure_rel_error", "pressure_l2_rel_error"),
+                {"displacement_rel_error": 1.01 * log_law_edem_max_error(x, n), "peak_pressure_rel_error": 1e-9, "pressure_l2_rel_error": 1e-9},
+                overrides=ramp_overrides(n, LOG_LAW_FORCE_N),
+                params={"steps": n},
+            )
+        )
+    for level in HEMISPHERE_LEVELS:
+        tolerance = {"thickness_faceting_ratio": 1.0}
+        if level == HEMISPHERE_LEVELS[-1]:
+            tolerance.update(thickness_mean_rel_error=1e-3, thickness_sd_mm=5e-5)  # thesis: 0.499, sd 1.5e-5
+        cases.append(
+            Case(
+                f"hemisphere-L{level}",
+                f"ray-cast thickness, target hemisphere with {level} subdivisions (thesis 4.2.2): exact 0.5",
+                "hemisphere-convergence",
+                ("dem", "closed-form:hemisphere-thickness"),
+                ("thickness_mean_mm", "thickness_sd_mm", "thickness_mean_rel_error", "thickness_faceting_ratio"),
+                tolerance,
+                overrides={"geometry.subdivisions": level},
+                params={"subdivisions": level},
+            )
+        )
+    return cases
+
+
+def _hemisphere_figure() -> Figure:
+    return Figure(
+        "hemisphere-thickness",
+        "Hemisphere thickness (exact 0.5) against target subdivisions",
+        "sweep",
+        tuple(f"hemisphere-L{k}" for k in HEMISPHERE_LEVELS),
+        x="subdivisions",
+        y=("thickness_mean_mm", "thickness_sd_mm"),
+        logy=(False, True),
+        exact={"thickness_mean_mm": 0.5},
+    )
+
+
+def _analytic_figures() -> tuple[Figure, ...]:
+    return (
+        _hemisphere_figure(),
+        Figure(
+            "log-law-convergence",
+            "EDEM against the log law: displacement error against step count",
+            "sweep",
+            tuple(f"log-law-n{n}" for n in LOG_LAW_STEPS),
+            x="steps",
+            y=("displacement_rel_error",),
+            logx=True,
+            logy=True,
+            reference_slope=-1.0,
+        ),
+        Figure("log-law-n8-displacement", "Log law, 8 increments: displacement against time", "timeseries", ("log-law-n8",), column="disp_z_mm"),
+        Figure(
+            "cylinder-refinement",
+            "Cylinder under a plane: errors against mesh size",
+            "sweep",
+            ("cylinder-plane-dem", "cylinder-plane-dem-fine"),
+            x="mesh_size_mm",
+            y=("displacement_rel_error", "pressure_l2_rel_error"),
+            logx=True,
+            logy=True,
+        ),
+    )
+
+
+def _stability_cases() -> list[Case]:
+    converges, closed = Expect("converges"), ("dem", "closed-form:flat-plates")
+    plate_checks = STABILITY_CHECKS + ("peak_pressure_rel_error", "displacement_rel_error")
+    plate_tol = {**STABILITY_TOL, "peak_pressure_rel_error": 1e-8, "displacement_rel_error": 1e-8}
+
+    def refused(pattern: str) -> Expect:
+        return Expect("refused", pattern)
+
+    cases = []
+    for nu in (0.49, 0.499, 0.4999):
+        cases.append(Case(f"nu-{nu:g}", f"nearly incompressible, nu = {nu:g} (E' = {confined_modulus_mpa(10.35, nu):.4g} MPa)", PLATES, closed, plate_checks, plate_tol, {"cartilage.poissons_ratio": nu}, converges))
+    # Linear springs solve any load, but an approach beyond the spring length (d = F h / (E' A) > h)
+    # is outside the model's range: the run must say so.
+    past_length = Expect("converges", warning=r"compressed past their length")
+    for e in (0.01, 1e4):
+        expect = past_length if 400.0 / (confined_modulus_mpa(e, 0.42) * PLATE_AREA_MM2) >= 1.0 else converges
+        cases.append(Case(f"E-{e:g}", f"Young's modulus {e:g} MPa", PLATES, closed, plate_checks, plate_tol, {"cartilage.youngs_modulus_mpa": e}, expect))
+    for f in (0.0, 1e-6, 1e5):
+        expect = past_length if f / (confined_modulus_mpa(10.35, 0.42) * PLATE_AREA_MM2) >= 1.0 else converges
+        cases.append(Case(f"load-{f:g}", f"normal load {f:g} N (linear springs, d = F h / (E' A))", PLATES, closed, plate_checks, plate_tol, {"load.force_n": [0.0, 0.0, f]}, expect))
+    cases += [
+        Case(
+            "load-1e5-gap-log",
+            "1e5 N on the Blankevoort gap-log law (t = 2.5 mm): the springs stiffen, never pass t",
+            PLATES,
+            ("dem",),
+            STABILITY_CHECKS,
+            STABILITY_TOL,
+            {"load.force_n": [0.0, 0.0, 1e5], "cartilage.law": "gap-log", "cartilage.thickness_mm": 2.5},
+            converges,
+        ),
+        Case("pull-apart", "a load pulling the plates apart (-100 N)", PLATES, ("dem",), STABILITY_CHECKS, STABILITY_TOL, {"load.force_n": [0.0, 0.0, -100.0]}, refused(r"no equilibrium")),
+        Case(
+            "tangential-no-shear",
+            "tangential load, tx free, zero shear stiffness: singular, names tx",
+            PLATES,
+            ("dem",),
+            STABILITY_CHECKS,
+            STABILITY_TOL,
+            {"load.force_n": [10.0, 0.0, 100.0], "constraints.fixed_dofs": ["ty", "rx", "ry", "rz"]},
+            refused(r"nothing resists motion along tx"),
+        ),
+        Case(
+            "tangential-with-shear",
+            "the same tangential load with shear stiffness G = 1 MPa",
+            PLATES,
+            ("dem",),
+            STABILITY_CHECKS,
+            STABILITY_TOL,
+            {"load.force_n": [10.0, 0.0, 100.0], "constraints.fixed_dofs": ["ty", "rx", "ry", "rz"], "cartilage.shear_modulus_mpa": 1.0},
+            converges,
+        ),
+        Case("hmax-0.1-touching", "h_max = 0.1 mm, plates 0.05 mm apart", PLATES, closed, plate_checks, plate_tol, {"cartilage.max_spring_length_mm": 0.1, "geometry.gap_mm": 0.05}, converges),
+        Case("hmax-0.1-apart", "h_max = 0.1 mm, plates 2 mm apart: no candidate", PLATES, ("dem",), STABILITY_CHECKS, STABILITY_TOL, {"cartilage.max_spring_length_mm": 0.1}, refused(r"no spring is a candidate")),
+        Case("far-apart-10mm", "plates 10 mm apart, h_max 3.5 mm: no candidate", PLATES, ("dem",), STABILITY_CHECKS, STABILITY_TOL, {"geometry.gap_mm": 10.0}, refused(r"no spring is a candidate")),
+        Case("far-apart-1m", "plates 1000 mm apart (a unit mismatch)", PLATES, ("dem",), STABILITY_CHECKS, STABILITY_TOL, {"geometry.gap_mm": 1000.0}, refused(r"bodies too far apart")),
+        Case(
+            "interpenetrating-start",
+            "the plane turned 30 deg about an axis 5 mm below the plate cuts through it (threshold law)",
+            PLATES,
+            ("dem",),
+            STABILITY_CHECKS,
+            STABILITY_TOL,
+            {"kinematics.axis_point_mm": [0.0, 0.0, -5.0], "kinematics.axis_direction": [1.0, 0.0, 0.0], "kinematics.angle_deg": -30.0},
+            refused(r"compressed past their length"),
+        ),
+        Case(
+            "compressed-past-length-edem",
+            "EDEM, one increment compresses the springs 3 mm (> h = 2 mm): the next step refuses",
+            PLATES,
+            ("edem",),
+            STABILITY_CHECKS,
+            STABILITY_TOL,
+            {"load.time_s": [0.0, 1.0, 2.0], "load.force_n": [[0.0, 0.0, 1.0], [0.0, 0.0, 3.0 * confined_modulus_mpa(10.35, 0.42) * PLATE_AREA_MM2 / 2.0], [0.0, 0.0, 16000.0]]},
+            refused(r"compressed past their length"),
+        ),
+    ]
+    cylinder = "cylinder-plane.toml"  # the idealised talus (3046 springs) under a plane, 333 N
+    cases += [
+        Case(
+            "cylinder-nu-0.4999",
+            "cylinder under a plane, nu = 0.4999: still the discrete foundation solution",
+            cylinder,
+            ("dem", "closed-form:cylinder-plane"),
+            STABILITY_CHECKS + ("peak_pressure_rel_error", "displacement_rel_error"),
+            {**STABILITY_TOL, "peak_pressure_rel_error": 0.01, "displacement_rel_error": 0.01},
+            {"cartilage.poissons_ratio": 0.4999},
+            converges,
+        ),
+        Case(
+            "cylinder-axial-no-shear",
+            "cylinder, 10 N along the axis with tx free and no shear stiffness: refused (faceting leaves the axis a "
+            "tiny normal stiffness, so the refusal is 'no equilibrium' rather than naming tx)",
+            cylinder,
+            ("dem",),
+            STABILITY_CHECKS,
+            STABILITY_TOL,
+            {"load.force_n": [10.0, 0.0, 333.0], "constraints.fixed_dofs": ["ty", "rx", "ry", "rz"]},
+            refused(r"nothing resists motion along tx|no equilibrium"),
+        ),
+    ]
+    # Kelvin-Voigt springs over tau x dt (SPEC 4): ramp to 300 N in 3 steps, hold 2 steps.
+    # exact integrator: converges everywhere, pressure = F/A at every time point (it follows the
+    # load); RK2: converges for dt <= 2 tau, refused beyond.
+    for tau in (1e-4, 1e-2, 1.0, 1e2, 1e4):
+        for dt in (1e-3, 1e-1, 1.0):
+            ramp = {
+                "load.time_s": [k * dt for k in range(6)],
+                "load.force_n": [[0.0, 0.0, 100.0 * min(k, 3)] for k in range(6)],
+                "viscoelastic.relaxation_time_s": tau,
+            }
+            for integrator in ("exact", "rk2"):
+                stable = integrator == "exact" or dt <= 2.0 * tau
+                cases.append(
+                    Case(
+                        f"ve-{integrator}-tau{tau:.0e}-dt{dt:.0e}",
+                        f"viscoelastic EDEM, {integrator}, tau = {tau:g} s, dt = {dt:g} s (dt/tau = {dt / tau:.3g})",
+                        PLATES,
+                        ("edem", "closed-form:flat-plates"),
+                        STABILITY_CHECKS + ("peak_pressure_rel_error", "pressure_l2_rel_error"),
+                        {**STABILITY_TOL, "peak_pressure_rel_error": 1e-9, "pressure_l2_rel_error": 1e-9},
+                        {**ramp, "viscoelastic.integrator": integrator},
+                        converges if stable else refused(r"RK2 is unstable"),
+                    )
+                )
+    return cases
+
+
+def _ideal_standing_case() -> Case:
+    return Case(
+        "ideal-standing-edem-vs-dem",
+        "ideal standing (333 N): EDEM's first step starts from the initial pose, so it equals DEM",
+        "ideal-standing",
+        ("edem", "dem"),
+        SPEC8_METRICS,
+        _tol(1e-9),
+        maps=True,
+    )
+
+
+def _quick() -> Campaign:
+    stability = {c.name: c for c in _stability_cases()}
+    picks = ["nu-0.4999", "load-0", "pull-apart", "tangential-no-shear", "interpenetrating-start", "cylinder-axial-no-shear", "ve-exact-tau1e-04-dt1e+00", "ve-rk2-tau1e-04-dt1e+00"]
+    return Campaign(
+        "quick",
+        "A CI subset (well under 5 minutes on 2 cores): every closed-form case, a few stability cases, ideal standing EDEM vs DEM.",
+        tuple(_analytic_cases()) + tuple(stability[n] for n in picks) + (_ideal_standing_case(),),
+        _analytic_figures(),
+    )
+
+
+def campaigns() -> dict[str, Campaign]:
+    """Every campaign by name."""
+    return {
+        "edem-analytic": Campaign(
+            "edem-analytic",
+            "EDEM/DEM against closed forms: flat plates, tilted plane, cylinder on a plane, the log law under a ramp, hemisphere thickness convergence.",
+            tuple(_analytic_cases()),
+            _analytic_figures(),
+        ),
+        "stability": Campaign(
+            "stability",
+            "Stiff and extreme input: each case ends in its declared outcome (converges with a small residual, or refused with a clear message) and no output holds a NaN.",
+            tuple(_stability_cases()),
+        ),
+        "quick": _quick(),
+    }
+
+
+def get_campaign(name: str) -> Campaign:
+    """The named campaign, or InputError listing the known ones."""
+    known = campaigns()
+    if name not in known:
+        raise InputError(f"unknown campaign '{name}'", key="CAMPAIGN", expected="one of " + ", ".join(known) + " (edem verify --list)")
+    return known[name]
+
+
+def validate_campaign(campaign: Campaign) -> None:
+    """InputError when a case names an unknown side or metric, or a tolerance on an unreported metric."""
+    from verification.sides import check_side
+
+    seen = set()
+    for case in campaign.cases:
+        key = f"{campaign.name}.{case.name}"
+        if case.name in seen:
+            raise InputError(f"duplicate case name '{case.name}'", key=key, expected="unique case names")
+        seen.add(case.name)
+        if not 1 <= len(case.sides) <= 2:
+            raise InputError(f"{len(case.sides)} sides", key=key, expected="one or two sides")
+        for side in case.sides:
+            check_side(side)
+        unknown = [m for m in case.metrics if m not in METRICS]
+        if unknown:
+            raise InputError(f"unknown metric(s) {', '.join(unknown)}", key=key, expected="metrics of verification.campaigns.METRICS")
+        stray = [m for m in case.tolerance if m not in case.metrics]
+        if stray:
+            raise InputError(f"tolerance on unreported metric(s) {', '.join(stray)}", key=key, expected="tolerances on the case's own metrics")
+        if any(not isinstance(v, (int, float)) or math.isnan(v) for v in case.tolerance.values()):
+            raise InputError("tolerances must be numbers", key=key, expected="metric -> max value")
+    for figure in campaign.figures:
+        missing = [c for c in figure.cases if c not in seen]
+        if missing:
+            raise InputError(f"figure '{figure.name}' names unknown case(s) {', '.join(missing)}", key=campaign.name)
+
+
+def describe_campaigns() -> str:
+    """What `edem verify --list` prints: each campaign, then one line per case."""
+    lines = []
+    for campaign in campaigns().values():
+        lines.append(f"{campaign.name} ({len(campaign.cases)} cases): {campaign.description}")
+        for case in campaign.cases:
+            versus = " vs ".join(case.sides)
+            lines.append(f"  {case.name:32s} [{versus}] {case.description}")
+        lines.append("")
+    return "\n".join(lines).rstrip() + "\n"

@@ -1,0 +1,391 @@
+"""Comparison metrics of SPEC 8 and the surface sampling they need (pure numpy/scipy on arrays).
+
+For one comparison of a side ``a`` (EDEM/DEM) against a reference ``b`` (FE or a closed form) at
+the same load: relative errors of peak pressure, mean pressure, contact area and bone
+displacement (norm of the difference over the norm of the reference), and the L2 relative error
+of the pressure field on common points: b's pressure is sampled at a's spring centroids by
+projecting each centroid onto b's triangulated surface (:func:`sample_onto` for nodal fields,
+exact for fields linear on the surface; :func:`sample_cells_onto` for piecewise-constant ones).
+:func:`compare_result_dirs` applies all of it to two SPEC 9 result directories.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: SPEC 8 metric names (each a relative error, 0 = identical) in the order they are printed.
+SPEC8_METRICS = (
+    "peak_pressure_rel_error",
+    "mean_pressure_rel_error",
+    "contact_area_rel_error",
+    "displacement_rel_error",
+    "pressure_l2_rel_error",
+)
+
+
+# ---------------------------------------------------------------------------------------------
+# Scalar and field errors
+
+
+def relative_error(value: float | np.ndarray, reference: float | np.ndarray) -> float:
+    """|value - reference| / |reference| (Euclidean norms for vectors), SPEC 8.
+
+    A zero reference gives 0 when the value is zero too and +inf otherwise (never NaN).
+    """
+    value = np.asarray(value, dtype=np.float64)
+    reference = np.asarray(reference, dtype=np.float64)
+    diff = float(np.linalg.norm((value - reference).ravel()))
+    ref = float(np.linalg.norm(reference.ravel()))
+    if ref == 0.0:
+        return 0.0 if diff == 0.0 else math.inf
+    return diff / ref
+
+
+def peak_pressure_error(peak_mpa: float, reference_peak_mpa: float) -> float:
+    """Relative error of the peak contact pressure (SPEC 8)."""
+    return relative_error(peak_mpa, reference_peak_mpa)
+
+
+def mean_pressure_error(mean_mpa: float, reference_mean_mpa: float) -> float:
+    """Relative error of the mean contact pressure (contact force over contact area, SPEC 8)."""
+    return relative_error(mean_mpa, reference_mean_mpa)
+
+
+def contact_area_error(area_mm2: float, reference_area_mm2: float) -> float:
+    """Relative error of the contact area (SPEC 8)."""
+    return relative_error(area_mm2, reference_area_mm2)
+
+
+def displacement_error(displacement_mm: np.ndarray, reference_displacement_mm: np.ndarray) -> float:
+    """|u - u_ref| / |u_ref| of the bone displacement vectors (SPEC 8)."""
+    return relative_error(displacement_mm, reference_displacement_mm)
+
+
+def l2_relative_error(values: np.ndarray, reference: np.ndarray, weights: np.ndarray | None = None) -> float:
+    """sqrt(sum w (v - r)^2 / sum w r^2): the L2 relative error of a field on common points (SPEC 8).
+
+    ``weights`` are the quadrature weights of the points (e.g. the spring areas in mm^2); equal
+    weights by default. A zero reference field gives 0 if the values vanish too, +inf otherwise.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    reference = np.asarray(reference, dtype=np.float64)
+    w = np.ones_like(reference) if weights is None else np.asarray(weights, dtype=np.float64)
+    num = float(np.sum(w * (values - reference) ** 2))
+    den = float(np.sum(w * reference**2))
+    if den == 0.0:
+        return 0.0 if num == 0.0 else math.inf
+    return math.sqrt(num / den)
+
+
+# ---------------------------------------------------------------------------------------------
+# Projection onto a triangulated surface
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Closest points of destination points on a triangulated surface."""
+
+    triangle: np.ndarray  # (n,) index of the triangle holding the closest point
+    barycentric: np.ndarray  # (n, 3) weights of that triangle's vertices
+    point_mm: np.ndarray  # (n, 3) the closest point
+    distance_mm: np.ndarray  # (n,)
+
+
+def _closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Squared distance and barycentric weights of the closest point of each triangle to p.
+
+    Arrays broadcast over leading axes, last axis xyz. If the orthogonal projection of p onto
+    the triangle's plane falls inside the triangle it is the closest point; otherwise the
+    closest point lies on the boundary, the nearest of the three clamped edge projections.
+    Degenerate triangles (zero area) are handled by the edge branch alone.
+    """
+    e0, e1 = b - a, c - a
+    v = p - a
+    d00 = np.einsum("...i,...i", e0, e0)
+    d01 = np.einsum("...i,...i", e0, e1)
+    d11 = np.einsum("...i,...i", e1, e1)
+    d20 = np.einsum("...i,...i", v, e0)
+    d21 = np.einsum("...i,...i", v, e1)
+    denom = d00 * d11 - d01 * d01
+    ok = denom > 1e-300 * np.maximum(d00 * d11, 1e-300)
+    safe = np.where(ok, denom, 1.0)
+    s = (d11 * d20 - d01 * d21) / safe
+    t = (d00 * d21 - d01 * d20) / safe
+    inside = ok & (s >= 0.0) & (t >= 0.0) & (s + t <= 1.0)
+    foot = a + s[..., None] * e0 + t[..., None] * e1
+    d2_inside = np.einsum("...i,...i", p - foot, p - foot)
+
+    best_d2 = np.full(d00.shape, np.inf)
+    best_w = np.zeros(d00.shape + (3,))
+    for start, end, i, j in ((a, b, 0, 1), (b, c, 1, 2), (c, a, 2, 0)):
+        edge = end - start
+        length2 = np.einsum("...i,...i", edge, edge)
+        u = np.einsum("...i,...i", p - start, edge) / np.where(length2 > 0.0, length2, 1.0)
+        u = np.clip(np.where(length2 > 0.0, u, 0.0), 0.0, 1.0)
+        q = start + u[..., None] * edge
+        d2 = np.einsum("...i,...i", p - q, p - q)
+        better = d2 < best_d2
+        best_d2 = np.where(better, d2, best_d2)
+        w = np.zeros(d00.shape + (3,))
+        w[..., i] = 1.0 - u
+        w[..., j] = u
+        best_w = np.where(better[..., None], w, best_w)
+    w_inside = np.stack([1.0 - s - t, s, t], axis=-1)
+    d2 = np.where(inside, d2_inside, best_d2)
+    weights = np.where(inside[..., None], w_inside, best_w)
+    return d2, weights
+
+
+def project_onto_surface(
+    points_src: np.ndarray,
+    triangles_src: np.ndarray,
+    points_dst: np.ndarray,
+    *,
+    candidates: int = 8,
+    chunk_pairs: int = 2_000_000,
+) -> Projection:
+    """Closest point of every destination point on the source triangulated surface (exact).
+
+    Candidates are the triangles with the nearest centroids (scipy cKDTree). The best candidate
+    is certified when the k-th nearest centroid is farther than its distance plus the largest
+    centroid-to-vertex radius of any triangle (no other triangle can then be closer); points
+    that are not certified are retried with twice as many candidates, up to every triangle.
+    """
+    from scipy.spatial import cKDTree
+
+    vertices = np.asarray(points_src, dtype=np.float64)
+    tris = np.asarray(triangles_src, dtype=np.int64).reshape(-1, 3)
+    dst = np.asarray(points_dst, dtype=np.float64).reshape(-1, 3)
+    n_tri, n_dst = tris.shape[0], dst.shape[0]
+    if n_tri == 0:
+        raise ValueError("the source surface has no triangles")
+    a, b, c = vertices[tris[:, 0]], vertices[tris[:, 1]], vertices[tris[:, 2]]
+    centroids = (a + b + c) / 3.0
+    radius = float(np.sqrt(np.max(np.stack([((x - centroids) ** 2).sum(axis=1) for x in (a, b, c)]))))
+    tree = cKDTree(centroids)
+
+    triangle = np.zeros(n_dst, dtype=np.int64)
+    weights = np.zeros((n_dst, 3))
+    dist2 = np.zeros(n_dst)
+    pending = np.arange(n_dst)
+    k = min(max(int(candidates), 1), n_tri)
+    while pending.size:
+        step = max(1, chunk_pairs // k)
+        still = []
+        for lo in range(0, pending.size, step):
+            idx_pts = pending[lo : lo + step]
+            p = dst[idx_pts]
+            d_c, idx = tree.query(p, k=k)
+            d_c, idx = d_c.reshape(len(p), k), idx.reshape(len(p), k)
+            d2, w = _closest_on_triangles(p[:, None, :], a[idx], b[idx], c[idx])
+            best = np.argmin(d2, axis=1)
+            rows = np.arange(len(p))
+            d_best = np.sqrt(d2[rows, best])
+            certified = (k == n_tri) | (d_c[:, -1] - radius >= d_best)
+            take = idx_pts[certified]
+            triangle[take] = idx[rows, best][certified]
+            weights[take] = w[rows, best][certified]
+            dist2[take] = d2[rows, best][certified]
+            still.append(idx_pts[~certified])
+        pending = np.concatenate(still) if still else np.zeros(0, np.int64)
+        k = min(2 * k, n_tri)
+    point = np.einsum("ij,ijk->ik", weights, vertices[tris[triangle]])
+    return Projection(triangle, weights, point, np.sqrt(dist2))
+
+
+def sample_onto(
+    points_src: np.ndarray,
+    triangles_src: np.ndarray,
+    values_src_at_vertices: np.ndarray,
+    points_dst: np.ndarray,
+) -> np.ndarray:
+    """Nodal values of the source surface interpolated at the projections of ``points_dst``.
+
+    Each destination point is projected onto the closest point of the source triangulated
+    surface and the vertex values of that triangle are interpolated barycentrically: exact for
+    fields linear on each triangle (P1, e.g. FE nodal pressure), for destination points on the
+    surface. ``values`` may be (n_vertices,) or (n_vertices, m).
+    """
+    values = np.asarray(values_src_at_vertices, dtype=np.float64)
+    proj = project_onto_surface(points_src, triangles_src, points_dst)
+    corner = values[np.asarray(triangles_src, dtype=np.int64).reshape(-1, 3)[proj.triangle]]  # (n, 3, ...)
+    return np.einsum("ij,ij...->i...", proj.barycentric, corner)
+
+
+def sample_cells_onto(
+    points_src: np.ndarray,
+    triangles_src: np.ndarray,
+    values_src_at_cells: np.ndarray,
+    points_dst: np.ndarray,
+) -> np.ndarray:
+    """Cell values (piecewise constant) of the triangle holding the closest point of each point."""
+    values = np.asarray(values_src_at_cells, dtype=np.float64)
+    proj = project_onto_surface(points_src, triangles_src, points_dst)
+    return values[proj.triangle]
+
+
+# ---------------------------------------------------------------------------------------------
+# Two result directories
+
+
+def _scalars(series: dict[str, np.ndarray], k: int) -> dict[str, Any]:
+    return {
+        "peak": float(series["peak_pressure_mpa"][k]),
+        "mean": float(series["mean_pressure_mpa"][k]),
+        "area": float(series["contact_area_mm2"][k]),
+        "disp": np.array([series[f"disp_{x}_mm"][k] for x in "xyz"], dtype=np.float64),
+    }
+
+
+def pressure_at_cells(frame) -> np.ndarray:
+    """Cell pressure of a frame: its cell data, else the mean of its nodal values per triangle."""
+    if "pressure_mpa" in frame.cell_data:
+        return frame.cell_data["pressure_mpa"]
+    if "pressure_mpa" in frame.point_data:
+        return frame.point_data["pressure_mpa"][frame.triangles].mean(axis=1)
+    raise ValueError("the surface has no pressure_mpa array")
+
+
+def same_mesh(frame_a, frame_b) -> bool:
+    """Whether two frames share their triangulation (same springs, e.g. EDEM and DEM of one scene)."""
+    return frame_a.triangles.shape == frame_b.triangles.shape and frame_a.points_mm.shape == frame_b.points_mm.shape and bool(
+        np.array_equal(frame_a.triangles, frame_b.triangles)
+    )
+
+
+def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[str, float]:
+    """L2 relative error of a's pressure against b's at a's spring centroids (SPEC 8).
+
+    a's points are the centroids of its non-degenerate triangles (the EDEM springs), weighted by
+    their areas. When b has nodal pressure (FE point data) it is interpolated at the projections
+    of those points onto b's surface (:func:`sample_onto`); when b only has cell pressure on the
+    same triangulation (another run of the same scene, or a closed form) each spring is paired
+    with itself, whatever the two poses; otherwise b's cell value at the projection is used.
+    Points farther than ``max_distance_mm`` from their partner are left out (all kept by default).
+    """
+    from edem.errors import InputError
+
+    areas = frame_a.areas_mm2
+    keep = areas > 0.0
+    points = frame_a.centroids_mm[keep]
+    try:
+        p_a = pressure_at_cells(frame_a)[keep]
+    except ValueError:
+        raise InputError("the surface of side a has no pressure_mpa array", expected="cell or point data pressure_mpa") from None
+    if "pressure_mpa" in frame_b.point_data:
+        proj = project_onto_surface(frame_b.points_mm, frame_b.triangles, points)
+        corner = frame_b.point_data["pressure_mpa"][frame_b.triangles[proj.triangle]]
+        p_b, distance, source = np.einsum("ij,ij->i", proj.barycentric, corner), proj.distance_mm, "point"
+    elif "pressure_mpa" in frame_b.cell_data and same_mesh(frame_a, frame_b):
+        p_b = frame_b.cell_data["pressure_mpa"][keep]
+        distance, source = np.linalg.norm(frame_b.centroids_mm[keep] - points, axis=1), "cell (same springs)"
+    elif "pressure_mpa" in frame_b.cell_data:
+        proj = project_onto_surface(frame_b.points_mm, frame_b.triangles, points)
+        p_b, distance, source = frame_b.cell_data["pressure_mpa"][proj.triangle], proj.distance_mm, "cell"
+    else:
+        raise InputError("the surface of side b has no pressure_mpa array", expected="cell or point data pressure_mpa")
+    common = np.ones(points.shape[0], bool) if max_distance_mm is None else distance <= max_distance_mm
+    return {
+        "pressure_l2_rel_error": l2_relative_error(p_a[common], p_b[common], areas[keep][common]),
+        "n_common_points": int(common.sum()),
+        "max_projection_distance_mm": float(distance.max(initial=0.0)),
+        "b_pressure_source": source,
+    }
+
+
+def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm: float | None = None) -> dict[str, Any]:
+    """SPEC 8 metrics of result directory a against the reference b (both in the SPEC 9 layout).
+
+    When both have the same time points every time point is compared and each metric is the
+    largest over them (``per_time`` keeps them all); otherwise the last time points are compared.
+    Scalars come from timeseries.csv; the pressure field from the pressure_NNNN.vtp files, b
+    sampled at a's spring centroids (point data when b has it, e.g. FE nodal pressure, else cell
+    data). Also returned: both wall times (summary.json) and the sampling distances.
+    """
+    from verification.resultdirs import read_result_dir
+
+    a, b = read_result_dir(a_dir), read_result_dir(b_dir)
+    ta, tb = a.time_s, b.time_s
+    same = ta.shape == tb.shape and np.allclose(ta, tb, rtol=1e-9, atol=1e-12) and len(a.frames) == len(b.frames) == len(ta)
+    pairs = [(k, k) for k in range(len(ta))] if same else [(len(ta) - 1, len(tb) - 1)]
+    per_time = []
+    for ka, kb in pairs:
+        sa, sb = _scalars(a.timeseries, ka), _scalars(b.timeseries, kb)
+        entry: dict[str, Any] = {
+            "time_a_s": float(ta[ka]),
+            "time_b_s": float(tb[kb]),
+            "peak_pressure_a_mpa": sa["peak"],
+            "peak_pressure_b_mpa": sb["peak"],
+            "mean_pressure_a_mpa": sa["mean"],
+            "mean_pressure_b_mpa": sb["mean"],
+            "contact_area_a_mm2": sa["area"],
+            "contact_area_b_mm2": sb["area"],
+            "displacement_a_mm": sa["disp"].tolist(),
+            "displacement_b_mm": sb["disp"].tolist(),
+            "peak_pressure_rel_error": peak_pressure_error(sa["peak"], sb["peak"]),
+            "mean_pressure_rel_error": mean_pressure_error(sa["mean"], sb["mean"]),
+            "contact_area_rel_error": contact_area_error(sa["area"], sb["area"]),
+            "displacement_rel_error": displacement_error(sa["disp"], sb["disp"]),
+        }
+        entry.update(field_error(a.frame(ka), b.frame(kb), max_distance_mm))
+        per_time.append(entry)
+    metrics = {name: max(float(e[name]) for e in per_time) for name in SPEC8_METRICS}
+    return {
+        "a": str(a.path),
+        "b": str(b.path),
+        "a_method": a.summary.get("method"),
+        "b_method": b.summary.get("method"),
+        "a_scene": a.summary.get("scene"),
+        "b_scene": b.summary.get("scene"),
+        "mode": "each time point" if same else "last time point",
+        "metrics": metrics,
+        "wall_time_a_s": float(a.summary.get("wall_time_s", math.nan)),
+        "wall_time_b_s": float(b.summary.get("wall_time_s", math.nan)),
+        "n_common_points": min(e["n_common_points"] for e in per_time),
+        "max_projection_distance_mm": max(e["max_projection_distance_mm"] for e in per_time),
+        "per_time": per_time,
+    }
+
+
+def format_metrics_table(comparison: dict[str, Any]) -> str:
+    """Plain-text table of a :func:`compare_result_dirs` result (what `edem compare` prints)."""
+    last = comparison["per_time"][-1]
+    rows = [
+        ("peak pressure (MPa)", last["peak_pressure_a_mpa"], last["peak_pressure_b_mpa"], "peak_pressure_rel_error"),
+        ("mean pressure (MPa)", last["mean_pressure_a_mpa"], last["mean_pressure_b_mpa"], "mean_pressure_rel_error"),
+        ("contact area (mm^2)", last["contact_area_a_mm2"], last["contact_area_b_mm2"], "contact_area_rel_error"),
+        (
+            "displacement |u| (mm)",
+            float(np.linalg.norm(last["displacement_a_mm"])),
+            float(np.linalg.norm(last["displacement_b_mm"])),
+            "displacement_rel_error",
+        ),
+        ("pressure field (L2)", None, None, "pressure_l2_rel_error"),
+    ]
+    many = len(comparison["per_time"]) > 1
+    head = f"{'quantity':24s} {'a':>12s} {'b':>12s} {'rel. error':>12s}" + (f" {'max over t':>12s}" if many else "")
+    lines = [
+        f"a: {comparison['a']} ({comparison['a_method']}, {comparison['wall_time_a_s']:.3g} s)",
+        f"b: {comparison['b']} ({comparison['b_method']}, {comparison['wall_time_b_s']:.3g} s), the reference",
+        f"compared: {comparison['mode']} ({len(comparison['per_time'])}), values at t = {last['time_a_s']:g} s",
+        head,
+        "-" * len(head),
+    ]
+    for label, va, vb, key in rows:
+        fa = f"{va:12.5g}" if va is not None else f"{'':12s}"
+        fb = f"{vb:12.5g}" if vb is not None else f"{'':12s}"
+        line = f"{label:24s} {fa} {fb} {last[key]:12.4g}"
+        if many:
+            line += f" {comparison['metrics'][key]:12.4g}"
+        lines.append(line)
+    lines.append(
+        f"pressure compared at {comparison['n_common_points']} spring centroids of a "
+        f"(b's {comparison['per_time'][-1]['b_pressure_source']} values; largest distance between compared points "
+        f"{comparison['max_projection_distance_mm']:.3g} mm)"
+    )
+    return "\n".join(lines)

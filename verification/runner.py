@@ -1,0 +1,511 @@
+"""Run a campaign: cases in parallel processes (or on a Dask cluster), cached by their inputs.
+
+Each case runs in ``OUT/cases/<case>/``: one SPEC 9 result directory per side (``a-<side>``,
+``b-<side>``) and ``metrics.json`` (every metric, the tolerance verdicts, wall times, the result
+directories). The case is cached under a key hashing its definition, the scene file and every
+file it references, the package version and the source of ``edem/``, ``geometries/`` and
+``verification/`` (plus ``fem_reference/`` for FE cases): re-running an unchanged case only
+re-reads its metrics.json, and a code change invalidates it. Verdicts are re-judged on every run,
+so changing a tolerance needs no re-run. ``OUT/metrics.json`` gathers the campaign and the HTML
+report (:mod:`reports.html`) ends it.
+
+Exit status of a campaign (SPEC 9): 0 when every case passes its tolerance, 1 when one fails
+(or crashes); cases whose side is unavailable (FE reference not installed yet) are reported and
+do not fail the campaign.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import datetime as _dt
+import hashlib
+import importlib.metadata
+import importlib.util
+import json
+import math
+import multiprocessing
+import os
+import platform
+import re
+import shutil
+import sys
+import time
+import tomllib
+from collections.abc import Callable, Iterable
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from edem.errors import InputError
+from verification.campaigns import Campaign, Case, validate_campaign
+from verification.sides import ERROR, OK, REFUSED, UNAVAILABLE, is_fe_side, run_side
+
+PASSED, FAILED = "passed", "failed"
+ROOT = Path(__file__).resolve().parents[1]
+SOURCE_PACKAGES = ("edem", "geometries", "verification")
+
+
+# ---------------------------------------------------------------------------------------------
+# JSON helpers
+
+
+def json_safe(value: Any) -> Any:
+    """numpy scalars/arrays to Python, non-finite floats to the strings "inf", "-inf", "nan"."""
+    import numpy as np
+
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, (np.bool_, bool)):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        if math.isfinite(v):
+            return v
+        return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")
+    return value
+
+
+def as_float(value: Any) -> float:
+    """A metric value read back from JSON ("inf" strings included)."""
+    return float(value)
+
+
+def write_json(path: Path, data: Any) -> None:
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(json_safe(data), indent=2) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
+# ---------------------------------------------------------------------------------------------
+# Cache keys
+
+
+@lru_cache(maxsize=None)
+def _source_digest(packages: tuple[str, ...]) -> str:
+    digest = hashlib.sha256()
+    for package in packages:
+        base = ROOT / package
+        for path in sorted(p for p in base.rglob("*") if p.is_file() and p.suffix in (".py", ".toml") and "__pycache__" not in p.parts):
+            digest.update(str(path.relative_to(ROOT)).encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _package_version() -> str:
+    try:
+        return importlib.metadata.version("edem")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def referenced_files(scene_path: Path, overrides: dict[str, Any]) -> list[Path]:
+    """Files a scene reads besides itself: mesh files of [geometry], load and kinematics files."""
+    from edem.scene import apply_overrides
+
+    try:
+        data = tomllib.loads(scene_path.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError):
+        return []
+    apply_overrides(data, dict(overrides))
+    files = []
+    for section, keys in (("geometry", ("mobile", "fixed")), ("load", ("file",)), ("kinematics", ("file",))):
+        table = data.get(section, {})
+        if isinstance(table, dict):
+            files += [scene_path.parent / table[k] for k in keys if isinstance(table.get(k), str)]
+    return files
+
+
+def case_key(case: Case) -> str:
+    """sha256 of everything a case's results depend on (module docstring)."""
+    from edem.scene import resolve_scene_path
+
+    digest = hashlib.sha256()
+    digest.update(json.dumps(json_safe(case.definition()), sort_keys=True).encode())
+    digest.update(_package_version().encode())
+    packages = SOURCE_PACKAGES + (("fem_reference",) if any(is_fe_side(s) for s in case.sides) else ())
+    digest.update(_source_digest(packages).encode())
+    try:
+        scene_path = resolve_scene_path(case.scene_ref())
+        files = [scene_path] + referenced_files(scene_path, case.overrides)
+    except InputError:
+        files = []
+    for path in files:
+        digest.update(str(path.name).encode())
+        digest.update(path.read_bytes() if path.is_file() else b"<missing>")
+    return digest.hexdigest()
+
+
+# ---------------------------------------------------------------------------------------------
+# One case (runs in a worker process or on a Dask worker)
+
+
+def _side_dir_name(index: int, side: str) -> str:
+    return ("a", "b")[index] + "-" + re.sub(r"[^A-Za-z0-9_.-]+", "-", side)
+
+
+def _thickness_metrics(a_dir: str, b_dir: str | None) -> dict[str, float]:
+    """Mean and sd of a's ray-cast spring lengths; errors against the closed form's thickness."""
+    import numpy as np
+
+    from verification.resultdirs import read_result_dir
+
+    a = read_result_dir(a_dir)
+    frame = a.frame(0)
+    hit = (frame.cell_data.get("ray_hit", np.ones(frame.triangles.shape[0])) > 0) & (frame.areas_mm2 > 0)
+    lengths = frame.cell_data["spring_length_mm"][hit]
+    out = {"thickness_mean_mm": float(lengths.mean()), "thickness_sd_mm": float(lengths.std())}
+    if b_dir is not None:
+        form = read_result_dir(b_dir).summary.get("closed_form", {})
+        if "thickness_mm" in form:
+            error = abs(out["thickness_mean_mm"] - form["thickness_mm"])
+            out["thickness_mean_rel_error"] = error / form["thickness_mm"]
+            bound = form.get("faceting_bound_mm", 0.0)
+            out["thickness_faceting_ratio"] = error / bound if bound > 0 else (0.0 if error == 0 else math.inf)
+    return out
+
+
+def _stability_metrics(case: Case, a: dict[str, Any]) -> dict[str, float]:
+    from verification.resultdirs import non_finite_count, read_result_dir
+
+    out: dict[str, float] = {}
+    actual = {OK: "converges", REFUSED: "refused"}.get(a["status"], a["status"])
+    if case.expect is not None:
+        matched = actual == case.expect.outcome
+        if matched and actual == "refused" and case.expect.message:
+            matched = re.search(case.expect.message, a["message"]) is not None
+        if matched and actual == "converges" and case.expect.warning:
+            warnings = read_result_dir(a["result_dir"]).summary.get("warnings", [])
+            matched = any(re.search(case.expect.warning, str(w)) for w in warnings)
+        out["outcome_mismatch"] = 0.0 if matched else 1.0
+    if a["status"] == OK:
+        out["non_finite_outputs"] = float(non_finite_count(a["result_dir"]))
+        result = read_result_dir(a["result_dir"])
+        series = result.timeseries
+        load = max(max(abs(series[f"force_{x}_n"]).max() for x in "xyz"), 1e-12)
+        out["force_residual_rel"] = float(result.summary.get("max_force_residual_n", math.inf)) / load
+    elif a["status"] == REFUSED:
+        out["non_finite_outputs"] = 0.0  # nothing written
+    return out
+
+
+def compute_metrics(case: Case, sides: list[dict[str, Any]]) -> tuple[dict[str, float], dict[str, Any] | None]:
+    """The case's metrics from its side outcomes (only those it declares) and the comparison."""
+    from verification.metrics import SPEC8_METRICS, compare_result_dirs
+
+    wanted = set(case.metrics)
+    metrics: dict[str, float] = {}
+    comparison = None
+    a = sides[0]
+    b = sides[1] if len(sides) > 1 else None
+    if wanted & {"outcome_mismatch", "non_finite_outputs", "force_residual_rel"}:
+        metrics.update(_stability_metrics(case, a))
+    both = a["status"] == OK and b is not None and b["status"] == OK
+    if both and wanted & set(SPEC8_METRICS):
+        comparison = compare_result_dirs(a["result_dir"], b["result_dir"])
+        metrics.update(comparison["metrics"])
+    if a["status"] == OK and wanted & {"thickness_mean_mm", "thickness_sd_mm", "thickness_mean_rel_error", "thickness_faceting_ratio"}:
+        metrics.update(_thickness_metrics(a["result_dir"], b["result_dir"] if both else None))
+    return {k: v for k, v in metrics.items() if k in wanted}, comparison
+
+
+def _scene_description(case: Case) -> str:
+    from edem.scene import resolve_scene_path
+
+    try:
+        data = tomllib.loads(resolve_scene_path(case.scene_ref()).read_text(encoding="utf-8"))
+        return " ".join(str(data.get("scene", {}).get("description", "")).split())
+    except (InputError, OSError, tomllib.TOMLDecodeError):
+        return ""
+
+
+def execute_case(case: Case, case_dir: str, key: str) -> dict[str, Any]:
+    """Run a case's sides into ``case_dir`` and write its metrics.json (without verdicts).
+
+    Top-level and picklable: runs in a ProcessPoolExecutor worker or on a Dask worker. A side
+    refused as the case expects skips the reference side. Never raises for a solver problem:
+    crashes become the "error" outcome with their traceback.
+    """
+    start = time.perf_counter()
+    root = Path(case_dir)
+    if root.exists():
+        shutil.rmtree(root)
+    root.mkdir(parents=True)
+    sides: list[dict[str, Any]] = []
+    for index, side in enumerate(case.sides):
+        if index and sides[0]["status"] != OK:
+            break  # no point running the reference of a refused or failed subject
+        outcome = run_side(side, case.scene_ref(), dict(case.overrides), root / _side_dir_name(index, side), dict(case.options))
+        sides.append(outcome.to_dict())
+    record: dict[str, Any] = {"case": case.definition(), "key": key, "sides": sides, "metrics": {}, "comparison": None}
+    try:
+        if not any(s["status"] in (UNAVAILABLE, ERROR) for s in sides):
+            record["metrics"], record["comparison"] = compute_metrics(case, sides)
+    except Exception as exc:  # a bug in the metrics: report it with the case
+        import traceback
+
+        sides.append({"side": "metrics", "status": ERROR, "result_dir": None, "message": f"{type(exc).__name__}: {exc}\n" + traceback.format_exc()[-1500:], "wall_time_s": 0.0, "error_type": type(exc).__name__})
+    record["scene_description"] = _scene_description(case)
+    record["wall_time_s"] = time.perf_counter() - start
+    record["computed_at"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    record["host"] = platform.node()
+    for side in sides:
+        if side.get("result_dir"):
+            side["result_dir"] = str(Path(side["result_dir"]).relative_to(root))
+    write_json(root / "metrics.json", record)
+    return json.loads((root / "metrics.json").read_text(encoding="utf-8"))
+
+
+# ---------------------------------------------------------------------------------------------
+# Verdicts
+
+
+def judge(case: Case, record: dict[str, Any]) -> tuple[str, dict[str, dict[str, Any]]]:
+    """Status (passed / failed / error / unavailable) and the verdict of every tolerance."""
+    sides = record["sides"]
+    if any(s["status"] == UNAVAILABLE for s in sides):
+        return UNAVAILABLE, {}
+    crashed = any(s["status"] == ERROR for s in sides)
+    refused_as_declared = case.expect is not None and case.expect.outcome == "refused" and record["metrics"].get("outcome_mismatch") == 0.0
+    verdicts: dict[str, dict[str, Any]] = {}
+    for metric, tol in case.tolerance.items():
+        if metric in record["metrics"]:
+            value = as_float(record["metrics"][metric])
+            verdicts[metric] = {"value": value, "tolerance": tol, "verdict": "pass" if value <= tol else "fail"}
+        else:
+            verdicts[metric] = {"value": None, "tolerance": tol, "verdict": "n/a" if refused_as_declared else "missing"}
+    if crashed:
+        return ERROR, verdicts
+    failed = any(v["verdict"] in ("fail", "missing") for v in verdicts.values())
+    return (FAILED if failed else PASSED), verdicts
+
+
+def outcome_of(record: dict[str, Any]) -> str:
+    """converges / refused / unavailable / error, from side a."""
+    status = record["sides"][0]["status"]
+    return {OK: "converges", REFUSED: "refused"}.get(status, status)
+
+
+def _cached_record(case_dir: Path, key: str) -> dict[str, Any] | None:
+    path = case_dir / "metrics.json"
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if record.get("key") != key:
+        return None
+    statuses = [s["status"] for s in record.get("sides", [])]
+    if not statuses or any(s in (UNAVAILABLE, ERROR) for s in statuses):
+        return None  # availability may change and crashes get fixed: run those again
+    if any(s.get("result_dir") and not (case_dir / s["result_dir"]).is_dir() for s in record["sides"]):
+        return None
+    return record
+
+
+# ---------------------------------------------------------------------------------------------
+# The campaign
+
+
+def software_versions() -> dict[str, str]:
+    """Versions of Python and the numerical stack (dolfinx only if installed), without importing them."""
+    versions = {"python": platform.python_version(), "platform": platform.platform()}
+    for name in ("edem", "numpy", "scipy", "vtk", "pyvista", "matplotlib", "embreex", "gmsh"):
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            pass
+    if importlib.util.find_spec("dolfinx") is not None:
+        dists = importlib.metadata.packages_distributions().get("dolfinx", [])
+        for dist in dists + ["fenics-dolfinx"]:
+            try:
+                versions["dolfinx"] = f"{importlib.metadata.version(dist)} ({dist})"
+                break
+            except importlib.metadata.PackageNotFoundError:
+                continue
+    return versions
+
+
+def _executor_results(
+    todo: list[tuple[Case, Path, str]], jobs: int, scheduler: str | None
+) -> Iterable[tuple[Case, dict[str, Any]]]:
+    """Yield (case, record) as cases finish: inline (jobs 1), a process pool or a Dask cluster."""
+    if not todo:
+        return
+    if scheduler is not None:
+        try:
+            from dask.distributed import Client, as_completed
+        except ImportError:
+            raise InputError("--scheduler needs dask.distributed", key="--scheduler", expected="pip install 'dask[distributed]'") from None
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise InputError(f"cannot reach the Dask scheduler: {exc}", key="--scheduler", expected="the address of a running scheduler, e.g. tcp://host:8786") from None
+        with client:
+            futures = {
+                client.submit(execute_case, case, str(case_dir), key, key=f"edem-case-{case.name}-{key[:12]}", pure=False): case
+                for case, case_dir, key in todo
+            }
+            for future in as_completed(futures):
+                yield futures[future], future.result()
+        return
+    if jobs <= 1:
+        for case, case_dir, key in todo:
+            yield case, execute_case(case, str(case_dir), key)
+        return
+    context = multiprocessing.get_context("spawn")
+    with concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, len(todo)), mp_context=context) as pool:
+        futures = {pool.submit(execute_case, case, str(case_dir), key): case for case, case_dir, key in todo}
+        for future in concurrent.futures.as_completed(futures):
+            yield futures[future], future.result()
+
+
+def run_campaign(
+    campaign: Campaign,
+    out_dir: str | Path,
+    *,
+    jobs: int | None = None,
+    scheduler: str | None = None,
+    progress: bool | None = None,
+    report: bool = True,
+    on_case: Callable[[str, bool], None] | None = None,
+) -> dict[str, Any]:
+    """Run (or take from the cache) every case of the campaign; write metrics.json and the report.
+
+    ``jobs``: worker processes (default: the CPU count; 1 runs in this process). ``scheduler``:
+    the address of a Dask distributed scheduler to run the cases on instead (its workers must
+    see ``out_dir``). ``progress``: a tqdm bar on stderr (default: when stderr is a terminal).
+    ``on_case(name, cached)`` is called as each case is done. Returns the campaign summary
+    (also in ``out_dir/metrics.json``), with "exit_status" and "report".
+    """
+    validate_campaign(campaign)
+    out = Path(out_dir)
+    (out / "cases").mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    jobs = (os.cpu_count() or 1) if jobs is None else jobs
+    if jobs < 1:
+        raise InputError(f"--jobs {jobs}", key="--jobs", expected="a number of processes >= 1")
+    records: dict[str, dict[str, Any]] = {}
+    cached: dict[str, bool] = {}
+    todo = []
+    for case in campaign.cases:
+        case_dir = out / "cases" / case.name
+        key = case_key(case)
+        record = _cached_record(case_dir, key)
+        if record is None:
+            todo.append((case, case_dir, key))
+        else:
+            records[case.name], cached[case.name] = record, True
+    show = sys.stderr.isatty() if progress is None else progress
+    bar = None
+    if show:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(campaign.cases), desc=campaign.name, unit="case", file=sys.stderr, initial=len(records))
+    for name in list(records):
+        if on_case:
+            on_case(name, True)
+    try:
+        for case, record in _executor_results(todo, jobs, scheduler):
+            records[case.name], cached[case.name] = record, False
+            if bar is not None:
+                bar.update(1)
+            if on_case:
+                on_case(case.name, False)
+    finally:
+        if bar is not None:
+            bar.close()
+
+    case_rows = []
+    for case in campaign.cases:
+        record = records[case.name]
+        status, verdicts = judge(case, record)
+        if record.get("status") != status or record.get("verdicts") != json_safe(verdicts) or "tolerance" not in record:
+            record.update(status=status, verdicts=verdicts, tolerance=case.tolerance, description=case.description)
+            write_json(out / "cases" / case.name / "metrics.json", record)
+        case_rows.append(
+            {
+                "name": case.name,
+                "description": case.description,
+                "scene": case.scene,
+                "scene_description": record.get("scene_description", ""),
+                "overrides": case.overrides,
+                "sides": record["sides"],
+                "status": status,
+                "outcome": outcome_of(record),
+                "expected_outcome": None if case.expect is None else case.expect.outcome,
+                "metrics": record["metrics"],
+                "tolerance": case.tolerance,
+                "verdicts": verdicts,
+                "params": case.params,
+                "maps": case.maps,
+                "wall_time_s": record["wall_time_s"],
+                "cached": cached[case.name],
+                "case_dir": f"cases/{case.name}",
+                "result_dirs": [f"cases/{case.name}/{s['result_dir']}" for s in record["sides"] if s.get("result_dir")],
+            }
+        )
+    counts = {s: sum(1 for r in case_rows if r["status"] == s) for s in (PASSED, FAILED, ERROR, UNAVAILABLE)}
+    outcomes = {o: sum(1 for r in case_rows if r["outcome"] == o) for o in ("converges", "refused")}
+    summary = {
+        "campaign": campaign.name,
+        "description": campaign.description,
+        "out_dir": str(out),
+        "finished_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "wall_time_s": time.perf_counter() - started,
+        "cases_wall_time_s": sum(r["wall_time_s"] for r in case_rows),
+        "computed": sum(1 for r in case_rows if not r["cached"]),
+        "cached": sum(1 for r in case_rows if r["cached"]),
+        "jobs": jobs if scheduler is None else None,
+        "scheduler": scheduler,
+        "counts": counts,
+        "outcomes": outcomes,
+        "exit_status": 1 if counts[FAILED] or counts[ERROR] else 0,
+        "versions": software_versions(),
+        "figures": [dataclasses.asdict(figure) for figure in campaign.figures],
+        "cases": case_rows,
+    }
+    summary["report"] = None
+    if report:
+        from reports.html import write_campaign_report
+
+        summary["report"] = str(write_campaign_report(summary, out))
+    write_json(out / "metrics.json", summary)
+    return summary
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """The text `edem verify` prints: counts, outcomes, then a table of what failed."""
+    counts, outcomes = summary["counts"], summary["outcomes"]
+    lines = [
+        f"{summary['campaign']}: {len(summary['cases'])} cases, {counts[PASSED]} passed, {counts[FAILED]} failed, "
+        f"{counts[ERROR]} crashed, {counts[UNAVAILABLE]} unavailable ({summary['computed']} run, {summary['cached']} from the cache) "
+        f"in {summary['wall_time_s']:.1f} s",
+        f"outcomes: {outcomes['converges']} converge, {outcomes['refused']} refused",
+    ]
+    bad = [r for r in summary["cases"] if r["status"] in (FAILED, ERROR)]
+    if bad:
+        lines.append("")
+        lines.append(f"{'case':34s} {'metric':26s} {'value':>12s} {'tolerance':>12s}")
+        for row in bad:
+            failing = [(m, v) for m, v in row["verdicts"].items() if v["verdict"] in ("fail", "missing")]
+            if row["status"] == ERROR or not failing:
+                message = next((s["message"] for s in row["sides"] if s["status"] in (ERROR, REFUSED)), "")
+                lines.append(f"{row['name']:34s} {row['status']}: {message.splitlines()[0] if message else ''}")
+            for metric, verdict in failing:
+                value = "missing" if verdict["value"] is None else f"{verdict['value']:.4g}"
+                lines.append(f"{row['name']:34s} {metric:26s} {value:>12s} {verdict['tolerance']:12.4g}")
+                if verdict["value"] is None:
+                    message = next((s["message"] for s in row["sides"] if s["status"] != OK), "")
+                    if message:
+                        lines.append(f"{'':34s}   ({message.splitlines()[0]})")
+    unavailable = [r for r in summary["cases"] if r["status"] == UNAVAILABLE]
+    for row in unavailable:
+        message = next(s["message"] for s in row["sides"] if s["status"] == UNAVAILABLE)
+        lines.append(f"{row['name']}: {message}")
+    return "\n".join(lines)
