@@ -19,6 +19,7 @@ from edem.mechanics import (
     rotation_matrix,
     rotation_vector,
     solve_unilateral,
+    unrestrained_dofs,
 )
 from edem.raycast import RayCaster
 from edem.scene import Scene, Viscoelastic
@@ -84,6 +85,32 @@ def fixed_placement(scene: Scene, step: int) -> Placement:
         return Placement.identity()
     rotation = rotation_matrix(kin.axis_direction * kin.angle_rad[step])
     return Placement(rotation, np.zeros(3), kin.axis_point_mm)
+
+
+def weak_dofs_warning(
+    directions: np.ndarray,
+    law: NormalLaw,
+    shear: ShearTerms | None,
+    solution: UnilateralSolution,
+    fixed_dofs: tuple[str, ...],
+    length_scale_mm: float,
+    ratio: float = 1e-4,
+) -> list[str]:
+    """Warn about free DOFs that are restrained only by round-off-like stiffness (SPEC 2).
+
+    A faceted cylinder's normals tilt slightly off radial, so sliding along its axis is not
+    exactly singular but about 1e-5 as stiff as the rest: the solve succeeds and the body drifts.
+    """
+    _, stiffness = law.force_and_stiffness(directions @ solution.displacement)
+    k = assemble_stiffness(directions, stiffness, solution.active, shear)
+    free = np.array([d not in fixed_dofs for d in DOF_NAMES])
+    weak = unrestrained_dofs(k, free, length_scale_mm, rtol=ratio)
+    if not weak:
+        return []
+    return [
+        f"the contact barely resists motion along {', '.join(weak)} (stiffness below {ratio:g} of the largest, "
+        "e.g. sliding along a faceted cylinder's axis): consider fixing these DOFs in [constraints] fixed_dofs"
+    ]
 
 
 def compression_ratio(geometry: SpringGeometry, cartilage: Cartilage, approach_mm: np.ndarray) -> np.ndarray:
@@ -152,12 +179,13 @@ def run(
         clock = time.perf_counter()
         cand = geometry.candidate
         n_c = int(cand.sum())
-        if cartilage.law == "threshold" and np.any(geometry.spring_length_mm[cand] <= 0.0):
+        if cartilage.law in ("threshold", "gap-log") and np.any(geometry.spring_length_mm[cand] <= 0.0):
+            # k = E'/h (threshold) and p = -E' ln(h/t) (gap-log) have no meaning once h <= 0.
             bad = int((geometry.spring_length_mm[cand] <= 0.0).sum())
             raise SolverError(
                 f"time point {k} (t = {t:g} s): {bad} springs are compressed past their length "
-                "(h <= 0, the bodies interpenetrate); the threshold law needs h > 0: "
-                + ("use more time points so each increment is small, or the gap-log law" if k else "separate the bodies or use the gap-log law")
+                f"(h <= 0, the bodies interpenetrate); the {cartilage.law} law needs h > 0: "
+                + ("use more time points so each increment is small, or the linear gap law" if k else "separate the bodies or use the linear gap law")
             )
         if n_c == 0 and not scene.ligaments and np.any(loads[k]):
             raise SolverError(
@@ -179,6 +207,8 @@ def run(
         except SolverError as exc:
             raise SolverError(f"time point {k} (t = {t:g} s, {n_c} candidate springs): {exc}") from None
         total_force = np.where(solution.active, solution.element_force_n, 0.0)
+        if k == 0:
+            warnings += weak_dofs_warning(directions, law, shear, solution, scene.fixed_dofs, length_scale)
         overstrained = int((solution.active[:n_c] & (compression_ratio(geometry, cartilage, directions[:n_c] @ solution.displacement) >= 1.0)).sum())
         if overstrained:
             warnings.append(
