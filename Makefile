@@ -20,10 +20,10 @@ $(STAMP): pyproject.toml | $(PY)
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/edem run ideal-stance --method edem --out results/ideal-stance-edem
-	$(VENV)/bin/edem run ideal-stance --method dem --out results/ideal-stance-dem
+	$(VENV)/bin/edem verify quick --out results/verify/quick
 
 test: $(STAMP)
+	@scripts/ensure-chromium.sh
 	$(PY) -m pytest -q -m "not slow"
 
 bench: $(STAMP)
