@@ -27,6 +27,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from edem.errors import InputError
+from edem.tables import SceneTable, is_number
 
 NM_TO_NMM = 1000.0
 """N·m -> N·mm."""
@@ -107,82 +108,6 @@ class JointKinematics:
 
 
 # --------------------------------------------------------------------------- scene tables
-
-
-class _Table:
-    """A scene TOML table with typed, error-reporting accessors (keys shown as `section.key`)."""
-
-    def __init__(self, table: dict[str, Any], scene_file: Path, section: str, allowed: tuple[str, ...]) -> None:
-        if not isinstance(table, dict):
-            raise InputError(f"[{section}] must be a table", file=scene_file, key=section,
-                             expected=f"a table with keys {', '.join(allowed)}")
-        self.table = table
-        self.scene_file = Path(scene_file)
-        self.section = section
-        unknown = sorted(set(table) - set(allowed))
-        if unknown:
-            raise self.error(unknown[0], f"unknown key(s) {', '.join(map(repr, unknown))} in [{section}]",
-                             f"only {', '.join(allowed)}")
-
-    def key(self, key: str) -> str:
-        return f"{self.section}.{key}"
-
-    def error(self, key: str, problem: str, expected: str | None = None) -> InputError:
-        return InputError(problem, file=self.scene_file, key=self.key(key), expected=expected)
-
-    def has(self, key: str) -> bool:
-        return key in self.table
-
-    def number(self, key: str, default: float | None = None) -> float:
-        value = self.table.get(key, default)
-        if not _is_number(value) or not math.isfinite(value):
-            raise self.error(key, f"got {value!r}", "a finite number")
-        return float(value)
-
-    def numbers(self, key: str, length: int | None = None, what: str = "a list of finite numbers") -> np.ndarray:
-        value = self.table[key]
-        if (not isinstance(value, list) or not all(_is_number(v) and math.isfinite(v) for v in value)
-                or (length is not None and len(value) != length) or len(value) == 0):
-            raise self.error(key, f"got {value!r}", what)
-        return np.array(value, dtype=np.float64)
-
-    def triple(self, key: str, what: str = "3 finite numbers [x, y, z]") -> np.ndarray:
-        return self.numbers(key, 3, what)
-
-    def triples(self, key: str, n: int) -> np.ndarray:
-        value = self.table[key]
-        what = f"a list of {n} triples [[x, y, z], ...], one per time_s value"
-        if not isinstance(value, list) or len(value) != n:
-            got = f"{len(value)} entries" if isinstance(value, list) else repr(value)
-            raise self.error(key, f"got {got}", what)
-        for i, row in enumerate(value):
-            if not (isinstance(row, list) and len(row) == 3 and all(_is_number(v) and math.isfinite(v) for v in row)):
-                raise self.error(key, f"entry {i} is {row!r}", what)
-        return np.array(value, dtype=np.float64)
-
-    def string(self, key: str, default: str | None = None) -> str:
-        value = self.table.get(key, default)
-        if not isinstance(value, str) or not value:
-            raise self.error(key, f"got {value!r}", "a non-empty string")
-        return value
-
-    def strings(self, key: str, length: int) -> list[str]:
-        value = self.table[key]
-        if not (isinstance(value, list) and len(value) == length and all(isinstance(v, str) and v for v in value)):
-            raise self.error(key, f"got {value!r}", f"a list of {length} column names (prefix '-' to negate)")
-        return list(value)
-
-    def path(self, key: str, what: str) -> Path:
-        path = Path(self.string(key))
-        if not path.is_absolute():
-            path = self.scene_file.parent / path
-        if not path.is_file():
-            raise self.error(key, f"file not found: {path}", f"{what}, relative to the scene file")
-        return path
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 # --------------------------------------------------------------------------- data files
@@ -316,7 +241,7 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
     Optional in all forms: `force_scale` (multiplies the force only; default 1) and
     `time_range_s = [t0, t1]` (keeps the time points with t0 <= t <= t1).
     """
-    tab = _Table(table, scene_file, "load", LOAD_KEYS)
+    tab = SceneTable(table, scene_file, "load", LOAD_KEYS)
     if tab.has("file") and tab.has("force_n"):
         raise tab.error("file", "both 'file' and 'force_n' are given", "exactly one of 'force_n' or 'file'")
     if tab.has("file"):
@@ -349,7 +274,7 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
     return LoadSeries(time_s, force_n, moment_nmm, frame)
 
 
-def _load_inline(tab: _Table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _load_inline(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if not tab.has("time_s"):
         force = tab.triple("force_n", "3 finite numbers [fx, fy, fz] (for a series, also give time_s)")
         moment = tab.triple("moment_nmm", "3 finite numbers [mx, my, mz]") if tab.has("moment_nmm") else np.zeros(3)
@@ -366,7 +291,7 @@ def _load_inline(tab: _Table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return time_s, force, moment
 
 
-def _load_from_file(tab: _Table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _load_from_file(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     path = tab.path("file", "a .csv, .sto or .mot file")
     data = _read_data_file(path, tab.key("file"))
     opensim = path.suffix.lower() in _OPENSIM_SUFFIXES
@@ -432,7 +357,7 @@ def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.
     `inDegrees=yes`, radians when `inDegrees=no`; it is linearly interpolated onto `time_s`,
     which must lie within the file's time range.
     """
-    tab = _Table(table, scene_file, "kinematics", KINEMATICS_KEYS)
+    tab = SceneTable(table, scene_file, "kinematics", KINEMATICS_KEYS)
     time_s = np.asarray(time_s, dtype=np.float64).reshape(-1)
     for key in ("axis_point_mm", "axis_direction"):
         if not tab.has(key):
@@ -456,10 +381,10 @@ def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.
     return JointKinematics(axis_point, axis / norm, np.deg2rad(angle_deg))
 
 
-def _inline_angles(tab: _Table, n: int) -> np.ndarray:
+def _inline_angles(tab: SceneTable, n: int) -> np.ndarray:
     value = tab.table["angle_deg"]
     what = f"a number or a list of 1 or {n} numbers (one per load time point)"
-    if _is_number(value):
+    if is_number(value):
         angles = np.array([tab.number("angle_deg")])
     else:
         angles = tab.numbers("angle_deg", what=what)
@@ -470,7 +395,7 @@ def _inline_angles(tab: _Table, n: int) -> np.ndarray:
     return angles
 
 
-def _file_angles(tab: _Table, time_s: np.ndarray) -> np.ndarray:
+def _file_angles(tab: SceneTable, time_s: np.ndarray) -> np.ndarray:
     path = tab.path("file", "an OpenSim .mot or .sto file")
     if path.suffix.lower() not in _OPENSIM_SUFFIXES:
         raise tab.error("file", f"unsupported file type '{path.suffix}'", "an OpenSim .mot or .sto file")

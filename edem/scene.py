@@ -6,7 +6,6 @@ off. Bad input raises InputError naming the file, the key and what was expected.
 
 from __future__ import annotations
 
-import math
 import tomllib
 import warnings
 from dataclasses import dataclass
@@ -20,6 +19,7 @@ from edem.errors import InputError
 from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, load_series_from_table
 from edem.mechanics import DOF_NAMES
 from edem.springs import Cartilage, Ligament
+from edem.tables import SceneTable
 from geometries.surface import TriangleSurface
 
 SECTIONS = {
@@ -92,66 +92,6 @@ class Scene:
         return self.mobile.areas_mm2[self.spring_triangle]
 
 
-# ---------------------------------------------------------------------------------------------
-# Small typed readers: each names the file, the key and what it expected.
-
-
-class _Reader:
-    def __init__(self, table: dict[str, Any], file: str, section: str, allowed: set[str] | None) -> None:
-        self.table, self.file, self.section = table, file, section
-        if allowed is not None:
-            unknown = sorted(set(table) - allowed)
-            if unknown:
-                raise InputError(
-                    f"unknown key(s) {', '.join(unknown)} in [{section}]",
-                    file=file,
-                    key=f"{section}.{unknown[0]}",
-                    expected="one of " + ", ".join(sorted(allowed)),
-                )
-
-    def key(self, name: str) -> str:
-        return f"{self.section}.{name}"
-
-    def number(self, name: str, default: float | None = None, *, positive: bool = False, low: float | None = None, high: float | None = None, what: str = "") -> float | None:
-        if name not in self.table:
-            if default is None:
-                return None
-            return float(default)
-        value = self.table[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise InputError(f"{value!r} is not a finite number", file=self.file, key=self.key(name), expected=what or "a number")
-        value = float(value)
-        if positive and value <= 0:
-            raise InputError(f"{value:g} is not positive", file=self.file, key=self.key(name), expected=what or "a number > 0")
-        if (low is not None and value <= low) or (high is not None and value >= high):
-            raise InputError(f"{value:g} is out of range", file=self.file, key=self.key(name), expected=what)
-        return value
-
-    def required_number(self, name: str, **kw: Any) -> float:
-        if name not in self.table:
-            raise InputError(f"[{self.section}] has no '{name}'", file=self.file, key=self.key(name), expected=kw.get("what") or "a number")
-        return self.number(name, **kw)  # type: ignore[return-value]
-
-    def string(self, name: str, default: str | None = None, choices: tuple[str, ...] | None = None) -> str | None:
-        value = self.table.get(name, default)
-        if value is None:
-            return None
-        if not isinstance(value, str):
-            raise InputError(f"{value!r} is not a string", file=self.file, key=self.key(name), expected="a string")
-        if choices is not None and value not in choices:
-            raise InputError(f"'{value}' is not allowed", file=self.file, key=self.key(name), expected="one of " + ", ".join(choices))
-        return value
-
-    def vector(self, name: str, default: Any = None) -> np.ndarray | None:
-        value = self.table.get(name, default)
-        if value is None:
-            return None
-        ok = isinstance(value, list) and len(value) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value)
-        if not ok or not all(math.isfinite(x) for x in value):
-            raise InputError(f"{value!r} is not a point", file=self.file, key=self.key(name), expected="three finite numbers [x, y, z]")
-        return np.array(value, float)
-
-
 def _parse_toml(path: Path) -> dict[str, Any]:
     try:
         text = path.read_text(encoding="utf-8")
@@ -222,13 +162,13 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             raise InputError(f"missing section [{section}]", file=file, key=section, expected=f"a [{section}] table (SPEC 9)")
     notes: list[str] = []
 
-    meta = _Reader(data.get("scene", {}), file, "scene", SECTIONS["scene"])
+    meta = SceneTable(data.get("scene", {}), file, "scene", SECTIONS["scene"])
     name = meta.string("name", path.stem)
-    description = meta.string("description", "")
+    description = meta.string("description") if meta.has("description") else ""
 
-    cart = _Reader(data["cartilage"], file, "cartilage", SECTIONS["cartilage"])
+    cart = SceneTable(data["cartilage"], file, "cartilage", SECTIONS["cartilage"])
     law = cart.string("law", "threshold", LAWS)
-    thickness = cart.number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
+    thickness = cart.optional_number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
     if law != "threshold" and thickness is None:
         raise InputError(f"the '{law}' law needs the undeformed thickness", file=file, key="cartilage.thickness_mm", expected="a thickness in mm > 0")
     window = cart.number("max_spring_length_mm", 3.5 if law == "threshold" else 2.0 * (thickness or 0.0), positive=True, what="h_max in mm (> 0)")
@@ -240,16 +180,13 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             expected="h_max >= thickness_mm for the gap laws (springs beyond h_max are not seen)",
         )
     cartilage = Cartilage(
-        youngs_modulus_mpa=cart.required_number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
-        poissons_ratio=cart.required_number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
+        youngs_modulus_mpa=cart.number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
+        poissons_ratio=cart.number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
         law=law,
         max_spring_length_mm=window,
         thickness_mm=thickness,
-        shear_modulus_mpa=cart.number("shear_modulus_mpa", 0.0, what="a shear modulus in MPa (>= 0)"),
+        shear_modulus_mpa=cart.number("shear_modulus_mpa", 0.0, nonnegative=True, what="a shear modulus in MPa (>= 0)"),
     )
-    if cartilage.shear_modulus_mpa < 0:
-        raise InputError("negative shear modulus", file=file, key="cartilage.shear_modulus_mpa", expected="a shear modulus in MPa (>= 0)")
-
     mobile, fixed, reference_point, attachments, geo_description = _load_geometry(data["geometry"], path, cartilage, notes)
     description = description or geo_description
 
@@ -258,7 +195,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
     if "kinematics" in data:
         kinematics = angle_series_from_table(data["kinematics"], path, load.time_s)
 
-    constraints = _Reader(data.get("constraints", {}), file, "constraints", SECTIONS["constraints"])
+    constraints = SceneTable(data.get("constraints", {}), file, "constraints", SECTIONS["constraints"])
     fixed_dofs = constraints.table.get("fixed_dofs", [])
     if not isinstance(fixed_dofs, list) or not all(isinstance(d, str) and d in DOF_NAMES for d in fixed_dofs):
         raise InputError(f"{fixed_dofs!r} is not a list of DOF names", file=file, key="constraints.fixed_dofs", expected="a subset of " + ", ".join(DOF_NAMES))
@@ -267,21 +204,18 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
 
     viscoelastic = None
     if "viscoelastic" in data:
-        ve = _Reader(data["viscoelastic"], file, "viscoelastic", SECTIONS["viscoelastic"])
-        allow = ve.table.get("allow_unstable", False)
-        if not isinstance(allow, bool):
-            raise InputError(f"{allow!r} is not true/false", file=file, key="viscoelastic.allow_unstable", expected="true or false")
+        ve = SceneTable(data["viscoelastic"], file, "viscoelastic", SECTIONS["viscoelastic"])
         viscoelastic = Viscoelastic(
-            relaxation_time_s=ve.required_number("relaxation_time_s", positive=True, what="the relaxation time tau in s (> 0)"),
+            relaxation_time_s=ve.number("relaxation_time_s", positive=True, what="the relaxation time tau in s (> 0)"),
             integrator=ve.string("integrator", "exact", ("exact", "rk2")),
-            allow_unstable=allow,
+            allow_unstable=ve.boolean("allow_unstable", False),
         )
 
-    solver = _Reader(data.get("solver", {}), file, "solver", SECTIONS["solver"])
+    solver = SceneTable(data.get("solver", {}), file, "solver", SECTIONS["solver"])
     method = solver.string("method", "edem", ("edem", "dem"))
     fe = data.get("fe")
     if fe is not None:
-        _Reader(fe, file, "fe", SECTIONS["fe"])
+        SceneTable(fe, file, "fe", SECTIONS["fe"])
 
     return Scene(
         name=name,
@@ -310,10 +244,10 @@ def _table_list(data: dict[str, Any], name: str, file: str) -> list[dict[str, An
 
 
 def _ligament(entry: dict[str, Any], index: int, file: str, attachments: dict[str, tuple[np.ndarray, np.ndarray]]) -> Ligament:
-    r = _Reader(entry, file, f"ligaments[{index}]", SECTIONS["ligaments"])
+    r = SceneTable(entry, file, f"ligaments[{index}]", SECTIONS["ligaments"])
     name = r.string("name", f"ligament-{index}")
-    mobile_point = r.vector("mobile_point_mm")
-    fixed_point = r.vector("fixed_point_mm")
+    mobile_point = r.optional_triple("mobile_point_mm")
+    fixed_point = r.optional_triple("fixed_point_mm")
     if mobile_point is None or fixed_point is None:
         if name not in attachments:
             raise InputError(
@@ -332,8 +266,8 @@ def _ligament(entry: dict[str, Any], index: int, file: str, attachments: dict[st
         name=name,
         mobile_point_mm=mobile_point,
         fixed_point_mm=fixed_point,
-        youngs_modulus_mpa=r.required_number("youngs_modulus_mpa", positive=True, what="the ligament's Young's modulus in MPa (> 0)"),
-        area_mm2=r.required_number("area_mm2", positive=True, what="the cross-section area in mm^2 (> 0)"),
+        youngs_modulus_mpa=r.number("youngs_modulus_mpa", positive=True, what="the ligament's Young's modulus in MPa (> 0)"),
+        area_mm2=r.number("area_mm2", positive=True, what="the cross-section area in mm^2 (> 0)"),
         rest_length_mm=r.number("rest_length_mm", initial, positive=True, what="the slack length in mm (default: the initial distance)"),
     )
 
@@ -360,23 +294,17 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
         else:
             from geometries.mesh_io import prepare_pair
 
-            r = _Reader(table, file, "geometry", FILE_GEOMETRY_KEYS)
+            r = SceneTable(table, file, "geometry", FILE_GEOMETRY_KEYS)
             units = r.string("units", "mm", ("mm", "m"))
             paths = []
             for key in ("mobile", "fixed"):
-                rel = r.string(key)
-                if rel is None:
-                    raise InputError(
-                        f"[geometry] has neither 'builtin' nor '{key}'",
-                        file=file,
-                        key=f"geometry.{key}",
-                        expected='a mesh file (STL/OBJ/PLY/VTK/VTP) or builtin = "<generator>"',
-                    )
-                paths.append(path.parent / rel)
+                if not r.has(key):
+                    raise r.error(key, f"[geometry] has neither 'builtin' nor '{key}'", 'a mesh file (STL/OBJ/PLY/VTK/VTP) or builtin = "<generator>"')
+                paths.append(path.parent / r.string(key))
             mobile, fixed = prepare_pair(*paths, units=units, max_spring_length_mm=cartilage.max_spring_length_mm)
             attachments, description = {}, ""
     warnings_out.extend(str(w.message) for w in caught)
-    given = _Reader(table, file, "geometry", None).vector("reference_point_mm")
+    given = SceneTable(table, file, "geometry", None).optional_triple("reference_point_mm")
     if given is not None:
         reference_point = given
     if reference_point is None:
