@@ -199,7 +199,9 @@ def run(
         shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals)
         lig_rows, lig_law, _ = ligament_elements(scene.ligaments, pose, f_pose, g_current)
         law = NormalLaw.concatenate(contact_law(geometry, cartilage, stored_normal), lig_law)
-        directions = np.vstack([generalised_directions(geometry.centroid_mm[cand], normals, g_current), lig_rows])
+        directions = generalised_directions(geometry.centroid_mm[cand], normals, g_current)
+        if len(lig_rows):
+            directions = np.vstack([directions, lig_rows])
         try:
             solution = solve_unilateral(
                 directions, law, loads[k], fixed_dofs=scene.fixed_dofs, shear=shear, length_scale_mm=length_scale

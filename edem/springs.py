@@ -29,7 +29,8 @@ class Placement:
         return Placement(np.eye(3), np.zeros(3), np.zeros(3) if pivot_mm is None else np.asarray(pivot_mm, float))
 
     def points(self, x_mm: np.ndarray) -> np.ndarray:
-        return (x_mm - self.pivot_mm) @ self.rotation.T + self.pivot_mm + self.translation_mm
+        rotation, offset = self.affine()
+        return x_mm @ rotation.T + offset
 
     def vectors(self, v: np.ndarray) -> np.ndarray:
         return v @ self.rotation.T
