@@ -43,6 +43,49 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fe(args: argparse.Namespace) -> int:
+    """The FE reference of a scene (SPEC 5, 9): fem_reference.run_scene into a result directory."""
+    from edem.scene import load_scene, parse_override
+
+    try:
+        from fem_reference.scene_run import parse_steps, resolve_settings, run_scene, world_rank
+    except ImportError as exc:
+        raise InputError(f"the FE reference is not available ({exc})", expected="the `fe` extra: pip install -e '.[fe]'") from None
+    rank = world_rank()  # under mpirun every rank runs this; rank 0 alone reports
+    bar = None
+    try:
+        scene = load_scene(args.scene, dict(parse_override(o) for o in args.set))
+        settings = resolve_settings(scene, model=args.model, mesh_size_mm=args.mesh_size, degree=args.degree)
+        steps = parse_steps(args.steps, len(scene.load.time_s))
+        out = Path(args.out) if args.out else Path("results") / f"{scene.name}-{settings.method}"
+        if rank == 0 and len(steps) > 1 and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(steps), desc=f"{scene.name} ({settings.method})", unit="step", file=sys.stderr)
+        result = run_scene(scene, model=settings.model, mesh_size_mm=args.mesh_size, degree=args.degree, steps=steps, out_dir=out,
+                           progress=None if bar is None else (lambda k: bar.update(1)))
+    except (InputError, SolverError):
+        if rank != 0:  # every rank fails alike: rank 0 alone reports it
+            return 2
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    if rank != 0:
+        return 0
+    for warning in result.warnings:
+        print(f"edem fe: warning: {warning}", file=sys.stderr)
+    data = result.summary()
+    print(
+        f"{scene.name}: FE {settings.model} ({data['element']}, mesh {settings.mesh_size_mm:g} mm), {data['steps']} time point(s), "
+        f"{data['n_dofs']} DOFs, {data['newton_iterations']} Newton iterations, {result.wall_time_s:.3f} s\n"
+        f"  peak pressure {data['peak_pressure_mpa']:.4g} MPa, max contact area {data['max_contact_area_mm2']:.4g} mm^2, "
+        f"final displacement [{', '.join(f'{x:.4g}' for x in data['final_displacement_mm'])}] mm\n"
+        f"  results: {out}/ (summary.json, timeseries.csv, pressure.pvd)"
+    )
+    return 0
+
+
 def _scenes(args: argparse.Namespace) -> int:
     from edem.scene import builtin_scene_names, resolve_scene_path
 
@@ -156,6 +199,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene value, e.g. --set cartilage.poissons_ratio=0.3"
     )
     p.set_defaults(func=_run)
+    p = sub.add_parser("fe", help="solve the FE reference (dolfinx) of a scene")
+    p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
+    p.add_argument("--model", choices=("slab", "layer"), help="slab (twin of the threshold law) or layer (of the gap laws); overrides [fe] model")
+    p.add_argument("--out", help="result directory (default results/<scene>-fe-<model>)")
+    p.add_argument("--mesh-size", type=float, metavar="MM", help="element size in mm; overrides [fe] mesh_size_mm")
+    p.add_argument("--degree", type=int, choices=(1, 2), help="element degree (2: P2, or Taylor-Hood at nu >= 0.49); overrides [fe] degree")
+    p.add_argument("--steps", metavar="LIST", help="time points to solve, e.g. 0,5-9,10:65:8 (default: all)")
+    p.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene value, e.g. --set cartilage.poissons_ratio=0.3"
+    )
+    p.set_defaults(func=_fe)
     p = sub.add_parser("scenes", help="list the built-in scenes")
     p.add_argument("--write", metavar="DIR", help="write their TOML files to DIR for editing")
     p.add_argument("--render", metavar="DIR", help="render each scene's geometry to DIR/<scene>.png (pyvista, off-screen)")
@@ -179,6 +233,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, help="worker processes (default: the CPU count; 1 runs in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on a Dask distributed cluster, e.g. tcp://host:8786")
     p.set_defaults(func=_verify)
+    from verification.check import add_parser as add_check_parser  # `edem check`: regression gate (SPEC 9)
+
+    add_check_parser(sub)
     return parser
 
 

@@ -137,9 +137,15 @@ class _Setup:
         lam, mu = problem.lame()
         self.lam = fem.Constant(mesh, float(lam))
         self.mu = fem.Constant(mesh, float(mu))
-        self.dirs = problem.free_directions()  # (k, 3)
-        self.k = len(self.dirs)
+        self.dirs = problem.free_directions()  # (k_t, 3)
+        self.rot = problem.free_rotation_axes()  # (k_r, 3), about the reference point G
+        self.kt = len(self.dirs)
+        self.k = self.kt + len(self.rot)
         self.load = np.asarray(problem.force_n, dtype=float)
+        self.moment = np.asarray(problem.moment_nmm, dtype=float)
+        self.ref_point = np.asarray(problem.reference_point_mm, dtype=float)
+        # generalised load of the rigid unknowns: e_j . F, then a_j . M (about G)
+        self.gen_load = np.concatenate([self.dirs @ self.load, self.rot @ self.moment])
 
         qd = problem.quadrature_degree if problem.quadrature_degree is not None else 2
         qc = (problem.contact_quadrature_degree if problem.contact_quadrature_degree is not None
@@ -206,6 +212,30 @@ class _Setup:
             f.interpolate(val)
         f.x.scatter_forward()
         return f
+
+    def rotation_field(self, axis: np.ndarray) -> Any:
+        """Function of V equal to the small rotation ``axis x (x - G)`` (pressure part zero for
+        TH): linear, so exact in P1/P2, and strain-free."""
+        fem = self.m["fem"]
+        f = fem.Function(self.V)
+        a = np.asarray(axis, dtype=np.float64)
+        g = self.ref_point
+
+        def val(x: np.ndarray) -> np.ndarray:
+            r = x - g.reshape(3, 1)
+            return np.cross(a, r.T).T
+
+        if self.element == "TH":
+            f.sub(0).interpolate(val)
+        else:
+            f.interpolate(val)
+        f.x.scatter_forward()
+        return f
+
+    def rigid_modes(self) -> list:
+        """The fields of the rigid unknowns: free translations, then free rotations."""
+        return ([self.constant_field(d) for d in self.dirs]
+                + [self.rotation_field(a) for a in self.rot])
 
     # ---- contact-surface points ----
     def contact_points(self, degree: int) -> tuple[np.ndarray, np.ndarray, Any]:
@@ -363,7 +393,7 @@ class _BorderedSystem:
         self.no = s.n_owned
         self.Eo = [e.x.array[: self.no].copy() for e in E]
         self.Ea = [e.x.array.copy() for e in E]
-        self.load_free = s.dirs @ s.load
+        self.load_free = s.gen_load
         self.delta = np.zeros(self.k)
         self.A = s.m["fem_petsc"].create_matrix(forms["J"])
         self.A.setOptionsPrefix(f"{prefix}A_")
@@ -514,8 +544,9 @@ class _BorderedSystem:
         if self.ehat is None:
             return 1.0
         growth = 4.0
-        pen = float(self.ehat @ (self.s.dirs.T @ self.delta)) - self.t_touch
-        new = pen - float(self.ehat @ (self.s.dirs.T @ dd))
+        kt = self.s.kt
+        pen = float(self.ehat @ (self.s.dirs.T @ self.delta[:kt])) - self.t_touch
+        new = pen - float(self.ehat @ (self.s.dirs.T @ dd[:kt]))
         if pen <= 0.0 or new == pen:
             return 1.0
         if new > growth * pen:
@@ -558,7 +589,7 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     ut = fem.Function(s.V)
     w = ufl.TestFunction(s.V)
     dw = ufl.TrialFunction(s.V)
-    E = [s.constant_field(d) for d in s.dirs]
+    E = s.rigid_modes()
 
     if element == "TH":
         u, p_ = ufl.split(uh)
@@ -603,11 +634,23 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     X = PETSc.Vec().createMPI((nloc, PETSc.DECIDE), comm=s.comm)
     Fv = X.duplicate()
     t0, t_touch, pen = s.initial_translation()
+    if problem.initial_translation_mm is not None:  # warm start
+        t0 = np.asarray(problem.initial_translation_mm, dtype=float)
+    q0 = (np.zeros(3) if problem.initial_rotation_rad is None
+          else np.asarray(problem.initial_rotation_rad, dtype=float))
     system.ehat, system.t_touch = s.load / load_norm, t_touch
     X.set(0.0)
+    if problem.initial_field is not None:
+        init = np.asarray(problem.initial_field, dtype=float).reshape(-1)
+        if init.shape != (s.n_owned,):
+            _destroy(X, Fv, system)
+            raise ValueError(f"initial_field has {init.size} values for {s.n_owned} owned dofs "
+                             "(a field of another mesh or element?)")
+        with X as xa:
+            xa[: s.n_owned] = init
     if s.comm.rank == 0:
         with X as xa:
-            xa[s.n_owned:] = s.dirs @ t0
+            xa[s.n_owned:] = np.concatenate([s.dirs @ t0, s.rot @ q0])
     Jshell = PETSc.Mat().createPython(((nloc, PETSc.DECIDE), (nloc, PETSc.DECIDE)),
                                       context=_ShellContext(system), comm=s.comm)
     Jshell.setUp()
@@ -682,6 +725,24 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
             f"load| = {force_residual:.3e} N along the free directions "
             f"(> {opt.force_balance_rtol:g} * |load|)", reason="FORCE_BALANCE",
             residual_norm=last, iterations=iters)
+    contact_moment = np.zeros(3)
+    moment_residual = 0.0
+    if len(s.rot):
+        arm = ufl.SpatialCoordinate(s.mesh) - fem.Constant(s.mesh, s.ref_point)
+        mom = ufl.cross(arm, -pressure * nu)
+        contact_moment = np.array([s.scalar(fem.form(mom[i] * s.ds_c)) for i in range(3)])
+        moment_residual = float(np.linalg.norm(s.rot @ (contact_moment - s.moment)))
+        x = s.mesh.geometry.x
+        size = max(s.comm.allreduce(float(x[:, i].max()) if len(x) else -np.inf, op=MPI.MAX)
+                   - s.comm.allreduce(float(x[:, i].min()) if len(x) else np.inf, op=MPI.MIN)
+                   for i in range(3))
+        scale = max(float(np.linalg.norm(s.moment)), load_norm * size)
+        if moment_residual > opt.force_balance_rtol * scale:
+            _destroy(snes, Jshell, X, Fv, system)
+            raise FEConvergenceError(
+                f"converged Newton solution does not balance the moment: |moment of the contact "
+                f"force about G - applied moment| = {moment_residual:.3e} N mm along the free "
+                f"rotations", reason="MOMENT_BALANCE", residual_norm=last, iterations=iters)
 
     pdofs, _, Q = s.contact_points(1)
     phi = ufl.TestFunction(Q)
@@ -706,10 +767,11 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     fields = None
     if keep_fields:
         fields = {"mesh": s.mesh, "facet_tags": s.facet_tags, "solution": uh, "pressure": pressure,
-                  "displacement": u, "space": s.V, "setup": s}
+                  "displacement": u, "space": s.V, "setup": s,
+                  "ut_owned": system.ut.x.array[: s.n_owned].copy()}
     _destroy(snes, Jshell, X, Fv, system)
     return FEContactResult(
-        bone_displacement_mm=s.dirs.T @ delta,
+        bone_displacement_mm=s.dirs.T @ delta[:s.kt],
         free_directions=s.dirs.copy(),
         contact_points_mm=x_all,
         contact_pressure_mpa=p_all,
@@ -730,6 +792,10 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
         method="nitsche",
         warnings=warnings,
         fields=fields,
+        rotation_axes=s.rot.copy(),
+        bone_rotation_rad=s.rot.T @ delta[s.kt:],
+        contact_moment_nmm=contact_moment,
+        moment_residual_nmm=moment_residual,
     )
 
 

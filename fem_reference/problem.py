@@ -313,7 +313,16 @@ class FEContactProblem:
     free_dofs: rigid translations of the bone that are unknown. ``None``: one, along the load
       direction. Or a sequence of axis names ("x", "y", "z") or of direction vectors. The other
       translations are fixed at zero (their reaction is reported as ``constraint_force_n``).
+    free_rotations: small rigid rotations of the bone about ``reference_point_mm`` that are
+      unknown (``None``/empty: none; else axis names or axis vectors). A small rotation q moves
+      the bonded face by q x (x - G), a field without strain, so testing the weak form with it
+      leaves the moment of the contact force about G: each free rotation adds the moment
+      balance ``a . (M_c - moment_nmm) = 0``. The other rotations are fixed at zero.
     rollers: zero normal displacement on tagged faces (symmetry planes, confining walls).
+    initial_translation_mm / initial_rotation_rad / initial_field: warm start (e.g. the
+      previous time point; ``initial_field`` = ``fields["ut_owned"]`` of a solve on the same mesh
+      object and element); default: a rigid approach along the load (see
+      ``_Setup.initial_translation``), no rotation, u~ = 0.
     """
 
     mesh: Any
@@ -332,6 +341,13 @@ class FEContactProblem:
     contact_quadrature_degree: int | None = None  # contact facets; default 2 * degree + 2
     initial_penetration_mm: float | None = None  # beyond first touch; default: Winkler estimate
     strain_warning: float = 0.10
+    free_rotations: Any = None
+    moment_nmm: Sequence[float] = (0.0, 0.0, 0.0)
+    reference_point_mm: Sequence[float] = (0.0, 0.0, 0.0)
+    initial_translation_mm: Sequence[float] | None = None
+    initial_rotation_rad: Sequence[float] | None = None
+    initial_field: Any = None  # owned values of the elastic part u~ (fields["ut_owned"] of a
+    # previous solve on the same mesh and element): warm start of the displacement field
 
     def __post_init__(self) -> None:
         e, nu = float(self.youngs_modulus_mpa), float(self.poissons_ratio)
@@ -349,6 +365,14 @@ class FEContactProblem:
         if not isinstance(self.obstacle, (RigidPlane, RigidCylinder, RigidSurface)):
             raise TypeError("obstacle must be a RigidPlane, RigidCylinder or RigidSurface")
         self.rollers = tuple(r if isinstance(r, Roller) else Roller(*r) for r in self.rollers)
+        self.moment_nmm = _point(self.moment_nmm, "moment_nmm")
+        self.reference_point_mm = _point(self.reference_point_mm, "reference_point_mm")
+        if self.rollers and len(self.free_rotation_axes()):
+            raise ValueError("free rotations move the bonded face along every axis: they cannot "
+                             "be combined with rollers")
+        for name in ("initial_translation_mm", "initial_rotation_rad"):
+            if getattr(self, name) is not None:
+                setattr(self, name, _point(getattr(self, name), name))
 
     # ---- derived quantities (pure numpy) ----
     def resolved_element(self) -> str:
@@ -363,37 +387,61 @@ class FEContactProblem:
 
     def free_directions(self) -> np.ndarray:
         """Orthonormal rows (k, 3) spanning the free bone translations."""
-        return resolve_free_directions(self.free_dofs, self.force_n, self.rollers)
+        # with free rotations a load along fixed translations only may still be balanced by a
+        # moment: the rotation equations then carry the problem
+        return resolve_free_directions(self.free_dofs, self.force_n, self.rollers,
+                                       require_load=not len(self.free_rotation_axes()))
+
+    def free_rotation_axes(self) -> np.ndarray:
+        """Orthonormal rows (k_r, 3) spanning the free bone rotations (may be empty)."""
+        return resolve_rotation_axes(self.free_rotations)
 
 
-def resolve_free_directions(free_dofs: Any, force_n: np.ndarray,
-                            rollers: Sequence[Roller] = ()) -> np.ndarray:
-    f = np.asarray(force_n, dtype=float)
-    if free_dofs is None:
-        dirs = [f / np.linalg.norm(f)]
-    else:
-        items = [free_dofs] if isinstance(free_dofs, str) else list(free_dofs)
-        dirs = []
-        for it in items:
-            if isinstance(it, str):
-                if it.lower() not in AXES:
-                    raise ValueError(f"free_dofs: unknown translation {it!r} (expected x, y, z)")
-                d = np.zeros(3)
-                d[AXES[it.lower()]] = 1.0
-                dirs.append(d)
-            else:
-                dirs.append(_unit(it, "free_dofs direction"))
-    d = np.array(dirs, dtype=float).reshape(-1, 3)
-    if len(d) == 0 or len(d) > 3:
-        raise ValueError("free_dofs must name 1 to 3 translations")
+def _axis_rows(items: Any, what: str) -> np.ndarray:
+    """Orthonormal rows from axis names ("x", "y", "z") or vectors (0 to 3 of them)."""
+    items = [items] if isinstance(items, str) else list(items)
+    rows = []
+    for it in items:
+        if isinstance(it, str):
+            if it.lower() not in AXES:
+                raise ValueError(f"{what}: unknown axis {it!r} (expected x, y, z)")
+            d = np.zeros(3)
+            d[AXES[it.lower()]] = 1.0
+            rows.append(d)
+        else:
+            rows.append(_unit(it, f"{what} direction"))
+    d = np.array(rows, dtype=float).reshape(-1, 3)
+    if len(d) > 3:
+        raise ValueError(f"{what} must name at most 3 axes")
+    if len(d) == 0:
+        return d
     q, r = np.linalg.qr(d.T)
     if np.min(np.abs(np.diag(r))) < 1e-10:
-        raise ValueError("free_dofs directions are linearly dependent")
+        raise ValueError(f"{what} directions are linearly dependent")
     # keep the user's directions when they are already orthonormal (axis names)
     if np.allclose(d @ d.T, np.eye(len(d)), atol=1e-12):
         q = d.T
-    d = q.T.copy()
-    if np.linalg.norm(d @ f) < 1e-12 * np.linalg.norm(f):
+    return q.T.copy()
+
+
+def resolve_rotation_axes(free_rotations: Any) -> np.ndarray:
+    """Orthonormal rows (k_r, 3) of the free rotation axes; (0, 3) for None."""
+    if free_rotations is None:
+        return np.zeros((0, 3))
+    return _axis_rows(free_rotations, "free_rotations")
+
+
+def resolve_free_directions(free_dofs: Any, force_n: np.ndarray,
+                            rollers: Sequence[Roller] = (), *,
+                            require_load: bool = True) -> np.ndarray:
+    f = np.asarray(force_n, dtype=float)
+    if free_dofs is None:
+        d = (f / np.linalg.norm(f)).reshape(1, 3)
+    else:
+        d = _axis_rows(free_dofs, "free_dofs")
+        if len(d) == 0:
+            raise ValueError("free_dofs must name 1 to 3 translations")
+    if require_load and np.linalg.norm(d @ f) < 1e-12 * np.linalg.norm(f):
         raise ValueError("the load has no component along the free translations")
     for r_ in rollers:
         if np.any(np.abs(d[:, r_.axis]) > 1e-12):
@@ -440,6 +488,12 @@ class FEContactResult:
     method: str  # "nitsche" or "vi"
     outer_iterations: int = 0  # VI path: secant steps on the translation
     warnings: list[str] = field(default_factory=list)
+    # free rotations (empty without them): small rotation vector of the bone about G, the moment
+    # of the contact force about G and |P_rot (M_c - moment)|
+    rotation_axes: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    bone_rotation_rad: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    contact_moment_nmm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    moment_residual_nmm: float = 0.0
     fields: Any = field(default=None, repr=False)  # dolfinx objects for post-processing
 
     @property

@@ -105,8 +105,68 @@ def _timeseries_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], ou
     plot_timeseries(dirs, spec["column"], path, labels)
 
 
+def _grid_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
+    """kind "heatmap": the metric y[0] over the grid of params x and param2; kind "cuts": line cuts
+    of it against x at the lowest, middle and highest param2, and against param2 likewise."""
+    from verification.analyses import grid_of
+
+    plt = _matplotlib()
+    metric = spec["y"][0]
+    xs, ys, z = grid_of(rows, tuple(spec["cases"]), spec["x"], spec["param2"], metric)
+    if not np.isfinite(z).any():
+        raise ValueError("no case of the grid has a value")
+    label_x, label_y, label_z = (v.replace("_", " ") for v in (spec["x"], spec["param2"], metric))
+    if spec["kind"] == "heatmap":
+        fig, ax = plt.subplots(figsize=(6.8, 5.2), constrained_layout=True)
+        mesh = ax.pcolormesh(xs, ys, z.T, shading="nearest", cmap="viridis")
+        levels = ax.contour(xs, ys, z.T, colors="white", linewidths=0.7, levels=8)
+        ax.clabel(levels, fontsize=7, fmt="%.3g")
+        fig.colorbar(mesh, ax=ax, label=label_z)
+        ax.set_xlabel(label_x)
+        ax.set_ylabel(label_y)
+    else:
+        fig, axes = plt.subplots(1, 2, figsize=(10.5, 4.0), constrained_layout=True)
+        for j in sorted({0, len(ys) // 2, len(ys) - 1}):
+            axes[0].plot(xs, z[:, j], "o-", ms=3, label=f"{label_y} = {ys[j]:.4g}")
+        for i in sorted({0, len(xs) // 2, len(xs) - 1}):
+            axes[1].plot(ys, z[i, :], "o-", ms=3, label=f"{label_x} = {xs[i]:.4g}")
+        for ax, xlabel in ((axes[0], label_x), (axes[1], label_y)):
+            ax.set_xlabel(xlabel)
+            ax.set_ylabel(label_z)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)
+    fig.suptitle(spec["title"], fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _instant_times(spec: dict[str, Any], row: dict[str, Any], out_dir: Path) -> list[tuple[str, float, float]]:
+    """(label, time_s, % of the span) of each instant of a "maps" figure, from side a's time series."""
+    from verification.campaigns import instant_indices
+    from verification.resultdirs import read_timeseries_csv
+
+    series = read_timeseries_csv(out_dir / row["result_dirs"][0] / "timeseries.csv")
+    time = series["time_s"]
+    force = np.column_stack([series[f"force_{x}_n"] for x in "xyz"])
+    instants = [tuple(i) for i in spec["instants"]]
+    span = float(time[-1] - time[0]) or 1.0
+    return [(label, float(time[k]), 100.0 * float(time[k] - time[0]) / span) for (label, _), k in zip(instants, instant_indices(time, force, tuple(instants)))]
+
+
 def _wall_time_figure(rows: list[dict[str, Any]], path: Path) -> None:
     plt = _matplotlib()
+    if len(rows) > 60:  # hundreds of cases: a histogram reads better than hundreds of bars
+        times = np.array([max(r["wall_time_s"], 1e-4) for r in rows])
+        fig, ax = plt.subplots(figsize=(7, 3.4), constrained_layout=True)
+        bins = np.geomspace(times.min(), times.max() * 1.001, 30) if times.max() > times.min() else 10
+        ax.hist(times, bins=bins, color="#1b7f3a")
+        ax.set_xscale("log")
+        ax.set_xlabel(f"wall time of a case (s), {len(rows)} cases, total {times.sum():.1f} s")
+        ax.set_ylabel("cases")
+        ax.grid(alpha=0.3, which="both")
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        return
     names = [r["name"] for r in rows]
     times = [max(r["wall_time_s"], 1e-4) for r in rows]
     colours = [STATUS_COLOURS.get(r["status"], "grey") for r in rows]
@@ -139,6 +199,31 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
     jobs = []
     for spec in summary.get("figures", []):
         involved = [keys.get(n) for n in spec["cases"]]
+        present = [rows[n] for n in spec["cases"] if n in rows]
+        if present and all(r["status"] in ("unavailable", "error") or not r["result_dirs"] for r in present):
+            why = next((s["message"].splitlines()[0] for s in present[0]["sides"] if s["status"] != "ok" and s.get("message")), present[0]["status"])
+            jobs.append((spec["name"], spec["title"], {"kind": "note", "error": f"case {present[0]['name']} is {present[0]['status']}: {why}", "unavailable": True}, None))
+            continue
+        if spec["kind"] == "maps":
+            row = present[0]
+            if len(row["result_dirs"]) < 2:
+                why = next((f"{s['side']} {s['status']}: {s['message'].splitlines()[0]}" for s in row["sides"] if s["status"] != "ok" and s.get("message")), "one side wrote no result directory")
+                jobs.append((spec["name"], spec["title"], {"kind": "note", "error": f"not drawn: {why}", "unavailable": True}, None))
+                continue
+            if not spec.get("instants"):
+                jobs.append((spec["name"], spec["title"], {"kind": "maps", "case": row["name"]}, involved))
+                continue
+            try:
+                instants = _instant_times(spec, row, out_dir)
+            except Exception as exc:
+                jobs.append((spec["name"], spec["title"], {"kind": "note", "error": f"{type(exc).__name__}: {exc}", "unavailable": False}, None))
+                continue
+            labels = [s["side"] for s in row["sides"][:2]]
+            for k, (label, time_s, percent) in enumerate(instants):
+                title = f"{spec['title']}: {label}, t = {time_s:.3g} s ({percent:.0f} %)"
+                job = {"kind": "maps-at", "case": row["name"], "time_s": time_s, "labels": labels, "caption": f"{label}, {percent:.0f} %"}
+                jobs.append((f"{spec['name']}-{k}", title, job, involved))
+            continue
         jobs.append((spec["name"], spec["title"], spec, involved))
     for row in summary["cases"]:
         if row.get("maps") and len(row["result_dirs"]) == 2:
@@ -147,6 +232,9 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
 
     figures = []
     for name, title, spec, inputs in jobs:
+        if spec["kind"] == "note":  # nothing to draw: say why
+            figures.append({"file": "", "title": title, "error": spec["error"], "unavailable": spec["unavailable"]})
+            continue
         file = f"{name}.png"
         path = fig_dir / file
         key = _figure_key(spec, inputs)
@@ -162,6 +250,16 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
 
                     row = rows[spec["case"]]
                     render_pressure_maps(out_dir / row["result_dirs"][0], out_dir / row["result_dirs"][1], path, labels=tuple(s["side"] for s in row["sides"][:2]))
+                elif spec["kind"] == "maps-at":
+                    from reports.maps import render_pressure_maps
+
+                    row = rows[spec["case"]]
+                    render_pressure_maps(
+                        out_dir / row["result_dirs"][0], out_dir / row["result_dirs"][1], path,
+                        labels=tuple(spec["labels"]), time_s=spec["time_s"], title=spec["caption"],
+                    )
+                elif spec["kind"] in ("heatmap", "cuts"):
+                    _grid_figure(spec, rows, path)
                 elif spec["kind"] == "wall-times":
                     _wall_time_figure(summary["cases"], path)
                 else:
@@ -190,7 +288,27 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; }
 .status { font-weight: bold; } figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #eee; }
 code { font-size: 0.95em; } .small { font-size: 0.8em; color: #555; }
 td.metrics { min-width: 24em; font-size: 0.95em; } td.links { font-size: 0.9em; }
+tr.flag td { background: #fff3e0; } .analysis-status { font-weight: bold; }
 """
+
+
+def _analyses_html(analyses: list[dict[str, Any]]) -> list[str]:
+    """One table per campaign-level analysis (verification.analyses): headline numbers first."""
+    h = html.escape
+    colours = {"passed": STATUS_COLOURS["passed"], "failed": STATUS_COLOURS["failed"], "error": STATUS_COLOURS["error"], "unavailable": STATUS_COLOURS["unavailable"]}
+    parts = ["<h2>Analyses</h2>"]
+    for result in analyses:
+        colour = colours.get(result["status"], "#444")
+        parts.append(f'<h3>{h(result["title"])} <span class="analysis-status" style="color:{colour}">[{h(result["status"])}]</span></h3>')
+        if result.get("columns"):
+            parts.append("<table><tr>" + "".join(f"<th>{h(str(c))}</th>" for c in result["columns"]) + "</tr>")
+            for row in result["rows"]:
+                cls = ' class="flag"' if row.get("flag") else ""
+                parts.append(f"<tr{cls}>" + "".join(f"<td>{h(str(c))}</td>" for c in row["cells"]) + "</tr>")
+            parts.append("</table>")
+        for note in result.get("notes", []):
+            parts.append(f'<p class="small">{h(str(note))}</p>')
+    return parts
 
 
 def _status_cell(status: str) -> str:
@@ -250,6 +368,7 @@ def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
         + f"({summary['computed']} cases run, {summary['cached']} from the cache; the cases' own wall times add up to {summary['cases_wall_time_s']:.1f} s); "
         + (f"Dask scheduler {h(str(summary['scheduler']))}." if summary.get("scheduler") else f"{summary.get('jobs')} worker process(es).")
         + ' Campaign data: <a href="metrics.json">metrics.json</a>.</p>',
+        *(_analyses_html(summary["analyses"]) if summary.get("analyses") else []),
         "<h2>Cases</h2>",
         "<table><tr><th>case</th><th>sides (a vs reference b)</th><th>status</th><th>outcome (declared)</th>"
         "<th>metrics (value vs tolerance)</th><th>wall time (s)</th><th>results</th></tr>",
@@ -272,7 +391,9 @@ def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
 
     parts.append("<h2>Figures</h2>")
     for fig in figures:
-        if fig["error"]:
+        if fig.get("unavailable"):
+            parts.append(f"<p><b>{h(fig['title'])}</b>: {h(fig['error'])}</p>")
+        elif fig["error"]:
             parts.append(f"<p><b>{h(fig['title'])}</b>: not drawn ({h(fig['error'])})</p>")
         else:
             parts.append(f'<figure><img src="{h(fig["file"])}" alt="{h(fig["title"])}"><figcaption>{h(fig["title"])}</figcaption></figure>')
@@ -282,9 +403,12 @@ def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
     for row in summary["cases"]:
         scenes.setdefault(row["scene"], []).append(row)
     for scene, rows in scenes.items():
+        shown = rows if len(rows) <= 12 else rows[:6]
         uses = "<br>".join(
-            f"{h(r['name'])}" + (f": <code>{h(_overrides_text(r['overrides']))}</code>" if r["overrides"] else "") for r in rows
+            f"{h(r['name'])}" + (f": <code>{h(_overrides_text(r['overrides']))}</code>" if r["overrides"] else "") for r in shown
         )
+        if len(shown) < len(rows):
+            uses += f"<br>... and {len(rows) - len(shown)} more cases (see the cases table)"
         parts.append(f"<tr><td><code>{h(scene)}</code></td><td>{h(rows[0]['scene_description'])}</td><td class=\"small\">{uses}</td></tr>")
     parts.append("</table>")
 

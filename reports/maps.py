@@ -60,6 +60,17 @@ def _contact(frame, pressure_cells: np.ndarray) -> np.ndarray:
     return pressure_cells > 0
 
 
+def _frame_at(result, time_s: float):
+    """The pressure map of a result directory at ``time_s`` (InputError naming pressure.pvd if none)."""
+    from edem.errors import InputError
+
+    times = np.array([t for t, _ in result.frames])
+    j = int(np.argmin(np.abs(times - time_s)))
+    if not np.isclose(times[j], time_s, rtol=1e-9, atol=1e-9):
+        raise InputError(f"no pressure map at t = {time_s:g} s", file=result.path / "pressure.pvd", expected="a <DataSet> at that time")
+    return result.frame(j)
+
+
 def render_pressure_maps(
     a_dir: str | Path,
     b_dir: str | Path,
@@ -68,24 +79,32 @@ def render_pressure_maps(
     time_index: int = -1,
     labels: tuple[str, str] | None = None,
     window_size: tuple[int, int] = (1500, 520),
+    time_s: float | None = None,
+    title: str | None = None,
 ) -> Path:
     """PNG of a's pressure, b's pressure and a - b at one time point (default: the last one).
 
     When both directories have the same time points, ``time_index`` picks the same one in both;
-    otherwise each directory's last time point is drawn. b's nodal pressure (FE point data) is
-    drawn interpolated, cell pressure piecewise constant. The view looks at a's contact region
-    along its mean normal.
+    otherwise each directory's last time point is drawn. ``time_s`` instead picks the pressure
+    map at that time in each directory (both must have one there: e.g. an FE reference solved at
+    selected instants of a series). b's nodal pressure (FE point data) is drawn interpolated, cell
+    pressure piecewise constant. The view looks at a's contact region along its mean normal.
+    ``title`` is written above the panels.
     """
     import pyvista as pv
 
     from verification.metrics import pressure_at_cells, project_onto_surface, same_mesh
     from verification.resultdirs import read_result_dir
 
+    heading = title
     a, b = read_result_dir(a_dir), read_result_dir(b_dir)
-    same = a.time_s.shape == b.time_s.shape and np.allclose(a.time_s, b.time_s)
-    ka = time_index if same else -1
-    kb = time_index if same else -1
-    frame_a, frame_b = a.frame(ka), b.frame(kb)
+    if time_s is not None:
+        frame_a, frame_b = _frame_at(a, time_s), _frame_at(b, time_s)
+    else:
+        same = a.time_s.shape == b.time_s.shape and np.allclose(a.time_s, b.time_s)
+        ka = time_index if same else -1
+        kb = time_index if same else -1
+        frame_a, frame_b = a.frame(ka), b.frame(kb)
     label_a, label_b = labels or (str(a.summary.get("method", "a")), str(b.summary.get("method", "b")))
     if label_a == label_b:  # scalar bars are told apart by their titles
         label_a, label_b = f"{label_a} (a)", f"{label_b} (b)"
@@ -149,6 +168,9 @@ def render_pressure_maps(
         plotter.view_vector(view, viewup=up)
         plotter.reset_camera()
     plotter.link_views()
+    if heading:
+        plotter.subplot(0, 0)
+        plotter.add_text(heading, position="upper_left", font_size=10, color="black")
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
     plotter.screenshot(str(out))

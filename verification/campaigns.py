@@ -2,13 +2,22 @@
 
 A :class:`Case` names a scene (a built-in scene or a TOML file of ``verification/scenes/``) with
 ``--set``-like overrides, the sides it runs (a subject and, optionally, the reference it is judged
-against: ``edem``, ``dem``, ``fe-slab``, ``fe-layer``, ``closed-form:<name>``), the metrics it
+against: ``edem``, ``dem``, ``fe-slab``, ``fe-layer``, ``fe-problem:<name>``, ``closed-form:<name>``), the metrics it
 reports and the tolerance it is judged by (metric -> largest admissible value). Stability cases
 also declare their expected outcome (:class:`Expect`): "converges" or "refused" with a message
 matching a pattern. A :class:`Campaign` adds the figures of its HTML report.
 
+An :class:`Analysis` is a campaign-level result computed after its cases from their metrics
+(:mod:`verification.analyses`): observed convergence orders of a mesh sweep (judged against a
+minimum order, like a tolerance), the thesis's figures beside ours (reported, large differences
+flagged, no verdict), the relative changes of a parameter sweep and plain tables of metrics.
+
 Campaigns: ``edem-analytic`` (EDEM/DEM against closed forms), ``stability`` (stiff and extreme
-input, each ending in its declared outcome, no NaN anywhere) and ``quick`` (a subset for CI).
+input, each ending in its declared outcome, no NaN anywhere), ``fe-analytic`` (the FE reference
+against Hertz line contact and confined compression on three meshes each, with observed orders),
+``stance`` (EDEM vs DEM over the built-in stance scenes, the thesis's figures beside ours, DEM
+vs the FE slab at five instants, "unavailable" without ``fem_reference.run_scene``), ``sensitivity`` (h_max x ligament modulus,
+20 x 20 EDEM stances, the thesis's fig. 4.3.10) and ``quick`` (a subset for CI).
 """
 
 from __future__ import annotations
@@ -20,7 +29,7 @@ from typing import Any
 
 from edem.errors import InputError
 from verification.closed_forms import confined_modulus_mpa, log_law_edem_max_error
-from verification.metrics import SPEC8_METRICS
+from verification.metrics import SERIES_METRICS, SPEC8_METRICS
 
 SCENES_DIR = Path(__file__).resolve().parent / "scenes"
 
@@ -38,7 +47,21 @@ METRICS: dict[str, str] = {
     "outcome_mismatch": "0 when side a ended in the declared outcome (converges / refused with the message), else 1",
     "non_finite_outputs": "number of NaN/inf values in side a's result directory",
     "force_residual_rel": "largest force residual of side a over the largest applied force",
+    "half_width_rel_error": "|a_FE - a| / a: FE Hertz half-width (contact area / slice thickness) against the closed form",
+    "half_width_fit_rel_error": "the same from an elliptic fit p^2 = p0^2 (1 - x^2/a^2) of the FE nodal pressure (edge-independent)",
 }
+_SERIES_DESCRIPTIONS = {
+    "peak_pressure_mpa": "largest peak pressure over the time points",
+    "mean_contact_area_mm2": "mean contact area over the time points",
+    "max_superior_displacement_mm": "largest displacement of G along +z (superior) over the time points",
+    "max_superior_displacement_percent": "when that happens, in % of the time span",
+    "displacement_norm_mm": "|u| of G at the last time point (a value: Richardson's observed order needs no exact one)",
+}
+for _side in ("a", "b"):
+    for _name in SERIES_METRICS:
+        METRICS[f"{_side}_{_name}"] = f"side {_side}: {_SERIES_DESCRIPTIONS[_name]} (timeseries.csv)"
+for _name in SERIES_METRICS:
+    METRICS[f"a_at_b_{_name}"] = f"side a at side b's time points only: {_SERIES_DESCRIPTIONS[_name]}"
 
 OUTCOMES = ("converges", "refused")
 
@@ -111,6 +134,26 @@ class Figure:
     logy: bool | tuple[bool, ...] = False  # one for all panels, or one per metric of y
     reference_slope: float | None = None  # draw a line of this slope (log-log convergence order)
     exact: dict[str, float] = field(default_factory=dict)  # metric -> exact value, drawn as a line
+    param2: str = ""  # "heatmap" / "cuts": the second parameter (the y axis of the heatmap)
+    instants: tuple[tuple[str, str], ...] = ()  # "maps": (label, "13%" | "peak-load") per map
+
+
+@dataclass(frozen=True)
+class Analysis:
+    """A campaign-level result over several cases, computed after them (verification.analyses).
+
+    kind "order": observed convergence orders of ``settings["metric"]`` against the cases'
+    ``params[settings["x"]]`` (mode "vs-exact" or "richardson"), judged when ``min_order`` is
+    given; kind "thesis": rows of our numbers beside the thesis's, flagged beyond ``flag_rel``;
+    kind "sensitivity": relative changes of a metric over a two-parameter grid against the thesis's;
+    kind "table": one row per case, one column per metric (e.g. DEM vs FE at five instants).
+    """
+
+    name: str
+    title: str
+    kind: str
+    cases: tuple[str, ...]
+    settings: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -119,6 +162,7 @@ class Campaign:
     description: str
     cases: tuple[Case, ...]
     figures: tuple[Figure, ...] = ()
+    analyses: tuple[Analysis, ...] = ()
 
     def case(self, name: str) -> Case:
         for case in self.cases:
@@ -424,13 +468,379 @@ def _ideal_standing_case() -> Case:
     )
 
 
+# ---------------------------------------------------------------------------------------------
+# fe-analytic: the FE reference against its closed forms (SPEC 5), three meshes each
+
+HERTZ_SIZES_MM = (0.4, 0.2, 0.1)  # contact element size = slice thickness; far size 10x (ratio 2)
+CONFINED_SIZES_MM = (2.0, 1.0, 0.5)  # slab 10 x 8 x 2 mm: (5, 4, 1), (10, 8, 2), (20, 16, 4) boxes
+HERTZ_METRICS = ("peak_pressure_rel_error", "half_width_rel_error", "half_width_fit_rel_error", "mean_pressure_rel_error", "pressure_l2_rel_error", "a_displacement_norm_mm")
+CONFINED_METRICS = SPEC8_METRICS
+
+
+def _hertz_tolerance(size_mm: float) -> dict[str, float]:
+    """tests/fem_reference (P2): 3 % at contact size <= 0.25 mm (test_fe_hertz, coarse); on the
+    finest of the three convergence meshes 1 % (peak) and 2 % (half-width) (test_fe_convergence).
+    The coarsest mesh is judged through the observed order only (the tests do the same)."""
+    if size_mm <= min(HERTZ_SIZES_MM):
+        return {"peak_pressure_rel_error": 0.01, "half_width_rel_error": 0.02}
+    if size_mm <= 0.25:
+        return {"peak_pressure_rel_error": 0.03, "half_width_rel_error": 0.03}
+    return {}
+
+
+def _fe_analytic_cases() -> list[Case]:
+    cases = []
+    for size in HERTZ_SIZES_MM:
+        cases.append(
+            Case(
+                f"fe-hertz-line-h{size:g}",
+                f"FE (P2) Hertz line contact, rigid cylinder R 20 mm on a 20 mm block, a = 1 mm; contact element size {size:g} mm: p0, half-width",
+                "fe-problem:hertz-line",
+                ("fe-problem:hertz-line", "closed-form:hertz-line"),
+                HERTZ_METRICS,
+                _hertz_tolerance(size),
+                options={"mesh_size_mm": size, "element": "P2"},
+                params={"mesh_size_mm": size},
+            )
+        )
+    for size in CONFINED_SIZES_MM:
+        cases.append(
+            Case(
+                f"fe-confined-compression-h{size:g}",
+                f"FE (P2) confined compression, 10 x 8 x 2 mm slab, 120 N, mesh size {size:g} mm: p = F/A, d = p h / E' (p = E' d / h)",
+                "fe-problem:confined-compression",
+                ("fe-problem:confined-compression", "closed-form:confined-compression"),
+                CONFINED_METRICS,
+                # tests/fem_reference/test_fe_confined_compression.py: pressure, peak and d within 1 %, area 1e-9
+                {"peak_pressure_rel_error": 0.01, "mean_pressure_rel_error": 0.01, "displacement_rel_error": 0.01, "pressure_l2_rel_error": 0.01, "contact_area_rel_error": 1e-9},
+                options={"mesh_size_mm": size, "element": "P2"},
+                params={"mesh_size_mm": size},
+            )
+        )
+    return cases
+
+
+def _fe_analytic_figures() -> tuple[Figure, ...]:
+    return (
+        Figure(
+            "fe-hertz-convergence",
+            "FE Hertz line contact (P2): errors against the closed form vs contact element size (dotted: slope 2)",
+            "sweep",
+            tuple(f"fe-hertz-line-h{h:g}" for h in HERTZ_SIZES_MM),
+            x="mesh_size_mm",
+            y=("peak_pressure_rel_error", "half_width_rel_error", "half_width_fit_rel_error"),
+            logx=True,
+            logy=True,
+            reference_slope=2.0,
+        ),
+        Figure(
+            "fe-confined-convergence",
+            "FE confined compression (P2): errors against p = E' d / h vs mesh size (round-off: the linear field is in the FE space)",
+            "sweep",
+            tuple(f"fe-confined-compression-h{h:g}" for h in CONFINED_SIZES_MM),
+            x="mesh_size_mm",
+            y=("peak_pressure_rel_error", "displacement_rel_error", "pressure_l2_rel_error"),
+            logx=True,
+            logy=True,
+        ),
+    )
+
+
+def _fe_analytic_analyses() -> tuple[Analysis, ...]:
+    hertz = tuple(f"fe-hertz-line-h{h:g}" for h in HERTZ_SIZES_MM)
+    confined = tuple(f"fe-confined-compression-h{h:g}" for h in CONFINED_SIZES_MM)
+    return (
+        Analysis(
+            "fe-orders",
+            "Observed convergence orders of the FE reference (P2; minimum orders of tests/fem_reference/test_fe_convergence.py)",
+            "order",
+            hertz + confined,
+            {
+                "checks": [
+                    {"label": "Hertz peak pressure vs p0", "cases": list(hertz), "x": "mesh_size_mm", "metric": "peak_pressure_rel_error", "mode": "vs-exact", "min_order": 1.5, "monotone": True},
+                    {"label": "Hertz bone displacement (Richardson, no closed form)", "cases": list(hertz), "x": "mesh_size_mm", "metric": "a_displacement_norm_mm", "mode": "richardson", "min_order": 1.5},
+                    {"label": "Hertz half-width (contact area / slice) vs a", "cases": list(hertz), "x": "mesh_size_mm", "metric": "half_width_rel_error", "mode": "vs-exact"},
+                    {"label": "Hertz half-width (elliptic fit) vs a", "cases": list(hertz), "x": "mesh_size_mm", "metric": "half_width_fit_rel_error", "mode": "vs-exact"},
+                    {"label": "confined compression peak pressure vs F/A", "cases": list(confined), "x": "mesh_size_mm", "metric": "peak_pressure_rel_error", "mode": "vs-exact"},
+                    {"label": "confined compression displacement vs p h / E'", "cases": list(confined), "x": "mesh_size_mm", "metric": "displacement_rel_error", "mode": "vs-exact"},
+                ],
+                "roundoff": 1e-9,  # errors below this on every mesh: exact, no order
+            },
+        ),
+    )
+
+
+def fe_analytic_campaign() -> Campaign:
+    return Campaign(
+        "fe-analytic",
+        "The FE reference (fem_reference core, P2) against closed forms: Hertz line contact (peak pressure, half-width) and confined compression (p = E' d / h), three meshes each, with observed orders.",
+        tuple(_fe_analytic_cases()),
+        _fe_analytic_figures(),
+        _fe_analytic_analyses(),
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# stance: EDEM vs DEM over the built-in stance scenes (SPEC 7, thesis 4.3.4)
+
+STANCE_SCENES = ("ideal-stance", "subject-stance")
+#: the instants of the pressure maps (and of the FE solves): label, % of stance or "peak-load"
+STANCE_INSTANTS = (("heel strike", "0%"), ("foot flat", "13%"), ("mid-stance", "50%"), ("peak load", "peak-load"), ("toe off", "100%"))
+STANCE_SERIES = tuple(f"{side}_{name}" for side in "ab" for name in ("peak_pressure_mpa", "mean_contact_area_mm2", "max_superior_displacement_mm", "max_superior_displacement_percent"))
+#: SPEC 7: the thesis's EDEM stance (4.3.4), for qualitative comparison
+THESIS_STANCE = {"superior_displacement_mm": 0.57, "superior_displacement_percent": 80.0, "mean_area_edem_cm2": 4.67, "mean_area_dem_cm2": 4.18, "peak_edem_mpa": 7.3, "peak_dem_mpa": 6.92}
+THESIS_FLAG_REL = 0.25  # flag ours against the thesis's beyond +-25 %
+
+
+def instant_indices(time_s: Any, force_n: Any, instants: tuple[tuple[str, str], ...] = STANCE_INSTANTS) -> list[int]:
+    """Time-point index of each instant: the nearest to "<p>%" of the time span, or the largest |F| ("peak-load")."""
+    import numpy as np
+
+    time = np.asarray(time_s, dtype=float)
+    force = np.asarray(force_n, dtype=float).reshape(len(time), -1)
+    out = []
+    for label, where in instants:
+        if where == "peak-load":
+            out.append(int(np.argmax(np.linalg.norm(force, axis=1))))
+        elif where.endswith("%"):
+            target = time[0] + float(where[:-1]) / 100.0 * (time[-1] - time[0])
+            out.append(int(np.argmin(np.abs(time - target))))
+        else:
+            raise ValueError(f"instant {label!r}: {where!r} is neither '<p>%' nor 'peak-load'")
+    return out
+
+
+def scene_instants(scene: str, instants: tuple[tuple[str, str], ...] = STANCE_INSTANTS) -> list[int]:
+    """instant_indices of a scene's [load] time series, read from its TOML (no geometry is built)."""
+    import tomllib
+
+    from edem.scene import resolve_scene_path
+
+    load = tomllib.loads(resolve_scene_path(scene).read_text(encoding="utf-8"))["load"]
+    return instant_indices(load["time_s"], load["force_n"], instants)
+
+
+def _slug(text: str) -> str:
+    return "-".join(text.lower().split())
+
+
+FE_INSTANT_METRICS = SPEC8_METRICS + (
+    "a_at_b_peak_pressure_mpa",
+    "b_peak_pressure_mpa",
+    "a_at_b_mean_contact_area_mm2",
+    "b_mean_contact_area_mm2",
+    "a_at_b_displacement_norm_mm",
+    "b_displacement_norm_mm",
+)
+
+
+def fe_instant_case_name(scene: str, label: str) -> str:
+    return f"{scene}-fe-{_slug(label)}"
+
+
+def _stance_cases() -> list[Case]:
+    cases = []
+    for scene in STANCE_SCENES:
+        cases.append(
+            Case(
+                f"{scene}-edem-vs-dem",
+                f"{scene}: EDEM (incremental, push-back) against DEM (each time point static), 65 time points; no tolerance: the methods differ by design",
+                scene,
+                ("edem", "dem"),
+                SPEC8_METRICS + STANCE_SERIES + ("outcome_mismatch",),
+                {"outcome_mismatch": 0.0},  # EDEM must solve the whole stance
+                expect=Expect("converges"),
+            )
+        )
+    # The FE slab at each instant of the maps, one case each (a refused instant does not take the
+    # others with it; the instants run in parallel). DEM is its like-for-like: both static at the
+    # instant, displacement of G from the initial pose of that time point (fem_reference.scene_run).
+    for scene in STANCE_SCENES:
+        steps = scene_instants(scene)
+        overrides = stance_fe_overrides(scene)
+        for (label, where), step in zip(STANCE_INSTANTS, steps):
+            cases.append(
+                Case(
+                    fe_instant_case_name(scene, label),
+                    f"{scene} at {label} ({where}, step {step}): DEM against the FE slab, both static at that time point, "
+                    f"both without ligaments{' and with ' + ', '.join(STANCE_FE_FIXED.get(scene, ())) + ' fixed' if scene in STANCE_FE_FIXED else ''}; no tolerance (reported)",
+                    scene,
+                    ("dem", "fe-slab"),
+                    FE_INSTANT_METRICS,
+                    overrides=overrides,
+                    options={"steps": [step]},
+                    params={"step": float(step)},
+                )
+            )
+    return cases
+
+
+#: DOFs fixed (in both DEM and FE) where the frictionless FE slab cannot resist them: on the ideal
+#: ankle (a cylinder under a plane) every contact normal is perpendicular to the antero-posterior
+#: slide once the tibia turns, and fem_reference refuses those instants (the discrete springs along
+#: M's normals resist it; the constraint carries that load component instead).
+STANCE_FE_FIXED = {"ideal-stance": ("ty",)}
+
+
+def stance_fe_overrides(scene: str) -> dict[str, Any]:
+    """Overrides of the DEM-vs-FE cases: no ligaments (the FE models none), STANCE_FE_FIXED added
+    to the scene's own fixed DOFs."""
+    import tomllib
+
+    from edem.scene import resolve_scene_path
+
+    overrides: dict[str, Any] = {"ligaments": []}
+    if scene in STANCE_FE_FIXED:
+        data = tomllib.loads(resolve_scene_path(scene).read_text(encoding="utf-8"))
+        fixed = list(data.get("constraints", {}).get("fixed_dofs", []))
+        overrides["constraints.fixed_dofs"] = fixed + [d for d in STANCE_FE_FIXED[scene] if d not in fixed]
+    return overrides
+
+
+def _stance_figures() -> tuple[Figure, ...]:
+    figures = []
+    for scene in STANCE_SCENES:
+        case = f"{scene}-edem-vs-dem"
+        for column, what in (("disp_z_mm", "talus (G) superior displacement"), ("peak_pressure_mpa", "peak pressure"), ("contact_area_mm2", "contact area")):
+            figures.append(Figure(f"{scene}-{column}", f"{scene}: {what} over the stance, EDEM and DEM", "timeseries", (case,), column=column))
+        figures.append(Figure(f"{scene}-maps", f"{scene}: pressure maps, EDEM vs DEM", "maps", (case,), instants=STANCE_INSTANTS))
+    for scene in STANCE_SCENES:
+        for instant in STANCE_INSTANTS:
+            name = fe_instant_case_name(scene, instant[0])
+            figures.append(Figure(name + "-maps", f"{scene}: pressure maps, DEM vs FE slab", "maps", (name,), instants=(instant,)))
+    return tuple(figures)
+
+
+def _stance_analyses() -> tuple[Analysis, ...]:
+    t = THESIS_STANCE
+    rows = []
+    for scene in STANCE_SCENES:
+        case = f"{scene}-edem-vs-dem"
+        rows += [
+            {"scene": scene, "quantity": "talus max superior displacement (mm)", "method": "EDEM", "case": case, "metric": "a_max_superior_displacement_mm", "thesis": t["superior_displacement_mm"]},
+            {"scene": scene, "quantity": "  ... at % stance", "method": "EDEM", "case": case, "metric": "a_max_superior_displacement_percent", "thesis": t["superior_displacement_percent"]},
+            {"scene": scene, "quantity": "talus max superior displacement (mm)", "method": "DEM", "case": case, "metric": "b_max_superior_displacement_mm", "thesis": None},
+            {"scene": scene, "quantity": "  ... at % stance", "method": "DEM", "case": case, "metric": "b_max_superior_displacement_percent", "thesis": None},
+            {"scene": scene, "quantity": "mean contact area (cm^2)", "method": "EDEM", "case": case, "metric": "a_mean_contact_area_mm2", "scale": 0.01, "thesis": t["mean_area_edem_cm2"]},
+            {"scene": scene, "quantity": "mean contact area (cm^2)", "method": "DEM", "case": case, "metric": "b_mean_contact_area_mm2", "scale": 0.01, "thesis": t["mean_area_dem_cm2"]},
+            {"scene": scene, "quantity": "peak pressure over the stance (MPa)", "method": "EDEM", "case": case, "metric": "a_peak_pressure_mpa", "thesis": t["peak_edem_mpa"]},
+            {"scene": scene, "quantity": "peak pressure over the stance (MPa)", "method": "DEM", "case": case, "metric": "b_peak_pressure_mpa", "thesis": t["peak_dem_mpa"]},
+        ]
+    fe_cases = tuple(fe_instant_case_name(scene, label) for scene in STANCE_SCENES for label, _ in STANCE_INSTANTS)
+    columns = [
+        {"header": "DEM peak (MPa)", "metric": "a_at_b_peak_pressure_mpa"},
+        {"header": "FE peak (MPa)", "metric": "b_peak_pressure_mpa"},
+        {"header": "peak rel. error", "metric": "peak_pressure_rel_error"},
+        {"header": "DEM area (cm^2)", "metric": "a_at_b_mean_contact_area_mm2", "scale": 0.01},
+        {"header": "FE area (cm^2)", "metric": "b_mean_contact_area_mm2", "scale": 0.01},
+        {"header": "area rel. error", "metric": "contact_area_rel_error"},
+        {"header": "DEM |u| (mm)", "metric": "a_at_b_displacement_norm_mm"},
+        {"header": "FE |u| (mm)", "metric": "b_displacement_norm_mm"},
+        {"header": "displacement rel. error", "metric": "displacement_rel_error"},
+        {"header": "pressure L2 rel. error", "metric": "pressure_l2_rel_error"},
+    ]
+    return (
+        Analysis(
+            "thesis-stance",
+            "Stance: our runs beside the thesis's figures (SPEC 7; thesis EDEM stance 4.3.4). Reported, no verdict; flagged beyond +-25 %",
+            "thesis",
+            tuple(dict.fromkeys(r["case"] for r in rows)),
+            {"rows": rows, "flag_rel": THESIS_FLAG_REL},
+        ),
+        Analysis(
+            "fe-instants",
+            "DEM against the FE slab at the five instants (both static, both without ligaments; ideal stance with ty fixed in both). Reported, no verdict",
+            "table",
+            fe_cases,
+            {"columns": columns},
+        ),
+    )
+
+
+def stance_campaign() -> Campaign:
+    return Campaign(
+        "stance",
+        "EDEM vs DEM over the built-in ideal and subject stances (65 time points): displacement, peak pressure and contact area over time, pressure maps at five instants, "
+        "the thesis's figures beside ours, and the FE slab at those instants when fem_reference.run_scene exists.",
+        tuple(_stance_cases()),
+        _stance_figures(),
+        _stance_analyses(),
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# sensitivity: h_max x ligament modulus over the ideal stance (thesis fig. 4.3.10)
+
+SENSITIVITY_SCENE = "ideal-stance"
+SENSITIVITY_GRID = 20
+SENSITIVITY_HMAX_MM = (2.5, 4.5)
+SENSITIVITY_MODULUS_MPA = (200.0, 350.0)
+THESIS_SENSITIVITY = {"hmax_change": -0.30, "modulus_change": 0.03}  # SPEC 7: peak -30 % from h_max 2.5 to 4.5; ~3 % over the moduli
+
+
+def _grid(bounds: tuple[float, float], n: int) -> list[float]:
+    lo, hi = bounds
+    return [round(lo + (hi - lo) * k / (n - 1), 9) for k in range(n)]
+
+
+def sensitivity_case_name(h_max_mm: float, modulus_mpa: float) -> str:
+    return f"hmax{h_max_mm:.4f}-E{modulus_mpa:.2f}"
+
+
+def _sensitivity_cases(n: int = SENSITIVITY_GRID) -> list[Case]:
+    cases = []
+    for h in _grid(SENSITIVITY_HMAX_MM, n):
+        for e in _grid(SENSITIVITY_MODULUS_MPA, n):
+            cases.append(
+                Case(
+                    sensitivity_case_name(h, e),
+                    f"EDEM ideal stance, h_max {h:.4g} mm, ligament modulus {e:.4g} MPa (all four ligaments)",
+                    SENSITIVITY_SCENE,
+                    ("edem",),
+                    ("a_peak_pressure_mpa", "a_mean_contact_area_mm2", "outcome_mismatch"),
+                    {"outcome_mismatch": 0.0},  # every run of the grid must solve its stance
+                    overrides={"cartilage.max_spring_length_mm": h, "ligaments[*].youngs_modulus_mpa": e},
+                    expect=Expect("converges"),
+                    options={"frames": "peak"},
+                    params={"h_max_mm": h, "ligament_modulus_mpa": e},
+                )
+            )
+    return cases
+
+
+def sensitivity_campaign(n: int = SENSITIVITY_GRID) -> Campaign:
+    cases = tuple(_sensitivity_cases(n))
+    names = tuple(c.name for c in cases)
+    return Campaign(
+        "sensitivity",
+        f"Peak pressure (max over the ideal stance, EDEM) on a {n} x {n} grid of h_max in [2.5, 4.5] mm and ligament modulus in [200, 350] MPa (thesis fig. 4.3.10).",
+        cases,
+        (
+            Figure("sensitivity-heatmap", "Peak pressure over the stance (MPa) against h_max and the ligament modulus", "heatmap", names, x="h_max_mm", y=("a_peak_pressure_mpa",), param2="ligament_modulus_mpa"),
+            Figure("sensitivity-cuts", "Line cuts: peak pressure against h_max at three moduli, against the modulus at three h_max", "cuts", names, x="h_max_mm", y=("a_peak_pressure_mpa",), param2="ligament_modulus_mpa"),
+        ),
+        (
+            Analysis(
+                "sensitivity-changes",
+                "Relative change of the peak pressure across each parameter's range, beside the thesis's (SPEC 7); reported, no verdict",
+                "sensitivity",
+                names,
+                {"x": "h_max_mm", "y": "ligament_modulus_mpa", "metric": "a_peak_pressure_mpa", "thesis_x_change": THESIS_SENSITIVITY["hmax_change"], "thesis_y_change": THESIS_SENSITIVITY["modulus_change"], "flag_rel": THESIS_FLAG_REL},
+            ),
+        ),
+    )
+
+
 def _quick() -> Campaign:
     stability = {c.name: c for c in _stability_cases()}
     picks = ["nu-0.4999", "load-0", "pull-apart", "tangential-no-shear", "interpenetrating-start", "cylinder-axial-no-shear", "ve-exact-tau1e-04-dt1e+00", "ve-rk2-tau1e-04-dt1e+00"]
+    fe = {c.name: c for c in _fe_analytic_cases()}
+    # one cheap FE case (a second or two; "unavailable" without dolfinx): the coarsest confined slab
+    fe_picks = [f"fe-confined-compression-h{max(CONFINED_SIZES_MM):g}"]
     return Campaign(
         "quick",
-        "A CI subset (well under 5 minutes on 2 cores): every closed-form case, a few stability cases, ideal standing EDEM vs DEM.",
-        tuple(_analytic_cases()) + tuple(stability[n] for n in picks) + (_ideal_standing_case(),),
+        "A CI subset (well under 5 minutes on 2 cores): every closed-form case, a few stability cases, ideal standing EDEM vs DEM, one cheap FE case (confined compression, coarse).",
+        tuple(_analytic_cases()) + tuple(stability[n] for n in picks) + (_ideal_standing_case(),) + tuple(fe[n] for n in fe_picks),
         _analytic_figures(),
     )
 
@@ -449,6 +859,9 @@ def campaigns() -> dict[str, Campaign]:
             "Stiff and extreme input: each case ends in its declared outcome (converges with a small residual, or refused with a clear message) and no output holds a NaN.",
             tuple(_stability_cases()),
         ),
+        "fe-analytic": fe_analytic_campaign(),
+        "stance": stance_campaign(),
+        "sensitivity": sensitivity_campaign(),
         "quick": _quick(),
     }
 
@@ -487,6 +900,14 @@ def validate_campaign(campaign: Campaign) -> None:
         missing = [c for c in figure.cases if c not in seen]
         if missing:
             raise InputError(f"figure '{figure.name}' names unknown case(s) {', '.join(missing)}", key=campaign.name)
+    from verification.analyses import ANALYSES
+
+    for analysis in campaign.analyses:
+        missing = [c for c in analysis.cases if c not in seen]
+        if missing:
+            raise InputError(f"analysis '{analysis.name}' names unknown case(s) {', '.join(missing)}", key=campaign.name)
+        if analysis.kind not in ANALYSES:
+            raise InputError(f"analysis '{analysis.name}' of unknown kind {analysis.kind!r}", key=campaign.name, expected="one of " + ", ".join(ANALYSES))
 
 
 def describe_campaigns() -> str:

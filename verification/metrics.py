@@ -3,8 +3,9 @@
 For one comparison of a side ``a`` (EDEM/DEM) against a reference ``b`` (FE or a closed form) at
 the same load: relative errors of peak pressure, mean pressure, contact area and bone
 displacement (norm of the difference over the norm of the reference), and the L2 relative error
-of the pressure field on common points: b's pressure is sampled at a's spring centroids by
-projecting each centroid onto b's triangulated surface (:func:`sample_onto` for nodal fields,
+of the pressure field on common points: b's pressure is sampled at a's springs (centroids; far
+ends when b is another surface such as an FE slab's contact face) by projecting each point onto
+b's triangulated surface (:func:`sample_onto` for nodal fields,
 exact for fields linear on the surface; :func:`sample_cells_onto` for piecewise-constant ones).
 :func:`compare_result_dirs` applies all of it to two SPEC 9 result directories.
 """
@@ -267,6 +268,12 @@ def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[
     same triangulation (another run of the same scene, or a closed form) each spring is paired
     with itself, whatever the two poses; otherwise b's cell value at the projection is used.
     Points farther than ``max_distance_mm`` from their partner are left out (all kept by default).
+
+    When b is another surface and a's frame has spring lengths (``spring_length_mm``, an EDEM/DEM
+    run), each spring is sampled at its far end, centroid + length x normal (the point of F its
+    ray hit, where an FE slab's contact face lies), not at its centroid: on a curved M the
+    closest point of that face to the centroid is off the spring's line by up to h tan(angle).
+    Springs without a hit (length 0) are sampled at their centroids.
     """
     from edem.errors import InputError
 
@@ -277,11 +284,22 @@ def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[
         p_a = pressure_at_cells(frame_a)[keep]
     except ValueError:
         raise InputError("the surface of side a has no pressure_mpa array", expected="cell or point data pressure_mpa") from None
+    shared = same_mesh(frame_a, frame_b)
+    sampled_at = "spring centroids"
+    if not shared and "spring_length_mm" in frame_a.cell_data:
+        length = frame_a.cell_data["spring_length_mm"][keep]
+        if np.any(length > 0):
+            tri = frame_a.triangles[keep]
+            a, b, c = (frame_a.points_mm[tri[:, i]] for i in range(3))
+            normal = np.cross(b - a, c - a)
+            normal /= np.linalg.norm(normal, axis=1)[:, None]
+            points = points + length[:, None] * normal
+            sampled_at = "spring ends (centroid + length x normal)"
     if "pressure_mpa" in frame_b.point_data:
         proj = project_onto_surface(frame_b.points_mm, frame_b.triangles, points)
         corner = frame_b.point_data["pressure_mpa"][frame_b.triangles[proj.triangle]]
         p_b, distance, source = np.einsum("ij,ij->i", proj.barycentric, corner), proj.distance_mm, "point"
-    elif "pressure_mpa" in frame_b.cell_data and same_mesh(frame_a, frame_b):
+    elif "pressure_mpa" in frame_b.cell_data and shared:
         p_b = frame_b.cell_data["pressure_mpa"][keep]
         distance, source = np.linalg.norm(frame_b.centroids_mm[keep] - points, axis=1), "cell (same springs)"
     elif "pressure_mpa" in frame_b.cell_data:
@@ -295,6 +313,7 @@ def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[
         "n_common_points": int(common.sum()),
         "max_projection_distance_mm": float(distance.max(initial=0.0)),
         "b_pressure_source": source,
+        "a_sampled_at": sampled_at,
     }
 
 
@@ -302,7 +321,9 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
     """SPEC 8 metrics of result directory a against the reference b (both in the SPEC 9 layout).
 
     When both have the same time points every time point is compared and each metric is the
-    largest over them (``per_time`` keeps them all); otherwise the last time points are compared.
+    largest over them (``per_time`` keeps them all); when b's time points are a subset of a's
+    (an FE reference solved at selected instants of a series) those are compared; otherwise the
+    last time points are.
     Scalars come from timeseries.csv; the pressure field from the pressure_NNNN.vtp files, b
     sampled at a's spring centroids (point data when b has it, e.g. FE nodal pressure, else cell
     data). Also returned: both wall times (summary.json) and the sampling distances.
@@ -312,7 +333,13 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
     a, b = read_result_dir(a_dir), read_result_dir(b_dir)
     ta, tb = a.time_s, b.time_s
     same = ta.shape == tb.shape and np.allclose(ta, tb, rtol=1e-9, atol=1e-12) and len(a.frames) == len(b.frames) == len(ta)
-    pairs = [(k, k) for k in range(len(ta))] if same else [(len(ta) - 1, len(tb) - 1)]
+    subset = None if same else matching_time_points(ta, tb)
+    if same:
+        pairs, mode = [(k, k) for k in range(len(ta))], "each time point"
+    elif subset is not None:
+        pairs, mode = list(zip(subset, range(len(tb)))), "b's time points"
+    else:
+        pairs, mode = [(len(ta) - 1, len(tb) - 1)], "last time point"
     per_time = []
     for ka, kb in pairs:
         sa, sb = _scalars(a.timeseries, ka), _scalars(b.timeseries, kb)
@@ -332,7 +359,7 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
             "contact_area_rel_error": contact_area_error(sa["area"], sb["area"]),
             "displacement_rel_error": displacement_error(sa["disp"], sb["disp"]),
         }
-        entry.update(field_error(a.frame(ka), b.frame(kb), max_distance_mm))
+        entry.update(field_error(a.frame(frame_index(a, ka)), b.frame(frame_index(b, kb)), max_distance_mm))
         per_time.append(entry)
     metrics = {name: max(float(e[name]) for e in per_time) for name in SPEC8_METRICS}
     return {
@@ -342,7 +369,7 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
         "b_method": b.summary.get("method"),
         "a_scene": a.summary.get("scene"),
         "b_scene": b.summary.get("scene"),
-        "mode": "each time point" if same else "last time point",
+        "mode": mode,
         "metrics": metrics,
         "wall_time_a_s": float(a.summary.get("wall_time_s", math.nan)),
         "wall_time_b_s": float(b.summary.get("wall_time_s", math.nan)),
@@ -350,6 +377,69 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
         "max_projection_distance_mm": max(e["max_projection_distance_mm"] for e in per_time),
         "per_time": per_time,
     }
+
+
+def matching_time_points(time_a: np.ndarray, time_b: np.ndarray) -> list[int] | None:
+    """Indices into ``time_a`` of every time of ``time_b`` when each one is there (to 1e-9), else None."""
+    ta, tb = np.asarray(time_a, dtype=np.float64), np.asarray(time_b, dtype=np.float64)
+    if tb.size == 0 or ta.size <= tb.size:
+        return None
+    out = []
+    for t in tb:
+        k = int(np.argmin(np.abs(ta - t)))
+        if not math.isclose(ta[k], t, rel_tol=1e-9, abs_tol=1e-12):
+            return None
+        out.append(k)
+    return out
+
+
+def frame_index(result, k: int) -> int:
+    """Index into ``result.frames`` of time point k: k when every time point has a pressure map,
+    else the map written at that time (result directories may hold maps of some time points only)."""
+    from edem.errors import InputError
+
+    n = len(result.time_s)
+    k = k % n
+    if len(result.frames) == n:
+        return k
+    times = np.array([t for t, _ in result.frames])
+    j = int(np.argmin(np.abs(times - result.time_s[k])))
+    if not math.isclose(times[j], result.time_s[k], rel_tol=1e-9, abs_tol=1e-12):
+        raise InputError(f"no pressure map at t = {result.time_s[k]:g} s", file=result.path / "pressure.pvd", expected="a <DataSet> at every compared time point")
+    return j
+
+
+#: summary values of one side's time series, reported with the prefix a_ or b_ (verification.campaigns.METRICS)
+SERIES_METRICS = (
+    "peak_pressure_mpa",
+    "mean_contact_area_mm2",
+    "max_superior_displacement_mm",
+    "max_superior_displacement_percent",
+    "displacement_norm_mm",
+)
+
+
+def series_metrics(series: dict[str, np.ndarray], prefix: str = "") -> dict[str, float]:
+    """Summary values of a time series (timeseries.csv columns), keys prefixed with ``prefix``.
+
+    peak_pressure_mpa: the largest peak pressure over the time points; mean_contact_area_mm2:
+    the mean contact area over them; max_superior_displacement_mm: the largest displacement of G
+    along +z (superior in the scene's axes) and ..._percent: when, in % of the time span (0 for a
+    single time point); displacement_norm_mm: |u| of G at the last time point.
+    """
+    time = np.asarray(series["time_s"], dtype=np.float64)
+    z = np.asarray(series["disp_z_mm"], dtype=np.float64)
+    k = int(np.argmax(z))
+    span = float(time[-1] - time[0])
+    last = np.array([series[f"disp_{x}_mm"][-1] for x in "xyz"], dtype=np.float64)
+    values = {
+        "peak_pressure_mpa": float(np.max(series["peak_pressure_mpa"])),
+        "mean_contact_area_mm2": float(np.mean(series["contact_area_mm2"])),
+        "max_superior_displacement_mm": float(z[k]),
+        "max_superior_displacement_percent": 100.0 * float(time[k] - time[0]) / span if span > 0 else 0.0,
+        "displacement_norm_mm": float(np.linalg.norm(last)),
+    }
+    return {prefix + name: value for name, value in values.items()}
 
 
 def format_metrics_table(comparison: dict[str, Any]) -> str:

@@ -212,3 +212,56 @@ def non_finite_count(result_dir: str | Path) -> int:
         for data in (frame.point_data, frame.cell_data):
             count += sum(int(np.count_nonzero(~np.isfinite(v))) for v in data.values())
     return count
+
+
+def write_static_result_dir(
+    out_dir: str | Path,
+    *,
+    summary: dict[str, Any],
+    force_n: np.ndarray,
+    displacement_mm: np.ndarray,
+    peak_pressure_mpa: float,
+    mean_pressure_mpa: float,
+    contact_area_mm2: float,
+    points_mm: np.ndarray,
+    triangles: np.ndarray,
+    point_data: dict[str, np.ndarray] | None = None,
+    cell_data: dict[str, np.ndarray] | None = None,
+    iterations: int = 0,
+    force_residual_n: float = 0.0,
+) -> Path:
+    """A SPEC 9 result directory of one static solution (one time point, t = 0).
+
+    ``summary`` holds the keys that are not derived from the numbers given here (scene, method,
+    wall_time_s, warnings and anything specific); the SPEC 9 scalars are filled in. The surface
+    (``points_mm``, ``triangles``) carries point and/or cell arrays, as `edem fe` writes them.
+    """
+    import csv
+    import json
+
+    from edem.results import TIMESERIES_COLUMNS, write_pvd
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    force = np.asarray(force_n, dtype=np.float64).reshape(3)
+    disp = np.asarray(displacement_mm, dtype=np.float64).reshape(3)
+    data = {
+        "steps": 1,
+        "peak_pressure_mpa": float(peak_pressure_mpa),
+        "max_contact_area_mm2": float(contact_area_mm2),
+        "final_displacement_mm": [float(x) for x in disp],
+        "max_force_residual_n": float(force_residual_n),
+        "warnings": [],
+        **summary,
+    }
+    (out / "summary.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    with open(out / "timeseries.csv", "w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f)
+        writer.writerow(TIMESERIES_COLUMNS)
+        writer.writerow(
+            [0, "0.0", *(repr(float(x)) for x in force), repr(float(peak_pressure_mpa)), repr(float(mean_pressure_mpa)),
+             repr(float(contact_area_mm2)), *(repr(float(x)) for x in disp), "0.0", "0.0", "0.0", int(iterations), repr(float(force_residual_n))]
+        )
+    write_surface_frame(out / "pressure_0000.vtp", points_mm, triangles, point_data, cell_data)
+    write_pvd(out / "pressure.pvd", [(0.0, "pressure_0000.vtp")])
+    return out

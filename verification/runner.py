@@ -9,9 +9,13 @@ re-reads its metrics.json, and a code change invalidates it. Verdicts are re-jud
 so changing a tolerance needs no re-run. ``OUT/metrics.json`` gathers the campaign and the HTML
 report (:mod:`reports.html`) ends it.
 
+After the cases, the campaign's analyses (:mod:`verification.analyses`: observed orders, the
+thesis's figures beside ours, parameter sensitivities) are computed from their metrics; they are
+cheap and never cached.
+
 Exit status of a campaign (SPEC 9): 0 when every case passes its tolerance, 1 when one fails
-(or crashes); cases whose side is unavailable (FE reference not installed yet) are reported and
-do not fail the campaign.
+(or crashes) or a judged analysis fails (an observed order below its minimum); cases whose side
+is unavailable (FE reference not installed yet) are reported and do not fail the campaign.
 """
 
 from __future__ import annotations
@@ -195,6 +199,30 @@ def _stability_metrics(case: Case, a: dict[str, Any]) -> dict[str, float]:
     return out
 
 
+def _series_metrics(wanted: set[str], a: dict[str, Any], b: dict[str, Any] | None) -> dict[str, float]:
+    """a_* / b_* summaries of each side's time series, and a_at_b_* of a's at b's time points."""
+    import numpy as np
+
+    from verification.metrics import SERIES_METRICS, matching_time_points, series_metrics
+    from verification.resultdirs import read_timeseries_csv
+
+    def series(side: dict[str, Any]) -> dict[str, Any]:
+        return read_timeseries_csv(Path(side["result_dir"]) / "timeseries.csv")
+
+    out: dict[str, float] = {}
+    if wanted & {f"{p}_{n}" for p in "ab" for n in SERIES_METRICS}:
+        for prefix, side in (("a_", a), ("b_", b)):
+            if side is not None and side["status"] == OK:
+                out.update(series_metrics(series(side), prefix))
+    if b is not None and a["status"] == b["status"] == OK and wanted & {f"a_at_b_{n}" for n in SERIES_METRICS}:
+        sa, sb = series(a), series(b)
+        same = sa["time_s"].shape == sb["time_s"].shape and np.allclose(sa["time_s"], sb["time_s"], rtol=1e-9, atol=1e-12)
+        index = list(range(len(sa["time_s"]))) if same else matching_time_points(sa["time_s"], sb["time_s"])
+        if index is not None:
+            out.update(series_metrics({k: v[index] for k, v in sa.items()}, "a_at_b_"))
+    return out
+
+
 def compute_metrics(case: Case, sides: list[dict[str, Any]]) -> tuple[dict[str, float], dict[str, Any] | None]:
     """The case's metrics from its side outcomes (only those it declares) and the comparison."""
     from verification.metrics import SPEC8_METRICS, compare_result_dirs
@@ -212,12 +240,21 @@ def compute_metrics(case: Case, sides: list[dict[str, Any]]) -> tuple[dict[str, 
         metrics.update(comparison["metrics"])
     if a["status"] == OK and wanted & {"thickness_mean_mm", "thickness_sd_mm", "thickness_mean_rel_error", "thickness_faceting_ratio"}:
         metrics.update(_thickness_metrics(a["result_dir"], b["result_dir"] if both else None))
+    metrics.update(_series_metrics(wanted, a, b))
+    if both and wanted & {"half_width_rel_error", "half_width_fit_rel_error"}:
+        from verification.fe_analytic import half_width_errors
+        from verification.resultdirs import read_result_dir
+
+        metrics.update(half_width_errors(read_result_dir(a["result_dir"]).summary, read_result_dir(b["result_dir"]).summary))
     return {k: v for k, v in metrics.items() if k in wanted}, comparison
 
 
 def _scene_description(case: Case) -> str:
     from edem.scene import resolve_scene_path
+    from verification.fe_analytic import FE_PROBLEMS
 
+    if case.scene.startswith("fe-problem:"):
+        return FE_PROBLEMS.get(case.scene.split(":", 1)[1], "")
     try:
         data = tomllib.loads(resolve_scene_path(case.scene_ref()).read_text(encoding="utf-8"))
         return " ".join(str(data.get("scene", {}).get("description", "")).split())
@@ -452,6 +489,11 @@ def run_campaign(
         )
     counts = {s: sum(1 for r in case_rows if r["status"] == s) for s in (PASSED, FAILED, ERROR, UNAVAILABLE)}
     outcomes = {o: sum(1 for r in case_rows if r["outcome"] == o) for o in ("converges", "refused")}
+    from verification.analyses import run_analysis
+
+    by_name = {r["name"]: r for r in case_rows}
+    analyses = [run_analysis(analysis, by_name) for analysis in campaign.analyses]
+    analyses_failed = sum(1 for a in analyses if a["status"] in (FAILED, ERROR))
     summary = {
         "campaign": campaign.name,
         "description": campaign.description,
@@ -465,9 +507,10 @@ def run_campaign(
         "scheduler": scheduler,
         "counts": counts,
         "outcomes": outcomes,
-        "exit_status": 1 if counts[FAILED] or counts[ERROR] else 0,
+        "exit_status": 1 if counts[FAILED] or counts[ERROR] or analyses_failed else 0,
         "versions": software_versions(),
         "figures": [dataclasses.asdict(figure) for figure in campaign.figures],
+        "analyses": analyses,
         "cases": case_rows,
     }
     summary["report"] = None
@@ -508,4 +551,10 @@ def format_summary(summary: dict[str, Any]) -> str:
     for row in unavailable:
         message = next(s["message"] for s in row["sides"] if s["status"] == UNAVAILABLE)
         lines.append(f"{row['name']}: {message}")
+    if summary.get("analyses"):
+        from verification.analyses import format_analysis
+
+        for result in summary["analyses"]:
+            lines.append("")
+            lines.append(format_analysis(result))
     return "\n".join(lines)

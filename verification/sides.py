@@ -5,7 +5,20 @@ A side turns (scene, overrides, options) into a SPEC 9 result directory:
 * ``edem`` / ``dem``: the discrete solver (:func:`edem.solver.run`);
 * ``fe-slab`` / ``fe-layer``: the dolfinx reference (``fem_reference.run_scene``), reported as
   "unavailable" (never faked) while that entry point or dolfinx is missing;
-* ``closed-form:<name>``: a closed form of :mod:`verification.closed_forms`.
+* ``closed-form:<name>``: a closed form of :mod:`verification.closed_forms` (of the case's
+  scene), or of an FE problem of :mod:`verification.fe_analytic` (``closed-form:hertz-line``,
+  ``closed-form:confined-compression``: no scene, the case's options give the mesh);
+* ``fe-problem:<name>``: the FE core (:func:`fem_reference.solve_contact`) on those closed-form
+  problems, "unavailable" without dolfinx.
+
+Options of a case reach its sides: ``mesh_size_mm``, ``degree`` and ``steps`` (the time points
+to solve) for the FE reference of a scene; ``mesh_size_mm`` and ``element`` for an FE problem;
+``frames`` for EDEM/DEM ("all", the default, or "peak": only the pressure map of the time point
+of peak pressure, for campaigns of hundreds of runs that need the time series only).
+
+Overrides are dotted scene keys (``--set``), plus ``<array>[*].<key>`` / ``<array>[<i>].<key>``
+for arrays of tables (e.g. ``ligaments[*].youngs_modulus_mpa``), which
+:func:`expand_array_overrides` turns into a whole-array override before the scene is loaded.
 
 Bad input (InputError) and "no equilibrium" (SolverError) are the side's *refusal*: the outcome
 says so with the message, which the stability campaign checks against its declared outcome.
@@ -15,6 +28,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import re
 import time
 import traceback
 from collections.abc import Callable
@@ -45,14 +59,91 @@ class SideOutcome:
 SideRunner = Callable[[str, dict[str, Any], Path, dict[str, Any]], str]
 
 
+ARRAY_OVERRIDE = re.compile(r"^(?P<array>[A-Za-z_][A-Za-z0-9_]*)\[(?P<index>\*|\d+)\]\.(?P<key>[A-Za-z_][A-Za-z0-9_]*)$")
+
+
+def expand_array_overrides(scene_ref: str, overrides: dict[str, Any]) -> dict[str, Any]:
+    """Overrides with ``array[*].key`` / ``array[i].key`` replaced by the whole edited array.
+
+    edem.scene.apply_overrides sets dotted keys of tables only; an array of tables (the scene's
+    ``[[ligaments]]``) is read from the scene file, its entries edited, and set as one top-level
+    key. Other overrides pass unchanged. InputError names the key when the array or index is missing.
+    """
+    if not any(ARRAY_OVERRIDE.match(k) for k in overrides):
+        return dict(overrides)
+    import copy
+    import tomllib
+
+    from edem.scene import apply_overrides, resolve_scene_path
+
+    path = resolve_scene_path(scene_ref)
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    plain = {k: v for k, v in overrides.items() if not ARRAY_OVERRIDE.match(k)}
+    apply_overrides(data, dict(plain))
+    arrays: dict[str, list[dict[str, Any]]] = {}
+    for dotted, value in overrides.items():
+        match = ARRAY_OVERRIDE.match(dotted)
+        if match is None:
+            continue
+        name = match["array"]
+        if name not in arrays:
+            entries = data.get(name)
+            if not isinstance(entries, list) or not entries or not all(isinstance(e, dict) for e in entries):
+                raise InputError(f"the scene has no [[{name}]] entries", file=path, key=dotted, expected=f"a scene with [[{name}]] tables")
+            arrays[name] = copy.deepcopy(entries)
+        entries = arrays[name]
+        if match["index"] == "*":
+            targets = entries
+        else:
+            index = int(match["index"])
+            if index >= len(entries):
+                raise InputError(f"index {index} past the {len(entries)} [[{name}]] entries", file=path, key=dotted, expected=f"0 .. {len(entries) - 1} or *")
+            targets = [entries[index]]
+        for entry in targets:
+            entry[match["key"]] = value
+    return {**plain, **arrays}
+
+
+FRAMES = ("all", "peak")
+
+
+def _write_discrete(result: Any, out_dir: Path, frames: str) -> None:
+    """write_results, or (frames "peak") the same summary and time series with one pressure map."""
+    import dataclasses
+
+    from edem.results import write_results
+
+    if frames == "all":
+        write_results(result, out_dir)
+        return
+    import csv
+    import json
+    import numbers
+
+    from edem.results import TIMESERIES_COLUMNS, summary, timeseries_rows
+
+    peak = max(range(len(result.steps)), key=lambda k: result.steps[k].peak_pressure_mpa)
+    write_results(dataclasses.replace(result, steps=[result.steps[peak]]), out_dir)  # that step's map
+    data = summary(result)
+    data["frames"] = f"pressure map of the peak-pressure time point only (step {result.steps[peak].step})"
+    (out_dir / "summary.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    with open(out_dir / "timeseries.csv", "w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f)
+        writer.writerow(TIMESERIES_COLUMNS)
+        for row in timeseries_rows(result):
+            writer.writerow([str(int(x)) if isinstance(x, numbers.Integral) else repr(float(x)) for x in row])
+
+
 def _run_discrete(method: str) -> SideRunner:
     def runner(scene_ref: str, overrides: dict[str, Any], out_dir: Path, options: dict[str, Any]) -> str:
-        from edem.results import write_results
         from edem.scene import load_scene
         from edem.solver import run
 
+        frames = str(options.get("frames", "all"))
+        if frames not in FRAMES:
+            raise InputError(f"frames = {frames!r}", key="options.frames", expected=" or ".join(f'"{f}"' for f in FRAMES))
         scene = load_scene(scene_ref, overrides)
-        write_results(run(scene, method), out_dir)
+        _write_discrete(run(scene, method), out_dir, frames)
         return str(out_dir)
 
     runner.__doc__ = f"{method.upper()} (edem.solver.run) into a SPEC 9 result directory."
@@ -86,7 +177,17 @@ def _run_fe(model: str) -> SideRunner:
         from edem.scene import load_scene
 
         scene = load_scene(scene_ref, overrides)
-        kwargs = {k: options[k] for k in ("mesh_size_mm", "degree") if k in options}
+        kwargs = {k: options[k] for k in ("mesh_size_mm", "degree", "steps") if k in options}
+        if "steps" in kwargs:
+            import inspect
+
+            try:
+                params = inspect.signature(fem_reference.run_scene).parameters
+            except (TypeError, ValueError):
+                params = {}
+            if params and "steps" not in params and not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+                raise UnavailableError("FE reference not available: fem_reference.run_scene takes no steps= selection")
+            kwargs["steps"] = list(kwargs["steps"])
         fem_reference.run_scene(scene, model=model, out_dir=out_dir, **kwargs)
         return str(out_dir)
 
@@ -94,9 +195,40 @@ def _run_fe(model: str) -> SideRunner:
     return runner
 
 
+def fe_core_availability() -> str | None:
+    """None when the FE core (fem_reference.solve_contact on dolfinx) can run, else why not."""
+    if importlib.util.find_spec("dolfinx") is None:
+        return "FE reference not available: dolfinx is not installed (pip install -e '.[fe]')"
+    try:
+        module = importlib.import_module("fem_reference")
+    except Exception as exc:  # the package is being written: any import failure means "not available"
+        return f"FE reference not available: importing fem_reference failed ({type(exc).__name__}: {exc})"
+    if not hasattr(module, "solve_contact"):
+        return "FE reference not available: fem_reference.solve_contact does not exist"
+    return None
+
+
+def _run_fe_problem(name: str) -> SideRunner:
+    def runner(scene_ref: str, overrides: dict[str, Any], out_dir: Path, options: dict[str, Any]) -> str:
+        why = fe_core_availability()
+        if why is not None:
+            raise UnavailableError(why)
+        from verification.fe_analytic import run_fe_problem
+
+        run_fe_problem(name, out_dir, options)
+        return str(out_dir)
+
+    runner.__doc__ = f"The FE core on the closed-form problem {name} (verification.fe_analytic), SPEC 5."
+    return runner
+
+
 def _run_closed_form(scene_ref: str, overrides: dict[str, Any], out_dir: Path, options: dict[str, Any], name: str) -> str:
     from verification.closed_forms import solve_closed_form, write_closed_form_results
+    from verification.fe_analytic import FE_PROBLEMS, write_exact_result
 
+    if name in FE_PROBLEMS:
+        write_exact_result(name, out_dir, options)
+        return str(out_dir)
     start = time.perf_counter()
     scene, solution = solve_closed_form(name, scene_ref, overrides)
     write_closed_form_results(scene, solution, out_dir, wall_time_s=time.perf_counter() - start)
@@ -108,6 +240,8 @@ SIDES: dict[str, SideRunner] = {
     "dem": _run_discrete("dem"),
     "fe-slab": _run_fe("slab"),
     "fe-layer": _run_fe("layer"),
+    "fe-problem:hertz-line": _run_fe_problem("hertz-line"),
+    "fe-problem:confined-compression": _run_fe_problem("confined-compression"),
 }
 CLOSED_FORM_PREFIX = "closed-form:"
 
@@ -115,8 +249,9 @@ CLOSED_FORM_PREFIX = "closed-form:"
 def side_names() -> list[str]:
     """Every side a case may name (closed forms as closed-form:<name>)."""
     from verification.closed_forms import CLOSED_FORMS
+    from verification.fe_analytic import FE_PROBLEMS
 
-    return list(SIDES) + [CLOSED_FORM_PREFIX + name for name in CLOSED_FORMS]
+    return list(SIDES) + [CLOSED_FORM_PREFIX + name for name in (*CLOSED_FORMS, *FE_PROBLEMS)]
 
 
 def is_fe_side(side: str) -> bool:
@@ -135,6 +270,7 @@ def run_side(side: str, scene_ref: str, overrides: dict[str, Any], out_dir: str 
     out = Path(out_dir)
     start = time.perf_counter()
     try:
+        overrides = expand_array_overrides(scene_ref, overrides) if overrides else {}
         if side.startswith(CLOSED_FORM_PREFIX):
             _run_closed_form(scene_ref, overrides, out, options or {}, side[len(CLOSED_FORM_PREFIX) :])
         else:

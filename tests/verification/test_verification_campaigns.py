@@ -39,12 +39,14 @@ def test_stability_cases_declare_outcomes_and_cover_the_extremes():
 
 
 def test_quick_is_a_subset_of_the_other_campaigns_plus_ideal_standing():
-    known = {c.name: c for name in ("edem-analytic", "stability") for c in get_campaign(name).cases}
+    known = {c.name: c for name in ("edem-analytic", "stability", "fe-analytic") for c in get_campaign(name).cases}
     quick = get_campaign("quick")
     for case in quick.cases:
         if case.name != "ideal-standing-edem-vs-dem":
             assert known[case.name] == case
     assert quick.case("ideal-standing-edem-vs-dem").sides == ("edem", "dem")
+    fe = [c for c in quick.cases if any(side.startswith("fe-") for side in c.sides)]
+    assert [c.options["mesh_size_mm"] for c in fe] == [2.0]  # one cheap FE case: the coarsest slab
 
 
 def test_verify_list_prints_each_campaign_with_one_line_per_case(capsys):

@@ -275,3 +275,34 @@ def test_runs_of_the_same_mesh_are_compared_spring_by_spring(tmp_path):
     # a different triangulation of the same plate falls back to projection
     c = write_result_dir(tmp_path / "c", row, [(points + [3.3, 0.0, 0.0], triangles[:, [1, 2, 0]], None, cells)], "other")
     assert compare_result_dirs(a, c)["metrics"]["pressure_l2_rel_error"] > 0.01
+
+
+def test_compare_at_b_time_points_when_they_are_a_subset_of_a(tmp_path):
+    """An FE reference solved at some instants of a series is compared at those instants only."""
+    pa, ta = plate_mesh(2, 1.0, 0.0)
+    rows_a = [{"time_s": t, "peak_pressure_mpa": p, "contact_area_mm2": 1.0} for t, p in ((0.0, 1.0), (0.5, 4.0), (1.0, 9.0), (1.5, 2.0))]
+    frames_a = [(pa, ta, None, {"pressure_mpa": np.full(len(ta), r["peak_pressure_mpa"])}) for r in rows_a]
+    a = write_result_dir(tmp_path / "a", rows_a, frames_a, "dem")
+    rows_b = [{"time_s": 0.5, "peak_pressure_mpa": 2.0, "contact_area_mm2": 1.0}, {"time_s": 1.5, "peak_pressure_mpa": 2.0, "contact_area_mm2": 1.0}]
+    b = write_result_dir(tmp_path / "b", rows_b, [(pa, ta, {"pressure_mpa": np.full(len(pa), 2.0)}, None)] * 2, "fe")
+    result = compare_result_dirs(a, b)
+    assert result["mode"] == "b's time points"
+    assert [e["time_a_s"] for e in result["per_time"]] == [0.5, 1.5]
+    assert result["metrics"]["peak_pressure_rel_error"] == pytest.approx(1.0)  # (4 - 2) / 2 at t = 0.5, not 9 at t = 1
+    assert result["metrics"]["pressure_l2_rel_error"] == pytest.approx(1.0)  # a's map at t = 0.5 (4) against 2
+
+
+def test_fe_surface_is_sampled_at_the_spring_ends(tmp_path):
+    """a: a plate at z = 0 with springs 2 mm long along +z; b: a surface at z = 2 mm carrying
+    p = x (nodal). Sampled at the spring ends each spring meets b right above itself (distance 0,
+    L2 exact for this linear field); at the centroids the projection would be 2 mm away."""
+    pa, ta = plate_mesh(4, 4.0, 0.0)
+    pb, tb = plate_mesh(8, 4.0, 2.0)
+    centroid_x = pa[ta].mean(axis=1)[:, 0]
+    cells = {"pressure_mpa": centroid_x, "spring_length_mm": np.full(len(ta), 2.0)}
+    a = write_result_dir(tmp_path / "a", [{"time_s": 0.0, "peak_pressure_mpa": 1.0}], [(pa, ta, None, cells)], "dem")
+    b = write_result_dir(tmp_path / "b", [{"time_s": 0.0, "peak_pressure_mpa": 1.0}], [(pb, tb, {"pressure_mpa": pb[:, 0]}, None)], "fe")
+    result = compare_result_dirs(a, b)
+    assert result["per_time"][0]["a_sampled_at"].startswith("spring ends")
+    assert result["max_projection_distance_mm"] < 1e-12
+    assert result["metrics"]["pressure_l2_rel_error"] < 1e-12

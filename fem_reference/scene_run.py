@@ -1,0 +1,1038 @@
+"""The FE reference of a whole scene (SPEC 5 and 9): ``edem fe SCENE``.
+
+:func:`run_scene` solves, for each selected time point of a scene, one static force-controlled
+frictionless FE contact problem (:func:`fem_reference.contact.solve_contact`) and writes the same
+result directory as ``edem run``.
+
+Models (SPEC 5), built with :mod:`geometries.fe_solids`:
+
+* ``slab`` (twin of the ``threshold`` law): the conforming slab between M's candidate surface and
+  F. The spring lengths are ray-cast exactly as :func:`edem.springs.spring_geometry` does (M at
+  its initial pose, F at the time point's pose :func:`edem.solver.fixed_placement`; candidates:
+  a hit with 0 < h <= h_max). The slab's top vertices are then moved onto F along their
+  extrusion direction (a ray cast from the bottom vertex), so the slab touches F exactly where
+  it can: the initial gap is zero to round-off. Bonded to M.
+* ``layer`` (twin of the ``gap`` laws): a uniform layer of ``cartilage.thickness_mm`` bonded to
+  M; the initial gap to F comes from the geometry.
+
+The obstacle is F's triangulation at the time point's pose (:class:`RigidSurface`); the load is
+:func:`edem.solver.applied_loads` of that time point; the free rigid motions of the bone are the
+scene's free DOFs (``[constraints] fixed_dofs``), rotations about G = ``reference_point_mm``
+(small rotations: ``q x (x - G)``). Frictionless contact cannot resist a free motion along which
+every contact normal is perpendicular (a bone sliding along a flat tibia): such a motion is fixed
+in the FE with a warning when the load has no component along it, and the time point is refused
+otherwise. Ligaments are not modelled (warning when the scene has some).
+
+Each time point is independent (the DEM convention: displacement of G from the initial pose of
+that time point). Consecutive time points with the same geometry (no kinematics, or the layer
+at the same joint angle) reuse the mesh and start Newton from the previous solution scaled to
+the new load (exact for a slab whose contact set does not change: 0 Newton iterations).
+
+Defaults (arguments > the scene's ``[fe]`` table > these): model = the twin of the scene's law;
+degree 2 (P2; Taylor-Hood P2-P1 from nu = 0.49) at ``mesh_size_mm`` = 1.0, or P1 at 0.5 with
+degree 1. The size is the target in-plane edge (M's triangles are midpoint-subdivided until
+their mean edge is at most the size, so it acts in factors of 2) and sets the layers through the
+thickness, ceil(thickness / size). Measured on the ideal ankle standing (slab, 333 N, nu = 0.42,
+2 shared cores): P2 at 1.0 mm 71 k DOFs, about 20 s and 1 GB, within 0.7 % (peak pressure,
+displacement, contact area) of P2 at 0.7 mm (402 k DOFs, 8 min, 8 GB); P1 at 0.5 mm 71 k DOFs,
+about 23 s, within 2 %; P1 at 1.0 mm 10 k DOFs, 2-4 s, within 2.5 % (a quick look).
+
+Result directory (SPEC 9, the layout of ``edem run``): summary.json (``n_dofs`` for
+``n_springs``, plus element, mesh size, Newton iterations, strains, the contact-area
+definitions), timeseries.csv with exactly ``edem.results.TIMESERIES_COLUMNS`` (``iterations`` =
+Newton iterations), pressure.pvd + pressure_NNNN.vtp per solved time point: the FE contact
+surface in the reference configuration of that time point (point data: nodal pressure_mpa,
+spring_length_mm = local slab thickness or layer thickness + initial gap, in_contact, gap_mm;
+cell data: the facet averages and in_contact of the average) and fixed.vtp (F as in the scene).
+For comparisons with the springs, which live on M: point data ``mobile_point_mm`` (the point of
+M under each contact-surface point, along its column) and ``pressure_on_mobile_mpa`` (point and
+cell data: the pressure times the columns' area ratio contact face / M, i.e. the force per area
+of M) and the summary's ``max_contact_area_on_mobile_mm2``. On a curved M the columns fan out:
+on the ideal ankle the slab's contact face has 525 mm^2 over 463 mm^2 of M.
+
+Only rank 0 writes files; the sums and gathers are collective, so ``mpirun -n N`` works.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .problem import (
+    AREA_DEFINITION_NITSCHE,
+    FEContactProblem,
+    FEConvergenceError,
+    FEMesh,
+    RigidSurface,
+)
+
+MODELS = ("slab", "layer")
+ELEMENTS = ("auto", "P1", "P2", "TH")
+
+#: Default degree and mesh sizes (mm), chosen on the ideal ankle for 2 cores (module docstring).
+DEFAULT_DEGREE = 2
+DEFAULT_MESH_SIZE_MM = {1: 0.5, 2: 1.0}
+#: Nearly incompressible cartilage: Taylor-Hood (P2-P1 u-p) by default from this Poisson's ratio.
+TAYLOR_HOOD_FROM_NU = 0.49
+#: Free rigid motions whose contact stiffness is below this fraction of the largest are fixed.
+WEAK_MODE_RATIO = 1e-8
+STRAIN_WARNING = 0.10
+AREA_ON_MOBILE_DEFINITION = (
+    "the contact indicator of contact_area_definition weighted, facet by facet, by the area of "
+    "the bonded (mobile-surface) triangle the facet's column was extruded from over the facet's "
+    "own area: the contact area measured on M, as the springs measure it (the slab's columns "
+    "fan out along M's normals, so its contact face is larger than the candidate surface)")
+NOMINAL_STRAIN_DEFINITION = (
+    "max over the contact-surface nodes in contact of the compression over the undeformed "
+    "thickness: (approach of the rigid bone motion along the obstacle normal - initial gap) / "
+    "(local slab thickness, or the layer thickness); max_principal_strain is the FE's largest "
+    "|principal strain| at cell midpoints, which grows under refinement at the bonded edges")
+
+DOF_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+
+@dataclass(frozen=True)
+class FESettings:
+    """The resolved FE settings of a run (from the arguments, then the scene's [fe] table, then
+    the defaults)."""
+
+    model: str
+    element: str  # P1 | P2 | TH
+    degree: int
+    mesh_size_mm: float
+    layers_through_thickness: int | None
+
+    @property
+    def method(self) -> str:
+        return f"fe-{self.model}"
+
+
+@dataclass
+class FEStepResult:
+    """One solved time point (the state timeseries.csv and pressure_NNNN.vtp are written from)."""
+
+    step: int
+    time_s: float
+    force_n: np.ndarray
+    moment_nmm: np.ndarray
+    displacement_mm: np.ndarray  # of G (the bone translation)
+    rotation_rad: np.ndarray  # small rotation vector of the bone about G (0 when fixed)
+    peak_pressure_mpa: float
+    mean_pressure_mpa: float
+    contact_area_mm2: float  # on the FE contact surface (see AREA_DEFINITION_NITSCHE)
+    contact_area_on_mobile_mm2: float  # the same indicator mapped onto M (see summary)
+    iterations: int  # Newton iterations
+    force_residual_n: float
+    moment_residual_nmm: float
+    n_dofs: int
+    wall_time_s: float
+    max_nominal_strain: float  # max over contact nodes of (rigid approach - gap) / thickness
+    max_principal_strain: float  # FE, max |principal strain| at cell midpoints
+    contact_force_n: np.ndarray
+    constraint_force_n: np.ndarray
+    # the FE contact surface (reference configuration of this time point) and its data
+    points_mm: np.ndarray
+    triangles: np.ndarray
+    point_data: dict[str, np.ndarray]
+    cell_data: dict[str, np.ndarray]
+    mean_edge_mm: float = 0.0
+    layers: int = 0
+    warnings: list[str] = field(default_factory=list)
+
+
+@dataclass
+class FERunResult:
+    """All solved time points of one scene."""
+
+    scene: Any
+    settings: FESettings
+    steps: list[FEStepResult]
+    wall_time_s: float
+    warnings: list[str]
+    n_time_points: int
+    out_dir: Path | None = None
+    rank: int = 0
+
+    @property
+    def method(self) -> str:
+        return self.settings.method
+
+    @property
+    def n_dofs(self) -> int:
+        return max((s.n_dofs for s in self.steps), default=0)
+
+    def summary(self) -> dict[str, Any]:
+        """summary.json (SPEC 9 keys, ``n_dofs`` for ``n_springs``, plus the FE details)."""
+        steps = self.steps
+        last = steps[-1]
+        s = self.settings
+        return {
+            "scene": self.scene.name,
+            "method": self.method,
+            "steps": len(steps),
+            "n_dofs": self.n_dofs,
+            "wall_time_s": float(self.wall_time_s),
+            "peak_pressure_mpa": max(float(x.peak_pressure_mpa) for x in steps),
+            "max_contact_area_mm2": max(float(x.contact_area_mm2) for x in steps),
+            "max_contact_area_on_mobile_mm2": max(float(x.contact_area_on_mobile_mm2)
+                                                  for x in steps),
+            "contact_area_on_mobile_definition": AREA_ON_MOBILE_DEFINITION,
+            "final_displacement_mm": [float(v) for v in last.displacement_mm],
+            "final_rotation_rad": [float(v) for v in last.rotation_rad],
+            "max_force_residual_n": max(float(x.force_residual_n) for x in steps),
+            "max_moment_residual_nmm": max(float(x.moment_residual_nmm) for x in steps),
+            "warnings": list(self.warnings),
+            "contact_area_definition": AREA_DEFINITION_NITSCHE,
+            "element": s.element,
+            "degree": s.degree,
+            "mesh_size_mm": float(s.mesh_size_mm),
+            "mean_edge_mm": max(float(x.mean_edge_mm) for x in steps),
+            "layers_through_thickness": max(int(x.layers) for x in steps),
+            "newton_iterations": int(sum(x.iterations for x in steps)),
+            "max_nominal_strain": max(float(x.max_nominal_strain) for x in steps),
+            "nominal_strain_definition": NOMINAL_STRAIN_DEFINITION,
+            "max_principal_strain": max(float(x.max_principal_strain) for x in steps),
+            "model": s.model,
+            "law": self.scene.cartilage.law,
+            "time_points": [int(x.step) for x in steps],
+            "n_time_points": int(self.n_time_points),
+        }
+
+
+# --------------------------------------------------------------------------------------------
+# settings
+# --------------------------------------------------------------------------------------------
+
+
+def _input_error(*args: Any, **kwargs: Any) -> Exception:
+    from edem.errors import InputError
+
+    return InputError(*args, **kwargs)
+
+
+def _solver_error(message: str) -> Exception:
+    from edem.errors import SolverError
+
+    return SolverError(message)
+
+
+def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: float | None = None,
+                     degree: int | None = None, element: str | None = None,
+                     layers_through_thickness: int | None = None) -> FESettings:
+    """Arguments first, then the scene's ``[fe]`` table, then the defaults.
+
+    model: default the twin of the scene's law (threshold -> slab, gap laws -> layer).
+    element: "auto" (default) is P1 for degree 1 and P2 for degree 2, and Taylor-Hood (P2-P1 u-p,
+    degree 2) when nu >= 0.49 unless the degree is given as 1 (P1 then locks: the core warns).
+    mesh_size_mm: default :data:`DEFAULT_MESH_SIZE_MM` of the degree.
+    """
+    fe = dict(scene.fe or {})
+    file = scene.source
+
+    def pick(arg: Any, key: str) -> tuple[Any, str]:
+        if arg is not None:
+            return arg, {"model": "--model", "mesh_size_mm": "--mesh-size", "degree": "--degree",
+                         "element": "element",
+                         "layers_through_thickness": "layers_through_thickness"}[key]
+        return fe.get(key), f"fe.{key}"
+
+    law = scene.cartilage.law
+    value, key = pick(model, "model")
+    if value is None:
+        value = "slab" if law == "threshold" else "layer"
+    if value not in MODELS:
+        raise _input_error(f"unknown FE model {value!r}", file=file, key=key,
+                           expected="slab (twin of the threshold law) or layer (of the gap laws)")
+    model_ = str(value)
+
+    deg, deg_key = pick(degree, "degree")
+    if deg is not None and (isinstance(deg, bool) or deg not in (1, 2)):
+        raise _input_error(f"{deg!r} is not an element degree", file=file, key=deg_key,
+                           expected="1 or 2")
+    el, el_key = pick(element, "element")
+    if el is None:
+        el = "auto"
+    if el not in ELEMENTS:
+        raise _input_error(f"unknown element {el!r}", file=file, key=el_key,
+                           expected="auto, P1, P2 or TH (Taylor-Hood P2-P1)")
+    nu = float(scene.cartilage.poissons_ratio)
+    if el == "auto":
+        d = DEFAULT_DEGREE if deg is None else int(deg)
+        if nu >= TAYLOR_HOOD_FROM_NU and deg is None:
+            el = "TH"
+        else:
+            el = "P1" if d == 1 else ("TH" if nu >= TAYLOR_HOOD_FROM_NU else "P2")
+    el_degree = 1 if el == "P1" else 2
+    if deg is not None and int(deg) != el_degree:
+        raise _input_error(f"element {el} has degree {el_degree}, not {deg}", file=file,
+                           key=deg_key, expected=f"degree {el_degree} with element {el}")
+
+    size, size_key = pick(mesh_size_mm, "mesh_size_mm")
+    if size is None:
+        size = DEFAULT_MESH_SIZE_MM[el_degree]
+    if isinstance(size, bool) or not isinstance(size, (int, float)) or not (
+            math.isfinite(size) and size > 0):
+        raise _input_error(f"{size!r} is not a mesh size", file=file, key=size_key,
+                           expected="a length in mm > 0")
+    layers, layers_key = pick(layers_through_thickness, "layers_through_thickness")
+    if layers is not None and (isinstance(layers, bool) or not isinstance(layers, int)
+                               or layers < 1):
+        raise _input_error(f"{layers!r} is not a number of layers", file=file, key=layers_key,
+                           expected="an integer >= 1")
+    if model_ == "layer" and scene.cartilage.thickness_mm is None:
+        raise _input_error("the FE layer model needs the undeformed cartilage thickness",
+                           file=file, key="cartilage.thickness_mm",
+                           expected="a thickness in mm > 0 (or --model slab)")
+    return FESettings(model_, el, el_degree, float(size), layers)
+
+
+def parse_steps(text: str | Sequence[int] | None, n: int) -> list[int]:
+    """Time point indices: None = all; a list of ints; or text "0,3,5-9,10:65:8" (a-b inclusive,
+    a:b[:c] as Python slices; negative indices count from the end). Sorted, unique."""
+    if text is None:
+        return list(range(n))
+    out: list[int] = []
+    expected = ("time point indices 0..{}: a comma list of N, A-B (inclusive) or A:B[:STEP]"
+                .format(n - 1))
+    if isinstance(text, str):
+        for part in (p.strip() for p in text.split(",")):
+            if not part:
+                continue
+            try:
+                if ":" in part:
+                    bits = [int(b) if b.strip() else None for b in part.split(":")]
+                    if len(bits) > 3:
+                        raise ValueError
+                    out += list(range(n))[slice(*bits)]
+                elif "-" in part[1:]:
+                    i = part.index("-", 1)
+                    a, b = int(part[:i]), int(part[i + 1:])
+                    if b < a:
+                        raise ValueError
+                    out += list(range(a, b + 1))
+                else:
+                    out.append(int(part))
+            except ValueError:
+                raise _input_error(f"cannot read the time point selection '{part}'",
+                                   key="--steps", expected=expected) from None
+    else:
+        try:
+            out = [int(i) for i in text]
+        except (TypeError, ValueError):
+            raise _input_error(f"{text!r} is not a list of time point indices", key="steps",
+                               expected=expected) from None
+    sel = []
+    for i in out:
+        j = i + n if i < 0 else i
+        if not 0 <= j < n:
+            raise _input_error(f"time point {i} does not exist (the scene has {n})",
+                               key="--steps", expected=expected)
+        sel.append(j)
+    if not sel:
+        raise _input_error("the time point selection is empty", key="--steps", expected=expected)
+    return sorted(set(sel))
+
+
+# --------------------------------------------------------------------------------------------
+# geometry of one time point
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Geometry:
+    solid: Any  # geometries.fe_solids.FESolid
+    obstacle: RigidSurface
+    key: tuple  # equal keys -> identical mesh and obstacle
+    warnings: list[str]
+
+
+def _spring_lengths(scene: Any, caster: Any, f_pose: Any) -> np.ndarray:
+    """Per mobile triangle: the signed ray length of its spring (inf: no hit / no spring)."""
+    from edem.springs import Placement, spring_geometry
+
+    geo = spring_geometry(scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2,
+                          Placement.identity(scene.reference_point_mm), caster, f_pose,
+                          scene.cartilage)
+    lengths = np.full(scene.mobile.n_triangles, np.inf)
+    lengths[scene.spring_triangle] = geo.spring_length_mm
+    return lengths
+
+
+def _snap_top_onto_fixed(solid: Any, caster: Any, f_pose: Any, window_mm: float,
+                         obstacle: RigidSurface) -> Any:
+    """Move the slab's top vertices onto F: along their extrusion direction (a ray cast from
+    the bottom vertex, as the springs measure), or where that ray misses F (at the rim of F) onto
+    the plane of the nearest triangle of F; intermediate layers follow in proportion. A vertex
+    that would move by more than half its column keeps its place (the caller warns)."""
+    from geometries.fe_solids import tet_volumes
+
+    pts = solid.points_mm
+    nl = int(solid.layer.max())
+    nv = int(np.sum(solid.layer == 0))
+    bottom = pts[:nv]
+    top = pts[nl * nv:]
+    span = top - bottom
+    h = np.linalg.norm(span, axis=1)
+    d = span / h[:, None]
+    rotation, translation = f_pose.affine()
+    hits = caster.cast(bottom, d, window_mm, rotation=rotation, translation=translation)
+    s = hits.spring_length_mm
+    ok = np.isfinite(s) & (s > 0.0) & (np.abs(s - h) <= 0.5 * h)
+    new_top = np.where(ok[:, None], bottom + s[:, None] * d, top)
+    rest = np.flatnonzero(~ok)
+    if rest.size:
+        gap, nu = obstacle.gap_and_normal(top[rest])
+        moved = top[rest] - gap[:, None] * nu
+        near = np.abs(gap) <= 0.5 * h[rest]
+        new_top[rest[near]] = moved[near]
+    frac = (np.arange(nl + 1) / nl)[:, None, None]
+    new = (bottom[None] + frac * (new_top - bottom)[None]).reshape(-1, 3)
+    if not np.all(tet_volumes(new, solid.tets) > 0):
+        return solid
+    return replace(solid, points_mm=new)
+
+
+def _build_geometry(scene: Any, settings: FESettings, k: int, caster: Any,
+                    solid_cache: dict) -> _Geometry:
+    from geometries import fe_solids
+
+    from edem.solver import fixed_placement
+
+    f_pose = fixed_placement(scene, k)
+    rotation, translation = f_pose.affine()
+    verts = f_pose.points(scene.fixed.vertices_mm)
+    obstacle = RigidSurface(verts, scene.fixed.triangles, candidates=16)
+    pose_key = (np.round(rotation, 14).tobytes(), np.round(translation, 12).tobytes())
+    warnings: list[str] = []
+    h_max = float(scene.cartilage.max_spring_length_mm)
+    size, layers = settings.mesh_size_mm, settings.layers_through_thickness
+    if settings.model == "layer":
+        if "solid" not in solid_cache:
+            try:
+                solid_cache["solid"] = fe_solids.layer_solid(
+                    scene.mobile, float(scene.cartilage.thickness_mm), size, layers)
+            except ValueError as exc:
+                raise _solver_error(f"building the FE layer failed: {exc}") from None
+        pts, _, _ = _contact_surface(solid_cache["solid"])
+        gap, _ = obstacle.gap_and_normal(pts)
+        overlap = float(-gap.min()) if len(gap) else 0.0
+        if overlap > 1e-9 * h_max:
+            warnings.append(
+                f"the layer overlaps the fixed body by up to {overlap:.3g} mm "
+                f"({int(np.sum(gap < 0))} contact-surface nodes): it starts pre-compressed")
+        return _Geometry(solid_cache["solid"], obstacle, ("layer", pose_key), warnings)
+    cached = solid_cache.get(("slab", pose_key))
+    if cached is not None:  # same pose of F: the same slab (its warnings were given once)
+        return _Geometry(cached, obstacle, ("slab", pose_key), warnings)
+    solid_cache.clear()
+    lengths = _spring_lengths(scene, caster, f_pose)
+    with np.errstate(invalid="ignore"):
+        cand = np.isfinite(lengths) & (lengths <= h_max)
+    bad = int(np.sum(cand & (lengths <= 0.0)))
+    if bad:
+        raise _solver_error(
+            f"{bad} springs are compressed past their length (h <= 0: the bodies interpenetrate); "
+            "the FE slab needs M and F apart (use the layer model for overlapping bodies)")
+    if not np.any(cand):
+        raise _solver_error(
+            f"no spring is a candidate: no part of the fixed body lies within h_max = {h_max:g} "
+            "mm of the mobile body along its normals (nothing to build the FE slab on)")
+    try:
+        solid = fe_solids.slab_solid(scene.mobile, lengths, h_max, size, layers)
+    except ValueError as exc:
+        raise _solver_error(f"building the FE slab failed: {exc}") from None
+    solid = _snap_top_onto_fixed(solid, caster, f_pose, 2.0 * h_max, obstacle)
+    pts, _, _ = _contact_surface(solid)
+    gap, _ = obstacle.gap_and_normal(pts)
+    off = np.abs(gap) > 1e-6 * h_max
+    if off.any():
+        warnings.append(
+            f"{int(off.sum())} of the slab's {len(pts)} contact-surface nodes could not be placed "
+            f"on the fixed body (initial gap from {float(gap.min()):.3g} to "
+            f"{float(gap.max()):.3g} mm; the slab is meant to touch it everywhere)")
+    solid_cache[("slab", pose_key)] = solid
+    return _Geometry(solid, obstacle, ("slab", pose_key), warnings)
+
+
+def _contact_surface(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(points, triangles, solid point index) of the solid's contact face."""
+    from geometries.fe_solids import CONTACT_TAG
+
+    faces = solid.faces(CONTACT_TAG)
+    used = np.unique(faces)
+    remap = np.full(len(solid.points_mm), -1, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    return solid.points_mm[used], remap[faces], used
+
+
+def _mean_edge(points: np.ndarray, tris: np.ndarray) -> float:
+    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    return float(np.mean(np.linalg.norm(points[e[:, 0]] - points[e[:, 1]], axis=1)))
+
+
+# --------------------------------------------------------------------------------------------
+# free rigid motions
+# --------------------------------------------------------------------------------------------
+
+
+def _mode_name(v: np.ndarray, names: tuple[str, str, str]) -> str:
+    i = int(np.argmax(np.abs(v)))
+    if abs(abs(v[i]) - 1.0) < 1e-9:
+        return names[i]
+    return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
+
+
+def _free_modes(scene: Any, geom: _Geometry, settings: FESettings, force: np.ndarray,
+                moment: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Free translation directions (k_t, 3) and rotation axes (k_r, 3) for this time point.
+
+    The scene's free DOFs, less the rigid motions the contact cannot resist: the contact
+    stiffness of a rigid motion is estimated by sum_i A_i (w . N_i)^2 over the contact-surface
+    vertices that face F and can reach it (N_i = the obstacle normal and its moment arm about
+    G); motions below WEAK_MODE_RATIO of the stiffest are fixed (warning) when the load has no
+    component along them, else the time point has no equilibrium (SolverError).
+    """
+    fixed = set(scene.fixed_dofs)
+    trans = np.array([np.eye(3)[i] for i, n in enumerate(DOF_NAMES[:3]) if n not in fixed])
+    rots = np.array([np.eye(3)[i] for i, n in enumerate(DOF_NAMES[3:]) if n not in fixed])
+    trans = trans.reshape(-1, 3)
+    rots = rots.reshape(-1, 3)
+    if len(trans) == 0:
+        raise _input_error("the FE reference needs at least one free translation of the bone",
+                           file=scene.source, key="constraints.fixed_dofs",
+                           expected="at most two of tx, ty, tz fixed")
+    pts, tris, _ = _contact_surface(geom.solid)
+    a, b, c = (pts[tris[:, i]] for i in range(3))
+    cr = np.cross(b - a, c - a)
+    area = 0.5 * np.linalg.norm(cr, axis=1)
+    n_out = cr / np.maximum(2.0 * area, 1e-300)[:, None]
+    lumped = np.zeros(len(pts))
+    vnorm = np.zeros_like(pts)
+    for j in range(3):
+        np.add.at(lumped, tris[:, j], area / 3.0)
+        np.add.at(vnorm, tris[:, j], cr)
+    vnorm /= np.maximum(np.linalg.norm(vnorm, axis=1), 1e-300)[:, None]
+    gap, nu = geom.obstacle.gap_and_normal(pts)
+    facing = np.einsum("ij,ij->i", nu, vnorm) < -0.1
+    if settings.model == "slab":
+        reach = facing & (gap <= 1e-3 * float(scene.cartilage.max_spring_length_mm))
+    else:
+        t = float(scene.cartilage.thickness_mm)
+        g0 = float(gap[facing].min()) if facing.any() else 0.0
+        reach = facing & (gap <= max(g0, 0.0) + 0.5 * t)
+    if not reach.any():
+        raise _solver_error("no part of the FE contact surface faces the fixed body within reach")
+    g = np.asarray(scene.reference_point_mm, dtype=float)
+    arm = pts[reach] - g
+    length = float(np.sqrt(np.mean(np.einsum("ij,ij->i", arm, arm)))) or 1.0
+    rows = np.hstack([nu[reach] @ trans.T, np.cross(arm, nu[reach]) @ rots.T / length])
+    w = lumped[reach]
+    stiff = rows.T @ (rows * w[:, None])
+    lam, vec = np.linalg.eigh(stiff)
+    weak = lam <= WEAK_MODE_RATIO * max(float(lam.max()), 1e-300)
+    warnings: list[str] = []
+    if not weak.any():
+        return trans, rots, warnings
+    kt = len(trans)
+    gen_load = np.concatenate([trans @ force, rots @ moment / length])
+    scale = float(np.linalg.norm(np.concatenate([force, moment / length])))
+    names_t, names_r = ("tx", "ty", "tz"), ("rx", "ry", "rz")
+    for v in vec[:, weak].T:
+        vt, vr = trans.T @ v[:kt], rots.T @ v[kt:]
+        what = (f"translation {_mode_name(vt, names_t)}" if np.linalg.norm(vr) < 1e-9 else
+                f"rotation {_mode_name(vr, names_r)}" if np.linalg.norm(vt) < 1e-9 else
+                "a combined translation and rotation")
+        if abs(float(v @ gen_load)) > 1e-9 * max(scale, 1e-300):
+            dof = (names_t[int(np.argmax(np.abs(vt)))] if np.linalg.norm(vt) >= np.linalg.norm(vr)
+                   else names_r[int(np.argmax(np.abs(vr)))])
+            raise _solver_error(
+                f"frictionless FE contact cannot resist the {what} of the bone (every contact "
+                f"normal is perpendicular to it) and the load has a component along it "
+                f"({float(v @ gen_load):.4g} N): no equilibrium; fix it in [constraints] "
+                f"fixed_dofs (e.g. add \"{dof}\"; the constraint then carries that load)")
+        if np.linalg.norm(vr) >= 1e-9 and np.linalg.norm(vt) >= 1e-9:
+            raise _solver_error(
+                f"frictionless FE contact cannot resist a combined rigid motion "
+                f"(translation {np.round(vt, 3).tolist()}, rotation {np.round(vr, 3).tolist()}): "
+                "fix more DOFs in [constraints] fixed_dofs")
+        warnings.append(
+            f"frictionless FE contact offers no stiffness along the {what} of the bone (every "
+            "contact normal is perpendicular to it; the discrete springs along M's normals may "
+            "resist it): fixed in the FE, the load has no component along it")
+    keep = vec[:, ~weak]
+    # the kept modes split into pure translations and pure rotations (mixed weak modes refused)
+    t_span = keep[:kt]
+    r_span = keep[kt:]
+    trans = _orthonormal_rows(trans.T @ t_span)
+    rots = _orthonormal_rows(rots.T @ r_span) if len(rots) else rots
+    if len(trans) == 0:
+        raise _solver_error("frictionless FE contact resists no free translation of the bone")
+    return trans, rots, warnings
+
+
+def _orthonormal_rows(cols: np.ndarray) -> np.ndarray:
+    """Orthonormal basis (rows) of the span of the columns, axis-aligned when it can be."""
+    if cols.size == 0:
+        return np.zeros((0, 3))
+    u, s, _ = np.linalg.svd(cols, full_matrices=False)
+    basis = u[:, s > 1e-9 * max(float(s.max()), 1e-300)].T
+    # prefer coordinate axes when the span is spanned by them
+    axes = [np.eye(3)[i] for i in range(3)
+            if np.linalg.norm(basis @ np.eye(3)[i]) > 1 - 1e-9]
+    if len(axes) == len(basis):
+        return np.array(axes).reshape(-1, 3)
+    return basis
+
+
+# --------------------------------------------------------------------------------------------
+# the run
+# --------------------------------------------------------------------------------------------
+
+
+def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | None = None,
+              degree: int | None = None, element: str | None = None,
+              steps: str | Sequence[int] | None = None, out_dir: str | Path | None = None,
+              layers_through_thickness: int | None = None, comm: Any = None,
+              progress: Callable[[int], None] | None = None) -> FERunResult:
+    """Solve the FE reference of ``scene`` (an :class:`edem.scene.Scene`) at the selected time
+    points and, with ``out_dir``, write the SPEC 9 result directory (rank 0 only).
+
+    Settings come from the arguments, then the scene's ``[fe]`` table (model, mesh_size_mm,
+    degree, element, layers_through_thickness), then the defaults (:func:`resolve_settings`).
+    ``steps``: None (all), indices, or text such as "0,5-9,10:65:8" (:func:`parse_steps`).
+    ``progress(k)`` is called after each solved time point.
+
+    Raises InputError on bad settings and SolverError (FEConvergenceError for a Newton failure)
+    naming the time point when one has no solution.
+    """
+    started = time.perf_counter()
+    settings = resolve_settings(scene, model=model, mesh_size_mm=mesh_size_mm, degree=degree,
+                                element=element, layers_through_thickness=layers_through_thickness)
+    n_times = len(scene.load.time_s)
+    selected = parse_steps(steps, n_times)
+    try:
+        from .contact import _fe_modules
+
+        mods = _fe_modules()
+    except ImportError as exc:
+        raise _input_error(f"the FE reference needs dolfinx ({exc})",
+                           expected="the `fe` extra: pip install -e '.[fe]'") from None
+    MPI = mods["MPI"]
+    comm = MPI.COMM_WORLD if comm is None else comm
+
+    from edem.raycast import RayCaster
+    from edem.solver import applied_loads
+
+    caster = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles)
+    loads = applied_loads(scene)
+    warnings: list[str] = list(scene.warnings)
+    if scene.ligaments:
+        warnings.append(f"the FE reference does not model ligaments: the scene's "
+                        f"{len(scene.ligaments)} ligament(s) are left out")
+    if scene.viscoelastic is not None:
+        warnings.append("[viscoelastic] is ignored by the FE reference (static elasticity)")
+    if scene.cartilage.shear_modulus_mpa:
+        warnings.append("cartilage.shear_modulus_mpa is ignored by the FE reference (the "
+                        "continuum has its own shear stiffness; the contact is frictionless)")
+    step_log: list[tuple[str, str]] = []
+    solid_cache: dict = {}
+    mesh_cache: dict = {}
+    previous: dict | None = None
+    results: list[FEStepResult] = []
+    for k in selected:
+        t = float(scene.load.time_s[k])
+        where = f"time point {k} (t = {t:g} s)"
+        clock = time.perf_counter()
+        try:
+            geom = _build_geometry(scene, settings, k, caster, solid_cache)
+        except Exception as exc:
+            if type(exc).__name__ in ("SolverError", "InputError"):
+                exc.args = (f"{where}: {exc}",)
+            raise
+        step_warnings = list(geom.warnings)
+        force, moment = loads[k, :3].astype(float), loads[k, 3:].astype(float)
+        if not np.any(force):
+            results.append(_zero_step(k, t, force, moment, geom, settings, clock))
+            step_warnings.append("no force: nothing to solve (zero pressure)")
+            results[-1].warnings = step_warnings
+            _add(step_log, step_warnings, where)
+            if progress is not None:
+                progress(k)
+            continue
+        try:
+            trans, rots, mode_warnings = _free_modes(scene, geom, settings, force, moment)
+        except Exception as exc:
+            if type(exc).__name__ in ("SolverError", "InputError"):
+                exc.args = (f"{where}: {exc}",)
+            raise
+        step_warnings += mode_warnings
+        if np.linalg.norm(trans @ force) == 0.0 and (
+                len(rots) == 0 or np.linalg.norm(rots @ moment) == 0.0):
+            results.append(_zero_step(k, t, force, moment, geom, settings, clock))
+            step_warnings.append("the load has no component along the free DOFs: carried by "
+                                 "the constraints (zero pressure)")
+            results[-1].warnings = step_warnings
+            _add(step_log, step_warnings, where)
+            if progress is not None:
+                progress(k)
+            continue
+        mesh_key = geom.key[0] if settings.model == "layer" else geom.key
+        if mesh_cache.get("key") != mesh_key:
+            mesh_cache.clear()
+            mesh, cell_tags, facet_tags = geom.solid.to_dolfinx(comm)
+            mesh_cache.update(key=mesh_key, mesh=FEMesh(mesh, facet_tags, cell_tags))
+        warm = previous is not None and previous["key"] == geom.key
+        if warm:  # same mesh and obstacle: start from the previous solution, scaled to the load
+            ratio = float(np.linalg.norm(force)) / max(float(np.linalg.norm(previous["force"])),
+                                                       1e-300)
+            t_warm = previous["t"] * (ratio if settings.model == "slab" else 1.0)
+        problem = FEContactProblem(
+            mesh=mesh_cache["mesh"],
+            youngs_modulus_mpa=float(scene.cartilage.youngs_modulus_mpa),
+            poissons_ratio=float(scene.cartilage.poissons_ratio),
+            obstacle=geom.obstacle,
+            force_n=force,
+            element=settings.element,
+            free_dofs=[tuple(r) for r in trans],
+            free_rotations=[tuple(r) for r in rots] if len(rots) else None,
+            moment_nmm=moment,
+            reference_point_mm=np.asarray(scene.reference_point_mm, dtype=float),
+            initial_translation_mm=t_warm if warm else None,
+            initial_rotation_rad=previous["q"] * ratio if warm else None,
+            initial_field=previous["ut"] * ratio if warm else None,
+            strain_warning=STRAIN_WARNING,
+        )
+        from .contact import solve_contact
+
+        try:
+            try:
+                res = solve_contact(problem, comm, keep_fields=True)
+            except FEConvergenceError:
+                if not warm:
+                    raise
+                # the previous time point's motion was a bad start: start afresh
+                problem.initial_translation_mm = problem.initial_rotation_rad = None
+                problem.initial_field = None
+                res = solve_contact(problem, comm, keep_fields=True)
+        except FEConvergenceError as exc:
+            exc.args = (f"{where}: {exc}",)
+            raise
+        except Exception as exc:
+            if type(exc).__name__ in ("SolverError", "InputError"):
+                exc.args = (f"{where}: {exc}",)
+                raise
+            raise _solver_error(f"{where}: the FE solve failed: {type(exc).__name__}: {exc}"
+                                ) from None
+        step_warnings += [w for w in res.warnings if not w.startswith("max nominal strain")]
+        previous = {"key": geom.key, "t": res.bone_displacement_mm.copy(),
+                    "q": res.bone_rotation_rad.copy(), "ut": res.fields["ut_owned"],
+                    "force": force}
+        results.append(_step_result(k, t, force, moment, geom, settings, res, clock, scene))
+        res.fields = None  # the dolfinx objects of this solve are no longer needed
+        if results[-1].max_nominal_strain > STRAIN_WARNING:
+            step_warnings.append(
+                f"nominal strain {results[-1].max_nominal_strain:.3f} (compression / thickness) "
+                f"exceeds {STRAIN_WARNING:.2f}: small-strain elasticity no longer holds")
+        results[-1].warnings = step_warnings
+        _add(step_log, step_warnings, where)
+        if progress is not None:
+            progress(k)
+    run = FERunResult(scene, settings, results, time.perf_counter() - started,
+                      _merge_warnings(warnings, step_log), n_times, None, comm.rank)
+    if out_dir is not None:
+        run.out_dir = Path(out_dir)
+        failure = None
+        if comm.rank == 0:  # rank 0 writes; every rank learns whether it worked (no hang)
+            try:
+                write_fe_results(run, run.out_dir)
+            except OSError as exc:
+                failure = ("input", f"cannot write the result directory: {exc}")
+            except Exception as exc:
+                failure = ("solver", f"writing the result directory failed: {exc}")
+        failure = comm.bcast(failure, root=0)
+        if failure is not None:
+            if failure[0] == "input":
+                raise _input_error(failure[1], file=str(out_dir),
+                                   expected="a writable directory (--out)")
+            raise _solver_error(failure[1])
+    return run
+
+
+def world_rank() -> int:
+    """Rank in MPI.COMM_WORLD (0 without the FE stack)."""
+    try:
+        from .contact import _fe_modules
+
+        return int(_fe_modules()["MPI"].COMM_WORLD.rank)
+    except ImportError:
+        return 0
+
+
+def _add(warnings: list[tuple[str, str]], step_warnings: list[str], where: str) -> None:
+    warnings.extend((where, w) for w in step_warnings)
+
+
+def _merge_warnings(general: list[str], per_step: list[tuple[str, str]]) -> list[str]:
+    """One line per kind of warning (numbers ignored): the first occurrence, and how many other
+    time points had it."""
+    import re
+
+    order: dict[str, list[str]] = {}
+    for where, w in per_step:
+        order.setdefault(re.sub(r"\d+(\.\d+)?(e[-+]?\d+)?", "#", w), []).append(f"{where}: {w}")
+    out = list(general)
+    for texts in order.values():
+        extra = len(texts) - 1
+        out.append(texts[0] + (f" (and at {extra} other time point{'s' * (extra > 1)})"
+                               if extra else ""))
+    return out
+
+
+def _surface_data(geom: _Geometry, settings: FESettings, scene: Any,
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                             np.ndarray]:
+    """Contact-surface points, triangles, local spring length (slab: thickness; layer:
+    thickness + initial gap), initial gap, obstacle normal and undeformed thickness per point."""
+    pts, tris, used = _contact_surface(geom.solid)
+    gap, nu = geom.obstacle.gap_and_normal(pts)
+    if settings.model == "slab":
+        bottom = geom.solid.points_mm[geom.solid.bottom_vertex[used]]
+        thickness = np.linalg.norm(pts - bottom, axis=1)
+        length = thickness
+    else:
+        thickness = np.full(len(pts), float(scene.cartilage.thickness_mm))
+        length = thickness + gap
+    return pts, tris, length, gap, nu, thickness
+
+
+def _mobile_mapping(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the contact surface stands on M: per contact-surface point the point of M its column
+    was extruded from, per point and per facet the area ratio (contact face / M) of the columns
+    (lumped at the points): a pressure times this ratio is the force per area of M, as the
+    springs carry it."""
+    pts, tris, used = _contact_surface(solid)
+    x = solid.points_mm
+    top = used[tris]
+    bottom = solid.bottom_vertex[top]
+
+    def areas(ix: np.ndarray) -> np.ndarray:
+        a, b, c = x[ix[:, 0]], x[ix[:, 1]], x[ix[:, 2]]
+        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+    a_top, a_bottom = areas(top), areas(bottom)
+    lumped_top, lumped_bottom = np.zeros(len(pts)), np.zeros(len(pts))
+    for j in range(3):
+        np.add.at(lumped_top, tris[:, j], a_top / 3.0)
+        np.add.at(lumped_bottom, tris[:, j], a_bottom / 3.0)
+    return x[solid.bottom_vertex[used]], lumped_top / lumped_bottom, a_top / a_bottom
+
+
+def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: _Geometry,
+               settings: FESettings, clock: float) -> FEStepResult:
+    pts, tris, used = _contact_surface(geom.solid)
+    z = np.zeros(len(pts))
+    zc = np.zeros(len(tris))
+    gap, _ = geom.obstacle.gap_and_normal(pts)
+    return FEStepResult(
+        step=k, time_s=t, force_n=force, moment_nmm=moment, displacement_mm=np.zeros(3),
+        rotation_rad=np.zeros(3), peak_pressure_mpa=0.0, mean_pressure_mpa=0.0,
+        contact_area_mm2=0.0, contact_area_on_mobile_mm2=0.0, iterations=0,
+        force_residual_n=0.0, moment_residual_nmm=0.0,
+        n_dofs=0, wall_time_s=time.perf_counter() - clock, max_nominal_strain=0.0,
+        max_principal_strain=0.0,
+        contact_force_n=np.zeros(3), constraint_force_n=-force,
+        points_mm=pts, triangles=tris,
+        point_data={"pressure_mpa": z, "spring_length_mm": z.copy(),
+                    "in_contact": z.astype(np.int8), "gap_mm": gap,
+                    "pressure_on_mobile_mpa": z.copy(),
+                    "mobile_point_mm": _mobile_mapping(geom.solid)[0]},
+        cell_data={"pressure_mpa": zc, "spring_length_mm": zc.copy(),
+                   "in_contact": zc.astype(np.int8), "pressure_on_mobile_mpa": zc.copy()},
+        mean_edge_mm=_mean_edge(pts, tris), layers=int(geom.solid.layer.max()))
+
+
+def _area_on_mobile(res: Any, solid: Any) -> float:
+    """The Nitsche contact-area integral with each contact facet weighted by (area of the
+    bonded triangle below it) / (its own area): the contact area measured on M."""
+    from scipy.spatial import cKDTree
+
+    from .contact import _fe_modules
+
+    m = _fe_modules()
+    fem, ufl, dmesh = m["fem"], m["ufl"], m["dolfinx"].mesh
+    s, pressure = res.fields["setup"], res.fields["pressure"]
+    mesh = s.mesh
+    pts, tris, used = _contact_surface(solid)
+    top = used[tris]  # solid point indices of the contact triangles
+    bottom = solid.bottom_vertex[top]  # layer-0 points are the first ones: same indices
+    x = solid.points_mm
+
+    def areas(ix: np.ndarray) -> np.ndarray:
+        a, b, c = x[ix[:, 0]], x[ix[:, 1]], x[ix[:, 2]]
+        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+    ratio_of = areas(bottom) / areas(top)
+    V0 = fem.functionspace(mesh, ("DG", 0))
+    w = fem.Function(V0)
+    facets = s.contact_facets
+    if len(facets):
+        geo = dmesh.entities_to_geometry(mesh, 2, facets, False)
+        centroids = mesh.geometry.x[geo].mean(axis=1)
+        dist, idx = cKDTree(x[top].mean(axis=1)).query(centroids)
+        size = float(np.ptp(x, axis=0).max()) or 1.0
+        if float(dist.max()) > 1e-8 * size:
+            raise _solver_error("the FE contact facets do not match the solid's contact face")
+        mesh.topology.create_connectivity(2, 3)
+        f2c = mesh.topology.connectivity(2, 3)
+        cells = np.array([f2c.links(f)[0] for f in facets], dtype=np.int32)
+        dofs = np.array([V0.dofmap.cell_dofs(c)[0] for c in cells])
+        w.x.array[dofs] = ratio_of[idx]
+    peak = float(res.peak_pressure_mpa)
+    ptol = fem.Constant(mesh, 1e-8 * max(peak, 1e-300))
+    ind = ufl.conditional(ufl.gt(pressure, ptol), 1.0, 0.0)
+    return s.scalar(fem.form(ind * w * s.ds_c))
+
+
+def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: _Geometry,
+                 settings: FESettings, res: Any, clock: float, scene: Any) -> FEStepResult:
+    from scipy.spatial import cKDTree
+
+    pts, tris, length, gap, nu, thickness = _surface_data(geom, settings, scene)
+    area_on_mobile = _area_on_mobile(res, geom.solid)
+    on_mobile, ratio_point, ratio_cell = _mobile_mapping(geom.solid)
+    xs = np.asarray(res.contact_points_mm).reshape(-1, 3)
+    dist, idx = cKDTree(xs).query(pts)
+    size = float(np.ptp(pts, axis=0).max()) or 1.0
+    if len(xs) != len(pts) or float(dist.max()) > 1e-8 * size:
+        raise _solver_error(
+            f"time point {k}: the FE contact-surface nodes do not match the solid's contact face "
+            f"({len(xs)} nodes for {len(pts)} vertices, farthest {float(dist.max()):.3g} mm)")
+    p = np.clip(np.asarray(res.contact_pressure_mpa)[idx], 0.0, None)
+    tol = 1e-8 * max(float(res.peak_pressure_mpa), 1e-300)
+    p_cell = p[tris].mean(axis=1)
+    length_cell = length[tris].mean(axis=1)
+    for name, value in (("pressure", p), ("displacement", res.bone_displacement_mm),
+                        ("rotation", res.bone_rotation_rad)):
+        if not np.all(np.isfinite(value)):
+            raise _solver_error(f"time point {k}: the FE {name} is not finite")
+    rigid = (res.bone_displacement_mm[None, :]
+             + np.cross(res.bone_rotation_rad, pts - np.asarray(scene.reference_point_mm)))
+    approach = -np.einsum("ij,ij->i", rigid, nu) - gap
+    contact = p > tol
+    nominal = float(np.max(approach[contact] / thickness[contact], initial=0.0))
+    return FEStepResult(
+        step=k, time_s=t, force_n=force, moment_nmm=moment,
+        displacement_mm=np.asarray(res.bone_displacement_mm, dtype=float),
+        rotation_rad=np.asarray(res.bone_rotation_rad, dtype=float),
+        peak_pressure_mpa=float(res.peak_pressure_mpa),
+        mean_pressure_mpa=float(res.mean_pressure_mpa),
+        contact_area_mm2=float(res.contact_area_mm2),
+        contact_area_on_mobile_mm2=float(area_on_mobile),
+        iterations=int(res.newton_iterations),
+        force_residual_n=float(res.force_residual_n),
+        moment_residual_nmm=float(res.moment_residual_nmm),
+        n_dofs=int(res.n_dofs),
+        wall_time_s=time.perf_counter() - clock,
+        max_nominal_strain=max(nominal, 0.0),
+        max_principal_strain=float(res.max_nominal_strain),
+        contact_force_n=np.asarray(res.contact_force_n, dtype=float),
+        constraint_force_n=np.asarray(res.constraint_force_n, dtype=float),
+        points_mm=pts, triangles=tris,
+        point_data={"pressure_mpa": p, "spring_length_mm": length,
+                    "in_contact": (p > tol).astype(np.int8), "gap_mm": gap,
+                    "pressure_on_mobile_mpa": p * ratio_point, "mobile_point_mm": on_mobile},
+        cell_data={"pressure_mpa": p_cell, "spring_length_mm": length_cell,
+                   "in_contact": (p_cell > tol).astype(np.int8),
+                   "pressure_on_mobile_mpa": p_cell * ratio_cell},
+        mean_edge_mm=_mean_edge(pts, tris), layers=int(geom.solid.layer.max()))
+
+
+# --------------------------------------------------------------------------------------------
+# the result directory (SPEC 9)
+# --------------------------------------------------------------------------------------------
+
+
+def write_fe_results(run: FERunResult, out_dir: str | Path) -> Path:
+    """summary.json, timeseries.csv (edem.results.TIMESERIES_COLUMNS), pressure.pvd with one
+    pressure_NNNN.vtp per solved time point (the FE contact surface in the reference
+    configuration of that time point: point data pressure_mpa, spring_length_mm, in_contact,
+    gap_mm, pressure_on_mobile_mpa, mobile_point_mm; cell data pressure_mpa, spring_length_mm,
+    in_contact, pressure_on_mobile_mpa) and fixed.vtp (see the module docstring)."""
+    import csv
+    import json
+
+    from edem.results import TIMESERIES_COLUMNS, write_pvd
+    from geometries.mesh_io import write_vtp
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    data = run.summary()
+    _check_finite(data)
+    (out / "summary.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    with open(out / "timeseries.csv", "w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f)
+        writer.writerow(TIMESERIES_COLUMNS)
+        for s in run.steps:
+            row = [s.step, s.time_s, *s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa,
+                   s.contact_area_mm2, *s.displacement_mm, *s.rotation_rad, s.iterations,
+                   s.force_residual_n]
+            if len(row) != len(TIMESERIES_COLUMNS):  # pragma: no cover - layout guard
+                raise RuntimeError("timeseries row does not match TIMESERIES_COLUMNS")
+            values = [float(x) for x in row]
+            if not all(math.isfinite(x) for x in values):
+                raise _solver_error(f"time point {s.step}: non-finite value in timeseries.csv")
+            writer.writerow([str(int(x)) if isinstance(x, (int, np.integer)) else repr(float(x))
+                             for x in row])
+    entries = []
+    for s in run.steps:
+        name = f"pressure_{s.step:04d}.vtp"
+        write_surface_vtp(out / name, s.points_mm, s.triangles, s.point_data, s.cell_data)
+        entries.append((s.time_s, name))
+    write_pvd(out / "pressure.pvd", entries)
+    write_vtp(out / "fixed.vtp", run.scene.fixed.vertices_mm, run.scene.fixed.triangles, {})
+    return out
+
+
+def _check_finite(data: dict) -> None:
+    for key, value in data.items():
+        values = value if isinstance(value, list) else [value]
+        if any(isinstance(v, float) and not math.isfinite(v) for v in values):
+            raise _solver_error(f"summary value {key} is not finite: {value}")
+
+
+def write_surface_vtp(path: str | Path, points_mm: np.ndarray, triangles: np.ndarray,
+                      point_data: dict[str, np.ndarray], cell_data: dict[str, np.ndarray]) -> None:
+    """A triangulated surface with point and cell arrays as binary VTK XML PolyData."""
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
+
+    pts = vtkPoints()
+    pts.SetData(numpy_to_vtk(np.ascontiguousarray(points_mm, dtype=np.float64), deep=True))
+    tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    cells = vtkCellArray()
+    offsets = numpy_to_vtkIdTypeArray(np.arange(0, 3 * len(tri) + 1, 3, dtype=np.int64),
+                                      deep=True)
+    conn = numpy_to_vtkIdTypeArray(np.ascontiguousarray(tri.ravel()), deep=True)
+    cells.SetData(offsets, conn)
+    poly = vtkPolyData()
+    poly.SetPoints(pts)
+    poly.SetPolys(cells)
+    for target, arrays in ((poly.GetPointData(), point_data), (poly.GetCellData(), cell_data)):
+        for name, values in arrays.items():
+            arr = numpy_to_vtk(np.ascontiguousarray(values), deep=True)
+            arr.SetName(name)
+            target.AddArray(arr)
+    writer = vtkXMLPolyDataWriter()
+    writer.SetFileName(str(path))
+    writer.SetInputData(poly)
+    writer.SetDataModeToBinary()
+    if not writer.Write():
+        raise OSError(f"could not write {path}")

@@ -1,0 +1,106 @@
+"""Report extensions: analysis tables (headline numbers, flags), pressure maps at a chosen time
+(FE references solved at some instants only), a histogram of wall times for campaigns of
+hundreds of cases, and figures of unavailable cases replaced by the reason."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from edem.results import write_pvd
+from reports.html import _wall_time_figure, write_campaign_report
+from verification.resultdirs import read_result_dir, write_surface_frame
+
+
+def _summary(**extra):
+    base = {
+        "campaign": "synthetic",
+        "description": "synthetic",
+        "counts": {"passed": 1, "failed": 0, "error": 0, "unavailable": 1},
+        "outcomes": {"converges": 2, "refused": 0},
+        "finished_at": "now",
+        "wall_time_s": 1.0,
+        "computed": 2,
+        "cached": 0,
+        "cases_wall_time_s": 1.0,
+        "jobs": 1,
+        "versions": {"python": "3"},
+        "figures": [],
+        "cases": [],
+    }
+    return {**base, **extra}
+
+
+def _row(name, status="passed", sides=None, result_dirs=()):
+    return {
+        "name": name, "description": name, "scene": "s", "scene_description": "", "overrides": {}, "status": status, "outcome": "converges",
+        "expected_outcome": None, "metrics": {}, "tolerance": {}, "verdicts": {}, "params": {}, "maps": False, "wall_time_s": 0.1, "cached": False,
+        "case_dir": f"cases/{name}", "result_dirs": list(result_dirs), "sides": sides or [{"side": "dem", "status": "ok", "result_dir": None, "message": "", "wall_time_s": 0.1}],
+    }
+
+
+def test_analysis_tables_come_first_with_flagged_rows(tmp_path):
+    analysis = {
+        "name": "t", "title": "Thesis beside ours", "kind": "thesis", "status": "reported", "columns": ["quantity", "ours", "thesis"],
+        "rows": [{"cells": ["peak", "25.9", "7.3"], "flag": True}, {"cells": ["area", "4.47", "4.67"]}], "notes": ["a note"], "values": {},
+    }
+    unavailable = _row("fe", "unavailable", [{"side": "fe-slab", "status": "unavailable", "result_dir": None, "message": "FE reference not available: test", "wall_time_s": 0.0}])
+    figure = {"name": "fe-maps", "title": "FE maps", "kind": "maps", "cases": ["fe"], "instants": [["toe off", "100%"]]}
+    path = write_campaign_report(_summary(analyses=[analysis], cases=[unavailable], figures=[figure]), tmp_path)
+    text = path.read_text(encoding="utf-8")
+    assert text.index("Thesis beside ours") < text.index("<h2>Cases</h2>")
+    assert '<tr class="flag"><td>peak</td>' in text and "a note" in text
+    assert "FE maps</b>: case fe is unavailable: FE reference not available: test" in text
+
+
+def test_wall_times_of_hundreds_of_cases_are_a_histogram(tmp_path):
+    from matplotlib.image import imread
+
+    rows = [{"name": f"c{i}", "wall_time_s": 0.1 + 0.001 * i, "status": "passed"} for i in range(400)]
+    _wall_time_figure(rows, tmp_path / "w.png")
+    height, width = imread(tmp_path / "w.png").shape[:2]
+    assert height < 600 and width < 1000  # not 400 bars
+
+
+def _frame_dir(root, times, values):
+    """A result directory with a 2-triangle plate whose cell pressure is ``values[k]`` at ``times[k]``."""
+    import csv
+
+    from edem.results import TIMESERIES_COLUMNS
+
+    root.mkdir(parents=True)
+    (root / "summary.json").write_text('{"scene": "plate", "method": "m"}', encoding="utf-8")
+    points = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    triangles = np.array([[0, 1, 2], [0, 2, 3]])
+    with open(root / "timeseries.csv", "w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f)
+        writer.writerow(TIMESERIES_COLUMNS)
+        for k, t in enumerate(times):
+            writer.writerow([k if c == "step" else (t if c == "time_s" else 0.0) for c in TIMESERIES_COLUMNS])
+    entries = []
+    for k, (t, v) in enumerate(zip(times, values)):
+        write_surface_frame(root / f"pressure_{k:04d}.vtp", points, triangles, None, {"pressure_mpa": np.full(2, v), "in_contact": np.ones(2)})
+        entries.append((t, f"pressure_{k:04d}.vtp"))
+    write_pvd(root / "pressure.pvd", entries)
+    return root
+
+
+def test_pressure_maps_at_a_time_pick_that_map_in_both_directories(tmp_path):
+    """a has maps at 0, 1, 2 s; b (an FE at one instant) only at 1 s: time_s = 1 draws a's second
+    map against b's only one (a - b = 0: the difference panel is the neutral colour)."""
+    from matplotlib.image import imread
+
+    from edem.errors import InputError
+    from reports.maps import _frame_at, render_pressure_maps
+
+    a = _frame_dir(tmp_path / "a", [0.0, 1.0, 2.0], [1.0, 3.0, 9.0])
+    b = _frame_dir(tmp_path / "b", [1.0], [3.0])
+    assert _frame_at(read_result_dir(a), 1.0).cell_data["pressure_mpa"][0] == 3.0
+    with pytest.raises(InputError, match="no pressure map at t = 2"):
+        _frame_at(read_result_dir(b), 2.0)
+    png = render_pressure_maps(a, b, tmp_path / "m.png", time_s=1.0, title="mid", window_size=(600, 200))
+    image = imread(png)[..., :3]
+    assert image.shape[:2] == (200, 600)
+    centre = [image[80:120, 80 + 200 * k : 120 + 200 * k].reshape(-1, 3).mean(axis=0) for k in range(3)]
+    assert np.abs(centre[0] - centre[1]).max() < 0.02  # a (3 MPa at 1 s, not 9 at 2 s) drawn like b
+    assert np.abs(centre[2] - centre[2].mean()).max() < 0.05  # a - b = 0: the diverging map's neutral grey

@@ -1,0 +1,312 @@
+"""Campaign-level analyses (:class:`verification.campaigns.Analysis`), computed after the cases.
+
+Each kind is a function of the analysis and the campaign's case rows (name -> row with
+"metrics", "params", "status", "sides") returning a JSON-able table::
+
+    {"name", "title", "kind", "status", "columns", "rows", "notes", "values"}
+
+``status`` is "passed" / "failed" for judged analyses (observed orders with a minimum),
+"reported" for comparisons without a verdict (the thesis's figures) and "unavailable" when
+their cases could not run. ``values`` holds the numbers for programs (tests, other reports);
+``rows`` holds display strings. A row may carry ``"flag": true`` (a large difference to look at).
+
+* ``order``: observed convergence orders of a mesh sweep (:func:`verification.fe_analytic.observed_orders`):
+  "vs-exact" from errors against a closed form, "richardson" from three values; judged when the
+  check declares ``min_order`` (mean order >= it; with ``monotone``, errors must decrease too).
+  Errors below ``roundoff`` on every mesh mean the discretisation is exact there: no order.
+* ``thesis``: our metric of a case (times ``scale``) beside the thesis's number, with the
+  relative difference, flagged beyond ``flag_rel``; rows of unavailable cases say why.
+* ``sensitivity``: a metric over a two-parameter grid; relative change across each parameter's
+  range (from its lowest to its highest value, at every value of the other parameter) beside the
+  thesis's.
+* ``table``: one row per case, one column per metric; cases that did not run say why.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+PASSED, FAILED, REPORTED, UNAVAILABLE = "passed", "failed", "reported", "unavailable"
+
+
+def _fmt(value: Any, digits: int = 4) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, str):
+        return value
+    x = float(value)
+    if math.isnan(x):
+        return "nan"
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return f"{x:.{digits}g}"
+
+
+def _percent(value: float | None) -> str:
+    return "–" if value is None or not math.isfinite(value) else f"{100.0 * value:+.1f} %"
+
+
+def _metric(row: dict[str, Any], metric: str) -> float | None:
+    value = row.get("metrics", {}).get(metric)
+    return None if value is None else float(value)
+
+
+def _unavailable_message(row: dict[str, Any]) -> str:
+    """The first line of the message of the first side that did not run (or "no value")."""
+    for side in row.get("sides", []):
+        if side.get("status") not in ("ok", None):
+            first = (side.get("message") or "").splitlines()
+            return first[0] if first else side["status"]
+    return "no value"
+
+
+# ---------------------------------------------------------------------------------------------
+# order
+
+
+def order_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    from verification.fe_analytic import observed_orders
+
+    settings = analysis.settings
+    roundoff = float(settings.get("roundoff", 0.0))
+    out_rows, values, notes = [], [], []
+    status = PASSED
+    judged = False
+    for check in settings["checks"]:
+        case_rows = [rows[n] for n in check["cases"] if n in rows]
+        unavailable = [r for r in case_rows if r["status"] == "unavailable"]
+        sizes = [float(r["params"][check["x"]]) for r in case_rows]
+        errors = [_metric(r, check["metric"]) for r in case_rows]
+        entry: dict[str, Any] = {"label": check["label"], "metric": check["metric"], "mode": check["mode"], "sizes": sizes, "values": errors, "orders": [], "mean_order": None,
+                                 "min_order": check.get("min_order"), "verdict": "reported"}
+        if unavailable or len(case_rows) != len(check["cases"]) or any(e is None for e in errors):
+            why = _unavailable_message(unavailable[0]) if unavailable else "a case has no value"
+            entry["verdict"] = "unavailable"
+            out_rows.append({"cells": [check["label"], ", ".join(_fmt(h) for h in sizes), "–", "–", "–", _fmt(check.get("min_order")), f"unavailable: {why}"]})
+            values.append(entry)
+            if check.get("min_order") is not None and not unavailable:
+                status = FAILED  # a judged check without its numbers: something crashed
+            continue
+        exact = check["mode"] == "vs-exact" and roundoff > 0 and max(abs(e) for e in errors) < roundoff
+        if exact:
+            entry["verdict"] = "exact"
+            verdict = f"exact to round-off (every error < {roundoff:g}): no order"
+        else:
+            orders = observed_orders(sizes, errors, check["mode"])
+            finite = [o for o in orders if math.isfinite(o)]
+            entry["orders"] = orders
+            entry["mean_order"] = float(np.mean(finite)) if finite else math.nan
+            verdict = "reported"
+            if check.get("min_order") is not None:
+                judged = True
+                ok = entry["mean_order"] >= float(check["min_order"])
+                if check.get("monotone"):
+                    ok = ok and all(abs(b) < abs(a) for a, b in zip(errors, errors[1:]))
+                verdict = "pass" if ok else "fail"
+                if not ok:
+                    status = FAILED
+            elif check["mode"] == "vs-exact" and not all(abs(b) < abs(a) for a, b in zip(errors, errors[1:])):
+                verdict = "reported (not monotone)"
+            entry["verdict"] = verdict
+        values.append(entry)
+        out_rows.append(
+            {
+                "cells": [
+                    check["label"],
+                    ", ".join(_fmt(h) for h in sizes),
+                    ", ".join(_fmt(e, 3) for e in errors),
+                    ", ".join(_fmt(o, 3) for o in entry["orders"]) or "–",
+                    _fmt(entry["mean_order"], 3),
+                    _fmt(check.get("min_order")),
+                    verdict,
+                ],
+                "flag": verdict == "fail",
+            }
+        )
+    if not judged and status == PASSED:
+        status = REPORTED
+    if all(v["verdict"] == "unavailable" for v in values):
+        status = UNAVAILABLE
+    notes.append("vs-exact: log(e_i / e_i+1) / log(h_i / h_i+1) between successive meshes; richardson: log(|f1 - f2| / |f2 - f3|) / log(r).")
+    return {
+        "columns": ["quantity", "mesh sizes (mm)", "errors / values", "orders", "mean order", "minimum", "verdict"],
+        "rows": out_rows,
+        "status": status,
+        "notes": notes,
+        "values": {"checks": values},
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# thesis
+
+
+def thesis_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    flag_rel = float(analysis.settings.get("flag_rel", 0.25))
+    out_rows, values = [], []
+    for spec in analysis.settings["rows"]:
+        row = rows.get(spec["case"])
+        scale = float(spec.get("scale", 1.0))
+        thesis = spec.get("thesis")
+        label = [spec.get("scene", ""), spec["quantity"], spec.get("method", "")]
+        if row is None or row["status"] in ("unavailable", "error") or _metric(row, spec["metric"]) is None:
+            why = "case not run" if row is None else _unavailable_message(row)
+            if row is not None and any(s.get("status") == "refused" for s in row.get("sides", [])):
+                side = next(s for s in row["sides"] if s.get("status") == "refused")
+                why = f"{side['side']} refused: {why}"
+            values.append({**spec, "ours": None, "difference": None, "flag": False, "note": why})
+            out_rows.append({"cells": label + ["–", _fmt(thesis), "–", why]})
+            continue
+        ours = _metric(row, spec["metric"]) * scale
+        difference = None if thesis in (None, 0) else (ours - float(thesis)) / float(thesis)
+        flag = difference is not None and abs(difference) > flag_rel
+        values.append({**spec, "ours": ours, "difference": difference, "flag": flag})
+        note = f"large difference (> {100 * flag_rel:.0f} %)" if flag else ""
+        out_rows.append({"cells": label + [_fmt(ours), _fmt(thesis), _percent(difference), note], "flag": flag})
+    available = [v for v in values if v["ours"] is not None]
+    return {
+        "columns": ["scene", "quantity", "method", "ours", "thesis", "difference", "note"],
+        "rows": out_rows,
+        "status": REPORTED if available else UNAVAILABLE,
+        "notes": [f"Reported, no verdict: the thesis's figures come from its own meshes and loads (SPEC 7); differences beyond {100 * flag_rel:.0f} % are flagged."],
+        "values": {"rows": values},
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# sensitivity
+
+
+def grid_of(rows: dict[str, dict[str, Any]], names: tuple[str, ...], x: str, y: str, metric: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(xs, ys, Z[i, j] = metric at xs[i], ys[j]) of the cases ``names`` (NaN where missing)."""
+    points = [(float(rows[n]["params"][x]), float(rows[n]["params"][y]), _metric(rows[n], metric)) for n in names if n in rows]
+    xs = np.array(sorted({p[0] for p in points}))
+    ys = np.array(sorted({p[1] for p in points}))
+    z = np.full((len(xs), len(ys)), np.nan)
+    for px, py, v in points:
+        if v is not None:
+            z[np.searchsorted(xs, px), np.searchsorted(ys, py)] = v
+    return xs, ys, z
+
+
+def sensitivity_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    s = analysis.settings
+    flag_rel = float(s.get("flag_rel", 0.25))
+    xs, ys, z = grid_of(rows, analysis.cases, s["x"], s["y"], s["metric"])
+    if not np.isfinite(z).any():
+        return {"columns": [], "rows": [], "status": UNAVAILABLE, "notes": ["no case has a value"], "values": {}}
+    # relative change from the lowest to the highest value of one parameter, at each value of the other
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows of a partly failed grid stay NaN
+        along_x = (z[-1, :] - z[0, :]) / z[0, :]
+        along_y = (z[:, -1] - z[:, 0]) / z[:, 0]
+        spread_y = (np.nanmax(z, axis=1) - np.nanmin(z, axis=1)) / np.nanmin(z, axis=1)
+    out_rows, values = [], {}
+    floor = float(s.get("flag_abs", 0.02))  # differences of a few points on a few % are not "large"
+
+    def summary_of(changes: np.ndarray) -> dict[str, float]:
+        finite = changes[np.isfinite(changes)]
+        if not finite.size:
+            return {"mean": math.nan, "min": math.nan, "max": math.nan}
+        return {"mean": float(finite.mean()), "min": float(finite.min()), "max": float(finite.max())}
+
+    def flagged(ours: float, thesis: float | None) -> bool:
+        return thesis is not None and math.isfinite(ours) and abs(ours - thesis) > max(flag_rel * abs(thesis), floor)
+
+    rows_spec = (
+        ("x_change", f"change of the peak, {s['x']} {xs[0]:g} -> {xs[-1]:g}", along_x, s.get("thesis_x_change"), s["y"]),
+        ("y_spread", f"spread (max - min) / min of the peak over {s['y']} {ys[0]:g} .. {ys[-1]:g}", spread_y, s.get("thesis_y_change"), s["x"]),
+        ("y_change", f"change of the peak, {s['y']} {ys[0]:g} -> {ys[-1]:g}", along_y, None, s["x"]),
+    )
+    for key, label, changes, thesis, other in rows_spec:
+        entry = summary_of(changes)
+        flag = flagged(entry["mean"], thesis)
+        values[key] = {**entry, "thesis": thesis, "flag": bool(flag), "per_other_value": changes.tolist()}
+        out_rows.append(
+            {
+                "cells": [label, f"{_percent(entry['mean'])} mean (from {_percent(entry['min'])} to {_percent(entry['max'])} over {other})", _percent(thesis) if thesis is not None else "–", "large difference" if flag else ""],
+                "flag": flag,
+            }
+        )
+    values["range"] = {"min": float(np.nanmin(z)), "max": float(np.nanmax(z)), "missing": int(np.isnan(z).sum()), "grid": [len(xs), len(ys)]}
+    out_rows.append({"cells": [f"{s['metric']} over the grid", f"{np.nanmin(z):.4g} .. {np.nanmax(z):.4g}" + (f" ({values['range']['missing']} missing)" if values["range"]["missing"] else ""), "–", ""]})
+    return {
+        "columns": ["quantity", "ours", "thesis", "note"],
+        "rows": out_rows,
+        "status": REPORTED,
+        "notes": [
+            "Reported, no verdict (SPEC 7: the thesis's fig. 4.3.10 from its own mesh and stance). A change is (value at the highest - value at the lowest) / value at the "
+            f"lowest, at each value of the other parameter; flagged when it differs from the thesis's by more than {100 * flag_rel:.0f} % of it (and {100 * floor:.0f} points)."
+        ],
+        "values": values,
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# table
+
+
+def table_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """One row per case, one column per metric (``settings["columns"]``: header, metric, scale);
+    cases that did not run give their reason instead of numbers."""
+    columns = analysis.settings["columns"]
+    out_rows, values = [], []
+    for name in analysis.cases:
+        row = rows.get(name)
+        numbers = [None if row is None or _metric(row, c["metric"]) is None else _metric(row, c["metric"]) * float(c.get("scale", 1.0)) for c in columns]
+        note = ""
+        if row is None:
+            note = "case not run"
+        elif any(s.get("status") != "ok" for s in row.get("sides", [])):
+            side = next(s for s in row["sides"] if s.get("status") != "ok")
+            note = f"{side['side']} {side['status']}: {_unavailable_message(row)}"
+        values.append({"case": name, "values": {c["metric"]: v for c, v in zip(columns, numbers)}, "note": note})
+        out_rows.append({"cells": [name] + [_fmt(v) for v in numbers] + [note]})
+    available = any(v is not None for entry in values for v in entry["values"].values())
+    return {
+        "columns": ["case"] + [c["header"] for c in columns] + ["note"],
+        "rows": out_rows,
+        "status": REPORTED if available else UNAVAILABLE,
+        "notes": [],
+        "values": {"rows": values},
+    }
+
+
+ANALYSES: dict[str, Callable[[Any, dict[str, dict[str, Any]]], dict[str, Any]]] = {
+    "order": order_analysis,
+    "thesis": thesis_analysis,
+    "sensitivity": sensitivity_analysis,
+    "table": table_analysis,
+}
+
+
+def run_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The analysis's table over the case rows; a crash becomes status "error" with its message."""
+    try:
+        result = ANALYSES[analysis.kind](analysis, rows)
+    except Exception as exc:  # a bug in an analysis must not sink the campaign's report
+        import traceback
+
+        result = {"columns": [], "rows": [], "status": "error", "notes": [f"{type(exc).__name__}: {exc}", traceback.format_exc()[-1200:]], "values": {}}
+    return {"name": analysis.name, "title": analysis.title, "kind": analysis.kind, **result}
+
+
+def format_analysis(result: dict[str, Any]) -> str:
+    """Plain-text table of an analysis (what `edem verify` prints)."""
+    lines = [f"{result['title']} [{result['status']}]"]
+    columns = result.get("columns", [])
+    table = [columns] + [r["cells"] for r in result.get("rows", [])]
+    if columns:
+        widths = [max(len(str(r[i])) for r in table) for i in range(len(columns))]
+        for k, r in enumerate(table):
+            mark = "!" if k and result["rows"][k - 1].get("flag") else " "
+            lines.append(mark + " " + "  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip())
+    if result["status"] == "error":
+        lines += result.get("notes", [])[:1]
+    return "\n".join(lines)
