@@ -992,7 +992,7 @@ def write_fe_results(run: FERunResult, out_dir: str | Path) -> Path:
     entries = []
     for s in run.steps:
         name = f"pressure_{s.step:04d}.vtp"
-        write_surface_vtp(out / name, s.points_mm, s.triangles, s.point_data, s.cell_data)
+        write_vtp(out / name, s.points_mm, s.triangles, s.cell_data, s.point_data)
         entries.append((s.time_s, name))
     write_pvd(out / "pressure.pvd", entries)
     write_vtp(out / "fixed.vtp", run.scene.fixed.vertices_mm, run.scene.fixed.triangles, {})
@@ -1006,33 +1006,3 @@ def _check_finite(data: dict) -> None:
             raise _solver_error(f"summary value {key} is not finite: {value}")
 
 
-def write_surface_vtp(path: str | Path, points_mm: np.ndarray, triangles: np.ndarray,
-                      point_data: dict[str, np.ndarray], cell_data: dict[str, np.ndarray]) -> None:
-    """A triangulated surface with point and cell arrays as binary VTK XML PolyData."""
-    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
-    from vtkmodules.vtkCommonCore import vtkPoints
-    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
-    from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
-
-    pts = vtkPoints()
-    pts.SetData(numpy_to_vtk(np.ascontiguousarray(points_mm, dtype=np.float64), deep=True))
-    tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    cells = vtkCellArray()
-    offsets = numpy_to_vtkIdTypeArray(np.arange(0, 3 * len(tri) + 1, 3, dtype=np.int64),
-                                      deep=True)
-    conn = numpy_to_vtkIdTypeArray(np.ascontiguousarray(tri.ravel()), deep=True)
-    cells.SetData(offsets, conn)
-    poly = vtkPolyData()
-    poly.SetPoints(pts)
-    poly.SetPolys(cells)
-    for target, arrays in ((poly.GetPointData(), point_data), (poly.GetCellData(), cell_data)):
-        for name, values in arrays.items():
-            arr = numpy_to_vtk(np.ascontiguousarray(values), deep=True)
-            arr.SetName(name)
-            target.AddArray(arr)
-    writer = vtkXMLPolyDataWriter()
-    writer.SetFileName(str(path))
-    writer.SetInputData(poly)
-    writer.SetDataModeToBinary()
-    if not writer.Write():
-        raise OSError(f"could not write {path}")

@@ -422,21 +422,25 @@ def read_surface(
 def write_vtp(
     path: str | Path, points_mm: np.ndarray, triangles: np.ndarray,
     cell_data: dict[str, np.ndarray] | None = None,
+    point_data: dict[str, np.ndarray] | None = None,
 ) -> None:
-    """Write a triangulated surface, with optional per-triangle arrays, as VTK XML PolyData.
+    """Write a triangulated surface, with optional per-triangle and per-vertex arrays, as VTK
+    XML PolyData.
 
     VTK's own vtkXMLPolyDataWriter, binary: float64 points and int64 connectivity, so a
-    round trip is exact (SPEC 6). The result directory's pressure maps use it too (SPEC 9).
-    Raises OSError if VTK cannot write the file.
+    round trip is exact (SPEC 6). Every result directory's pressure maps use it (SPEC 9: the
+    discrete runs write cell data, the FE runs nodal and facet data). Raises OSError if VTK
+    cannot write the file.
     """
     from vtkmodules.util.numpy_support import numpy_to_vtk
     from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
 
     poly = _vtk_polydata(points_mm, _block(np.asarray(triangles).reshape(-1, 3)))
-    for name, values in (cell_data or {}).items():
-        array = numpy_to_vtk(np.ascontiguousarray(values), deep=True)
-        array.SetName(name)
-        poly.GetCellData().AddArray(array)
+    for target, arrays in ((poly.GetCellData(), cell_data), (poly.GetPointData(), point_data)):
+        for name, values in (arrays or {}).items():
+            array = numpy_to_vtk(np.ascontiguousarray(values), deep=True)
+            array.SetName(name)
+            target.AddArray(array)
     writer = vtkXMLPolyDataWriter()
     writer.SetFileName(str(path))
     writer.SetInputData(poly)

@@ -156,32 +156,9 @@ def write_surface_frame(
     cell_data: dict[str, np.ndarray] | None = None,
 ) -> Path:
     """A .vtp with point and cell arrays (the FE layout of SPEC 9; `edem run` writes cell data only)."""
-    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
-    from vtkmodules.vtkCommonCore import vtkPoints
-    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
-    from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
+    from geometries.mesh_io import write_vtp
 
-    points_mm = np.ascontiguousarray(points_mm, dtype=np.float64)
-    triangles = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
-    poly = vtkPolyData()
-    pts = vtkPoints()
-    pts.SetData(numpy_to_vtk(points_mm, deep=True))
-    poly.SetPoints(pts)
-    cells = vtkCellArray()
-    offsets = np.arange(0, 3 * len(triangles) + 1, 3, dtype=np.int64)
-    cells.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True), numpy_to_vtkIdTypeArray(triangles.ravel(), deep=True))
-    poly.SetPolys(cells)
-    for target, data in ((poly.GetPointData(), point_data), (poly.GetCellData(), cell_data)):
-        for name, values in (data or {}).items():
-            array = numpy_to_vtk(np.ascontiguousarray(values), deep=True)
-            array.SetName(name)
-            target.AddArray(array)
-    writer = vtkXMLPolyDataWriter()
-    writer.SetFileName(str(path))
-    writer.SetInputData(poly)
-    writer.SetDataModeToBinary()
-    if not writer.Write():
-        raise OSError(f"could not write {path}")
+    write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data)
     return Path(path)
 
 
