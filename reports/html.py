@@ -89,6 +89,45 @@ def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
     plt.close(fig)
 
 
+def _error_time_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
+    """kind "error-vs-time": each metric of y against the wall time of side a (one panel per
+    metric, log axes as declared), one series per family of cases (the case name up to its last
+    '-'), dashed the Pareto front (points no other beats in both) of the cases against each truth
+    (side b)."""
+    plt = _matplotlib()
+    names = [n for n in spec["cases"] if n in rows and rows[n].get("sides")]
+    panels = list(spec["y"])
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.8 * len(panels), 3.8), constrained_layout=True, squeeze=False)
+    for ax, metric in zip(axes[0], panels):
+        points = []
+        for n in names:
+            t, e = _value(rows[n]["sides"][0].get("wall_time_s")), _value(rows[n]["metrics"].get(metric))
+            if math.isfinite(t) and math.isfinite(e) and t > 0 and (e > 0 or not spec["logy"]):
+                truth = rows[n]["sides"][1].get("side", "") if len(rows[n]["sides"]) > 1 else ""
+                points.append((n.rsplit("-", 1)[0], n, t, e, truth))
+        for family in dict.fromkeys(p[0] for p in points):
+            mine = sorted((p for p in points if p[0] == family), key=lambda p: p[2])
+            ax.plot([p[2] for p in mine], [p[3] for p in mine], "o-", label=family)
+            for p in mine:
+                ax.annotate(p[1].rsplit("-", 1)[1], (p[2], p[3]), fontsize=6, xytext=(3, 3), textcoords="offset points")
+        for k, truth in enumerate(dict.fromkeys(p[4] for p in points)):  # one front per truth (side b)
+            group = [p for p in points if p[4] == truth]
+            front = sorted((p for p in group if not any(q[2] <= p[2] and q[3] <= p[3] and (q[2] < p[2] or q[3] < p[3]) for q in group)), key=lambda p: p[2])
+            if front:
+                ax.plot([p[2] for p in front], [p[3] for p in front], "--", color=f"{0.2 * k:.1f}", lw=1, label=f"Pareto front vs {truth or 'b'}")
+        if spec["logx"]:
+            ax.set_xscale("log")
+        if spec["logy"]:
+            ax.set_yscale("log")
+        ax.set_xlabel("wall time of side a (s)")
+        ax.set_ylabel(metric.replace("_", " "))
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    fig.suptitle(spec["title"], fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def _timeseries_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], out_dir: Path, path: Path) -> None:
     from reports.plots import plot_timeseries
 
@@ -245,6 +284,8 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
                     _sweep_figure(spec, rows, path)
                 elif spec["kind"] == "timeseries":
                     _timeseries_figure(spec, rows, out_dir, path)
+                elif spec["kind"] == "error-vs-time":
+                    _error_time_figure(spec, rows, path)
                 elif spec["kind"] == "maps":
                     from reports.maps import render_pressure_maps
 

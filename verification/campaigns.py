@@ -863,7 +863,15 @@ def campaigns() -> dict[str, Campaign]:
         "stance": stance_campaign(),
         "sensitivity": sensitivity_campaign(),
         "quick": _quick(),
+        **_fe_campaigns(),
     }
+
+
+def _fe_campaigns() -> dict[str, Campaign]:
+    """cylinder-plane, subject and error-vs-runtime (verification.fe_campaigns): EDEM/DEM vs the FE reference."""
+    from verification.fe_campaigns import fe_campaigns
+
+    return fe_campaigns()
 
 
 def get_campaign(name: str) -> Campaign:
@@ -920,3 +928,8 @@ def describe_campaigns() -> str:
             lines.append(f"  {case.name:32s} [{versus}] {case.description}")
         lines.append("")
     return "\n".join(lines).rstrip() + "\n"
+
+
+# The FE comparison campaigns register two truth sides and the "pareto" analysis kind: import the
+# module here (at the end, once every name above exists) so spawned workers see them too.
+import verification.fe_campaigns  # noqa: E402,F401
