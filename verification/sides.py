@@ -150,16 +150,16 @@ def _run_discrete(method: str) -> SideRunner:
     return runner
 
 
-def fe_availability() -> str | None:
-    """None when the FE reference can run, else why not (dolfinx or fem_reference.run_scene missing)."""
+def fe_availability(entry_point: str = "run_scene") -> str | None:
+    """None when the FE reference can run, else why not (dolfinx or fem_reference.<entry_point> missing)."""
     if importlib.util.find_spec("dolfinx") is None:
         return "FE reference not available: dolfinx is not installed (pip install -e '.[fe]')"
     try:
         module = importlib.import_module("fem_reference")
-    except Exception as exc:  # the package is being written: any import failure means "not available"
+    except Exception as exc:  # a broken installation: any import failure means "not available"
         return f"FE reference not available: importing fem_reference failed ({type(exc).__name__}: {exc})"
-    if not hasattr(module, "run_scene"):
-        return "FE reference not available: fem_reference.run_scene does not exist yet"
+    if not hasattr(module, entry_point):
+        return f"FE reference not available: fem_reference.{entry_point} does not exist"
     return None
 
 
@@ -195,22 +195,9 @@ def _run_fe(model: str) -> SideRunner:
     return runner
 
 
-def fe_core_availability() -> str | None:
-    """None when the FE core (fem_reference.solve_contact on dolfinx) can run, else why not."""
-    if importlib.util.find_spec("dolfinx") is None:
-        return "FE reference not available: dolfinx is not installed (pip install -e '.[fe]')"
-    try:
-        module = importlib.import_module("fem_reference")
-    except Exception as exc:  # the package is being written: any import failure means "not available"
-        return f"FE reference not available: importing fem_reference failed ({type(exc).__name__}: {exc})"
-    if not hasattr(module, "solve_contact"):
-        return "FE reference not available: fem_reference.solve_contact does not exist"
-    return None
-
-
 def _run_fe_problem(name: str) -> SideRunner:
     def runner(scene_ref: str, overrides: dict[str, Any], out_dir: Path, options: dict[str, Any]) -> str:
-        why = fe_core_availability()
+        why = fe_availability("solve_contact")
         if why is not None:
             raise UnavailableError(why)
         from verification.fe_analytic import run_fe_problem

@@ -115,7 +115,7 @@ def test_source_digest_covers_the_solver_package():
 
 
 def test_fe_side_is_reported_unavailable_not_faked(tmp_path, monkeypatch):
-    monkeypatch.setattr(sides, "fe_availability", lambda: "FE reference not available: test")
+    monkeypatch.setattr(sides, "fe_availability", lambda *entry_point: "FE reference not available: test")
     fe_case = Case("vs-fe", "DEM against the FE slab", "flat-plates.toml", ("dem", "fe-slab"), SPEC8_METRICS, {m: 0.1 for m in SPEC8_METRICS})
     summary = run_campaign(Campaign("fe", "FE", (fe_case,)), tmp_path / "fe", jobs=1, report=False)
     row = summary["cases"][0]
