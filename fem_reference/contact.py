@@ -199,36 +199,20 @@ class _Setup:
 
     def constant_field(self, direction: np.ndarray) -> Any:
         """Function of V equal to ``direction`` everywhere (pressure part zero for TH)."""
-        fem = self.m["fem"]
-        f = fem.Function(self.V)
         d = np.asarray(direction, dtype=np.float64)
-
-        def val(x: np.ndarray) -> np.ndarray:
-            return np.tile(d.reshape(3, 1), (1, x.shape[1]))
-
-        if self.element == "TH":
-            f.sub(0).interpolate(val)
-        else:
-            f.interpolate(val)
-        f.x.scatter_forward()
-        return f
+        return self._vector_function(lambda x: np.tile(d.reshape(3, 1), (1, x.shape[1])))
 
     def rotation_field(self, axis: np.ndarray) -> Any:
         """Function of V equal to the small rotation ``axis x (x - G)`` (pressure part zero for
         TH): linear, so exact in P1/P2, and strain-free."""
-        fem = self.m["fem"]
-        f = fem.Function(self.V)
         a = np.asarray(axis, dtype=np.float64)
         g = self.ref_point
+        return self._vector_function(lambda x: np.cross(a, (x - g.reshape(3, 1)).T).T)
 
-        def val(x: np.ndarray) -> np.ndarray:
-            r = x - g.reshape(3, 1)
-            return np.cross(a, r.T).T
-
-        if self.element == "TH":
-            f.sub(0).interpolate(val)
-        else:
-            f.interpolate(val)
+    def _vector_function(self, values: Any) -> Any:
+        """Function of V interpolating the vector field ``values(x)`` (its displacement part for TH)."""
+        f = self.m["fem"].Function(self.V)
+        (f.sub(0) if self.element == "TH" else f).interpolate(values)
         f.x.scatter_forward()
         return f
 

@@ -76,17 +76,8 @@ def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
             x0, y0 = xs[ok][0], ys[ok][0]
             xr = np.array([xs[ok].min(), xs[ok].max()])
             ax.plot(xr, y0 * (xr / x0) ** slope, ":", color="grey", label=f"slope {slope:g}")
-        if spec["logx"]:
-            ax.set_xscale("log")
-        if log:
-            ax.set_yscale("log")
-        ax.set_xlabel(spec["x"].replace("_", " "))
-        ax.set_ylabel(metric.replace("_", " "))
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8)
-    fig.suptitle(spec["title"], fontsize=10)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+        _finish_panel(ax, spec["logx"], log, spec["x"].replace("_", " "), metric)
+    _save(plt, fig, spec["title"], path)
 
 
 def _error_time_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
@@ -115,15 +106,23 @@ def _error_time_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], pa
             front = sorted((p for p in group if not any(q[2] <= p[2] and q[3] <= p[3] and (q[2] < p[2] or q[3] < p[3]) for q in group)), key=lambda p: p[2])
             if front:
                 ax.plot([p[2] for p in front], [p[3] for p in front], "--", color=f"{0.2 * k:.1f}", lw=1, label=f"Pareto front vs {truth or 'b'}")
-        if spec["logx"]:
-            ax.set_xscale("log")
-        if spec["logy"]:
-            ax.set_yscale("log")
-        ax.set_xlabel("wall time of side a (s)")
-        ax.set_ylabel(metric.replace("_", " "))
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8)
-    fig.suptitle(spec["title"], fontsize=10)
+        _finish_panel(ax, spec["logx"], spec["logy"], "wall time of side a (s)", metric)
+    _save(plt, fig, spec["title"], path)
+
+
+def _finish_panel(ax: Any, logx: bool, logy: bool, xlabel: str, metric: str) -> None:
+    if logx:
+        ax.set_xscale("log")
+    if logy:
+        ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(metric.replace("_", " "))
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+
+
+def _save(plt: Any, fig: Any, title: str, path: Path) -> None:
+    fig.suptitle(title, fontsize=10)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

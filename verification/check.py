@@ -129,13 +129,7 @@ def edem_quantities(result_dir: str | Path, scene) -> dict[str, Any]:
     series = result.timeseries
     centroids, areas = scene.mobile.centroids_mm, scene.mobile.areas_mm2  # the frames' triangles, in order
     fields = [coarse_field(centroids, areas, pressure_at_cells(result.frame(k))) for k in range(len(result.time_s))]
-    return {
-        "time_s": series["time_s"].tolist(),
-        "peak_pressure_mpa": series["peak_pressure_mpa"].tolist(),
-        "contact_area_mm2": series["contact_area_mm2"].tolist(),
-        "displacement_mm": np.column_stack([series[f"disp_{x}_mm"] for x in "xyz"]).tolist(),
-        "pressure_field": fields,
-    }
+    return _quantities(series, fields)
 
 
 def fe_quantities(fe_dir: str | Path, edem_dir: str | Path, scene) -> dict[str, Any]:
@@ -159,12 +153,19 @@ def fe_quantities(fe_dir: str | Path, edem_dir: str | Path, scene) -> dict[str, 
             p = frame_fe.cell_data["pressure_mpa"][proj.triangle]
         fields.append(coarse_field(centroids, areas, p))
     return {
+        **_quantities(series, fields),
+        "summary": {k: fe.summary[k] for k in ("method", "n_dofs", "wall_time_s", "warnings") if k in fe.summary},
+    }
+
+
+def _quantities(series: dict[str, np.ndarray], fields: list) -> dict[str, Any]:
+    """The stored quantities per time point of a SPEC 9 time series and its binned pressure fields."""
+    return {
         "time_s": series["time_s"].tolist(),
         "peak_pressure_mpa": series["peak_pressure_mpa"].tolist(),
         "contact_area_mm2": series["contact_area_mm2"].tolist(),
         "displacement_mm": np.column_stack([series[f"disp_{x}_mm"] for x in "xyz"]).tolist(),
         "pressure_field": fields,
-        "summary": {k: fe.summary[k] for k in ("method", "n_dofs", "wall_time_s", "warnings") if k in fe.summary},
     }
 
 
