@@ -10,6 +10,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from edem.atomic_dirs import atomic_result_dir
 from edem.solver import RunResult
 from geometries.mesh_io import write_vtp
 
@@ -72,10 +73,16 @@ def timeseries_rows(run: RunResult) -> list[list[float]]:
     ]
 
 
-def write_results(run: RunResult, out_dir: str | Path) -> Path:
-    """Write the SPEC 9 result directory for a DEM/EDEM run; returns the directory."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+def write_results(run: RunResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+    """Write the SPEC 9 result directory for a DEM/EDEM run, atomically and sealed with its
+    manifest (:mod:`edem.atomic_dirs`; ``overwrite`` replaces an existing result); returns it."""
+    with atomic_result_dir(out_dir, overwrite=overwrite) as tmp:
+        write_result_files(run, tmp)
+    return Path(out_dir)
+
+
+def write_result_files(run: RunResult, out: Path) -> None:
+    """The files of :func:`write_results` into the existing directory ``out`` (not sealed)."""
     data = summary(run)
     _check_finite(data)
     (out / "summary.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
@@ -85,7 +92,6 @@ def write_results(run: RunResult, out_dir: str | Path) -> Path:
         for row in timeseries_rows(run):
             writer.writerow([_fmt(x) for x in row])
     _write_pressure_maps(run, out)
-    return out
 
 
 def _fmt(x: float) -> str:

@@ -958,7 +958,17 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
 # --------------------------------------------------------------------------------------------
 
 
-def write_fe_results(run: FERunResult, out_dir: str | Path) -> Path:
+def write_fe_results(run: FERunResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+    """The result directory of :func:`write_fe_result_files`, written atomically and sealed
+    with its manifest (:mod:`edem.atomic_dirs`; ``overwrite`` replaces an existing result)."""
+    from edem.atomic_dirs import atomic_result_dir
+
+    with atomic_result_dir(out_dir, overwrite=overwrite) as tmp:
+        write_fe_result_files(run, tmp)
+    return Path(out_dir)
+
+
+def write_fe_result_files(run: FERunResult, out_dir: str | Path) -> Path:
     """summary.json, timeseries.csv (edem.results.TIMESERIES_COLUMNS), pressure.pvd with one
     pressure_NNNN.vtp per solved time point (the FE contact surface in the reference
     configuration of that time point: point data pressure_mpa, spring_length_mm, in_contact,

@@ -60,16 +60,21 @@ class ResultDir:
 def read_result_dir(path: str | Path) -> ResultDir:
     """Read summary.json, timeseries.csv and the pressure.pvd index of a result directory (SPEC 9).
 
-    Raises InputError naming the file when something of the layout is missing or unreadable.
+    Raises InputError naming the file when something of the layout is missing or unreadable,
+    and when the directory does not verify against its manifest (a file missing, changed or
+    left by another run: :func:`edem.atomic_dirs.verify_manifest`).
     """
+    from edem.atomic_dirs import verify_manifest
+
     root = Path(path)
     expected = "a result directory of edem run / edem fe (summary.json, timeseries.csv, pressure.pvd)"
     if not root.is_dir():
         raise InputError("not a directory", file=root, expected=expected)
+    if not (root / "summary.json").is_file():
+        raise InputError("no summary.json here", file=root, expected=expected)
+    verify_manifest(root)
     try:
         summary = json.loads((root / "summary.json").read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError("no summary.json here", file=root, expected=expected) from None
     except ValueError as exc:
         raise InputError(f"summary.json is not valid JSON: {exc}", file=root / "summary.json") from None
     series = read_timeseries_csv(root / "timeseries.csv")
@@ -216,10 +221,9 @@ def write_static_result_dir(
     import csv
     import json
 
+    from edem.atomic_dirs import atomic_result_dir
     from edem.results import TIMESERIES_COLUMNS, write_pvd
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     force = np.asarray(force_n, dtype=np.float64).reshape(3)
     disp = np.asarray(displacement_mm, dtype=np.float64).reshape(3)
     data = {
@@ -231,14 +235,15 @@ def write_static_result_dir(
         "warnings": [],
         **summary,
     }
-    (out / "summary.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    with open(out / "timeseries.csv", "w", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f)
-        writer.writerow(TIMESERIES_COLUMNS)
-        writer.writerow(
-            [0, "0.0", *(repr(float(x)) for x in force), repr(float(peak_pressure_mpa)), repr(float(mean_pressure_mpa)),
-             repr(float(contact_area_mm2)), *(repr(float(x)) for x in disp), "0.0", "0.0", "0.0", int(iterations), repr(float(force_residual_n))]
-        )
-    write_surface_frame(out / "pressure_0000.vtp", points_mm, triangles, point_data, cell_data)
-    write_pvd(out / "pressure.pvd", [(0.0, "pressure_0000.vtp")])
-    return out
+    with atomic_result_dir(out_dir) as out:
+        (out / "summary.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+        with open(out / "timeseries.csv", "w", newline="", encoding="utf-8") as f:
+            writer = csv.writer(f)
+            writer.writerow(TIMESERIES_COLUMNS)
+            writer.writerow(
+                [0, "0.0", *(repr(float(x)) for x in force), repr(float(peak_pressure_mpa)), repr(float(mean_pressure_mpa)),
+                 repr(float(contact_area_mm2)), *(repr(float(x)) for x in disp), "0.0", "0.0", "0.0", int(iterations), repr(float(force_residual_n))]
+            )
+        write_surface_frame(out / "pressure_0000.vtp", points_mm, triangles, point_data, cell_data)
+        write_pvd(out / "pressure.pvd", [(0.0, "pressure_0000.vtp")])
+    return Path(out_dir)

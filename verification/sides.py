@@ -109,21 +109,26 @@ FRAMES = ("all", "peak")
 
 def _write_discrete(result: Any, out_dir: Path, frames: str) -> None:
     """write_results, or (frames "peak") the same summary and time series with one pressure map."""
-    import dataclasses
-
+    from edem.atomic_dirs import atomic_result_dir
     from edem.results import write_results
 
     if frames == "all":
         write_results(result, out_dir)
         return
+    peak = max(range(len(result.steps)), key=lambda k: result.steps[k].peak_pressure_mpa)
+    with atomic_result_dir(out_dir) as tmp:
+        _write_peak_frame(result, peak, tmp)
+
+
+def _write_peak_frame(result: Any, peak: int, out_dir: Path) -> None:
     import csv
+    import dataclasses
     import json
     import numbers
 
-    from edem.results import TIMESERIES_COLUMNS, summary, timeseries_rows
+    from edem.results import TIMESERIES_COLUMNS, summary, timeseries_rows, write_result_files
 
-    peak = max(range(len(result.steps)), key=lambda k: result.steps[k].peak_pressure_mpa)
-    write_results(dataclasses.replace(result, steps=[result.steps[peak]]), out_dir)  # that step's map
+    write_result_files(dataclasses.replace(result, steps=[result.steps[peak]]), out_dir)  # that step's map
     data = summary(result)
     data["frames"] = f"pressure map of the peak-pressure time point only (step {result.steps[peak].step})"
     (out_dir / "summary.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
