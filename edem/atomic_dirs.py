@@ -88,15 +88,17 @@ def is_result_dir(path: str | Path) -> bool:
     return (Path(path) / MANIFEST_NAME).is_file()
 
 
-def check_out_dir(out: str | Path, *, overwrite: bool = False, reuse: bool = False) -> Path:
+def check_out_dir(out: str | Path, *, overwrite: bool = False, reuse_if: str | None = None) -> Path:
     """Refuse, before any computing, an output directory the result could not be written to.
 
     Creates the missing parent directories and a probe directory beside ``out`` (removed again)
     so that read-only file systems and permissions are found now, not after the solve.
     ``overwrite``: an existing result directory (one with a manifest) may be replaced; a non-
-    empty directory that is not a result is never replaced. ``reuse``: the directory is kept and
-    written into (a campaign's cache directory). Returns the absolute path.
+    empty directory that is not a result is never replaced. ``reuse_if``: the directory is kept
+    and written into (a campaign's cache directory) when it is new, empty or holds this entry
+    (e.g. "cases"). Returns the absolute path.
     """
+    reuse = reuse_if is not None
     out = Path(os.path.abspath(out))
     ancestor = _existing_ancestor(out)
     limit = _name_max(ancestor)
@@ -107,6 +109,9 @@ def check_out_dir(out: str | Path, *, overwrite: bool = False, reuse: bool = Fal
     if len(out.name.encode()) + _SIBLING_EXTRA > limit:
         raise InputError(f"the name has {len(out.name.encode())} bytes", file=out, key="--out",
                          expected=f"at most {limit - _SIBLING_EXTRA} bytes (room for the temporary sibling written first)")
+    if out.is_dir() and reuse and any(out.iterdir()) and not os.path.lexists(out / reuse_if):
+        raise InputError(f"the directory exists and holds no '{reuse_if}' of an earlier run; it is never written into",
+                         file=out, key="--out", expected="a new or empty directory, or one this command wrote")
     if out.is_dir() and not reuse and any(out.iterdir()):
         if not is_result_dir(out):
             raise InputError("the directory exists and is not a result directory (no manifest.json); it is never replaced",

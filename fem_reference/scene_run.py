@@ -599,14 +599,15 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
               degree: int | None = None, element: str | None = None,
               steps: str | Sequence[int] | None = None, out_dir: str | Path | None = None,
               layers_through_thickness: int | None = None, comm: Any = None,
-              progress: Callable[[int], None] | None = None) -> FERunResult:
+              progress: Callable[[int], None] | None = None, overwrite: bool = False) -> FERunResult:
     """Solve the FE reference of ``scene`` (an :class:`edem.scene.Scene`) at the selected time
     points and, with ``out_dir``, write the SPEC 9 result directory (rank 0 only).
 
     Settings come from the arguments, then the scene's ``[fe]`` table (model, mesh_size_mm,
     degree, element, layers_through_thickness), then the defaults (:func:`resolve_settings`).
     ``steps``: None (all), indices, or text such as "0,5-9,10:65:8" (:func:`parse_steps`).
-    ``progress(k)`` is called after each solved time point.
+    ``progress(k)`` is called after each solved time point. ``overwrite``: replace an existing
+    result directory at ``out_dir`` (:func:`write_fe_results`).
 
     Raises InputError on bad settings and SolverError (FEConvergenceError for a Newton failure)
     naming the time point when one has no solution.
@@ -747,10 +748,14 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
                       _merge_warnings(warnings, step_log), n_times, None, comm.rank)
     if out_dir is not None:
         run.out_dir = Path(out_dir)
+        from edem.errors import InputError
+
         failure = None
         if comm.rank == 0:  # rank 0 writes; every rank learns whether it worked (no hang)
             try:
-                write_fe_results(run, run.out_dir)
+                write_fe_results(run, run.out_dir, overwrite=overwrite)
+            except InputError as exc:  # disk full, not writable, a result there already
+                failure = ("input", exc.problem)
             except OSError as exc:
                 failure = ("input", f"cannot write the result directory: {exc}")
             except Exception as exc:
