@@ -178,11 +178,12 @@ def _verify(args: argparse.Namespace) -> int:
         return 0
     if not args.campaign:
         raise InputError("no campaign given", key="CAMPAIGN", expected="a campaign name (edem verify --list)")
+    from reports.html import write_campaign_report
     from verification.runner import format_summary, run_campaign
 
     campaign = get_campaign(args.campaign)
     out = Path(args.out) if args.out else Path("results") / "verify" / campaign.name
-    summary = run_campaign(campaign, out, jobs=args.jobs, scheduler=args.scheduler)
+    summary = run_campaign(campaign, out, jobs=args.jobs, scheduler=args.scheduler, report=write_campaign_report)
     print(format_summary(summary))
     print(f"report: {summary['report']}")
     return summary["exit_status"]
