@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+import edem.resultdir as resultdir
 import edem.results as results
 from edem.atomic_dirs import atomic_result_dir, manifest_problems, verify_manifest, write_manifest
 from edem.errors import InputError
@@ -95,7 +96,7 @@ def test_write_error_keeps_the_previous_result(tmp_path, plates_run, monkeypatch
     def failing(path, entries):
         raise OSError(code, os.strerror(code), str(path))
 
-    monkeypatch.setattr(results, "write_pvd", failing)
+    monkeypatch.setattr(resultdir, "write_pvd", failing)
     with pytest.raises(InputError, match="disk is full" if code == errno.ENOSPC else "cannot write the result") as info:
         results.write_results(plates_run, out, overwrite=True)
     assert "previous result is unchanged" in str(info.value)
