@@ -88,17 +88,17 @@ def is_result_dir(path: str | Path) -> bool:
     return (Path(path) / MANIFEST_NAME).is_file()
 
 
-def check_out_dir(out: str | Path, *, overwrite: bool = False, reuse_if: str | None = None) -> Path:
+def check_out_dir(out: str | Path, *, overwrite: bool = False, reuse_if: tuple[str, ...] = ()) -> Path:
     """Refuse, before any computing, an output directory the result could not be written to.
 
     Creates the missing parent directories and a probe directory beside ``out`` (removed again)
     so that read-only file systems and permissions are found now, not after the solve.
     ``overwrite``: an existing result directory (one with a manifest) may be replaced; a non-
     empty directory that is not a result is never replaced. ``reuse_if``: the directory is kept
-    and written into (a campaign's cache directory) when it is new, empty or holds this entry
-    (e.g. "cases"). Returns the absolute path.
+    and written into (a campaign's cache directory) when it is new, empty or holds one of these
+    entries (e.g. "cases"). Returns the absolute path.
     """
-    reuse = reuse_if is not None
+    reuse = bool(reuse_if)
     out = Path(os.path.abspath(out))
     ancestor = _existing_ancestor(out)
     limit = _name_max(ancestor)
@@ -109,8 +109,8 @@ def check_out_dir(out: str | Path, *, overwrite: bool = False, reuse_if: str | N
     if len(out.name.encode()) + _SIBLING_EXTRA > limit:
         raise InputError(f"the name has {len(out.name.encode())} bytes", file=out, key="--out",
                          expected=f"at most {limit - _SIBLING_EXTRA} bytes (room for the temporary sibling written first)")
-    if out.is_dir() and reuse and any(out.iterdir()) and not os.path.lexists(out / reuse_if):
-        raise InputError(f"the directory exists and holds no '{reuse_if}' of an earlier run; it is never written into",
+    if out.is_dir() and reuse and any(out.iterdir()) and not any(os.path.lexists(out / name) for name in reuse_if):
+        raise InputError(f"the directory exists and holds no '{reuse_if[0]}' of an earlier run; it is never written into",
                          file=out, key="--out", expected="a new or empty directory, or one this command wrote")
     if out.is_dir() and not reuse and any(out.iterdir()):
         if not is_result_dir(out):

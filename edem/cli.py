@@ -212,7 +212,7 @@ def _compare(args: argparse.Namespace) -> int:
     from verification.runner import write_json
 
     out = Path(args.out) if args.out else default_out_dir(RESULTS_ROOT / "compare", Path(args.a_dir).name, "vs", Path(args.b_dir).name)
-    out = check_out_dir(out, reuse_if="metrics.json")
+    out = check_out_dir(out, reuse_if=("metrics.json",))
     comparison = compare_result_dirs(args.a_dir, args.b_dir)
     write_json(out / "metrics.json", comparison)
     print(format_metrics_table(comparison))
@@ -238,7 +238,7 @@ def _verify(args: argparse.Namespace) -> int:
     from verification.runner import format_summary, run_campaign
 
     campaign = get_campaign(args.campaign)
-    out = check_out_dir(Path(args.out) if args.out else RESULTS_ROOT / "verify" / campaign.name, reuse_if="cases")
+    out = check_out_dir(Path(args.out) if args.out else RESULTS_ROOT / "verify" / campaign.name, reuse_if=("cases", ".lock"))
     summary = run_campaign(campaign, out, jobs=args.jobs, scheduler=args.scheduler, report=write_campaign_report)
     print(format_summary(summary))
     print(f"report: {summary['report']}")
@@ -308,6 +308,9 @@ def main(argv: list[str] | None = None) -> int:
     except SolverError as exc:
         print(f"edem {args.command}: no solution: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as exc:  # Ctrl-C: no traceback; campaigns say what they kept
+        print(f"edem {args.command}: {exc or 'interrupted'}", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
