@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import json
 from pathlib import Path
 
@@ -14,15 +13,11 @@ DERIVED = {"disp_norm_mm": ("disp_x_mm", "disp_y_mm", "disp_z_mm")}
 
 
 def read_timeseries(result_dir: str | Path) -> dict[str, np.ndarray]:
-    """Columns of a result directory's timeseries.csv (SPEC 9) as float arrays."""
-    path = Path(result_dir) / "timeseries.csv"
-    try:
-        with open(path, newline="", encoding="utf-8") as f:
-            rows = list(csv.reader(f))
-    except FileNotFoundError:
-        raise InputError("no timeseries.csv here", file=path, expected="a result directory of edem run / edem fe") from None
-    header, data = rows[0], np.array(rows[1:], dtype=float).reshape(-1, len(rows[0]))
-    columns = {name: data[:, i] for i, name in enumerate(header)}
+    """Columns of a result directory's timeseries.csv (SPEC 9) as float arrays, plus the derived
+    ones; the directory must verify against its manifest (:func:`edem.resultdir.read_result_dir`)."""
+    from edem.resultdir import read_result_dir
+
+    columns = dict(read_result_dir(result_dir).timeseries)
     for name, parts in DERIVED.items():
         if all(p in columns for p in parts):
             columns[name] = np.sqrt(sum(columns[p] ** 2 for p in parts))
