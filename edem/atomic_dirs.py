@@ -1,11 +1,11 @@
 """Result directories that are never partial, stale or mixed.
 
-A result directory is written into a temporary sibling (``.<name>.tmp-<pid>-<random>``), sealed
-with ``manifest.json`` (every file with its size and sha256, and the run id), flushed to disk
-(fsync of every file and directory) and only then renamed into place. An existing result is
-replaced only when the caller says so (``overwrite``), and it stays untouched until the rename:
-a crash, a kill or a full disk before that point leaves the previous result as it was and at
-most a temporary sibling behind. Readers verify the manifest (:func:`verify_manifest`): a
+A result directory is written into a temporary sibling (``.<name>.tmp-<host>-<pid>-<random>``),
+sealed with ``manifest.json`` (every file with its size and sha256, and the run id), flushed to
+disk (fsync of every file and directory) and only then renamed into place. An existing result
+is replaced only when the caller says so (``overwrite``), and it stays untouched until the
+rename: a crash, a kill or a full disk before that point leaves the previous result as it was
+and at most a hidden temporary sibling, which the next write of that result removes. Readers verify the manifest (:func:`verify_manifest`): a
 missing, changed or extra file (two runs mixed in one directory) is refused.
 
 Output paths are checked before any solve (:func:`check_out_dir`): a path that is a file or
@@ -27,6 +27,7 @@ import os
 import re
 import secrets
 import shutil
+import socket
 import tempfile
 import uuid
 from collections.abc import Iterator
@@ -37,7 +38,9 @@ from edem.errors import InputError
 
 MANIFEST_NAME = "manifest.json"
 MANIFEST_FORMAT = 1
-#: Bytes the temporary sibling's name adds to the result's name (".", ".tmp-", pid, 16 hex).
+#: Host tag of the temporary siblings: only this host's dead writers' siblings are removed.
+_HOST = hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+#: Bytes the temporary sibling's name adds to the result's name (".", ".tmp-", host, pid, 16 hex).
 _SIBLING_EXTRA = 48
 _CHUNK = 1 << 20
 
@@ -227,41 +230,69 @@ def verify_manifest(root: str | Path) -> str:
 # Atomic write
 
 
-def _write_error(out: Path, exc: OSError) -> InputError:
+class ResultWriteError(InputError):
+    """Writing a result failed (disk full, I/O error...): exit status 2 like bad input, but a
+    campaign records it as a crash to run again, never as the case's refusal."""
+
+
+def _write_error(out: Path, exc: OSError) -> ResultWriteError:
     full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
     problem = "the disk is full" if full else f"cannot write the result ({exc.strerror or exc})"
-    return InputError(f"{problem}; nothing was written there and a previous result is unchanged", file=out,
-                      expected="free space and a writable directory" if full else "a writable directory")
+    return ResultWriteError(f"{problem}; nothing was written there and a previous result is unchanged", file=out,
+                            expected="free space and a writable directory" if full else "a writable directory")
+
+
+def _sibling(out: Path, kind: str) -> Path:
+    """``.<name>.<kind>-<host>-<pid>-<random>``: hidden, and traceable to the process writing it."""
+    return out.parent / f".{out.name}.{kind}-{_HOST}-{os.getpid()}-{secrets.token_hex(8)}"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_siblings(out: str | Path) -> list[str]:
+    """Remove the temporary siblings of ``out`` left by writers of this host that were killed
+    (their pid no longer exists); returns their names. Live writers' siblings are kept."""
+    out = Path(os.path.abspath(out))
+    pattern = re.compile(rf"^\.{re.escape(out.name)}\.(tmp|old)-{_HOST}-(\d+)-[0-9a-f]{{16}}$")
+    removed = []
+    with contextlib.suppress(OSError):
+        for entry in out.parent.iterdir():
+            match = pattern.match(entry.name)
+            if match and not _alive(int(match.group(2))):
+                shutil.rmtree(entry, ignore_errors=True)
+                removed.append(entry.name)
+    return removed
 
 
 @contextlib.contextmanager
-def atomic_result_dir(out: str | Path, *, overwrite: bool = False, run_id: str | None = None,
-                      seal: bool = True) -> Iterator[Path]:
+def atomic_result_dir(out: str | Path, *, overwrite: bool = False, run_id: str | None = None) -> Iterator[Path]:
     """Yield a temporary sibling of ``out`` to write into; seal it and rename it to ``out`` on exit.
 
-    ``seal``: write the manifest (otherwise only fsync and rename: a campaign's case directory
-    whose files are rewritten later). An existing ``out`` is replaced only with ``overwrite``
-    and only when it is a result directory or empty; it is renamed aside at the last moment and
-    deleted after the new result is in place. An exception inside the block removes the
-    temporary sibling and leaves ``out`` as it was; OSError (disk full, read-only, ...) becomes
-    InputError (exit status 2) with a message.
+    An existing ``out`` is replaced only with ``overwrite`` and only when it is a result
+    directory or empty; it stays whole until the rename (an atomic exchange where the file
+    system has one). An exception inside the block removes the temporary sibling and leaves
+    ``out`` as it was; OSError (disk full, read-only, ...) becomes ResultWriteError (an
+    InputError: exit status 2) with a message. Siblings of killed earlier writers are removed.
     """
     out = Path(os.path.abspath(out))
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.parent / f".{out.name}.tmp-{os.getpid()}-{secrets.token_hex(8)}"
+        remove_stale_siblings(out)
+        tmp = _sibling(out, "tmp")
         tmp.mkdir()  # not mkdtemp: the result gets the umask's permissions, not 0700
     except OSError as exc:
         raise _write_error(out, exc) from None
     try:
         yield tmp
-        if seal:
-            write_manifest(tmp, run_id)
-        else:
-            for rel in _listed_files(tmp):
-                with open(tmp / rel, "rb") as f:
-                    os.fsync(f.fileno())
-            _fsync_dir(tmp)
+        write_manifest(tmp, run_id)
         _replace(tmp, out, overwrite)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -299,7 +330,7 @@ def _replace(tmp: Path, out: Path, overwrite: bool) -> None:
             shutil.rmtree(tmp, ignore_errors=True)
             return
         else:
-            old = out.parent / f".{out.name}.old-{secrets.token_hex(8)}"
+            old = _sibling(out, "old")
             os.rename(out, old)
             os.rename(tmp, out)
             _fsync_dir(out.parent)

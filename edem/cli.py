@@ -308,6 +308,9 @@ def main(argv: list[str] | None = None) -> int:
     except SolverError as exc:
         print(f"edem {args.command}: no solution: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # disk full or not writable where no finer message was given
+        print(f"edem {args.command}: cannot write: {exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt as exc:  # Ctrl-C: no traceback; campaigns say what they kept
         print(f"edem {args.command}: {exc or 'interrupted'}", file=sys.stderr)
         return 130

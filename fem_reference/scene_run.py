@@ -57,6 +57,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from edem.atomic_dirs import ResultWriteError
 from edem.mechanics import DOF_NAMES
 from edem.raycast import RayCaster
 from edem.resultdir import Frame, SurfaceFrame, timeseries_row, write_result_dir
@@ -484,7 +485,9 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         if comm.rank == 0:  # rank 0 writes; every rank learns whether it worked (no hang)
             try:
                 write_fe_results(run, run.out_dir, overwrite=overwrite)
-            except InputError as exc:  # disk full, not writable, a result there already
+            except ResultWriteError as exc:  # disk full, not writable
+                failure = ("write", exc.problem)
+            except InputError as exc:  # a result there already
                 failure = ("input", exc.problem)
             except OSError as exc:
                 failure = ("input", f"cannot write the result directory: {exc}")
@@ -492,6 +495,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
                 failure = ("solver", f"writing the result directory failed: {exc}")
         failure = comm.bcast(failure, root=0)
         if failure is not None:
+            if failure[0] == "write":
+                raise ResultWriteError(failure[1], file=str(out_dir), expected="free space and a writable directory (--out)")
             if failure[0] == "input":
                 raise InputError(failure[1], file=str(out_dir),
                                    expected="a writable directory (--out)")

@@ -496,6 +496,10 @@ def _run_campaign_locked(
                 bar.update(1)
             if on_case:
                 on_case(case.name, False)
+    except OSError as exc:  # the campaign directory cannot be written (disk full...)
+        finished.close()
+        raise InputError(f"cannot write the campaign's results ({exc.strerror or exc}); {len(records)} finished cases are kept",
+                         file=out, expected="free space and a writable directory") from None
     except KeyboardInterrupt:
         finished.close()  # stops the workers
         raise CampaignInterrupted(

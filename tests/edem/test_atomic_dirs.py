@@ -141,3 +141,19 @@ def test_manifest_records_the_run_id(tmp_path):
     (tmp_path / "a.txt").write_text("a")
     rid = uuid.uuid4().hex
     assert write_manifest(tmp_path, rid)["run_id"] == rid == verify_manifest(tmp_path)
+
+
+def test_siblings_of_killed_writers_are_removed_live_ones_kept(tmp_path, plates_run):
+    """A writer killed mid-write leaves a hidden temporary sibling; the next write of that result
+    removes it when its pid is gone (here: a child that has exited), never a live writer's."""
+    import edem.atomic_dirs as atomic_dirs
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(dead.stdout)
+    stale = tmp_path / f".r.tmp-{atomic_dirs._HOST}-{dead_pid}-{'0' * 16}"
+    live = tmp_path / f".r.tmp-{atomic_dirs._HOST}-{os.getpid()}-{'1' * 16}"
+    for d in (stale, live):
+        d.mkdir()
+        (d / "summary.json").write_text("{half")
+    results.write_results(plates_run, tmp_path / "r")
+    assert not stale.exists() and live.exists()

@@ -195,3 +195,39 @@ def test_library_versions_are_in_the_cache_key(monkeypatch):
     versions = dict(runner.library_versions())
     monkeypatch.setattr(runner, "library_versions", lambda: {**versions, "numpy": "0.0.1"})
     assert case_key(case) != before
+
+
+def test_a_full_disk_in_a_side_is_a_crash_run_again_not_a_refusal(tmp_path, monkeypatch):
+    import errno
+
+    import edem.resultdir as resultdir
+
+    def full(path, entries):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    out = tmp_path / "out"
+    campaign = tiny(2)
+    monkeypatch.setattr(resultdir, "write_pvd", full)
+    first = run_campaign(campaign, out, jobs=1)
+    assert first["counts"]["error"] == 2 and first["exit_status"] == 1
+    assert "disk is full" in first["cases"][0]["sides"][0]["message"]
+    monkeypatch.undo()
+    again = run_campaign(campaign, out, jobs=1)
+    assert again["computed"] == 2 and again["counts"]["passed"] == 2
+
+
+def test_a_full_file_system_ends_the_campaign_with_exit_2_and_no_traceback(tmp_path):
+    """A real 96 KiB tmpfs: the campaign's cases and report do not fit."""
+    where = tmp_path / "mnt"
+    where.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=96k", "tmpfs", str(where)], capture_output=True).returncode:
+        pytest.skip("mounting a tmpfs needs root")
+    try:
+        campaign = start(tmp_path, where / "out")
+        _, err = campaign.communicate(timeout=300)
+        assert campaign.returncode == 2, err
+        assert "Traceback" not in err and ("disk is full" in err or "No space left" in err), err
+        sides = [d for d in (where / "out" / "cases").glob("*/[ab]-*") if d.is_dir()]
+        assert all(manifest_problems(d) == [] for d in sides)  # what was written is whole
+    finally:
+        subprocess.run(["umount", str(where)], check=True)
