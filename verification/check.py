@@ -26,7 +26,6 @@ end of each spring (where the FE slab's contact face lies) and binned by the sam
 
 from __future__ import annotations
 
-import argparse
 import datetime as _dt
 import json
 import math
@@ -295,12 +294,3 @@ def run_check(*, refresh: bool = False, references: str | Path | None = None, sc
     print(format_rows(rows), file=out)
     print(f"edem check: {'FAILED' if drifted else 'ok'} ({len(scenes)} scenes against {directory})", file=out)
     return 1 if drifted else 0
-
-
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    """Register `edem check` on the CLI's subcommands (edem/cli.py)."""
-    p = sub.add_parser("check", help="regression gate: rerun EDEM on stored references, exit 1 with a table when something drifted")
-    p.add_argument("--refresh", action="store_true", help="recompute the stored references (FE values too when the FE reference is available)")
-    p.add_argument("--references", metavar="DIR", help=f"reference directory (default {REFERENCES_DIR})")
-    p.add_argument("--no-fe", action="store_true", help="with --refresh: store EDEM baselines only")
-    p.set_defaults(func=lambda args: run_check(refresh=args.refresh, references=args.references, with_fe=not args.no_fe))

@@ -3,9 +3,11 @@
 Each case runs in ``OUT/cases/<case>/``: one SPEC 9 result directory per side (``a-<side>``,
 ``b-<side>``) and ``metrics.json`` (every metric, the tolerance verdicts, wall times, the result
 directories). The case is cached under a key hashing its definition, the scene file and every
-file it references, the package version and the source of ``edem/``, ``geometries/`` and
-``verification/`` (plus ``fem_reference/`` for FE cases): re-running an unchanged case only
-re-reads its metrics.json, and a code change invalidates it. Verdicts are re-judged on every run,
+file it references, the package version and the source of the modules that compute it: those its
+sides name (:func:`verification.sides.side_modules`) and the metrics, with everything they
+import, plus the files of this runner and of the side runners. Re-running an unchanged case only
+re-reads its metrics.json; a change to code it uses invalidates it, a change elsewhere (another
+campaign, a report) does not. Verdicts are re-judged on every run,
 so changing a tolerance needs no re-run. ``OUT/metrics.json`` gathers the campaign; the HTML
 report is drawn by the caller (``edem verify`` passes :func:`reports.html.write_campaign_report`).
 
@@ -37,17 +39,21 @@ import sys
 import time
 import tomllib
 from collections.abc import Callable, Iterable
-from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 from edem.errors import InputError
 from verification.campaign_model import Campaign, Case, validate_campaign
-from verification.sides import ERROR, OK, REFUSED, UNAVAILABLE, is_fe_side, run_side
+from verification.sides import ERROR, OK, REFUSED, UNAVAILABLE, run_side, side_modules
+from verification import sources
 
 PASSED, FAILED = "passed", "failed"
-ROOT = Path(__file__).resolve().parents[1]
-SOURCE_PACKAGES = ("edem", "geometries", "verification")
+#: where the hashed sources are read (a test points it at a copy)
+SOURCE_ROOT = sources.ROOT
+#: the glue every case runs through: their own source is hashed (what they import, per side)
+CASE_GLUE_MODULES = ("verification.runner", "verification.sides", "verification.fe_analytic")
+#: what computes the metrics of every case (hashed with everything it imports)
+METRIC_MODULES = ("verification.metrics", "edem.resultdir")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -91,15 +97,9 @@ def write_json(path: Path, data: Any) -> None:
 # Cache keys
 
 
-@lru_cache(maxsize=None)
-def _source_digest(packages: tuple[str, ...]) -> str:
-    digest = hashlib.sha256()
-    for package in packages:
-        base = ROOT / package
-        for path in sorted(p for p in base.rglob("*") if p.is_file() and p.suffix in (".py", ".toml") and "__pycache__" not in p.parts):
-            digest.update(str(path.relative_to(ROOT)).encode())
-            digest.update(path.read_bytes())
-    return digest.hexdigest()
+def _source_digest(modules: tuple[str, ...]) -> str:
+    """sha256 of the source of ``modules`` (a package name: all its modules)."""
+    return sources.source_digest(modules, SOURCE_ROOT)
 
 
 def _package_version() -> str:
@@ -133,8 +133,9 @@ def case_key(case: Case) -> str:
     digest = hashlib.sha256()
     digest.update(json.dumps(json_safe(case.definition()), sort_keys=True).encode())
     digest.update(_package_version().encode())
-    packages = SOURCE_PACKAGES + (("fem_reference",) if any(is_fe_side(s) for s in case.sides) else ())
-    digest.update(_source_digest(packages).encode())
+    roots = METRIC_MODULES + tuple(m for side in case.sides for m in side_modules(side))
+    digest.update(sources.closure_digest(tuple(sorted(set(roots))), SOURCE_ROOT).encode())
+    digest.update(_source_digest(CASE_GLUE_MODULES).encode())
     try:
         scene_path = resolve_scene_path(case.scene_ref())
         files = [scene_path] + referenced_files(scene_path, case.overrides)

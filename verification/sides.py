@@ -41,6 +41,16 @@ from edem.results import write_results
 
 OK, REFUSED, UNAVAILABLE, ERROR = "ok", "refused", "unavailable", "error"
 
+# The modules whose source a side's results depend on, with all they import (verification.sources):
+# a campaign case's cache key hashes them, so editing anything else keeps its results.
+DISCRETE_MODULES = ("edem.scene", "edem.solver", "edem.results")
+FE_MODULES = ("edem.scene", "fem_reference.scene_run", "fem_reference.contact")
+FE_PROBLEM_MODULES = ("verification.fe_analytic", "fem_reference")
+CLOSED_FORM_MODULES = ("edem.scene", "verification.closed_forms")
+FE_EXACT_MODULES = ("verification.fe_analytic",)
+#: for a side runner that does not say (a stand-in): every package that can compute results
+ANY_MODULES = ("geometries", "edem", "fem_reference", "verification")
+
 
 @dataclass(frozen=True)
 class SideOutcome:
@@ -131,6 +141,7 @@ def _run_discrete(method: str) -> SideRunner:
         return str(out_dir)
 
     runner.__doc__ = f"{method.upper()} (edem.solver.run) into a SPEC 9 result directory."
+    runner.modules = DISCRETE_MODULES
     return runner
 
 
@@ -176,6 +187,7 @@ def _run_fe(model: str) -> SideRunner:
         return str(out_dir)
 
     runner.__doc__ = f"The FE reference, {model} model (fem_reference.run_scene), SPEC 5."
+    runner.modules = FE_MODULES
     return runner
 
 
@@ -190,6 +202,7 @@ def _run_fe_problem(name: str) -> SideRunner:
         return str(out_dir)
 
     runner.__doc__ = f"The FE core on the closed-form problem {name} (verification.fe_analytic), SPEC 5."
+    runner.modules = FE_PROBLEM_MODULES
     return runner
 
 
@@ -239,6 +252,9 @@ def _run_edem_truth(scene_ref: str, overrides: dict[str, Any], out_dir: Path, op
     return _run_discrete("edem")(scene_ref, resample_load(overrides, TRUTH_STEPS), out_dir, options)
 
 
+_run_fe_truth.modules = FE_MODULES
+_run_edem_truth.modules = DISCRETE_MODULES
+
 SIDES: dict[str, SideRunner] = {
     "edem": _run_discrete("edem"),
     "dem": _run_discrete("dem"),
@@ -258,6 +274,15 @@ def side_names() -> list[str]:
     from verification.fe_analytic import FE_PROBLEMS
 
     return list(SIDES) + [CLOSED_FORM_PREFIX + name for name in (*CLOSED_FORMS, *FE_PROBLEMS)]
+
+
+def side_modules(side: str) -> tuple[str, ...]:
+    """The modules whose source (with what they import) the side's results depend on."""
+    if side.startswith(CLOSED_FORM_PREFIX):
+        from verification.fe_analytic import FE_PROBLEMS
+
+        return FE_EXACT_MODULES if side[len(CLOSED_FORM_PREFIX):] in FE_PROBLEMS else CLOSED_FORM_MODULES
+    return getattr(SIDES.get(side), "modules", ANY_MODULES)
 
 
 def is_fe_side(side: str) -> bool:
