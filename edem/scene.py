@@ -21,7 +21,9 @@ from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, loa
 from edem.mechanics import DOF_NAMES
 from edem.springs import Cartilage, Ligament
 from edem.tables import SceneTable
+from geometries.builders import build_geometry
 from geometries.surface import TriangleSurface
+
 
 SECTIONS = {
     "scene": {"name", "description"},
@@ -404,7 +406,6 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if "builtin" in table:
-            from geometries.builders import build_geometry
             from geometries.mesh_io import check_pair_distance
 
             if not isinstance(table["builtin"], str):
