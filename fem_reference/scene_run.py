@@ -64,8 +64,6 @@ from edem.solver import applied_loads, fixed_placement
 from fem_reference.contact import _fe_modules, solve_contact
 from fem_reference.models import FE_MODELS, FEGeometry, contact_surface
 from fem_reference.problem import (
-
-
     AREA_DEFINITION_NITSCHE,
     FEContactProblem,
     FEConvergenceError,
