@@ -65,11 +65,36 @@ def pressure_frame(run: RunResult, s: StepResult) -> Frame:
 
 def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int] | None = None, note: str | None = None,
                   overwrite: bool = False) -> Path:
-    """Write the result directory of a DEM/EDEM run (atomically, sealed); returns the directory.
+    """Write the result directory of a DEM/EDEM run (layout: :mod:`edem.resultdir`), atomically.
 
-    ``frame_steps``: positions in ``run.steps`` whose pressure maps are written (default: all).
-    ``note``: recorded as the summary's "frames" entry when only some maps are written.
-    ``overwrite``: replace an existing result directory.
+    Parameters
+    ----------
+    run : RunResult
+        From :func:`edem.solver.solve`.
+    out_dir : str or Path
+        The directory: summary.json, timeseries.csv, pressure.pvd with one pressure_NNNN.vtp
+        per time point (the mobile surface at its pose, cell data ``pressure_mpa`` in MPa,
+        ``spring_length_mm``, ``in_contact``, ``ray_hit``), fixed.vtp and manifest.json. Written
+        into a hidden sibling and renamed into place when complete.
+    frame_steps : list of int, optional
+        Positions in ``run.steps`` whose pressure maps are written (default: all).
+    note : str, optional
+        Recorded as the summary's "frames" entry when only some maps are written.
+    overwrite : bool, optional
+        Replace an existing result directory (default: refuse).
+
+    Returns
+    -------
+    Path
+        ``out_dir``.
+
+    Raises
+    ------
+    SolverError
+        When a value to write is not finite (naming the file and key).
+    InputError
+        When ``out_dir`` holds a result already (without ``overwrite``) or is not a result
+        directory; ResultWriteError (an InputError) when the disk is full or not writable.
     """
     data = summary(run)
     if note is not None:

@@ -2,21 +2,20 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from edem.errors import InputError
+from edem.resultdir import read_result_dir
 
 DERIVED = {"disp_norm_mm": ("disp_x_mm", "disp_y_mm", "disp_z_mm")}
 
 
 def read_timeseries(result_dir: str | Path) -> dict[str, np.ndarray]:
-    """Columns of a result directory's timeseries.csv (SPEC 9) as float arrays, plus the derived
-    ones; the directory must verify against its manifest (:func:`edem.resultdir.read_result_dir`)."""
-    from edem.resultdir import read_result_dir
-
+    """Columns of a result directory's timeseries.csv as float arrays, plus the derived
+    :data:`DERIVED` columns (``disp_norm_mm``); the directory must verify against its manifest
+    (:func:`edem.resultdir.read_result_dir`)."""
     columns = dict(read_result_dir(result_dir).timeseries)
     for name, parts in DERIVED.items():
         if all(p in columns for p in parts):
@@ -51,7 +50,7 @@ def plot_timeseries(result_dirs: list[str | Path], column: str, out_png: str | P
 
 def _default_label(directory: Path) -> str:
     try:
-        summary = json.loads((directory / "summary.json").read_text(encoding="utf-8"))
+        summary = read_result_dir(directory).summary
         return f"{summary['scene']} ({summary['method']})"
-    except (OSError, KeyError, ValueError):
+    except (InputError, KeyError):
         return directory.name
