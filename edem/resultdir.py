@@ -59,6 +59,7 @@ from typing import Any
 
 import numpy as np
 
+from edem.atomic_dirs import atomic_result_dir, verify_manifest
 from geometries.errors import InputError, SolverError
 
 SUMMARY_FILE = "summary.json"
@@ -154,8 +155,6 @@ def write_result_dir(
     contradicts itself is never written as if it were one), InputError when the directory
     cannot be written (disk full, read-only...; a previous result there is left unchanged).
     """
-    from edem.atomic_dirs import atomic_result_dir
-
     out = Path(out_dir)
     check_finite_summary(summary, out / SUMMARY_FILE)
     columns = list(TIMESERIES_COLUMNS)
@@ -287,8 +286,6 @@ def read_result_dir(path: str | Path) -> ResultDir:
     and when the directory does not verify against its manifest (a file missing, changed or
     left by another run: :func:`edem.atomic_dirs.verify_manifest`).
     """
-    from edem.atomic_dirs import verify_manifest
-
     root = Path(path)
     expected = "a result directory of edem run / edem fe (summary.json, timeseries.csv, pressure.pvd)"
     if not root.is_dir():

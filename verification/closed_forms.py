@@ -358,15 +358,6 @@ def solve_closed_form(name: str, scene_ref: str | Path, overrides: dict[str, Any
 
 
 def write_closed_form_results(scene: Scene, solution: ClosedFormSolution, out_dir: str | Path, wall_time_s: float = 0.0) -> Path:
-    """:func:`write_closed_form_files` into a new result directory, atomically and sealed."""
-    from edem.atomic_dirs import atomic_result_dir
-
-    with atomic_result_dir(out_dir) as tmp:
-        write_closed_form_files(scene, solution, tmp, wall_time_s)
-    return Path(out_dir)
-
-
-def write_closed_form_files(scene: Scene, solution: ClosedFormSolution, out_dir: str | Path, wall_time_s: float = 0.0) -> Path:
     """The SPEC 9 result directory of a closed form (method "closed-form:<name>").
 
     The pressure maps are the mobile surface translated by the closed-form displacement, with
