@@ -289,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"edem {args.command}: cannot write: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:  # Ctrl-C: no traceback; campaigns say what they kept
-        print(f"edem {args.command}: {exc or 'interrupted'}", file=sys.stderr)
+        print(f"edem {args.command}: {str(exc) or 'interrupted'}", file=sys.stderr)
         return 130
 
 

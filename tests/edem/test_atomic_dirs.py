@@ -157,3 +157,28 @@ def test_siblings_of_killed_writers_are_removed_live_ones_kept(tmp_path, plates_
         (d / "summary.json").write_text("{half")
     results.write_results(plates_run, tmp_path / "r")
     assert not stale.exists() and live.exists()
+
+
+def test_ctrl_c_during_edem_run_leaves_a_whole_result_or_none(tmp_path):
+    """SIGINT to `edem run ideal-stance` (65 steps, ~2-3 s) at several instants: each run either
+    finished (exit 0, the result verifies) or stopped (exit 130, a message, no traceback, no
+    directory and no temporary sibling left behind)."""
+    import signal
+    import time
+
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    stopped = 0
+    for k, delay_s in enumerate((0.8, 1.5, 2.2)):
+        out = tmp_path / f"r{k}"
+        run_ = subprocess.Popen([sys.executable, "-m", "edem", "run", "ideal-stance", "--out", str(out)], env=env,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        time.sleep(delay_s)
+        os.killpg(run_.pid, signal.SIGINT)
+        _, err = run_.communicate(timeout=120)
+        assert "Traceback" not in err, err
+        if run_.returncode == 0:
+            assert verify_manifest(out)
+        else:
+            assert run_.returncode == 130 and "interrupted" in err and not out.exists()
+            stopped += 1
+    assert stopped >= 1 and leftovers(tmp_path) == []
