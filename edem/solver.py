@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from edem import consistency
 from edem.errors import SolverError
 from edem.mechanics import (
     DOF_NAMES,
@@ -48,6 +49,8 @@ class StepResult:
     mobile_placement: Placement  # pose of M after the step (for the pressure maps)
     fixed_placement: Placement
     area_mm2: np.ndarray  # (n_springs,) spring areas
+    # DEM: the load fraction the springs measured again at the solved pose leave unbalanced (None: EDEM)
+    remeasured_imbalance: float | None = None
 
     @property
     def contact_area_mm2(self) -> float:
@@ -168,6 +171,7 @@ def run(
     stored = np.zeros((n_springs, 3))  # committed (elastic) spring forces: the EDEM push-back
     pose = Placement.identity(g0)
     steps: list[StepResult] = []
+    unbalanced: list[tuple[int, float]] = []  # DEM time points whose re-measured springs miss the load
     seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
         clock = time.perf_counter()
@@ -227,12 +231,27 @@ def run(
             )
             if not np.all(np.isfinite(u)):
                 raise SolverError(f"time point {k} (t = {t:g} s): the viscoelastic integration diverged (non-finite displacement)")
+        where = f"time point {k} (t = {t:g} s)"
+        free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
+        consistency.check_contact_kept(loads[k, :3], geometry.normal, spring_area, int(solution.active[:n_c].sum()), free, u, where)
+        consistency.check_increment(u, geometry.centroid_mm[cand][solution.active[:n_c]], g_current, cartilage, where)
         committed = elastic_force[:n_c, None] * normals
         if shear is not None:
             committed = committed + shear.force(u, solution.active[:n_c])
         stored = np.zeros((n_springs, 3))
         stored[cand] = committed
         pose = Placement(rotation_matrix(u[3:]) @ pose.rotation, pose.translation_mm + u[:3], g0)
+        if method == "dem":
+            clock_remeasure = time.perf_counter()
+            imbalance, scale = consistency.remeasured_imbalance(
+                pose=pose, fixed_pose=f_pose, initial=geometry, spring_centroid_mm=spring_centroid, spring_normal=spring_normal,
+                spring_area_mm2=spring_area, caster=caster, cartilage=cartilage, ligaments=scene.ligaments, reference_point_mm=g0,
+                shear=shear, u=u, active=solution.active, model_force_n=total_force, load=loads[k], free=free, length_scale_mm=length_scale,
+            )
+            seconds["geometry"] += time.perf_counter() - clock_remeasure
+            remeasured = imbalance / scale if scale > 0 else 0.0
+            if remeasured > consistency.DEM_IMBALANCE_FRACTION:
+                unbalanced.append((k, remeasured))
         pressure = np.zeros(n_springs)
         pressure[cand] = total_force[:n_c] / spring_area[cand]
         viscous_pressure = np.zeros(n_springs)
@@ -259,10 +278,14 @@ def run(
                 mobile_placement=pose,
                 fixed_placement=f_pose,
                 area_mm2=spring_area,
+                remeasured_imbalance=remeasured if method == "dem" else None,
             )
         )
         if progress is not None:
             progress(k)
+    if unbalanced:
+        worst = max(unbalanced, key=lambda item: item[1])
+        warnings.append(consistency.remeasured_warning(len(unbalanced), worst[0], worst[1]))
     return RunResult(scene, method, steps, time.perf_counter() - started, warnings, seconds)
 
 
