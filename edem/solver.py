@@ -10,6 +10,7 @@ import numpy as np
 
 from edem import consistency
 from edem.errors import SolverError
+from edem.joint_reaction import transfer_moment
 from edem.mechanics import (
     DOF_NAMES,
     NormalLaw,
@@ -126,14 +127,41 @@ def compression_ratio(geometry: SpringGeometry, cartilage: Cartilage, approach_m
 
 
 def applied_loads(scene: Scene) -> np.ndarray:
-    """(n, 6) force and moment per time point in global axes (turned with F for frame = "fixed")."""
+    """(n, 6) force and moment about G per time point in global axes (turned with F for frame = "fixed").
+
+    A moment given about another point (``load.point_mm``, e.g. a JointReaction's joint centre,
+    placed with F for frame = "fixed") is moved to G: M_G = M_P + (P - G) x F.
+    """
     load = scene.load
-    force, moment = load.force_n, load.moment_nmm
+    force, moment, point = load.force_n, load.moment_nmm, load.point_mm
     if load.frame == "fixed" and scene.kinematics is not None:
-        rotations = [fixed_placement(scene, k).rotation for k in range(len(load.time_s))]
+        placements = [fixed_placement(scene, k) for k in range(len(load.time_s))]
+        rotations = [p.rotation for p in placements]
         force = np.einsum("kij,kj->ki", rotations, force)
         moment = np.einsum("kij,kj->ki", rotations, moment)
+        if point is not None:
+            point = np.array([p.points(x[None])[0] for p, x in zip(placements, point)])
+    if point is not None:
+        moment = transfer_moment(moment, force, point, scene.reference_point_mm)
     return np.hstack([force, moment])
+
+
+def constrained_moment_warning(loads: np.ndarray, fixed_dofs: tuple[str, ...]) -> list[str]:
+    """Say so when the applied moment about G has components along fixed rotations: the
+    constraint carries them and the spring bed never sees them (never dropped silently)."""
+    fixed = [i for i, name in enumerate(DOF_NAMES[3:]) if name in fixed_dofs]
+    if not fixed:
+        return []
+    largest = np.abs(loads[:, 3:][:, fixed]).max(axis=0)
+    scale = max(float(np.abs(loads[:, 3:]).max()), 1e-300)
+    carried = [f"{DOF_NAMES[3 + i]} (up to {m:.4g} N mm)" for i, m in zip(fixed, largest) if m > 1e-9 * scale]
+    if not carried:
+        return []
+    return [
+        f"the applied moment about G has components about {', '.join(carried)}, which [constraints] fixed_dofs "
+        "carry: the contact does not see them (free these rotations, or move G, e.g. to the joint centre, "
+        "if the contact should carry them)"
+    ]
 
 
 def run(
@@ -162,7 +190,7 @@ def run(
     length_scale = float(np.sqrt(((spring_centroid - g0) ** 2).sum(axis=1).mean()))
     load = scene.load
     loads = applied_loads(scene)
-    warnings: list[str] = []
+    warnings: list[str] = constrained_moment_warning(loads, scene.fixed_dofs)
     viscous = scene.viscoelastic if method == "edem" else None
     if scene.viscoelastic is not None and viscous is None:
         warnings.append("[viscoelastic] is ignored by DEM, a static method: use --method edem")
