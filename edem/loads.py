@@ -76,6 +76,7 @@ class LoadSeries:
     moment_nmm: np.ndarray
     frame: str = "global"
     point_mm: np.ndarray | None = None
+    in_ground: bool = False  # a JointReaction expressed in OpenSim's ground (taken as the scene's axes)
 
     def __post_init__(self) -> None:
         t = np.asarray(self.time_s, dtype=np.float64)
@@ -217,6 +218,11 @@ def _read_opensim(path: Path, key: str) -> _DataFile:
     return _parse_rows(path, key, rows[0][1], rows[1:], in_degrees)
 
 
+def read_opensim_table(path: Path, key: str) -> _DataFile:
+    """An OpenSim .sto/.mot as a table (columns, values, the inDegrees flag); InputError naming ``key`` when malformed."""
+    return _read_opensim(path, key)
+
+
 def _read_data_file(path: Path, key: str) -> _DataFile:
     suffix = path.suffix.lower()
     if suffix == ".csv":
@@ -282,6 +288,8 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
                                             f"[{time_s[0]}, {time_s[-1]}] s", "a range containing load time points")
         time_s, force_n, moment_nmm = time_s[keep], force_n[keep], moment_nmm[keep]
         point_mm = None if point_mm is None else point_mm[keep]
+    in_ground = file_frame == "ground"
+    file_frame = "global" if in_ground else file_frame
     frame = tab.string("frame", file_frame or "global")
     if frame not in ("global", "fixed"):
         raise tab.error("frame", f"'{frame}' is not a frame", "'global' or 'fixed' (the fixed body's axes, turning with [kinematics])")
@@ -292,7 +300,7 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
         rotation = _axes(tab)
         force_n, moment_nmm = force_n @ rotation.T, moment_nmm @ rotation.T
         point_mm = None if point_mm is None else point_mm @ rotation.T
-    return LoadSeries(time_s, force_n, moment_nmm, frame, point_mm)
+    return LoadSeries(time_s, force_n, moment_nmm, frame, point_mm, in_ground)
 
 
 def _axes(tab: SceneTable) -> np.ndarray:
@@ -411,12 +419,14 @@ def _joint_reaction(tab: SceneTable, data: _DataFile, prefix: str) -> tuple[floa
                          "a JointReaction of the joint between the scene's two bodies (on_child or on_parent)")
     if columns.frame == fixed:
         frame = "fixed"
+    elif columns.frame == mobile:
+        frame = "global"  # the scene's frame is M's (M moves only by the solved increments)
     elif columns.frame == "ground":
-        frame = "global"
+        frame = "ground"
     else:
-        raise data.error(key, f"the load is expressed in frame '{columns.frame}': only the fixed body's frame "
-                              f"('{fixed}', turning with [kinematics]) or ground are placed in the scene",
-                         "JointReaction express_in_frame = the fixed body (parent) or ground")
+        raise data.error(key, f"the load is expressed in frame '{columns.frame}': only the mobile body's frame "
+                              f"('{mobile}'), the fixed body's ('{fixed}', turning with the joint) or ground are placed in the scene",
+                         "JointReaction express_in_frame = child, parent or ground")
     point_names = columns.names("p")
     return sign, (point_names if all(n in data.columns for n in point_names) else None), frame
 

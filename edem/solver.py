@@ -11,6 +11,7 @@ import numpy as np
 from edem import consistency
 from edem.errors import SolverError
 from edem.joint_reaction import transfer_moment
+from edem.opensim_model import BodyPoses
 from edem.mechanics import (
     DOF_NAMES,
     NormalLaw,
@@ -83,10 +84,13 @@ class RunResult:
 
 
 def fixed_placement(scene: Scene, step: int) -> Placement:
-    """Pose of F at a time point: the joint angle about the scene's axis (SPEC 3 step 1)."""
+    """Pose of F at a time point: the joint angle about the scene's axis (SPEC 3 step 1), or the
+    pose an OpenSim model gives it at the motion's coordinates."""
     kin = scene.kinematics
     if kin is None:
         return Placement.identity()
+    if isinstance(kin, BodyPoses):  # F's full pose from an OpenSim model
+        return Placement(kin.rotation[step], kin.translation_mm[step], np.zeros(3))
     rotation = rotation_matrix(kin.axis_direction * kin.angle_rad[step])
     return Placement(rotation, np.zeros(3), kin.axis_point_mm)
 
