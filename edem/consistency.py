@@ -83,30 +83,24 @@ def check_increment(
 
 
 def measured_spring_force_n(initial: SpringGeometry, measured: SpringGeometry, cartilage: Cartilage) -> np.ndarray:
-    """(n,) normal force of every spring from the lengths measured at a new pose (no linearisation).
-
-    threshold: A E' / h0 (h0 - h) for the springs that were candidates at the initial pose (h0 their
-    length there) and A E' / h_max (-h) for the others where they now interpenetrate (h < 0);
-    gap: A E' (t - h) / t; gap-log: -A E' ln(h / t) (a spring at h <= 0 gets the force at
-    h = 1e-6 t, i.e. a huge one). Zero where the ray finds no surface in the window.
+    """(n,) normal force of the springs that were candidates at the initial pose, from the lengths
+    measured at a new pose (no linearisation): the law's element force at the approach h0 - h,
+    h0 the initial length (threshold: A E' / h0 (h0 - h); gap: A E' (t - h) / t; gap-log:
+    -A E' ln(h / t)). Zero for the others and where the ray finds no surface in the window.
     """
-    e_conf = cartilage.confined_modulus_mpa
-    area = measured.area_mm2
-    h = measured.spring_length_mm
+    sel = initial.candidate
+    h0 = initial.spring_length_mm[sel]
+    h = measured.spring_length_mm[sel]
     hit = np.isfinite(h)
-    h_hit = np.where(hit, h, 0.0)
-    if cartilage.law == "threshold":
-        h0 = np.where(initial.candidate, initial.spring_length_mm, cartilage.max_spring_length_mm)
-        h0 = np.maximum(h0, 1e-12 * cartilage.max_spring_length_mm)
-        compression = np.where(initial.candidate, h0 - h_hit, -h_hit)
-        force = area * e_conf / h0 * compression
-    elif cartilage.law == "gap":
-        t = float(cartilage.thickness_mm)
-        force = area * e_conf * (t - h_hit) / t
-    else:
-        t = float(cartilage.thickness_mm)
-        force = -area * e_conf * np.log(np.maximum(h_hit, 1e-6 * t) / t)
-    return np.where(hit, np.maximum(force, 0.0), 0.0)
+    elements = cartilage.spring_law.elements(
+        initial.area_mm2[sel], h0, cartilage.confined_modulus_mpa, cartilage.thickness_mm, np.zeros(h0.shape)
+    )
+    with np.errstate(divide="ignore", invalid="ignore"):
+        force = elements.force_and_stiffness(np.where(hit, h0 - h, 0.0))[0]
+    out = np.zeros(initial.spring_length_mm.shape)
+    # a log spring pressed past t has no finite force: count it as a huge one (the pose is then refused or warned)
+    out[sel] = np.where(hit, np.nan_to_num(np.maximum(force, 0.0), nan=0.0, posinf=1e300), 0.0)
+    return out
 
 
 def remeasured_imbalance(
@@ -144,7 +138,7 @@ def remeasured_imbalance(
     total = generalised_directions(measured.centroid_mm, measured.normal, g).T @ force
     lig_rows, lig_law, _ = ligament_elements(ligaments, pose, fixed_pose, g)
     if len(lig_rows):
-        total = total + lig_rows.T @ np.maximum(lig_law.offset, 0.0)
+        total = total + lig_rows.T @ np.maximum(lig_law.offset_n, 0.0)
     if shear is not None:
         total = total + shear.generalised_force(u, active[: shear.normals.shape[0]])
     to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)
