@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -53,6 +53,11 @@ class StepResult:
     area_mm2: np.ndarray  # (n_springs,) spring areas
     # DEM: the load fraction the springs measured again at the solved pose leave unbalanced (None: EDEM)
     remeasured_imbalance: float | None = None
+    # sum of p A n over the springs (N), its moment about G (N mm) and the centre of pressure (mm),
+    # springs where the solve measured them (so they balance the load with ligaments and constraints)
+    contact_force_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    contact_moment_nmm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    centre_of_pressure_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def contact_area_mm2(self) -> float:
@@ -259,6 +264,11 @@ def run(
             )
             if not np.all(np.isfinite(u)):
                 raise SolverError(f"time point {k} (t = {t:g} s): the viscoelastic integration diverged (non-finite displacement)")
+        contact = directions[:n_c].T @ total_force[:n_c]
+        if shear is not None:
+            contact = contact + shear.generalised_force(solution.displacement, solution.active[:n_c])
+        spring_force = total_force[:n_c]
+        centre = (spring_force @ geometry.centroid_mm[cand]) / spring_force.sum() if spring_force.sum() > 0 else g_current
         where = f"time point {k} (t = {t:g} s)"
         free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
         consistency.check_contact_kept(loads[k, :3], geometry.normal, spring_area, int(solution.active[:n_c].sum()), free, u, where)
@@ -307,6 +317,9 @@ def run(
                 fixed_placement=f_pose,
                 area_mm2=spring_area,
                 remeasured_imbalance=remeasured if method == "dem" else None,
+                contact_force_n=contact[:3],
+                contact_moment_nmm=contact[3:],
+                centre_of_pressure_mm=centre,
             )
         )
         if progress is not None:
