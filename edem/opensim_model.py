@@ -79,6 +79,7 @@ def import_opensim():
             key="opensim",
             expected="the optional extra: pip install -e '.[opensim]' (the opensim 4.6 wheel, Python 3.12)",
         ) from None
+    opensim.Logger.removeFileSink()  # no opensim.log in the user's working directory
     return opensim
 
 
@@ -104,7 +105,7 @@ def find_geometry_file(name: str, model_file: Path, search_path: list[Path]) -> 
 
 def body_surface(osim, model, body_name: str, model_file: Path, search_path: list[Path], only: list[str] | None, key: str) -> TriangleSurface:
     """Every mesh attached to a body (or to frames fixed on it), scaled and placed in its frame, in mm, merged."""
-    from geometries.mesh_io import clean_surface, read_surface
+    from geometries.mesh_io import check_units, clean_surface, read_surface
 
     meshes = []
     for component in model.getComponentsList():
@@ -137,6 +138,7 @@ def body_surface(osim, model, body_name: str, model_file: Path, search_path: lis
         triangles.append(surface.triangles + offset)
         offset += len(placed)
     merged = TriangleSurface(np.vstack(vertices), np.vstack(triangles), name=body_name, source=str(model_file))
+    check_units(merged, "m", refuse=True, key=key)
     return clean_surface(merged, key=key)
 
 

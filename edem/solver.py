@@ -126,6 +126,23 @@ def weak_dofs_warning(
     ]
 
 
+def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> list[str]:
+    """Say so when a gap-law bed starts compressed (t larger than the gap h): it pushes the
+    bodies apart before any load, so the first time point's result includes that preload."""
+    if cartilage.thickness_mm is None:
+        return []
+    t = float(cartilage.thickness_mm)
+    h = geometry.spring_length_mm[geometry.candidate]
+    compressed = h < t * (1.0 - 1e-9)
+    if not np.any(compressed):
+        return []
+    return [
+        f"the {cartilage.law} bed starts pre-compressed: {int(compressed.sum())} springs are shorter than the "
+        f"thickness t = {t:g} mm, by up to {float((t - h).max()):.3g} mm (the gap between the surfaces is less "
+        "than t): the bodies push apart before any load; check thickness_mm against the gap"
+    ]
+
+
 def compression_ratio(geometry: SpringGeometry, cartilage: Cartilage, approach_mm: np.ndarray) -> np.ndarray:
     """Compression over undeformed length of the candidate springs after an approach (strain)."""
     return cartilage.spring_law.strain(geometry.spring_length_mm[geometry.candidate], approach_mm, cartilage.thickness_mm)
@@ -247,6 +264,7 @@ def run(
             raise SolverError(f"time point {k} (t = {t:g} s, {n_c} candidate springs): {exc}") from None
         total_force = np.where(solution.active, solution.element_force_n, 0.0)
         if k == 0:
+            warnings += precompression_warning(geometry, cartilage)
             warnings += weak_dofs_warning(directions, law, shear, solution, scene.fixed_dofs, length_scale)
         overstrained = int((solution.active[:n_c] & (compression_ratio(geometry, cartilage, directions[:n_c] @ solution.displacement) >= 1.0)).sum())
         if overstrained:

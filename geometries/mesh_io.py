@@ -828,25 +828,32 @@ def clean_surface(
     return orient_consistently(s, key=key)
 
 
-def check_units(surface: TriangleSurface, units: str = "mm") -> float:
-    """Warn when the bounding-box diagonal (in mm) suggests the wrong length unit (SPEC 6).
+def check_units(surface: TriangleSurface, units: str = "mm", *, refuse: bool = False, key: str | None = None) -> float:
+    """Warn (or with ``refuse``, raise InputError) when the bounding-box diagonal (in mm)
+    suggests the wrong length unit (SPEC 6).
 
     Below 1 mm the mesh most likely is in metres (suggest ``units = "m"``); above 2000 mm it
-    is larger than any joint, most likely micrometres or another unit. Returns the diagonal.
+    is larger than any joint, most likely micrometres or another unit. A scene refuses such a
+    mesh: solved as given it yields absurd contact numbers. Returns the diagonal.
     """
     diag = _bbox_diagonal_mm(surface.vertices_mm)
     where = _where(surface)
+    problem = None
     if diag < SMALL_DIAGONAL_MM:
         if units == "m":
-            _warn(f"{where}: the mesh is only {diag:.4g} mm across even after converting "
-                  "from metres; check the units of the file")
+            problem = f"the mesh is only {diag:.4g} mm across even after converting from metres"
+            expected = "a joint-sized mesh (1 to 2000 mm across): check the units of the file"
         else:
-            _warn(f"{where}: the mesh is only {diag:.4g} mm across; it looks like it is in "
-                  'metres: set units = "m" in the [geometry] section')
+            problem = f"the mesh is only {diag:.4g} mm across; it looks like it is in metres"
+            expected = 'units = "m" in the [geometry] section'
     elif diag > LARGE_DIAGONAL_MM:
-        _warn(f"{where}: the mesh is {diag:.4g} mm across, larger than any joint; it looks "
-              "like micrometres or another unit (lengths are read in mm, or in m with "
-              'units = "m")')
+        problem = f"the mesh is {diag:.4g} mm across, larger than any joint; it looks like micrometres or another unit"
+        expected = 'lengths in mm, or in m with units = "m"'
+    if problem is None:
+        return diag
+    if refuse:
+        raise InputError(problem, file=surface.source or None, key=key, expected=expected)
+    _warn(f"{where}: {problem} (expected {expected})")
     return diag
 
 
@@ -895,7 +902,7 @@ def check_pair_distance(
 
 def prepare_surface(
     path: str | Path, *, units: str = "mm", key: str | None = None, name: str = "",
-    merge_rel_tol: float = 1e-9,
+    merge_rel_tol: float = 1e-9, refuse_units: bool = False,
 ) -> TriangleSurface:
     """Read a mesh file and clean it: the entry point for one scene mesh (SPEC 6).
 
@@ -904,7 +911,7 @@ def prepare_surface(
     signed normals: call :func:`orient_pair` (or use :func:`prepare_pair`).
     """
     s = read_surface(path, units=units, key=key, name=name)
-    check_units(s, units)
+    check_units(s, units, refuse=refuse_units, key=key)
     return clean_surface(s, key=key, merge_rel_tol=merge_rel_tol)
 
 
@@ -916,10 +923,11 @@ def prepare_pair(
     """Read, clean and orient the mobile and fixed surfaces of a scene (SPEC 2 and 6).
 
     Returns ``(mobile, fixed)`` with M's normals towards F and F's towards M. With
-    ``max_spring_length_mm`` the bodies are also checked to be close enough for springs.
+    ``max_spring_length_mm`` the bodies are also checked to be close enough for springs. A mesh
+    whose size says its unit is wrong (under 1 mm or over 2000 mm across) is refused.
     """
-    mobile = prepare_surface(mobile_path, units=units, key=mobile_key, name="mobile")
-    fixed = prepare_surface(fixed_path, units=units, key=fixed_key, name="fixed")
+    mobile = prepare_surface(mobile_path, units=units, key=mobile_key, name="mobile", refuse_units=True)
+    fixed = prepare_surface(fixed_path, units=units, key=fixed_key, name="fixed", refuse_units=True)
     mobile, fixed = orient_pair(mobile, fixed, mobile_key=mobile_key, fixed_key=fixed_key, near_mm=max_spring_length_mm)
     if max_spring_length_mm is not None:
         check_pair_distance(mobile, fixed, max_spring_length_mm, key="geometry")

@@ -33,9 +33,10 @@ def plate_in_opensim_axes() -> TriangleSurface:
 
 
 def build_model(folder: Path) -> Path:
-    import opensim as osim
-
+    from edem.opensim_model import import_opensim
     from geometries.mesh_io import write_surface
+
+    osim = import_opensim()
 
     geometry = folder / "Geometry"
     geometry.mkdir(parents=True, exist_ok=True)
