@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from edem import consistency
+from edem.consistency import DEM_IMBALANCE_FRACTION, check_contact_kept, check_increment, remeasured_imbalance, remeasured_warning
 from edem.errors import InputError, SolverError
 from edem.joint_reaction import transfer_moment
 from edem.laws import ElementLaw, stack_elements
@@ -293,8 +293,8 @@ def run(
         centre = (spring_force @ geometry.centroid_mm[cand]) / spring_force.sum() if spring_force.sum() > 0 else g_current
         where = f"time point {k} (t = {t:g} s)"
         free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
-        consistency.check_contact_kept(loads[k, :3], geometry.normal, spring_area, int(solution.active[:n_c].sum()), free, u, where)
-        consistency.check_increment(u, geometry.centroid_mm[cand][solution.active[:n_c]], g_current, cartilage, where)
+        check_contact_kept(loads[k, :3], geometry.normal, spring_area, int(solution.active[:n_c].sum()), free, u, where)
+        check_increment(u, geometry.centroid_mm[cand][solution.active[:n_c]], g_current, cartilage, where)
         committed = elastic_force[:n_c, None] * normals
         if shear is not None:
             committed = committed + shear.force(u, solution.active[:n_c])
@@ -303,14 +303,14 @@ def run(
         pose = Placement(rotation_matrix(u[3:]) @ pose.rotation, pose.translation_mm + u[:3], g0)
         if method == "dem":
             clock_remeasure = time.perf_counter()
-            imbalance, scale = consistency.remeasured_imbalance(
+            imbalance, scale = remeasured_imbalance(
                 pose=pose, fixed_pose=f_pose, initial=geometry, spring_centroid_mm=spring_centroid, spring_normal=spring_normal,
                 spring_area_mm2=spring_area, caster=caster, cartilage=cartilage, ligaments=scene.ligaments, reference_point_mm=g0,
                 shear=shear, u=u, active=solution.active, model_force_n=total_force, load=loads[k], free=free, length_scale_mm=length_scale,
             )
             seconds["geometry"] += time.perf_counter() - clock_remeasure
             remeasured = imbalance / scale if scale > 0 else 0.0
-            if remeasured > consistency.DEM_IMBALANCE_FRACTION:
+            if remeasured > DEM_IMBALANCE_FRACTION:
                 unbalanced.append((k, remeasured))
         pressure = np.zeros(n_springs)
         pressure[cand] = total_force[:n_c] / spring_area[cand]
@@ -348,7 +348,7 @@ def run(
             progress(k)
     if unbalanced:
         worst = max(unbalanced, key=lambda item: item[1])
-        warnings.append(consistency.remeasured_warning(len(unbalanced), worst[0], worst[1]))
+        warnings.append(remeasured_warning(len(unbalanced), worst[0], worst[1]))
     return RunResult(scene, method, steps, time.perf_counter() - started, warnings, seconds)
 
 
