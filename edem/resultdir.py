@@ -181,24 +181,24 @@ def write_result_dir(
         writer = csv.writer(f)
         writer.writerow(columns)
         writer.writerows(lines)
-    entries = []
-    for frame in frames:
-        name = f"pressure_{frame.step:04d}.vtp"
-        write_surface_frame(out / name, frame.surface.points_mm, frame.surface.triangles, frame.surface.point_data, frame.surface.cell_data)
-        entries.append((float(frame.time_s), name))
-    write_pvd(out / COLLECTION_FILE, entries)
+    _write_series(out, "pressure", frames, COLLECTION_FILE)
     if fixed is not None:
         write_surface_frame(out / FIXED_FILE, fixed.points_mm, fixed.triangles, fixed.point_data, fixed.cell_data)
     if fixed_frames:
-        entries = []
-        for frame in fixed_frames:
-            name = f"fixed_{frame.step:04d}.vtp"
-            write_surface_frame(out / name, frame.surface.points_mm, frame.surface.triangles, frame.surface.point_data, frame.surface.cell_data)
-            entries.append((float(frame.time_s), name))
-        write_pvd(out / FIXED_COLLECTION_FILE, entries)
+        _write_series(out, "fixed", fixed_frames, FIXED_COLLECTION_FILE)
     if opensim_sto:
         write_sto(out / STO_FILE, columns, [[float(row[c]) for c in columns] for row in timeseries], name=str(summary.get("scene", "edem")))
     return out
+
+
+def _write_series(out: Path, prefix: str, frames: Sequence[Frame], collection: str) -> None:
+    """<prefix>_NNNN.vtp per frame and the ParaView collection listing them."""
+    entries = []
+    for frame in frames:
+        name = f"{prefix}_{frame.step:04d}.vtp"
+        write_surface_frame(out / name, frame.surface.points_mm, frame.surface.triangles, frame.surface.point_data, frame.surface.cell_data)
+        entries.append((float(frame.time_s), name))
+    write_pvd(out / collection, entries)
 
 
 def write_sto(path: str | Path, columns: Sequence[str], rows: Sequence[Sequence[float]], *, name: str = "edem") -> Path:
