@@ -520,3 +520,15 @@ def test_fe_solid_refuses_naming_the_triangles_it_cannot_extrude():
     triangles of the mobile surface and how far their vertex normals lean."""
     with pytest.raises(ValueError, match=r"turn inside out .*triangles \d+.*of the mobile surface.*lean up to \d+ deg"):
         F.layer_solid(lip_patch(160.0), 2.0, layers_through_thickness=2)
+
+
+def test_fe_models_report_dropped_rim_triangles_and_refuse_with_solver_error():
+    """The FE models pass the construction's warnings on to the run (summary.json) and turn a
+    solid that cannot be built into a SolverError (exit 2) naming the triangles."""
+    from fem_reference.models import _build_solid
+    from geometries.errors import SolverError
+
+    solid, notes = _build_solid("layer", lambda: F.layer_solid(lip_patch(120.0), 2.0, layers_through_thickness=2))
+    assert np.all(solid.volumes_mm3 > 0) and any("rim triangles dropped" in n for n in notes)
+    with pytest.raises(SolverError, match=r"building the FE layer failed: .*triangles \d+"):
+        _build_solid("layer", lambda: F.layer_solid(lip_patch(160.0), 2.0, layers_through_thickness=2))
