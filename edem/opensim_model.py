@@ -28,13 +28,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from edem.errors import InputError
 from edem.tables import SceneTable
 from geometries.surface import TriangleSurface
+
+if TYPE_CHECKING:
+    from edem.loads import LoadSeries
+    from edem.springs import Cartilage
 
 OPENSIM_KEYS = {"model", "mobile_body", "fixed_body", "motion", "mobile_meshes", "fixed_meshes", "geometry_path"}
 M_TO_MM = 1000.0
@@ -226,7 +230,7 @@ def load_opensim_bodies(table: dict[str, Any], scene_file: Path, time_s: np.ndar
     return OpenSimBodies(mobile, fixed, poses, tuple(warnings))
 
 
-def load_in_mobile_frame(load, poses: BodyPoses):
+def load_in_mobile_frame(load: LoadSeries, poses: BodyPoses) -> LoadSeries:
     """A load expressed in ground (a JointReaction in_ground) re-expressed in M's frame, the scene's:
     F_M = R_GM^T F_G, M_M = R_GM^T M_G, P_M = R_GM^T (P_G - o_M)."""
     from dataclasses import replace
@@ -244,7 +248,9 @@ def load_in_mobile_frame(load, poses: BodyPoses):
     )
 
 
-def model_geometry(data: dict[str, Any], scene_file: Path, cartilage, load, notes: list[str]):
+def model_geometry(
+    data: dict[str, Any], scene_file: Path, cartilage: Cartilage, load: LoadSeries, notes: list[str]
+) -> tuple[TriangleSurface, TriangleSurface, np.ndarray, BodyPoses, LoadSeries]:
     """The scene's geometry, F's poses and the load (re-expressed in M's frame) from `[opensim]`.
 
     Returns ``(mobile, fixed, reference_point_mm, poses, load)``. The surfaces are oriented
