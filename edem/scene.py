@@ -32,6 +32,7 @@ SECTIONS = {
         "max_spring_length_mm",
         "thickness_mm",
         "shear_modulus_mpa",
+        "coupling",
     },
     "load": None,  # checked by edem.loads
     "kinematics": None,  # checked by edem.loads
@@ -43,6 +44,7 @@ SECTIONS = {
 }
 FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm"}
 LAWS = ("threshold", "gap", "gap-log")
+COUPLINGS = ("none", "thin-layer")
 
 
 @dataclass(frozen=True)
@@ -179,7 +181,16 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             key="cartilage.max_spring_length_mm",
             expected="h_max >= thickness_mm for the gap laws (springs beyond h_max are not seen)",
         )
+    coupling = cart.string("coupling", "none", COUPLINGS)
+    if coupling == "thin-layer" and law == "gap-log":
+        raise InputError(
+            "the thin-layer coupling is linear: it has no logarithmic law",
+            file=file,
+            key="cartilage.coupling",
+            expected='law = "gap" or "threshold" with coupling = "thin-layer", or coupling = "none"',
+        )
     cartilage = Cartilage(
+        coupling=coupling,
         youngs_modulus_mpa=cart.number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
         poissons_ratio=cart.number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
         law=law,

@@ -24,6 +24,7 @@ from edem.mechanics import (
 from edem.raycast import RayCaster
 from edem.scene import Scene, Viscoelastic
 from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, shear_terms, spring_geometry
+from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 from edem.viscoelastic import check_rk2_stability, integrator_weights
 
 
@@ -167,6 +168,7 @@ def run(
         warnings += check_rk2_stability(load.time_s, viscous.relaxation_time_s, viscous.allow_unstable, scene.source)
     stored = np.zeros((n_springs, 3))  # committed (elastic) spring forces: the EDEM push-back
     pose = Placement.identity(g0)
+    layer_mesh = coupled_layer_mesh(scene) if cartilage.coupling == "thin-layer" else None
     steps: list[StepResult] = []
     seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
@@ -203,9 +205,13 @@ def run(
         if len(lig_rows):
             directions = np.vstack([directions, lig_rows])
         try:
-            solution = solve_unilateral(
-                directions, law, loads[k], fixed_dofs=scene.fixed_dofs, shear=shear, length_scale_mm=length_scale
-            )
+            if layer_mesh is None:
+                solution = solve_unilateral(
+                    directions, law, loads[k], fixed_dofs=scene.fixed_dofs, shear=shear, length_scale_mm=length_scale
+                )
+            else:
+                coupled = CoupledStep.build(layer_mesh, geometry, cartilage, stored_normal, directions[:n_c], lig_rows, lig_law)
+                solution = coupled.solve(loads[k], scene.fixed_dofs, shear, length_scale)
         except SolverError as exc:
             raise SolverError(f"time point {k} (t = {t:g} s, {n_c} candidate springs): {exc}") from None
         total_force = np.where(solution.active, solution.element_force_n, 0.0)
@@ -222,9 +228,13 @@ def run(
         else:
             dt = float(t - load.time_s[k - 1]) if k else 0.0
             previous = loads[k - 1] if k else np.zeros(6)
-            u, elastic_force = viscoelastic_increment(
-                directions, law, shear, solution, previous, loads[k], dt, viscous, scene.fixed_dofs
-            )
+            if layer_mesh is None:
+                u, elastic_force = viscoelastic_increment(
+                    directions, law, shear, solution, previous, loads[k], dt, viscous, scene.fixed_dofs
+                )
+            else:
+                weights = integrator_weights(dt, viscous.relaxation_time_s, viscous.integrator)
+                u, elastic_force = coupled.viscoelastic_increment(solution, stored_normal, previous, loads[k], weights, shear, scene.fixed_dofs)
             if not np.all(np.isfinite(u)):
                 raise SolverError(f"time point {k} (t = {t:g} s): the viscoelastic integration diverged (non-finite displacement)")
         committed = elastic_force[:n_c, None] * normals
