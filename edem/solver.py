@@ -215,6 +215,8 @@ def run(
         except SolverError as exc:
             raise SolverError(f"time point {k} (t = {t:g} s, {n_c} candidate springs): {exc}") from None
         total_force = np.where(solution.active, solution.element_force_n, 0.0)
+        if layer_mesh is not None and solution.max_penetration_mm > 1e-9 * cartilage.max_spring_length_mm:
+            warnings.append(f"time point {k} (t = {t:g} s): the layer's surface penetrates the fixed body by {solution.max_penetration_mm:.3g} mm out of contact")
         if k == 0:
             warnings += weak_dofs_warning(directions, law, shear, solution, scene.fixed_dofs, length_scale)
         overstrained = int((solution.active[:n_c] & (compression_ratio(geometry, cartilage, directions[:n_c] @ solution.displacement) >= 1.0)).sum())

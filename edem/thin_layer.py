@@ -160,6 +160,23 @@ class SurfaceMesh:
             out[:, i] = np.einsum("ij,ij->i", u, v) / np.maximum(2.0 * area, 1e-300)
         return SurfaceMesh(np.asarray(triangles, np.int64), area, out)
 
+    def neighbourhood(self, cells: np.ndarray, width_mm: float) -> np.ndarray:
+        """Triangles within about ``width_mm`` of the triangles ``cells`` (bool mask, (n,)).
+
+        Grown ring by ring through shared vertices; a ring is about one triangle size sqrt(2 A) wide.
+        """
+        n = self.triangles.shape[0]
+        incidence = sp.csr_matrix((np.ones(3 * n), (np.repeat(np.arange(n), 3), self.triangles.ravel())))
+        mask = np.zeros(n, bool)
+        mask[cells] = True
+        size = float(np.sqrt(2.0 * self.area_mm2[mask]).mean()) if np.any(mask) else 1.0
+        for _ in range(int(np.ceil(width_mm / max(size, 1e-12)))):
+            grown = incidence @ (incidence.T @ mask.astype(float)) > 0
+            if np.array_equal(grown, mask):
+                break
+            mask = grown
+        return mask
+
     @staticmethod
     def from_surface(vertices_mm: np.ndarray, triangles: np.ndarray) -> "SurfaceMesh":
         return SurfaceMesh.from_corners(triangles, vertices_mm[triangles])

@@ -34,7 +34,7 @@ from scipy.sparse.linalg import splu
 
 from edem.errors import SolverError
 from edem.mechanics import DOF_NAMES, NormalLaw, ShearTerms, UnilateralSolution, unrestrained_dofs
-from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance
+from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance, operator_factors
 
 
 @dataclass
@@ -124,7 +124,8 @@ def solve_thin_layer(
 ) -> ThinLayerSolution:
     """Unilateral equilibrium of the rigid body on the coupled layer (module docstring).
 
-    ``directions`` (n_c, 6): rows g_j of the candidate springs; ``overlap_mm`` (n_c,): d0;
+    ``directions`` (n, 6): rows g_j of the layer's springs; ``overlap_mm`` (n,): d0, -inf where no
+    opposing surface can be touched (the free layer around the contact);
     ``ligament_rows`` (n_l, 6) and ``ligament_law``: tension-only ligaments as in
     ``edem.mechanics.solve_unilateral``. Returns element forces for the springs then the
     ligaments, with ``active`` the contact set; raises SolverError like ``solve_unilateral``.
@@ -138,7 +139,8 @@ def solve_thin_layer(
     load = np.where(free, np.asarray(load, float), 0.0)
     to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)
     spring_scale = 1.0 / layer.local_mm_per_n  # N/mm: weighs the gap against the force in the NCP
-    active = np.ones(n_c, bool)  # the first iterate takes every candidate, as DEM does
+    touchable = np.isfinite(overlap_mm)  # -inf: free layer with no opposing surface
+    active = touchable.copy()  # the first iterate takes every candidate, as DEM does
     ligament_active = np.ones(ligament_rows.shape[0], bool)
     everything: np.ndarray | None = None
     seen: set[bytes] = set()
@@ -149,8 +151,8 @@ def solve_thin_layer(
         rhs = load - system.pushback(directions) - f_other
         if unrestrained_dofs(stiffness, free, length_scale_mm):
             if everything is None:
-                full = ActiveSystem.build(layer, directions, overlap_mm, np.ones(n_c, bool))
-                k_all, _ = _others(ligament_rows, ligament_law, np.ones_like(ligament_active), shear, np.ones(n_c, bool))
+                full = ActiveSystem.build(layer, directions, overlap_mm, touchable)
+                k_all, _ = _others(ligament_rows, ligament_law, np.ones_like(ligament_active), shear, touchable)
                 everything = full.stiffness(directions) + k_all
                 missing = unrestrained_dofs(everything, free, length_scale_mm)
                 if missing:
@@ -171,6 +173,11 @@ def solve_thin_layer(
         new_active = np.where(active, f > 0.0, gap < 0.0)
         new_ligaments = tension > 0.0
         if np.array_equal(new_active, active) and np.array_equal(new_ligaments, ligament_active):
+            break
+        if not np.any(new_active) and not np.any(new_ligaments) and not np.any(load):
+            active, ligament_active, u = new_active, new_ligaments, np.zeros(6)  # nothing to carry
+            f, gap, w = np.zeros(n_c), overlap_mm.copy(), np.zeros(n_c)
+            tension = ligament_law.offset.copy()
             break
         # Springs at zero force to round-off can flip for ever: accept a repeated set whose
         # violations (negative forces, penetrations) are below cycle_rtol of the force scale.
@@ -255,39 +262,85 @@ def coupled_layer_mesh(scene) -> SurfaceMesh:
 
 @dataclass(frozen=True)
 class CoupledStep:
-    """One time point of DEM/EDEM on the coupled layer: the candidates' layer, overlap and elements.
+    """One time point of DEM/EDEM on the coupled layer: the layer, overlap and elements.
 
-    Local thickness: t for the gap law, the current spring length for the threshold law. The
-    overlap d0 is t - h (gap law) or C f_carried (threshold law: the EDEM push-back of the forces
-    committed at the previous step, zero in DEM).
+    The layer covers the candidate springs and a band of the surface around them 3 sqrt(b) h_max
+    wide (three decay lengths of the bulge, where the layer is free: f = 0, no opposing surface),
+    so the layer can bulge outside the contact; beyond it the boundary is natural. Local
+    thickness: t for the gap law, the current spring length for the threshold law (h_max on the
+    band). The overlap d0 is t - h (gap law) or C f_carried (threshold law: the EDEM push-back of
+    the forces committed at the previous step, zero in DEM); -inf on the band.
     """
 
     layer: LayerCompliance
-    overlap_mm: np.ndarray
-    directions: np.ndarray  # (n_c, 6)
+    overlap_mm: np.ndarray  # (n_d,) over the layer's springs
+    directions: np.ndarray  # (n_d, 6)
+    candidate: np.ndarray  # (n_d,) bool: the layer's springs that are candidates, in candidate order
     ligament_rows: np.ndarray
     ligament_law: NormalLaw
 
     @staticmethod
     def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law) -> "CoupledStep":
-        cells = np.flatnonzero(geometry.candidate)
-        length = geometry.spring_length_mm[cells]
-        thickness = length if cartilage.law == "threshold" else np.full(cells.shape, float(cartilage.thickness_mm))
-        layer = layer_compliance(mesh, cells, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio)
+        """``directions`` (n_c, 6) and ``carried_force_n`` (n_c,) are those of the candidates."""
+        cand = np.flatnonzero(geometry.candidate)
+        law_thickness = cartilage.max_spring_length_mm if cartilage.law == "threshold" else float(cartilage.thickness_mm)
+        _, _, _, b = operator_factors(cartilage.poissons_ratio, 1.0, 1.0)
+        domain = np.flatnonzero(mesh.neighbourhood(cand, 3.0 * np.sqrt(b) * law_thickness)) if b > 0 else cand
+        is_candidate = geometry.candidate[domain]
+        length = geometry.spring_length_mm[domain]
+        thickness = np.where(is_candidate, length, law_thickness) if cartilage.law == "threshold" else np.full(domain.shape, law_thickness)
+        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio)
+        overlap = np.full(domain.shape, -np.inf)
         if cartilage.law == "threshold":
-            overlap = layer.deflection(carried_force_n) if np.any(carried_force_n) else np.zeros(cells.shape)
+            carried = np.zeros(domain.shape)
+            carried[is_candidate] = carried_force_n
+            overlap[is_candidate] = layer.deflection(carried)[is_candidate] if np.any(carried) else 0.0
         else:
-            overlap = thickness - length
-        return CoupledStep(layer, overlap, directions, ligament_rows, ligament_law)
+            overlap[is_candidate] = (thickness - length)[is_candidate]
+        rows = np.zeros((domain.shape[0], 6))
+        rows[is_candidate] = directions  # domain is sorted, so candidates keep their order
+        return CoupledStep(layer, overlap, rows, is_candidate, ligament_rows, ligament_law)
+
+    def _to_candidates(self, solution: ThinLayerSolution) -> ThinLayerSolution:
+        n_d, c = self.directions.shape[0], self.candidate
+        keep = np.concatenate([c, np.ones(solution.element_force_n.shape[0] - n_d, bool)])
+        solution.element_force_n = solution.element_force_n[keep]
+        solution.active = solution.active[keep]
+        solution.deflection_mm, solution.gap_mm = solution.deflection_mm[c], solution.gap_mm[c]
+        return solution
 
     def solve(self, load, fixed_dofs, shear, length_scale_mm) -> ThinLayerSolution:
-        return solve_thin_layer(
-            self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
-            fixed_dofs=fixed_dofs, shear=shear, length_scale_mm=length_scale_mm,
+        """The coupled solve; forces, contact set, deflection and gap of the candidates (then ligaments)."""
+        return self._to_candidates(
+            solve_thin_layer(
+                self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
+                fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
+            )
         )
 
+    def _shear(self, shear: ShearTerms | None) -> ShearTerms | None:
+        """The candidates' shear springs spread over the layer's springs (zero on the band)."""
+        if shear is None:
+            return None
+        c = self.candidate
+
+        def spread(values):
+            out = np.zeros((c.shape[0],) + values.shape[1:])
+            out[c] = values
+            return out
+
+        return ShearTerms(spread(shear.arm_mm), spread(shear.normals), spread(shear.stiffness_n_per_mm), spread(shear.stored_force_n))
+
     def viscoelastic_increment(self, elastic, carried_force_n, previous_load, load, weights, shear, fixed_dofs):
-        return thin_layer_viscoelastic_increment(
-            self.directions, self.layer, self.overlap_mm, self.ligament_rows, self.ligament_law, shear, elastic,
-            carried_force_n, previous_load, load, weights, fixed_dofs,
+        """Kelvin-Voigt increment (``thin_layer_viscoelastic_increment``) in candidate order."""
+        c = self.candidate
+        n_d = c.shape[0]
+        full = ThinLayerSolution(elastic.displacement, None, np.concatenate([np.zeros(n_d, bool), elastic.active[int(c.sum()):]]), 0, 0.0, 0.0)
+        full.active[:n_d][c] = elastic.active[: int(c.sum())]
+        carried = np.zeros(n_d)
+        carried[c] = carried_force_n
+        u, force = thin_layer_viscoelastic_increment(
+            self.directions, self.layer, self.overlap_mm, self.ligament_rows, self.ligament_law, self._shear(shear), full,
+            carried, previous_load, load, weights, fixed_dofs,
         )
+        return u, np.concatenate([force[:n_d][c], force[n_d:]])
