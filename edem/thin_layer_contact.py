@@ -33,7 +33,8 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from edem.errors import SolverError
-from edem.mechanics import DOF_NAMES, NormalLaw, ShearTerms, UnilateralSolution, unrestrained_dofs
+from edem.laws import LinearElements
+from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, unrestrained_dofs
 from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance, operator_factors
 
 
@@ -94,7 +95,7 @@ def _others(ligament_rows, ligament_law, ligament_active, shear, active):
     """Stiffness (6, 6) and generalised force at u = 0 (6,) of the active ligaments and shear springs."""
     c = ligament_law.stiffness_n_per_mm * ligament_active
     k = ligament_rows.T @ (ligament_rows * c[:, None])
-    f0 = ligament_rows.T @ (ligament_law.offset * ligament_active)
+    f0 = ligament_rows.T @ (ligament_law.offset_n * ligament_active)
     if shear is not None:
         k = k + shear.stiffness(active)
         f0 = f0 + shear.generalised_force(np.zeros(6), active)
@@ -114,7 +115,7 @@ def solve_thin_layer(
     load: np.ndarray,
     *,
     ligament_rows: np.ndarray | None = None,
-    ligament_law: NormalLaw | None = None,
+    ligament_law: LinearElements | None = None,
     fixed_dofs: tuple[str, ...] = (),
     shear: ShearTerms | None = None,
     length_scale_mm: float = 1.0,
@@ -132,7 +133,7 @@ def solve_thin_layer(
     """
     n_c = directions.shape[0]
     if ligament_rows is None:
-        ligament_rows, ligament_law = np.zeros((0, 6)), NormalLaw.linear(np.zeros(0), np.zeros(0))
+        ligament_rows, ligament_law = np.zeros((0, 6)), LinearElements(np.zeros(0), np.zeros(0))
     free = np.ones(6, bool)
     for name in fixed_dofs:
         free[DOF_NAMES.index(name)] = False
@@ -169,7 +170,7 @@ def solve_thin_layer(
         f[active] = system.forces(u)
         w = system.deflection(layer, u)
         gap = w - overlap_mm - directions @ u
-        tension = ligament_law.offset + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
+        tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
         new_active = np.where(active, f > 0.0, gap < 0.0)
         new_ligaments = tension > 0.0
         if np.array_equal(new_active, active) and np.array_equal(new_ligaments, ligament_active):
@@ -177,7 +178,7 @@ def solve_thin_layer(
         if not np.any(new_active) and not np.any(new_ligaments) and not np.any(load):
             active, ligament_active, u = new_active, new_ligaments, np.zeros(6)  # nothing to carry
             f, gap, w = np.zeros(n_c), overlap_mm.copy(), np.zeros(n_c)
-            tension = ligament_law.offset.copy()
+            tension = ligament_law.offset_n.copy()
             break
         # Springs at zero force to round-off can flip for ever: accept a repeated set whose
         # violations (negative forces, penetrations) are below cycle_rtol of the force scale.
@@ -220,7 +221,7 @@ def thin_layer_viscoelastic_increment(
     layer: LayerCompliance,
     overlap_mm: np.ndarray,
     ligament_rows: np.ndarray,
-    ligament_law: NormalLaw,
+    ligament_law: LinearElements,
     shear: ShearTerms | None,
     elastic: ThinLayerSolution,
     carried_force_n: np.ndarray,
@@ -239,7 +240,7 @@ def thin_layer_viscoelastic_increment(
     phi, psi = weights
     n_c = directions.shape[0]
     active = elastic.active[:n_c] | (carried_force_n > 0.0)
-    ligament_active = elastic.active[n_c:] | (ligament_law.offset > 0.0)
+    ligament_active = elastic.active[n_c:] | (ligament_law.offset_n > 0.0)
     free = np.array([d not in fixed_dofs for d in DOF_NAMES])
     u = np.zeros(6)
     f = np.zeros(n_c)
@@ -251,7 +252,7 @@ def thin_layer_viscoelastic_increment(
             rhs = phi * (previous_load - system.pushback(directions) - f_other) + psi * (load - previous_load)
             u[free] = np.linalg.lstsq(k[np.ix_(free, free)], rhs[free], rcond=None)[0]
         f[active] = np.maximum(system.forces(u), 0.0)
-    tension = ligament_law.offset + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
+    tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
     return u, np.concatenate([f, np.where(ligament_active, np.maximum(tension, 0.0), 0.0)])
 
 
@@ -264,12 +265,13 @@ def coupled_layer_mesh(scene) -> SurfaceMesh:
 class CoupledStep:
     """One time point of DEM/EDEM on the coupled layer: the layer, overlap and elements.
 
-    The layer covers the candidate springs and a band of the surface around them 3 sqrt(b) h_max
+    The layer covers the candidate springs and a band of the surface around them 3 sqrt(b) h
     wide (three decay lengths of the bulge, where the layer is free: f = 0, no opposing surface),
     so the layer can bulge outside the contact; beyond it the boundary is natural. Local
-    thickness: t for the gap law, the current spring length for the threshold law (h_max on the
-    band). The overlap d0 is t - h (gap law) or C f_carried (threshold law: the EDEM push-back of
-    the forces committed at the previous step, zero in DEM); -inf on the band.
+    thickness: the length the law's shear springs use (t for the gap law, the current spring
+    length for the threshold law; t or h_max on the band). The overlap d0 is t - h for an
+    "overlap" law (gap) or C f_carried for a "carried" law (threshold: the EDEM push-back of the
+    forces committed at the previous step, zero in DEM); -inf on the band.
     """
 
     layer: LayerCompliance
@@ -277,21 +279,24 @@ class CoupledStep:
     directions: np.ndarray  # (n_d, 6)
     candidate: np.ndarray  # (n_d,) bool: the layer's springs that are candidates, in candidate order
     ligament_rows: np.ndarray
-    ligament_law: NormalLaw
+    ligament_law: LinearElements
 
     @staticmethod
     def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law) -> "CoupledStep":
         """``directions`` (n_c, 6) and ``carried_force_n`` (n_c,) are those of the candidates."""
         cand = np.flatnonzero(geometry.candidate)
-        law_thickness = cartilage.max_spring_length_mm if cartilage.law == "threshold" else float(cartilage.thickness_mm)
+        law = cartilage.spring_law
+        # The band's thickness: t, or h_max for a law whose thickness is the spring length.
+        band_thickness = float(cartilage.thickness_mm) if law.needs_thickness else cartilage.max_spring_length_mm
         _, _, _, b = operator_factors(cartilage.poissons_ratio, 1.0, 1.0)
-        domain = np.flatnonzero(mesh.neighbourhood(cand, 3.0 * np.sqrt(b) * law_thickness)) if b > 0 else cand
+        domain = np.flatnonzero(mesh.neighbourhood(cand, 3.0 * np.sqrt(b) * band_thickness)) if b > 0 else cand
         is_candidate = geometry.candidate[domain]
         length = geometry.spring_length_mm[domain]
-        thickness = np.where(is_candidate, length, law_thickness) if cartilage.law == "threshold" else np.full(domain.shape, law_thickness)
+        thickness = np.full(domain.shape, band_thickness)
+        thickness[is_candidate] = law.shear_length_mm(length[is_candidate], cartilage.thickness_mm)  # the layer k_s = G / h sees
         layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio)
         overlap = np.full(domain.shape, -np.inf)
-        if cartilage.law == "threshold":
+        if law.thin_layer == "carried":
             carried = np.zeros(domain.shape)
             carried[is_candidate] = carried_force_n
             overlap[is_candidate] = layer.deflection(carried)[is_candidate] if np.any(carried) else 0.0
