@@ -201,7 +201,7 @@ def solve_thin_layer(
     if shear is not None:
         resultant = resultant + shear.generalised_force(u, active)
     residual = np.where(free, resultant - load, 0.0)
-    scale = float(np.linalg.norm(load * to_newton)) + float(f.sum()) + 1e-300
+    scale = float(np.linalg.norm(load * to_newton)) + float(f.sum()) + 1e-9  # floor: a nanonewton, for a vanishing load
     if float(np.linalg.norm(residual * to_newton)) > max(rtol, cycle_rtol) * 1e3 * scale:
         raise SolverError(f"the thin-layer solve does not balance the load (residual {np.linalg.norm(residual):.3e} N)")
     outside = ~active
