@@ -225,7 +225,7 @@ def thin_layer_viscoelastic_increment(
     ligament_rows: np.ndarray,
     ligament_law: LinearElements,
     shear: ShearTerms | None,
-    elastic: ThinLayerSolution,
+    elastic_active: np.ndarray,
     carried_force_n: np.ndarray,
     previous_load: np.ndarray,
     load: np.ndarray,
@@ -234,15 +234,15 @@ def thin_layer_viscoelastic_increment(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Kelvin-Voigt increment on the coupled layer (``edem.viscoelastic``, eq. 6.18).
 
-    The contact set is frozen at the quasi-static set under T_k plus the springs that carried a
-    force into the step (so they can creep back); u = K^-1 [phi (T_{k-1} - p) + psi (T_k - T_{k-1})]
+    The contact set is frozen at the quasi-static set under T_k (``elastic_active``: springs then
+    ligaments) plus the springs that carried a force into the step (so they can creep back); u = K^-1 [phi (T_{k-1} - p) + psi (T_k - T_{k-1})]
     with K the coupled contact stiffness and p the push-back of that set at u = 0. Returns u and the
     elastic element forces (springs then ligaments) to commit.
     """
     phi, psi = weights
     n_c = directions.shape[0]
-    active = elastic.active[:n_c] | (carried_force_n > 0.0)
-    ligament_active = elastic.active[n_c:] | (ligament_law.offset_n > 0.0)
+    active = elastic_active[:n_c] | (carried_force_n > 0.0)
+    ligament_active = elastic_active[n_c:] | (ligament_law.offset_n > 0.0)
     free = np.array([d not in fixed_dofs for d in DOF_NAMES])
     u = np.zeros(6)
     f = np.zeros(n_c)
@@ -342,13 +342,11 @@ class CoupledStep:
     def viscoelastic_increment(self, elastic, carried_force_n, previous_load, load, weights, shear, fixed_dofs):
         """Kelvin-Voigt increment (``thin_layer_viscoelastic_increment``) in candidate order."""
         c = self.candidate
-        n_d = c.shape[0]
-        full = ThinLayerSolution(elastic.displacement, None, np.concatenate([np.zeros(n_d, bool), elastic.active[int(c.sum()):]]), 0, 0.0, 0.0)
-        full.active[:n_d][c] = elastic.active[: int(c.sum())]
-        carried = np.zeros(n_d)
-        carried[c] = carried_force_n
+        n_c = int(c.sum())
+        active, carried = np.zeros(c.shape[0], bool), np.zeros(c.shape[0])
+        active[c], carried[c] = elastic.active[:n_c], carried_force_n
         u, force = thin_layer_viscoelastic_increment(
-            self.directions, self.layer, self.overlap_mm, self.ligament_rows, self.ligament_law, self._shear(shear), full,
-            carried, previous_load, load, weights, fixed_dofs,
+            self.directions, self.layer, self.overlap_mm, self.ligament_rows, self.ligament_law, self._shear(shear),
+            np.concatenate([active, elastic.active[n_c:]]), carried, previous_load, load, weights, fixed_dofs,
         )
-        return u, np.concatenate([force[:n_d][c], force[n_d:]])
+        return u, np.concatenate([force[: c.shape[0]][c], force[c.shape[0]:]])

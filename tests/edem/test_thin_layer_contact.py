@@ -173,3 +173,21 @@ def test_incompressible_flat_punch_gives_the_thin_layer_paraboloid_through_the_s
     g = E / (2 * (1 + nu))
     assert -fit[1] == pytest.approx(3 * g * step.displacement_mm[2] / (4 * h**3), rel=0.03)
     assert abs(balance(scene, step)[2]) <= 1e-9 * force
+
+
+def test_ligaments_and_shear_springs_act_beside_the_coupled_layer():
+    """A ligament below the plate takes T = E A / L0 d (tension only) and the layer the rest; shear
+    springs carry a tangential load on the coupled cylinder (balance in every free DOF)."""
+    from edem.springs import Ligament
+
+    mobile, fixed = grid_plate(20, 20, 8), plane(lambda x, y: 2.0)
+    below = Ligament("lig", np.zeros(3), np.array([0.0, 0.0, -20.0]), 255.0, 10.0, 20.0)
+    scene = coupled(make_scene(mobile, fixed, [0, 0, 300.0], fixed_dofs=("tx", "ty", "rz"), ligaments=(below,), poissons_ratio=0.49))
+    step = run(scene, "dem").steps[0]
+    tension = 255.0 * 10.0 / 20.0 * step.displacement_mm[2]
+    assert step.ligament_force_n[0] == pytest.approx(tension, rel=1e-9)
+    assert (step.pressure_mpa * step.area_mm2).sum() == pytest.approx(300.0 - tension, rel=1e-9)
+    scene = coupled(make_scene(cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), [20.0, 0, 333.0],
+                               fixed_dofs=("rx", "ry", "rz"), shear_modulus_mpa=3.6, poissons_ratio=0.45))
+    step = run(scene, "dem").steps[0]
+    assert step.displacement_mm[0] > 0 and step.force_residual_n <= 1e-9 * 333.0
