@@ -148,6 +148,7 @@ class SurfaceMesh:
     triangles: np.ndarray  # (n, 3) int
     area_mm2: np.ndarray  # (n,)
     cotangents: np.ndarray  # (n, 3)
+    incidence: sp.csr_matrix  # (n, n_vertices) triangle-vertex incidence
 
     @staticmethod
     def from_corners(triangles: np.ndarray, corners_mm: np.ndarray) -> "SurfaceMesh":
@@ -158,20 +159,22 @@ class SurfaceMesh:
             u = corners_mm[:, (i + 1) % 3] - corners_mm[:, i]
             v = corners_mm[:, (i + 2) % 3] - corners_mm[:, i]
             out[:, i] = np.einsum("ij,ij->i", u, v) / np.maximum(2.0 * area, 1e-300)
-        return SurfaceMesh(np.asarray(triangles, np.int64), area, out)
+        tri = np.asarray(triangles, np.int64)
+        n = tri.shape[0]
+        incidence = sp.csr_matrix((np.ones(3 * n), (np.repeat(np.arange(n), 3), tri.ravel())))
+        return SurfaceMesh(tri, area, out, incidence)
 
     def neighbourhood(self, cells: np.ndarray, width_mm: float) -> np.ndarray:
         """Triangles within about ``width_mm`` of the triangles ``cells`` (bool mask, (n,)).
 
         Grown ring by ring through shared vertices; a ring is about one triangle size sqrt(2 A) wide.
         """
-        n = self.triangles.shape[0]
-        incidence = sp.csr_matrix((np.ones(3 * n), (np.repeat(np.arange(n), 3), self.triangles.ravel())))
-        mask = np.zeros(n, bool)
+        incidence, incidence_t = self.incidence, self.incidence.T.tocsr()
+        mask = np.zeros(self.triangles.shape[0], bool)
         mask[cells] = True
         size = float(np.sqrt(2.0 * self.area_mm2[mask]).mean()) if np.any(mask) else 1.0
         for _ in range(int(np.ceil(width_mm / max(size, 1e-12)))):
-            grown = incidence @ (incidence.T @ mask.astype(float)) > 0
+            grown = incidence @ (incidence_t @ mask.astype(float)) > 0
             if np.array_equal(grown, mask):
                 break
             mask = grown
@@ -181,27 +184,32 @@ class SurfaceMesh:
     def from_surface(vertices_mm: np.ndarray, triangles: np.ndarray) -> "SurfaceMesh":
         return SurfaceMesh.from_corners(triangles, vertices_mm[triangles])
 
-    def submesh_operators(self, cells: np.ndarray, weight: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix, np.ndarray]:
-        """P1 operators on the triangles ``cells`` (indices, m): (K, Q, M).
+    def smoothing_operators(self, cells: np.ndarray, weight: np.ndarray) -> tuple[sp.csc_matrix, sp.csr_matrix]:
+        """P1 operators on the triangles ``cells`` (indices, m): (H, Q).
 
-        K (v, v): cotangent stiffness with each triangle weighted by ``weight`` (m,) (natural
-        boundary); Q (m, v): triangle value = mean of its corners; M = Q^T A Q (v, v), mm^2.
-        Vertices are renumbered to those the cells use.
+        H = M + K (v, v), mm^2: the mass M = Q^T A Q plus the cotangent stiffness K with each
+        triangle weighted by ``weight`` (m,) mm^2 (natural boundary), assembled in one pass;
+        Q (m, v): triangle value = mean of its corners. Vertices are renumbered to those the
+        cells use.
         """
         tri = self.triangles[cells]
         vertices, local = np.unique(tri, return_inverse=True)
         local = local.reshape(tri.shape)
         n_v, m = vertices.shape[0], tri.shape[0]
-        # Edge opposite corner i joins corners i+1 and i+2; its stiffness is w cot_i / 2.
-        rows = np.concatenate([local[:, (i + 1) % 3] for i in range(3)])
-        cols = np.concatenate([local[:, (i + 2) % 3] for i in range(3)])
+        # Mass: A/9 for every ordered pair of corners of a triangle (Q^T A Q).
+        pair_rows = np.repeat(local, 3, axis=1).ravel()
+        pair_cols = np.tile(local, (1, 3)).ravel()
+        pair_vals = np.repeat(self.area_mm2[cells] / 9.0, 9)
+        # Stiffness: the edge opposite corner i (corners i+1, i+2) carries w cot_i / 2.
+        a = np.concatenate([local[:, (i + 1) % 3] for i in range(3)])
+        b = np.concatenate([local[:, (i + 2) % 3] for i in range(3)])
         half = 0.5 * (self.cotangents[cells] * np.asarray(weight, float)[:, None]).T.ravel()
-        off = sp.coo_matrix((-half, (rows, cols)), shape=(n_v, n_v))
-        off = off + off.T
-        stiffness = (off - sp.diags(np.asarray(off.sum(axis=1)).ravel())).tocsr()
+        rows = np.concatenate([pair_rows, a, b, a, b])
+        cols = np.concatenate([pair_cols, b, a, a, b])
+        vals = np.concatenate([pair_vals, -half, -half, half, half])
+        smoothing = sp.csc_matrix((vals, (rows, cols)), shape=(n_v, n_v))
         q = sp.csr_matrix((np.full(3 * m, 1.0 / 3.0), (np.repeat(np.arange(m), 3), local.ravel())), shape=(m, n_v))
-        mass = (q.T @ sp.diags(self.area_mm2[cells]) @ q).tocsr()
-        return stiffness, q, mass
+        return smoothing, q
 
 
 @dataclass(frozen=True)
@@ -245,7 +253,6 @@ def layer_compliance(
     c_loc, s2, sigma, b = operator_factors(poissons_ratio, g, h)
     if sigma == 0.0:
         return LayerCompliance(c_loc / area, sp.csr_matrix((0, cells.shape[0])), sp.csc_matrix((0, 0)), 0.0)
-    stiffness, q, mass = mesh.submesh_operators(cells, b * h * h)
-    smoothing = (mass + stiffness).tocsc()
+    smoothing, q = mesh.smoothing_operators(cells, b * h * h)
     z = (q.T @ sp.diags(np.sqrt(s2))).tocsr()
     return LayerCompliance(c_loc / area, z, smoothing, sigma)
