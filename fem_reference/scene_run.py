@@ -61,8 +61,11 @@ from edem.mechanics import DOF_NAMES
 from edem.raycast import RayCaster
 from edem.resultdir import Frame, SurfaceFrame, timeseries_row, write_result_dir
 from edem.solver import applied_loads, fixed_placement
+from fem_reference.contact import _fe_modules, solve_contact
 from fem_reference.models import FE_MODELS, FEGeometry, contact_surface
 from fem_reference.problem import (
+
+
     AREA_DEFINITION_NITSCHE,
     FEContactProblem,
     FEConvergenceError,
@@ -276,7 +279,7 @@ def _free_modes(scene: Any, geom: FEGeometry, settings: FESettings, force: np.nd
     kt = len(trans)
     gen_load = np.concatenate([trans @ force, rots @ moment / length])
     scale = float(np.linalg.norm(np.concatenate([force, moment / length])))
-    names_t, names_r = ("tx", "ty", "tz"), ("rx", "ry", "rz")
+    names_t, names_r = DOF_NAMES[:3], DOF_NAMES[3:]
     for v in vec[:, weak].T:
         vt, vr = trans.T @ v[:kt], rots.T @ v[kt:]
         what = (f"translation {_mode_name(vt, names_t)}" if np.linalg.norm(vr) < 1e-9 else
@@ -351,8 +354,6 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     n_times = len(scene.load.time_s)
     selected = _selected_steps(steps, n_times)
     try:
-        from fem_reference.contact import _fe_modules
-
         mods = _fe_modules()
     except ImportError as exc:
         raise InputError(f"the FE reference needs dolfinx ({exc})",
@@ -440,7 +441,6 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             initial_field=previous["ut"] * ratio if warm else None,
             strain_warning=STRAIN_WARNING,
         )
-        from fem_reference.contact import solve_contact  # dolfinx: imported on first use
 
         try:
             try:
@@ -499,8 +499,6 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
 def world_rank() -> int:
     """Rank in MPI.COMM_WORLD (0 without the FE stack)."""
     try:
-        from fem_reference.contact import _fe_modules
-
         return int(_fe_modules()["MPI"].COMM_WORLD.rank)
     except ImportError:
         return 0
@@ -586,8 +584,6 @@ def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FE
 def _area_on_mobile(res: Any, solid: Any) -> float:
     """The Nitsche contact-area integral with each contact facet weighted by (area of the
     bonded triangle below it) / (its own area): the contact area measured on M."""
-    from fem_reference.contact import _fe_modules
-
     m = _fe_modules()
     fem, ufl, dmesh = m["fem"], m["ufl"], m["dolfinx"].mesh
     s, pressure = res.fields["setup"], res.fields["pressure"]
