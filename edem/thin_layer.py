@@ -73,6 +73,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import spsolve
 
 # --------------------------------------------------------------------------- symbols
 
@@ -233,8 +234,6 @@ class LayerCompliance:
         """Surface deflection w (m,) in mm under spring forces f (m,) in N."""
         w = self.local_mm_per_n * force_n
         if self.coupled:
-            from scipy.sparse.linalg import spsolve
-
             w = w + self.sigma * (self.z.T @ spsolve(self.h, self.z @ force_n))
         return w
 

@@ -13,7 +13,7 @@ from edem.mechanics import confined_modulus_mpa, generalised_directions
 from edem.raycast import RayCaster
 from edem.scene import Viscoelastic, load_scene
 from edem.solver import fixed_placement, run
-from edem.springs import Placement, spring_geometry
+from edem.springs import Ligament, Placement, spring_geometry
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 from geometries.surface import TriangleSurface
 
@@ -177,8 +177,6 @@ def test_incompressible_flat_punch_gives_the_thin_layer_paraboloid_through_the_s
 def test_ligaments_and_shear_springs_act_beside_the_coupled_layer():
     """A ligament below the plate takes T = E A / L0 d (tension only) and the layer the rest; shear
     springs carry a tangential load on the coupled cylinder (balance in every free DOF)."""
-    from edem.springs import Ligament
-
     mobile, fixed = grid_plate(20, 20, 8), plane(lambda x, y: 2.0)
     below = Ligament("lig", np.zeros(3), np.array([0.0, 0.0, -20.0]), 255.0, 10.0, 20.0)
     scene = coupled(make_scene(mobile, fixed, [0, 0, 300.0], fixed_dofs=("tx", "ty", "rz"), ligaments=(below,), poissons_ratio=0.49))

@@ -10,6 +10,7 @@ import pytest
 from verification.campaign_model import Campaign
 from verification.campaigns import describe_campaigns, get_campaign, validate_campaign
 from verification.campaigns.thin_layer import LOADS_N, NUS, THICKNESS_MM, case_name
+from verification.runner import run_campaign
 from verification.sides import fe_availability
 
 
@@ -41,8 +42,6 @@ def test_coupled_layer_beats_the_springs_against_the_fe_at_nu_049(tmp_path):
     """Cylinder layer 2 mm, 333 N, nu 0.49: the coupled bed's displacement, peak and L2 errors
     against the FE layer are each below the independent springs' (measured here: springs -66 %
     displacement, +93 % peak)."""
-    from verification.runner import run_campaign
-
     full = get_campaign("thin-layer")
     names = [case_name("layer", v, 333.0, 2.0, 0.49) for v in ("coupled", "springs")]
     sub = Campaign("thin-layer-pair", full.description, tuple(full.case(n) for n in names))
