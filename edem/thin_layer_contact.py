@@ -121,7 +121,6 @@ def solve_thin_layer(
     fixed_dofs: tuple[str, ...] = (),
     shear: ShearTerms | None = None,
     length_scale_mm: float = 1.0,
-    rtol: float = 1e-10,
     cycle_rtol: float = 1e-7,
     max_iterations: int = 60,
 ) -> ThinLayerSolution:
@@ -202,7 +201,9 @@ def solve_thin_layer(
         resultant = resultant + shear.generalised_force(u, active)
     residual = np.where(free, resultant - load, 0.0)
     scale = float(np.linalg.norm(load * to_newton)) + float(f.sum()) + 1e-9  # floor: a nanonewton, for a vanishing load
-    if float(np.linalg.norm(residual * to_newton)) > max(rtol, cycle_rtol) * 1e3 * scale:
+    # The 6 x 6 solve balances to round-off; only an accepted cycle or a regularised transient set
+    # (1e-8 of the full stiffness) can leave more, and both stay far below 10 cycle_rtol.
+    if float(np.linalg.norm(residual * to_newton)) > 10.0 * cycle_rtol * scale:
         raise SolverError(f"the thin-layer solve does not balance the load (residual {np.linalg.norm(residual):.3e} N)")
     outside = ~active
     return ThinLayerSolution(
