@@ -56,15 +56,20 @@ s^2 / (h e / G) (93 at nu = 0.499). On forces f = A p the compliance
     w = C f,  C = diag(c_loc / A) + sigma Z^T H^-1 Z,  Z = Q^T diag(s),  H = M + K[b h^2],
 
 is symmetric; it is positive definite (for sigma = -1 because Q H^-1 Q^T A <= Q M^-1 Q^T A, a
-projection, and c_loc - s^2 = (h/G) e > 0 for constant h), a uniform pressure gives the uniform
-deflection h p / E' (K 1 = 0, Q 1 = 1), and the continuum symbol is recovered as the mesh size
+projection, and c_loc - s^2 = (h/G) e > 0 for constant h), a uniform pressure on a layer
+without free edges gives the uniform deflection h p / E' (K 1 = 0, Q 1 = 1), and the continuum symbol is recovered as the mesh size
 -> 0. A cell-centred two-point Laplacian would avoid the transfer but is inconsistent on
 non-orthogonal meshes (8 % anisotropy on right-triangle grids), and a transfer-based Laplacian on
 cell values (Q^T K Q) has checkerboard null modes that leave nearly incompressible pressures
 unresolved; here checkerboards see the finite local compliance c_loc. The intrinsic quantities
 (areas, cotangents) do not change under the rigid motions of the body, so they are computed once.
-The operator lives on the candidate springs; its boundary is natural (no flux), i.e. the layer
-is cut where no opposing surface is within the ray window.
+
+Boundaries. Where the spring-bearing surface ends, the cartilage has a free lateral face: there
+the smoothed field vanishes (S p = 0, Dirichlet), the Pade form of the thin-layer free-edge
+condition p = 0 (for e -> 0 and a plate in full contact it gives the squeeze-film paraboloid
+(3 G d / 2 h^3)(a^2 - x^2) plus an O(h^2/a^2) edge term; a no-flux edge would confine the
+incompressible layer and make it rigid). Where the contact solve cuts the surface to a band
+around the candidates (``edem.thin_layer_contact``), the layer goes on, and the cut is natural.
 """
 
 from __future__ import annotations
@@ -150,6 +155,7 @@ class SurfaceMesh:
     area_mm2: np.ndarray  # (n,)
     cotangents: np.ndarray  # (n, 3)
     incidence: sp.csr_matrix  # (n, n_vertices) triangle-vertex incidence
+    free_edge_vertex: np.ndarray  # (n_vertices,) bool: on the surface's boundary (the cartilage's free edge)
 
     @staticmethod
     def from_corners(triangles: np.ndarray, corners_mm: np.ndarray) -> "SurfaceMesh":
@@ -163,7 +169,11 @@ class SurfaceMesh:
         tri = np.asarray(triangles, np.int64)
         n = tri.shape[0]
         incidence = sp.csr_matrix((np.ones(3 * n), (np.repeat(np.arange(n), 3), tri.ravel())))
-        return SurfaceMesh(tri, area, out, incidence)
+        edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+        unique, count = np.unique(edges, axis=0, return_counts=True)
+        free = np.zeros(incidence.shape[1], bool)
+        free[unique[count == 1].ravel()] = True  # an edge of one triangle only
+        return SurfaceMesh(tri, area, out, incidence, free)
 
     def neighbourhood(self, cells: np.ndarray, width_mm: float) -> np.ndarray:
         """Triangles within about ``width_mm`` of the triangles ``cells`` (bool mask, (n,)).
@@ -191,7 +201,8 @@ class SurfaceMesh:
         H = M + K (v, v), mm^2: the mass M = Q^T A Q plus the cotangent stiffness K with each
         triangle weighted by ``weight`` (m,) mm^2 (natural boundary), assembled in one pass;
         Q (m, v): triangle value = mean of its corners. Vertices are renumbered to those the
-        cells use.
+        cells use; those on the surface's free edge are left out (the smoothed field vanishes
+        there, module docstring), the rest of the subset's boundary is natural.
         """
         tri = self.triangles[cells]
         vertices, local = np.unique(tri, return_inverse=True)
@@ -210,6 +221,9 @@ class SurfaceMesh:
         vals = np.concatenate([pair_vals, -half, -half, half, half])
         smoothing = sp.csc_matrix((vals, (rows, cols)), shape=(n_v, n_v))
         q = sp.csr_matrix((np.full(3 * m, 1.0 / 3.0), (np.repeat(np.arange(m), 3), local.ravel())), shape=(m, n_v))
+        keep = ~self.free_edge_vertex[vertices]
+        if not np.all(keep):
+            smoothing, q = smoothing[keep][:, keep].tocsc(), q[:, keep].tocsr()
         return smoothing, q
 
 
