@@ -147,6 +147,8 @@ def run(
     that time, the stored spring forces of the springs still in contact push back (eq. 3.17),
     the increment solves K u = T_k - p with the active set handled as in DEM (eq. 3.18-3.19),
     then the forces are committed and M is moved by u. Springs that left contact keep no force.
+    With ``cartilage.coupling = "thin-layer"`` each solve is the coupled layer's
+    (:mod:`edem.thin_layer_contact`) and the committed forces are its coupled pressure field.
     """
     method = method or scene.method
     if method not in METHODS:
