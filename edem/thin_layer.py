@@ -36,28 +36,36 @@ The surface operator
 --------------------
 As an operator, (1 - b h^2 lap) w = (h/G)(e - a h^2 lap) p. Dividing the polynomials,
 
-    w = c_loc p + sigma s (S (s p)),  S = (1 - b h^2 lap)^-1,
-    c_loc = (h/G) a/b,  s^2 = (h/G) |c1| / b,  sigma = -sign(c1),
+    w = c_loc p + sigma c_nl S p,  S = (1 - b h^2 lap)^-1,
+    c_loc = (h/G) a/b,  c_nl = (h/G) |c1| / b,  sigma = -sign(c1),
 
 one local term and one screened-Poisson smoothing (sigma = -1 for nu > 1/4: pressing a point lifts
-its neighbours, the incompressible bulge). Where h varies, the smoothing is
-(1 - div(b h^2 grad)) and s carries the local h, which keeps the operator symmetric; for constant
-h it is the Pade exactly.
+its neighbours, the incompressible bulge; c_loc - c_nl = (h/G) e). Where h varies,
+
+    S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl,
+
+which keeps c_nl S symmetric, keeps S 1 = 1 (a uniform pressure deflects the layer by h p / E'
+at every thickness) and gives for long waves w = (h/G) e p - (c1/G) div(h^3 grad p): the
+variable-thickness thin-layer law with h^3 inside the divergence (for nu = 1/2, -(1/3G)
+div(h^3 grad p)). For constant h it is the Pade exactly. (A splitting sqrt(c_nl) S sqrt(c_nl) p
+would also be symmetric but deflects a uniform pressure by O(c_nl h h''), as large as the local
+term e h/G at nu 0.49 on a curved joint.)
 
 Discretisation. Spring values (pressure p, deflection w) live on the triangles (one spring per
 triangle). The smoothing is solved on the vertices with P1 finite elements: the cotangent
-Laplace-Beltrami stiffness K[b h^2] (each triangle weighted by its own b h^2) and the mass
-M = Q^T A Q, where Q (Q_tv = 1/3) takes vertex values to triangle values (corner mean) and Q^T A
-triangle pressures to vertex loads. With this mass, S = Q H^-1 Q^T A reduces for K = 0 to the
-A-orthogonal projection onto the range of Q, exact to O((ks)^4) on smooth fields; a lumped mass
+Laplace-Beltrami stiffness K[b h^2 c_nl] (each triangle weighted by its own value) and the mass
+M = Q^T diag(A c_nl) Q, where Q (Q_tv = 1/3) takes vertex values to triangle values (corner mean)
+and Q^T A triangle pressures to vertex loads. With this mass, S = Q H^-1 Q^T diag(A c_nl) reduces
+for K = 0 to a projection onto the range of Q, exact to O((ks)^4) on smooth fields; a lumped mass
 would leave an O((ks)^2) smoothing, which the nearly incompressible layer amplifies by
-s^2 / (h e / G) (93 at nu = 0.499). On forces f = A p the compliance
+c_nl / (h e / G) (93 at nu = 0.499). On forces f = A p the compliance
 
-    w = C f,  C = diag(c_loc / A) + sigma Z^T H^-1 Z,  Z = Q^T diag(s),  H = M + K[b h^2],
+    w = C f,  C = diag(c_loc / A) + sigma Z^T H^-1 Z,  Z = Q^T diag(c_nl),  H = M + K,
 
-is symmetric; it is positive definite (for sigma = -1 because Q H^-1 Q^T A <= Q M^-1 Q^T A, a
-projection, and c_loc - s^2 = (h/G) e > 0 for constant h), a uniform pressure on a layer
-without free edges gives the uniform deflection h p / E' (K 1 = 0, Q 1 = 1), and the continuum symbol is recovered as the mesh size
+is symmetric; it is positive definite (for sigma = -1 because Z^T H^-1 Z <= Z^T M^-1 Z, a
+projection in the c_nl-weighted product, and c_loc - c_nl = (h/G) e > 0), a uniform pressure on
+a layer without free edges gives the uniform deflection h p / E' (K 1 = 0, Q 1 = 1), and the
+continuum symbol is recovered as the mesh size
 -> 0. A cell-centred two-point Laplacian would avoid the transfer but is inconsistent on
 non-orthogonal meshes (8 % anisotropy on right-triangle grids), and a transfer-based Laplacian on
 cell values (Q^T K Q) has checkerboard null modes that leave nearly incompressible pressures
@@ -130,7 +138,7 @@ def pade_error_bound(poissons_ratio: float, max_kh: float = 1.0) -> float:
 
 
 def operator_factors(poissons_ratio: float, shear_modulus_mpa: float, thickness_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """(c_loc mm/MPa, s^2 mm/MPa, sigma, b) of w = c_loc p + sigma s S(s p), per spring (module docstring)."""
+    """(c_loc mm/MPa, c_nl mm/MPa, sigma, b) of w = c_loc p + sigma c_nl S p, per spring (module docstring)."""
     e, a, b = pade_coefficients(poissons_ratio)
     _, c1, _ = taylor_coefficients(poissons_ratio)
     h_over_g = np.asarray(thickness_mm, float) / shear_modulus_mpa
@@ -195,11 +203,11 @@ class SurfaceMesh:
     def from_surface(vertices_mm: np.ndarray, triangles: np.ndarray) -> "SurfaceMesh":
         return SurfaceMesh.from_corners(triangles, vertices_mm[triangles])
 
-    def smoothing_operators(self, cells: np.ndarray, weight: np.ndarray) -> tuple[sp.csc_matrix, sp.csr_matrix]:
+    def smoothing_operators(self, cells: np.ndarray, mass_weight: np.ndarray, stiffness_weight: np.ndarray) -> tuple[sp.csc_matrix, sp.csr_matrix]:
         """P1 operators on the triangles ``cells`` (indices, m): (H, Q).
 
-        H = M + K (v, v), mm^2: the mass M = Q^T A Q plus the cotangent stiffness K with each
-        triangle weighted by ``weight`` (m,) mm^2 (natural boundary), assembled in one pass;
+        H = M + K (v, v): the mass M = Q^T diag(A mass_weight) Q plus the cotangent stiffness K
+        with each triangle weighted by ``stiffness_weight`` (m,) (natural boundary), in one pass;
         Q (m, v): triangle value = mean of its corners. Vertices are renumbered to those the
         cells use; those on the surface's free edge are left out (the smoothed field vanishes
         there, module docstring), the rest of the subset's boundary is natural.
@@ -208,14 +216,14 @@ class SurfaceMesh:
         vertices, local = np.unique(tri, return_inverse=True)
         local = local.reshape(tri.shape)
         n_v, m = vertices.shape[0], tri.shape[0]
-        # Mass: A/9 for every ordered pair of corners of a triangle (Q^T A Q).
+        # Mass: A m / 9 for every ordered pair of corners of a triangle (Q^T diag(A m) Q).
         pair_rows = np.repeat(local, 3, axis=1).ravel()
         pair_cols = np.tile(local, (1, 3)).ravel()
-        pair_vals = np.repeat(self.area_mm2[cells] / 9.0, 9)
+        pair_vals = np.repeat(self.area_mm2[cells] * np.asarray(mass_weight, float) / 9.0, 9)
         # Stiffness: the edge opposite corner i (corners i+1, i+2) carries w cot_i / 2.
         a = np.concatenate([local[:, (i + 1) % 3] for i in range(3)])
         b = np.concatenate([local[:, (i + 2) % 3] for i in range(3)])
-        half = 0.5 * (self.cotangents[cells] * np.asarray(weight, float)[:, None]).T.ravel()
+        half = 0.5 * (self.cotangents[cells] * np.asarray(stiffness_weight, float)[:, None]).T.ravel()
         rows = np.concatenate([pair_rows, a, b, a, b])
         cols = np.concatenate([pair_cols, b, a, a, b])
         vals = np.concatenate([pair_vals, -half, -half, half, half])
@@ -231,7 +239,7 @@ class SurfaceMesh:
 class LayerCompliance:
     """w = C f on a set of springs: C = diag(local) + sigma Z^T H^-1 Z (module docstring).
 
-    ``local`` is c_loc / A in mm/N; Z (v, m) in sqrt(mm/N)-consistent units; H (v, v) in mm^2.
+    ``local`` is c_loc / A in mm/N; Z (v, m) in mm/MPa; H (v, v) in mm^3/MPa.
     sigma = 0 means no coupling (independent springs, Z empty).
     """
 
@@ -263,9 +271,10 @@ def layer_compliance(
     g = youngs_modulus_mpa / (2.0 * (1.0 + poissons_ratio))
     h = np.broadcast_to(np.asarray(thickness_mm, float), cells.shape)
     area = mesh.area_mm2[cells]
-    c_loc, s2, sigma, b = operator_factors(poissons_ratio, g, h)
+    c_loc, c_nl, sigma, b = operator_factors(poissons_ratio, g, h)
     if sigma == 0.0:
         return LayerCompliance(c_loc / area, sp.csr_matrix((0, cells.shape[0])), sp.csc_matrix((0, 0)), 0.0)
-    smoothing, q = mesh.smoothing_operators(cells, b * h * h)
-    z = (q.T @ sp.diags(np.sqrt(s2))).tocsr()
+    # S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl (module docstring, variable thickness).
+    smoothing, q = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl)
+    z = (q.T @ sp.diags(c_nl)).tocsr()
     return LayerCompliance(c_loc / area, z, smoothing, sigma)

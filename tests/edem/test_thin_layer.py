@@ -143,6 +143,17 @@ def test_flat_plate_under_uniform_pressure_deflects_uniformly():
         np.testing.assert_allclose(w, 2.0 * 1.5 / confined_modulus_mpa(E, nu), rtol=1e-10)
 
 
+def test_uniform_pressure_on_a_layer_of_varying_thickness_deflects_each_spring_by_h_p_over_e_conf():
+    # S 1 = 1 for any h (module docstring): no lateral flow without a pressure gradient, so every
+    # spring deflects by its own h p / E', to round-off (periodic grid: no free edge).
+    mesh, centroid = periodic_grid(24, 0.7)
+    cells = np.arange(mesh.area_mm2.shape[0])
+    h = 1.5 + np.sin(centroid[:, 0] * 2 * np.pi / (24 * 0.7)) ** 2  # 1.5 .. 2.5 mm
+    for nu in (0.1, 0.42, 0.499):
+        w = layer_compliance(mesh, cells, h, E, nu).deflection(2.0 * mesh.area_mm2)
+        np.testing.assert_allclose(w, h * 2.0 / confined_modulus_mpa(E, nu), rtol=1e-9)
+
+
 def test_compliance_is_symmetric_positive_definite():
     plate = grid_plate(10.0, 10.0, 8)
     mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
