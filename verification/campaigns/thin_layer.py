@@ -8,7 +8,8 @@ and 0.49 (cylinder layer 2 mm; ideal ankle). Every point is two cases, ``<model>
 ``<model>-springs-...``, each against its own FE run (the runner caches per case).
 
 FE: coarse on purpose (a shared 2-core machine): P2 at 1.0 mm (Taylor-Hood from nu 0.49), the
-layer with its default two elements through the thickness, about 15-20 s per run. Tolerances are
+layer with its default two elements through the thickness: 10 s to 3 min per run on the
+shared 2-core machine (the Taylor-Hood runs are the slow ones). Tolerances are
 generous (the campaign measures; it fails only when something is broken); the issue's goal
 (within 10 % of FE up to nu 0.499, 5 % up to 0.42, L2 at most half the springs') is read off the
 tables and figures, not enforced."""
