@@ -218,7 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_run)
     p = sub.add_parser("fe", help="solve the FE reference (dolfinx) of a scene")
     p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
-    p.add_argument("--model", choices=("slab", "layer"), help="slab (twin of the threshold law) or layer (of the gap laws); overrides [fe] model")
+    p.add_argument("--model", help="an FE model (fem_reference.models): slab (twin of the threshold law) or layer (of the gap laws); overrides [fe] model")
     p.add_argument("--out", help="result directory (default results/<scene>-fe-<model>)")
     p.add_argument("--mesh-size", type=float, metavar="MM", help="element size in mm; overrides [fe] mesh_size_mm")
     p.add_argument("--degree", type=int, choices=(1, 2), help="element degree (2: P2, or Taylor-Hood at nu >= 0.49); overrides [fe] degree")

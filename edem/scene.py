@@ -275,7 +275,24 @@ def apply_overrides(data: dict[str, Any], overrides: dict[str, Any]) -> None:
 def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
     """Read, validate and build a scene (geometry, springs, loads) from a TOML file or built-in name.
 
-    ``overrides`` maps dotted keys ('cartilage.poissons_ratio') to values set before validation.
+    Parameters
+    ----------
+    scene : str or Path
+        A scene TOML file (layout in the README), or the name of a built-in scene
+        (:func:`builtin_scene_names`).
+    overrides : dict, optional
+        Dotted keys ('cartilage.poissons_ratio') to values, set before validation (as ``--set``).
+
+    Returns
+    -------
+    Scene
+        Surfaces in mm (one spring per non-degenerate mobile triangle), the cartilage, the load
+        history (n_times,) and the optional kinematics, constraints, ligaments, viscoelasticity.
+
+    Raises
+    ------
+    InputError
+        Naming the file, the key and what was expected.
     """
     path = resolve_scene_path(scene)
     data = _parse_toml(path)

@@ -64,8 +64,6 @@ from edem.solver import applied_loads, fixed_placement
 from fem_reference.contact import _fe_modules, solve_contact
 from fem_reference.models import FE_MODELS, FEGeometry, contact_surface
 from fem_reference.problem import (
-
-
     AREA_DEFINITION_NITSCHE,
     FEContactProblem,
     FEConvergenceError,
@@ -383,9 +381,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         clock = time.perf_counter()
         try:
             geom = _build_geometry(scene, settings, k, caster, solid_cache)
-        except Exception as exc:
-            if type(exc).__name__ in ("SolverError", "InputError"):
-                exc.args = (f"{where}: {exc}",)
+        except (SolverError, InputError) as exc:
+            exc.args = (f"{where}: {exc}",)
             raise
         step_warnings = list(geom.warnings)
         force, moment = loads[k, :3].astype(float), loads[k, 3:].astype(float)
@@ -399,9 +396,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             continue
         try:
             trans, rots, mode_warnings = _free_modes(scene, geom, settings, force, moment)
-        except Exception as exc:
-            if type(exc).__name__ in ("SolverError", "InputError"):
-                exc.args = (f"{where}: {exc}",)
+        except (SolverError, InputError) as exc:
+            exc.args = (f"{where}: {exc}",)
             raise
         step_warnings += mode_warnings
         if np.linalg.norm(trans @ force) == 0.0 and (
@@ -455,10 +451,10 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         except FEConvergenceError as exc:
             exc.args = (f"{where}: {exc}",)
             raise
+        except (SolverError, InputError) as exc:
+            exc.args = (f"{where}: {exc}",)
+            raise
         except Exception as exc:
-            if type(exc).__name__ in ("SolverError", "InputError"):
-                exc.args = (f"{where}: {exc}",)
-                raise
             raise SolverError(f"{where}: the FE solve failed: {type(exc).__name__}: {exc}"
                                 ) from None
         step_warnings += [w for w in res.warnings if not w.startswith("max nominal strain")]
