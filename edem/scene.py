@@ -35,6 +35,7 @@ SECTIONS = {
         "max_spring_length_mm",
         "thickness_mm",
         "shear_modulus_mpa",
+        "coupling",
     },
     "load": None,  # checked by edem.loads
     "kinematics": None,  # checked by edem.loads
@@ -46,6 +47,7 @@ SECTIONS = {
     "opensim": None,  # checked by edem.opensim_model
 }
 FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm"}
+COUPLINGS = ("none", "thin-layer")
 
 
 @dataclass(frozen=True)
@@ -327,7 +329,16 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             key="cartilage.max_spring_length_mm",
             expected=f"h_max >= thickness_mm for the {law} law (springs beyond h_max are not seen)",
         )
+    coupling = cart.string("coupling", "none", COUPLINGS)
+    if coupling == "thin-layer" and spring_law.thin_layer is None:
+        raise InputError(
+            "the thin-layer coupling is linear: it has no logarithmic law",
+            file=file,
+            key="cartilage.coupling",
+            expected='law = "gap" or "threshold" with coupling = "thin-layer", or coupling = "none"',
+        )
     cartilage = Cartilage(
+        coupling=coupling,
         youngs_modulus_mpa=cart.number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
         poissons_ratio=cart.number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
         law=law,

@@ -27,6 +27,7 @@ from edem.opensim_model import BodyPoses
 from edem.raycast import RayCaster
 from edem.scene import Scene, Viscoelastic
 from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, shear_terms, spring_geometry
+from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 from edem.viscoelastic import check_rk2_stability, integrator_weights
 
 
@@ -203,6 +204,8 @@ def run(
     that time, the stored spring forces of the springs still in contact push back (eq. 3.17),
     the increment solves K u = T_k - p with the active set handled as in DEM (eq. 3.18-3.19),
     then the forces are committed and M is moved by u. Springs that left contact keep no force.
+    With ``cartilage.coupling = "thin-layer"`` each solve is the coupled layer's
+    (:mod:`edem.thin_layer_contact`) and the committed forces are its coupled pressure field.
     """
     method = method or scene.method
     if method not in METHODS:
@@ -224,6 +227,7 @@ def run(
         warnings += check_rk2_stability(load.time_s, viscous.relaxation_time_s, viscous.allow_unstable, scene.source)
     stored = np.zeros((n_springs, 3))  # committed (elastic) spring forces: the EDEM push-back
     pose = Placement.identity(g0)
+    layer_mesh = coupled_layer_mesh(scene) if cartilage.coupling == "thin-layer" else None
     steps: list[StepResult] = []
     unbalanced: list[tuple[int, float]] = []  # DEM time points whose re-measured springs miss the load
     free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
@@ -262,12 +266,18 @@ def run(
         if len(lig_rows):
             directions = np.vstack([directions, lig_rows])
         try:
-            solution = solve_unilateral(
-                directions, law, loads[k], fixed_dofs=scene.fixed_dofs, shear=shear, length_scale_mm=length_scale
-            )
+            if layer_mesh is None:
+                solution = solve_unilateral(
+                    directions, law, loads[k], fixed_dofs=scene.fixed_dofs, shear=shear, length_scale_mm=length_scale
+                )
+            else:
+                coupled = CoupledStep.build(layer_mesh, geometry, cartilage, stored_normal, directions[:n_c], lig_rows, lig_law)
+                solution = coupled.solve(loads[k], scene.fixed_dofs, shear, length_scale)
         except SolverError as exc:
             raise SolverError(f"time point {k} (t = {t:g} s, {n_c} candidate springs): {exc}") from None
         total_force = np.where(solution.active, solution.element_force_n, 0.0)
+        if layer_mesh is not None and solution.max_penetration_mm > 1e-9 * cartilage.max_spring_length_mm:
+            warnings.append(f"time point {k} (t = {t:g} s): the layer's surface penetrates the fixed body by {solution.max_penetration_mm:.3g} mm out of contact")
         if k == 0:
             warnings += precompression_warning(geometry, cartilage)
             warnings += weak_dofs_warning(directions, law, shear, solution, scene.fixed_dofs, length_scale)
@@ -282,9 +292,13 @@ def run(
         else:
             dt = float(t - load.time_s[k - 1]) if k else 0.0
             previous = loads[k - 1] if k else np.zeros(6)
-            u, elastic_force = viscoelastic_increment(
-                directions, law, shear, solution, previous, loads[k], dt, viscous, scene.fixed_dofs
-            )
+            if layer_mesh is None:
+                u, elastic_force = viscoelastic_increment(
+                    directions, law, shear, solution, previous, loads[k], dt, viscous, scene.fixed_dofs
+                )
+            else:
+                weights = integrator_weights(dt, viscous.relaxation_time_s, viscous.integrator)
+                u, elastic_force = coupled.viscoelastic_increment(solution, stored_normal, previous, loads[k], weights, shear, scene.fixed_dofs)
             if not np.all(np.isfinite(u)):
                 raise SolverError(f"time point {k} (t = {t:g} s): the viscoelastic integration diverged (non-finite displacement)")
         contact = directions[:n_c].T @ total_force[:n_c]
