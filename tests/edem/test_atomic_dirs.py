@@ -44,7 +44,10 @@ def leftovers(parent: Path) -> list[str]:
 def test_a_result_is_sealed_and_verifies(tmp_path, plates_run):
     out = results.write_results(plates_run, tmp_path / "r")
     manifest = json.loads((out / "manifest.json").read_text())
-    assert set(manifest["files"]) == {"summary.json", "timeseries.csv", "pressure.pvd", "pressure_0000.vtp", "fixed.vtp"}
+    # Every file the writer produces (issue 11's fixed-body series and .sto included) is sealed.
+    assert set(manifest["files"]) == {"summary.json", "timeseries.csv", "timeseries.sto", "pressure.pvd", "pressure_0000.vtp",
+                                      "fixed.vtp", "fixed.pvd", "fixed_0000.vtp"}
+    assert set(manifest["files"]) == {p.name for p in out.iterdir()} - {"manifest.json"}
     assert verify_manifest(out) == manifest["run_id"] and leftovers(tmp_path) == []
     assert read_result_dir(out).summary["method"] == "dem"
 
@@ -60,6 +63,19 @@ def test_missing_changed_and_extra_files_are_refused_by_readers(tmp_path, plates
     (out / "pressure_0000.vtp").unlink()
     problems = manifest_problems(out)
     assert any("pressure_0000.vtp is missing" in p for p in problems) and any("timeseries.csv has 20 bytes" in p for p in problems)
+    with pytest.raises(InputError, match="incomplete, changed or mixed"):
+        read_result_dir(out)
+
+
+def test_changed_sto_or_missing_fixed_frame_is_refused_by_readers(tmp_path, plates_run):
+    out = results.write_results(plates_run, tmp_path / "r")
+    (out / "fixed_0000.vtp").unlink()
+    with pytest.raises(InputError, match="incomplete, changed or mixed"):
+        read_result_dir(out)
+    out = results.write_results(plates_run, tmp_path / "s")
+    sto = out / "timeseries.sto"
+    sto.write_text(sto.read_text().replace("version=1", "version=2"))  # same size, other bytes
+    assert any("timeseries.sto" in p for p in manifest_problems(out))
     with pytest.raises(InputError, match="incomplete, changed or mixed"):
         read_result_dir(out)
 
