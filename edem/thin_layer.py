@@ -178,9 +178,13 @@ class SurfaceMesh:
         n = tri.shape[0]
         incidence = sp.csr_matrix((np.ones(3 * n), (np.repeat(np.arange(n), 3), tri.ravel())))
         edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
-        unique, count = np.unique(edges, axis=0, return_counts=True)
-        free = np.zeros(incidence.shape[1], bool)
-        free[unique[count == 1].ravel()] = True  # an edge of one triangle only
+        n_v = incidence.shape[1]
+        # One integer key per undirected edge: a 1-D unique is much faster than unique(axis=0).
+        key, count = np.unique(edges[:, 0] * n_v + edges[:, 1], return_counts=True)
+        free = np.zeros(n_v, bool)
+        single = key[count == 1]  # an edge of one triangle only
+        free[single // n_v] = True
+        free[single % n_v] = True
         return SurfaceMesh(tri, area, out, incidence, free)
 
     def neighbourhood(self, cells: np.ndarray, width_mm: float) -> np.ndarray:
@@ -203,36 +207,52 @@ class SurfaceMesh:
     def from_surface(vertices_mm: np.ndarray, triangles: np.ndarray) -> "SurfaceMesh":
         return SurfaceMesh.from_corners(triangles, vertices_mm[triangles])
 
-    def smoothing_operators(self, cells: np.ndarray, mass_weight: np.ndarray, stiffness_weight: np.ndarray) -> tuple[sp.csc_matrix, sp.csr_matrix]:
-        """P1 operators on the triangles ``cells`` (indices, m): (H, Q).
+    def smoothing_operators(self, cells: np.ndarray, mass_weight: np.ndarray, stiffness_weight: np.ndarray) -> tuple[sp.csc_matrix, sp.csr_matrix, np.ndarray]:
+        """P1 operators on the triangles ``cells`` (indices, m): (H, Q, slots).
 
         H = M + K (v, v): the mass M = Q^T diag(A mass_weight) Q plus the cotangent stiffness K
         with each triangle weighted by ``stiffness_weight`` (m,) (natural boundary), in one pass;
         Q (m, v): triangle value = mean of its corners. Vertices are renumbered to those the
         cells use; those on the surface's free edge are left out (the smoothed field vanishes
-        there, module docstring), the rest of the subset's boundary is natural.
+        there, module docstring), the rest of the subset's boundary is natural. ``slots`` (m, 9)
+        int: where each triangle's corner pair (i, j), row-major, sits in ``H.data`` (canonical
+        CSC), -1 for a pair on the free edge; a matrix Q^T diag(x) Q is then H's pattern with
+        x / 9 added at the slots (no sparse product, no re-assembly).
         """
         tri = self.triangles[cells]
-        vertices, local = np.unique(tri, return_inverse=True)
-        local = local.reshape(tri.shape)
-        n_v, m = vertices.shape[0], tri.shape[0]
-        # Mass: A m / 9 for every ordered pair of corners of a triangle (Q^T diag(A m) Q).
-        pair_rows = np.repeat(local, 3, axis=1).ravel()
-        pair_cols = np.tile(local, (1, 3)).ravel()
-        pair_vals = np.repeat(self.area_mm2[cells] * np.asarray(mass_weight, float) / 9.0, 9)
-        # Stiffness: the edge opposite corner i (corners i+1, i+2) carries w cot_i / 2.
-        a = np.concatenate([local[:, (i + 1) % 3] for i in range(3)])
-        b = np.concatenate([local[:, (i + 2) % 3] for i in range(3)])
-        half = 0.5 * (self.cotangents[cells] * np.asarray(stiffness_weight, float)[:, None]).T.ravel()
-        rows = np.concatenate([pair_rows, a, b, a, b])
-        cols = np.concatenate([pair_cols, b, a, a, b])
-        vals = np.concatenate([pair_vals, -half, -half, half, half])
-        smoothing = sp.csc_matrix((vals, (rows, cols)), shape=(n_v, n_v))
-        q = sp.csr_matrix((np.full(3 * m, 1.0 / 3.0), (np.repeat(np.arange(m), 3), local.ravel())), shape=(m, n_v))
-        keep = ~self.free_edge_vertex[vertices]
-        if not np.all(keep):
-            smoothing, q = smoothing[keep][:, keep].tocsc(), q[:, keep].tocsr()
-        return smoothing, q
+        # Renumber the vertices the cells use, free-edge ones last (dropped below), in O(n).
+        used = np.zeros(self.free_edge_vertex.shape[0], bool)
+        used[tri] = True
+        interior, edge = used & ~self.free_edge_vertex, used & self.free_edge_vertex
+        n_v, n_edge = int(interior.sum()), int(edge.sum())
+        renumber = np.empty(used.shape[0], np.int64)
+        renumber[interior] = np.arange(n_v)
+        renumber[edge] = np.arange(n_v, n_v + n_edge)
+        local = renumber[tri]
+        m = tri.shape[0]
+        # One 3 x 3 element matrix per triangle: mass A m / 9 for every ordered pair of corners
+        # (Q^T diag(A m) Q) plus the cotangent stiffness, where the edge opposite corner k
+        # carries w cot_k / 2 (off-diagonal -w cot_k / 2, diagonal the sum over the corner's two edges).
+        half = 0.5 * self.cotangents[cells] * np.asarray(stiffness_weight, float)[:, None]  # (m, 3)
+        element = np.repeat((self.area_mm2[cells] * np.asarray(mass_weight, float) / 9.0)[:, None, None], 3, axis=1).repeat(3, axis=2)
+        for i in range(3):
+            j, k = (i + 1) % 3, (i + 2) % 3
+            element[:, i, i] += half[:, j] + half[:, k]
+            element[:, j, k] -= half[:, i]
+            element[:, k, j] -= half[:, i]
+        rows = np.repeat(local, 3, axis=1).ravel()
+        cols = np.tile(local, (1, 3)).ravel()
+        vals = element.ravel()
+        inside = (rows < n_v) & (cols < n_v)  # free-edge vertices: the smoothed field vanishes there
+        smoothing = sp.coo_matrix((vals[inside], (rows[inside], cols[inside])), shape=(n_v, n_v)).tocsc()
+        smoothing.sum_duplicates()  # canonical: sorted row indices, so column-major keys increase
+        stored = np.repeat(np.arange(n_v, dtype=np.int64), np.diff(smoothing.indptr)) * n_v + smoothing.indices
+        slots = np.full(9 * m, -1, np.int64)
+        slots[inside] = np.searchsorted(stored, cols[inside] * n_v + rows[inside])
+        corner = local.ravel()
+        kept = corner < n_v
+        q = sp.csr_matrix((np.full(int(kept.sum()), 1.0 / 3.0), (np.repeat(np.arange(m), 3)[kept], corner[kept])), shape=(m, n_v))
+        return smoothing, q, slots.reshape(m, 9)
 
 
 @dataclass(frozen=True)
@@ -245,8 +265,21 @@ class LayerCompliance:
 
     local_mm_per_n: np.ndarray  # (m,)
     z: sp.csr_matrix  # (v, m)
-    h: sp.csc_matrix  # (v, v)
+    h: sp.csc_matrix  # (v, v) canonical CSC
     sigma: float
+    nonlocal_weight: np.ndarray = None  # (m,) c_nl: Z = Q^T diag(c_nl)
+    slots: np.ndarray = None  # (m, 9) positions of each spring's corner pairs in h.data (SurfaceMesh.smoothing_operators)
+
+    def coupled_matrix(self, spring_weight: np.ndarray) -> sp.csc_matrix:
+        """H + sigma Z diag(spring_weight) Z^T (v, v) for weights (m,) in N/mm, on H's pattern.
+
+        Z diag(x) Z^T = Q^T diag(c_nl^2 x) Q puts c_nl^2 x / 9 on every corner pair of each
+        triangle, all of them entries of H, so only H.data changes.
+        """
+        ok = self.slots >= 0
+        per_pair = np.broadcast_to((self.sigma * self.nonlocal_weight**2 * spring_weight / 9.0)[:, None], self.slots.shape)
+        data = self.h.data + np.bincount(self.slots[ok], weights=per_pair[ok], minlength=self.h.data.shape[0])
+        return sp.csc_matrix((data, self.h.indices, self.h.indptr), shape=self.h.shape)
 
     @property
     def coupled(self) -> bool:
@@ -275,6 +308,6 @@ def layer_compliance(
     if sigma == 0.0:
         return LayerCompliance(c_loc / area, sp.csr_matrix((0, cells.shape[0])), sp.csc_matrix((0, 0)), 0.0)
     # S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl (module docstring, variable thickness).
-    smoothing, q = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl)
+    smoothing, q, slots = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl)
     z = (q.T @ sp.diags(c_nl)).tocsr()
-    return LayerCompliance(c_loc / area, z, smoothing, sigma)
+    return LayerCompliance(c_loc / area, z, smoothing, sigma, np.broadcast_to(c_nl, cells.shape), slots)

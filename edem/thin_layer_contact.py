@@ -29,7 +29,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from edem.errors import SolverError
@@ -64,12 +63,20 @@ class ActiveSystem:
         if not layer.coupled:
             forces = lam[:, None] * rhs
             return ActiveSystem(active, forces[:, 0], forces[:, 1:], np.zeros(0), np.zeros((0, 6)))
-        z_i = layer.z[:, active]
-        matrix = (layer.h + layer.sigma * (z_i @ sp.diags(lam) @ z_i.T)).tocsc()
+        # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T, added on H's fixed pattern.
+        weight = np.zeros(active.shape[0])
+        weight[active] = lam
+        matrix = layer.coupled_matrix(weight)
         # SPD: symmetric ordering and diagonal pivots (about 1.5x faster than the default LU).
         factor = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-        vertex = factor.solve(np.asarray(z_i @ (lam[:, None] * rhs)))
-        forces = lam[:, None] * (rhs - layer.sigma * np.asarray(z_i.T @ vertex))
+        loads = np.zeros((active.shape[0], 7))
+        loads[active] = lam[:, None] * rhs
+        # A zero column (DEM: no overlap before the increment) needs no triangular solves.
+        nonzero = np.flatnonzero(np.any(loads, axis=0))
+        vertex = np.zeros((matrix.shape[0], 7))
+        if nonzero.size:
+            vertex[:, nonzero] = factor.solve(np.asarray(layer.z @ loads[:, nonzero]))
+        forces = lam[:, None] * (rhs - layer.sigma * np.asarray(layer.z.T @ vertex)[active])
         return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:])
 
     def forces(self, u: np.ndarray) -> np.ndarray:
