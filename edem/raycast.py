@@ -21,12 +21,15 @@ Two interchangeable backends sit behind :class:`RayCaster`:
     Intel Embree through ``embreex`` (a BVH built once per fixed surface, in F's own frame, with
     Embree's robust scene flag). Embree traverses in float32; every returned hit is re-measured in
     float64 with one vectorised Moller-Trumbore test on the returned triangle, so lengths are exact
-    to round-off wherever Embree picked the right triangle. The rare float32 failures are re-solved
-    exactly: a returned triangle the ray misses in float64 (by more than 1e-6 in barycentric
-    units), or a ray still crossing wrong-facing sheets after a few re-casts, goes to the exact
-    brute-force caster; a ray Embree lost on an edge or vertex is found again from the triangles
-    around a slightly shifted probe ray's hit; a skipped wrong-facing hit first has the triangles
-    around it checked (a fold ties a back-facing and a front-facing triangle at the same point).
+    to round-off wherever Embree picked the right triangle. The float32 failures are re-solved
+    exactly and locally: a ray that float64 puts on an edge or vertex of the returned triangle,
+    or just off it, is re-solved among the triangles sharing a vertex with it (float32 ties are
+    between neighbours; structured meshes whose edges line up with the rays meet this often);
+    a ray Embree lost on an edge or vertex (or whose returned triangle has no neighbour on the
+    ray) is found again from the triangles around a slightly shifted probe ray's hit; a skipped
+    wrong-facing hit first has the triangles around it checked (a fold ties a back-facing and a
+    front-facing triangle at the same point). Only a ray still crossing wrong-facing sheets after
+    a few re-casts goes to the exact brute-force caster.
     Limits: two sheets of F closer than ~2e-6 x (size of F) along a ray count as one; a hit Embree
     loses while it reports a farther one is not detected (never seen with the robust flag).
 ``"numpy"``
@@ -191,6 +194,9 @@ class RayCaster:
         self._centre_mm = 0.5 * (lo + hi)
         self._extent_mm = float(np.max(hi - lo)) if len(vertices) else 0.0
         self._scene = None
+        # Float64 ray/triangle tests done so far (re-measures, local re-solves, brute force): the
+        # machine-independent cost of the exact work around Embree.
+        self.pairs_tested = 0
         if backend == "embree" and len(tri):
             self._build_embree()
 
@@ -336,6 +342,7 @@ class RayCaster:
             t, u, v, det = _moller_trumbore(
                 origins[start:stop, None], dirs[start:stop, None], v0, e1, e2
             )
+            self.pairs_tested += t.size
             valid = (det > 0) & _inside(u, v, _REFERENCE_SLACK) & (t > -h) & (t <= h)
             t = np.where(valid, t, np.inf)
             best = np.argmin(t, axis=1)
@@ -377,17 +384,32 @@ class RayCaster:
             idx, k, o, d, s0 = active[found], prim[found], o[found], d[found], s0[found]
             # Re-measure in float64 from the true origin (signed length directly, no subtraction).
             t, u, v, det = _moller_trumbore(o, d, self._v0[k], self._edge1[k], self._edge2[k])
+            self.pairs_tested += k.size
+            # Embree's float32 answer is only trusted where float64 puts the ray on its triangle;
+            # a ray that lands at (or, in float64, just past) an edge or vertex of it is re-solved
+            # exactly among the triangles around that triangle: a float32 tie is always between
+            # neighbours, so this stays local (never a pass over all of F).
+            near_edge = ~_inside(u, v, _REFERENCE_SLACK)
+            if near_edge.any():
+                fix = np.flatnonzero(near_edge)
+                far = np.full(fix.size, h + self._reach_mm)
+                t_fix, k_fix, det_fix = self._star_hits(o[fix], d[fix], k[fix], s0[fix], far, front_only=False)
+                found_fix = k_fix >= 0
+                t[fix], det[fix] = t_fix, det_fix
+                k[fix[found_fix]] = k_fix[found_fix]
+                # No neighbour meets the ray: Embree's triangle was not where the ray passes at
+                # all; it counts as a miss and goes to the probe repair below.
+                u[fix] = np.where(found_fix, 0.0, np.nan)
+                v[fix] = 0.0
             facing = det > 0
             on_triangle = _inside(u, v, _BARYCENTRIC_SLACK)  # False where det == 0 (nan)
             accept = facing & on_triangle & (t > -h) & (t <= h)
             # Wrong-facing, or in the padding before the window: skip it and continue past it.
             # (Any hit beyond the window ends the search: nothing nearer was found.)
             skip = on_triangle & (t <= h) & (~facing | (t <= -h))
-            # Embree's float32 triangle is not where float64 puts the ray: re-solve exactly.
-            wrong = ~on_triangle
             length[idx[accept]] = t[accept]
             hit[idx[accept]] = k[accept]
-            hard.append(idx[wrong])
+            missed.append(idx[~on_triangle])
             # Before resuming past a skipped hit, look at the triangles around it: where F folds
             # (a ridge between a front- and a back-facing triangle) Embree may have returned the
             # back-facing one of a tie, and the valid hit sits at the same point.
@@ -396,7 +418,8 @@ class RayCaster:
                 break
             sk, t_sk = idx[skip], t[skip]
             resume = np.maximum(t_sk, s0[skip]) + step
-            tie_t, tie_tri = self._star_hits(o[skip], d[skip], h, k[skip], t_sk - step, resume)
+            low, high = np.maximum(t_sk - step, np.nextafter(-h, h)), np.minimum(resume, h)
+            tie_t, tie_tri, _ = self._star_hits(o[skip], d[skip], k[skip], low, high)
             tie = np.isfinite(tie_t)
             length[sk[tie]] = tie_t[tie]
             hit[sk[tie]] = tie_tri[tie]
@@ -445,8 +468,8 @@ class RayCaster:
         near = np.flatnonzero(prim >= 0)
         if not near.size:
             return
-        unbounded = np.full(near.size, np.inf)
-        best_t, best_tri = self._star_hits(o[near], d[near], h, prim[near], -unbounded, unbounded)
+        low, high = np.full(near.size, np.nextafter(-h, h)), np.full(near.size, h)
+        best_t, best_tri, _ = self._star_hits(o[near], d[near], prim[near], low, high)
         got = np.isfinite(best_t)
         length[missed[near[got]]] = best_t[got]
         hit[missed[near[got]]] = best_tri[got]
@@ -455,15 +478,16 @@ class RayCaster:
         self,
         origins: np.ndarray,
         dirs: np.ndarray,
-        h: float,
         triangle: np.ndarray,
         t_low: np.ndarray,
         t_high: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Exact nearest valid hit of ray i among the triangles sharing a vertex with triangle[i].
+        front_only: bool = True,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Exact nearest hit of ray i among the triangles sharing a vertex with triangle[i].
 
-        Valid: front-facing, on the triangle (edges and vertices included), inside the window
-        (-h, h] and inside [t_low[i], t_high[i]]. Returns (inf, -1) where there is none.
+        Counted: on the triangle (edges and vertices included), t in [t_low[i], t_high[i]], and
+        front-facing unless ``front_only`` is False. Returns (t, triangle, det) of the nearest
+        hit, (inf, -1, nan) where there is none; det > 0 marks a front-facing hit.
         """
         corner = self._welded_corners[triangle].ravel()
         counts = self._star_start[corner + 1] - self._star_start[corner]
@@ -474,6 +498,17 @@ class RayCaster:
         t, u, v, det = _moller_trumbore(
             origins[ray], dirs[ray], self._v0[cand], self._edge1[cand], self._edge2[cand]
         )
-        valid = (det > 0) & _inside(u, v, _REFERENCE_SLACK) & (t > -h) & (t <= h)
-        valid &= (t >= t_low[ray]) & (t <= t_high[ray])
-        return _nearest_per_ray(ray[valid], t[valid], cand[valid], len(triangle))
+        self.pairs_tested += cand.size
+        valid = (det != 0) & _inside(u, v, _REFERENCE_SLACK) & (t >= t_low[ray]) & (t <= t_high[ray])
+        if front_only:
+            valid &= det > 0
+        best_t, best_tri = _nearest_per_ray(ray[valid], t[valid], cand[valid], len(triangle))
+        best_det = np.full(len(triangle), np.nan)
+        found = best_tri >= 0
+        # det of the chosen pair: one more exact test on the winner (cheap, one per ray).
+        if found.any():
+            _, _, _, best_det[found] = _moller_trumbore(
+                origins[found], dirs[found], self._v0[best_tri[found]],
+                self._edge1[best_tri[found]], self._edge2[best_tri[found]],
+            )
+        return best_t, best_tri, best_det
