@@ -193,6 +193,7 @@ class RayCaster:
         # Embree sees coordinates relative to the box centre: float32 resolution is best near 0.
         self._centre_mm = 0.5 * (lo + hi)
         self._extent_mm = float(np.max(hi - lo)) if len(vertices) else 0.0
+        self._box_mm = hi - lo
         self._scene = None
         # Float64 ray/triangle tests done so far (re-measures, local re-solves, brute force): the
         # machine-independent cost of the exact work around Embree.
@@ -239,19 +240,33 @@ class RayCaster:
         self._probe_shift_mm = max(1e-4 * median_edge, 4e-6 * scale)
         # Far enough to cross all of F from anywhere near it.
         self._reach_mm = 4.0 * scale
+        # Plane of every triangle (normal e1 x e2, unnormalised, and its offset n . v0) for the
+        # float64 re-measure of hits well inside their triangle.
+        self._normal = np.cross(self._edge1, self._edge2)
+        self._plane_offset = np.einsum("ij,ij->i", self._normal, self._v0)
+        # Barycentric distance from the edges that float32 round-off (Embree's coordinates are
+        # ~6e-8 x scale off) cannot cross, per triangle: 64 ulps of the scale over its smallest
+        # altitude (twice the area over the longest edge); beyond 1/3 nothing counts as interior.
+        longest = np.max(np.linalg.norm(np.stack([self._edge1, self._edge2, self._edge2 - self._edge1]), axis=2), axis=0)
+        twice_area = np.linalg.norm(self._normal, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            altitude = np.where(longest > 0, twice_area / longest, 0.0)
+            margin = 64 * float(np.finfo(np.float32).eps) * scale / altitude
+        self._interior_margin = np.where(np.isfinite(margin), np.minimum(margin, 1.0), 1.0)
 
     def _embree_run(
         self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray
-    ) -> np.ndarray:
-        """One Embree pass: hit triangle per ray (-1 = none), rays already in F's local frame."""
-        result = self._scene.run(
+    ) -> dict[str, np.ndarray]:
+        """One Embree pass, rays already in F's local frame: float32 ``primID`` (-1 = none),
+        ``tfar`` (distance along the ray) and barycentric ``u``, ``v`` of every ray's hit."""
+        return self._scene.run(
+            # Subtract in float64, round once: float32 resolution is best near the box centre.
             np.ascontiguousarray(origins - self._centre_mm, dtype=np.float32),
             np.ascontiguousarray(directions, dtype=np.float32),
             # embreex writes the hit distances into this array in place: always pass a fresh one.
             dists=np.ascontiguousarray(tfar, dtype=np.float32),
             output=1,
         )
-        return result["primID"].astype(np.int64)
 
     # -- public ----------------------------------------------------------------------------------
 
@@ -290,7 +305,11 @@ class RayCaster:
             raise ValueError(f"origins_mm must have shape (n, 3), got {origins.shape}")
         if dirs.shape != origins.shape:
             raise ValueError(f"directions must have shape {origins.shape}, got {dirs.shape}")
-        if not (np.all(np.isfinite(origins)) and np.all(np.isfinite(dirs))):
+        # One reduction instead of two full isfinite passes; a finite sum can only overflow for
+        # coordinates near 1e308, which then take the exact check.
+        if not np.isfinite(origins.sum() + dirs.sum()) and not (
+            np.all(np.isfinite(origins)) and np.all(np.isfinite(dirs))
+        ):
             raise ValueError("origins_mm and directions must be finite")
         h = float(max_length_mm)
         if not (np.isfinite(h) and h > 0):
@@ -314,16 +333,17 @@ class RayCaster:
             dirs = dirs @ rot
 
         n = len(origins)
+        cast = self._cast_bruteforce if self.backend == "numpy" else self._cast_embree
+        if not len(self.triangles):
+            return RayHits(spring_length_mm=np.full(n, np.inf), triangle=np.full(n, -1, dtype=np.int64))
+        if has_direction.all():  # the usual case: no gather, no scatter
+            length, hit = cast(origins, dirs, h)
+            return RayHits(spring_length_mm=length, triangle=hit)
         length = np.full(n, np.inf)
         hit = np.full(n, -1, dtype=np.int64)
         live = np.flatnonzero(has_direction)
-        if live.size and len(self.triangles):
-            if self.backend == "numpy":
-                sub_len, sub_hit = self._cast_bruteforce(origins[live], dirs[live], h)
-            else:
-                sub_len, sub_hit = self._cast_embree(origins[live], dirs[live], h)
-            length[live] = sub_len
-            hit[live] = sub_hit
+        if live.size:
+            length[live], hit[live] = cast(origins[live], dirs[live], h)
         return RayHits(spring_length_mm=length, triangle=hit)
 
     # -- backends --------------------------------------------------------------------------------
@@ -377,14 +397,14 @@ class RayCaster:
                 o, d, s0 = origins[active], dirs[active], seg_start[active]
             # Traverse past the window end (up to the far side of F): a ray whose nearest hit
             # lies beyond the window is then a plain 'no spring', not a miss worth a repair probe.
-            prim = self._embree_run(o + s0[:, None] * d, d, (h + self._reach_mm) - s0)
+            ray = self._embree_run(o + s0[:, None] * d, d, (h + self._reach_mm) - s0)
+            prim = ray["primID"]
             none = prim < 0
             missed.append(active[none])
-            found = ~none
-            idx, k, o, d, s0 = active[found], prim[found], o[found], d[found], s0[found]
-            # Re-measure in float64 from the true origin (signed length directly, no subtraction).
-            t, u, v, det = _moller_trumbore(o, d, self._v0[k], self._edge1[k], self._edge2[k])
-            self.pairs_tested += k.size
+            # A nearest float32 hit beyond the window (and its padding) ends the search: no spring.
+            found = ~none & (ray["tfar"] <= (h + step) - s0)
+            idx, k, o, d, s0 = active[found], prim[found].astype(np.int64), o[found], d[found], s0[found]
+            t, u, v, det = self._remeasure(o, d, k, ray["u"][found], ray["v"][found])
             # Embree's float32 answer is only trusted where float64 puts the ray on its triangle;
             # a ray that lands at (or, in float64, just past) an edge or vertex of it is re-solved
             # exactly among the triangles around that triangle: a float32 tie is always between
@@ -437,6 +457,32 @@ class RayCaster:
             )
         return length, hit
 
+    def _remeasure(
+        self, o: np.ndarray, d: np.ndarray, k: np.ndarray, u32: np.ndarray, v32: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(t, u, v, det) in float64 of rays o + t d on Embree's triangles k (see _moller_trumbore).
+
+        Where Embree's float32 barycentrics put the hit well inside the triangle (further from every
+        edge than float32 round-off can move it) the triangle is certainly right and only the
+        plane distance is recomputed in float64 (signed length directly from the true origin);
+        Embree's u, v are returned for those rows. The other rows get a full Moller-Trumbore test.
+        """
+        normal = self._normal[k]
+        along = np.einsum("ij,ij->i", normal, d)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (self._plane_offset[k] - np.einsum("ij,ij->i", normal, o)) / along
+        det = -along
+        u, v = u32.astype(np.float64), v32.astype(np.float64)
+        margin = np.minimum(np.minimum(u, v), 1.0 - u - v)
+        edge = np.flatnonzero(~(margin > self._interior_margin[k]))
+        if edge.size:
+            ke = k[edge]
+            t[edge], u[edge], v[edge], det[edge] = _moller_trumbore(
+                o[edge], d[edge], self._v0[ke], self._edge1[ke], self._edge2[ke]
+            )
+        self.pairs_tested += k.size
+        return t, u, v, det
+
     def _repair_misses(
         self,
         origins: np.ndarray,
@@ -464,7 +510,12 @@ class RayCaster:
         side /= np.sqrt(np.einsum("ij,ij->i", side, side))[:, None]
         s0 = seg_start[missed]
         probe = o + s0[:, None] * d + self._probe_shift_mm * side
-        prim = self._embree_run(probe, d, (h + self._step_mm) - s0)
+        # Only probes whose window segment passes near F's bounding box can have lost a hit.
+        near_box = self._segment_meets_box(probe, d, (h + self._step_mm) - s0)
+        if not near_box.any():
+            return
+        o, d, s0, probe, missed = o[near_box], d[near_box], s0[near_box], probe[near_box], missed[near_box]
+        prim = self._embree_run(probe, d, (h + self._step_mm) - s0)["primID"].astype(np.int64)
         near = np.flatnonzero(prim >= 0)
         if not near.size:
             return
@@ -473,6 +524,23 @@ class RayCaster:
         got = np.isfinite(best_t)
         length[missed[near[got]]] = best_t[got]
         hit[missed[near[got]]] = best_tri[got]
+
+    def _segment_meets_box(self, origins: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
+        """Whether each segment o + s d, 0 <= s <= length, meets F's bounding box padded by the
+        probe shift and a float32 margin (slab test)."""
+        pad = self._probe_shift_mm + self._step_mm
+        lo = self._centre_mm - 0.5 * self._box_mm - pad
+        hi = self._centre_mm + 0.5 * self._box_mm + pad
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inverse = 1.0 / dirs
+            a, b = (lo - origins) * inverse, (hi - origins) * inverse
+        # A zero direction component: the slab holds the whole line or none of it.
+        inside = (origins >= lo) & (origins <= hi)
+        near = np.where(np.isnan(a), np.where(inside, -np.inf, np.inf), np.minimum(a, b))
+        far = np.where(np.isnan(b), np.where(inside, np.inf, -np.inf), np.maximum(a, b))
+        enter = np.maximum(near.max(axis=1), 0.0)
+        leave = np.minimum(far.min(axis=1), length)
+        return enter <= leave
 
     def _star_hits(
         self,
