@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import csv
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -27,7 +28,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from edem.errors import InputError
-from edem.tables import SceneTable, is_number
+from edem.tables import SceneTable, is_number, not_utf8
 
 NM_TO_NMM = 1000.0
 """N·m -> N·mm."""
@@ -153,6 +154,7 @@ class _DataFile:
 
 def _parse_rows(path: Path, key: str, header: list[str], rows: list[tuple[int, list[str]]],
                 in_degrees: bool | None) -> _DataFile:
+    """Row-by-row parse: slow, but names the line and column of the first bad value."""
     values = np.empty((len(rows), len(header)))
     for r, (line, fields) in enumerate(rows):
         if len(fields) != len(header):
@@ -167,20 +169,48 @@ def _parse_rows(path: Path, key: str, header: list[str], rows: list[tuple[int, l
     return _DataFile(path, header, values, [line for line, _ in rows], in_degrees, key)
 
 
+def _read_text(path: Path, key: str) -> list[str]:
+    """The lines of a UTF-8 text file; unreadable or non-UTF-8 files are bad input."""
+    try:
+        return path.read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError as exc:
+        raise InputError(not_utf8(exc), file=path, key=key, expected="a UTF-8 (or ASCII) text file") from None
+    except OSError as exc:
+        raise InputError(f"cannot read the file: {exc.strerror}", file=path, key=key) from None
+
+
+def _parse_table(path: Path, key: str, header: list[str], lines: list[tuple[int, str]], delimiter: str | None,
+                 split, in_degrees: bool | None) -> _DataFile:
+    """Data rows as floats: numpy's C parser for the whole table (1e6 rows in about a second),
+    the row-by-row parser only when that fails, to say which line and column is wrong."""
+    numbers = [line for _, line in lines]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "empty input": handled by the shape check
+            values = np.loadtxt(numbers, delimiter=delimiter, ndmin=2, dtype=np.float64, comments=None)
+        if values.shape != (len(numbers), len(header)):
+            raise ValueError("column count")
+    except ValueError:
+        return _parse_rows(path, key, header, [(i, split(line)) for i, line in lines], in_degrees)
+    return _DataFile(path, header, values, [i for i, _ in lines], in_degrees, key)
+
+
 def _read_csv(path: Path, key: str) -> _DataFile:
     """CSV with one header row of column names; blank lines skipped."""
-    with path.open(newline="") as handle:
-        rows = [(i, [f.strip() for f in row]) for i, row in enumerate(csv.reader(handle), start=1)
-                if any(f.strip() for f in row)]
+    rows = [(i, line) for i, line in enumerate(_read_text(path, key), start=1) if line.strip(" \t,")]
     if not rows:
         raise InputError("empty file", file=path, key=key, expected="a header row of column names, then data rows")
-    return _parse_rows(path, key, rows[0][1], rows[1:], None)
+
+    def split(line: str) -> list[str]:
+        return [f.strip() for f in next(csv.reader([line]))]
+
+    return _parse_table(path, key, split(rows[0][1]), rows[1:], ",", split, None)
 
 
 def _read_opensim(path: Path, key: str) -> _DataFile:
     """OpenSim .sto/.mot: header lines up to `endheader` (`inDegrees=yes|no` read), then a
     whitespace-separated table whose first row names the columns (`time`, ...)."""
-    lines = path.read_text().splitlines()
+    lines = _read_text(path, key)
     in_degrees: bool | None = None
     end = None
     for i, line in enumerate(lines):
@@ -198,11 +228,11 @@ def _read_opensim(path: Path, key: str) -> _DataFile:
     if end is None:
         raise InputError("no 'endheader' line", file=path, key=key,
                          expected="an OpenSim storage file: header lines, 'endheader', then a column-name row")
-    rows = [(i, line.split()) for i, line in enumerate(lines[end + 1:], start=end + 2) if line.strip()]
+    rows = [(i, line) for i, line in enumerate(lines[end + 1:], start=end + 2) if line.strip()]
     if not rows:
         raise InputError("no column-name row after 'endheader'", file=path, key=key,
                          expected="a row of column names such as 'time\\t...'")
-    return _parse_rows(path, key, rows[0][1], rows[1:], in_degrees)
+    return _parse_table(path, key, rows[0][1].split(), rows[1:], None, str.split, in_degrees)
 
 
 def _read_data_file(path: Path, key: str) -> _DataFile:
@@ -364,9 +394,12 @@ def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.
             raise tab.error(key, f"missing '{key}'", "3 finite numbers [x, y, z]")
     axis_point = tab.triple("axis_point_mm")
     axis = tab.triple("axis_direction")
-    norm = float(np.linalg.norm(axis))
-    if norm == 0.0:
+    # Scaled first: the norm of [1e300, 0, 0] overflows, and a subnormal one underflows to zero.
+    biggest = float(np.abs(axis).max())
+    if biggest == 0.0:
         raise tab.error("axis_direction", "zero vector", "a non-zero direction [x, y, z]")
+    axis = axis / biggest
+    norm = float(np.linalg.norm(axis))
 
     if tab.has("file") == tab.has("angle_deg"):
         raise tab.error("angle_deg", "give exactly one of 'angle_deg' or 'file'",
@@ -378,6 +411,9 @@ def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.
         angle_deg = _inline_angles(tab, time_s.size)
     else:
         angle_deg = _file_angles(tab, time_s)
+    if np.abs(angle_deg).max() > 360.0:  # more than a full turn is no joint angle (a unit or column mix-up)
+        key = "angle_deg" if tab.has("angle_deg") else "file"
+        raise tab.error(key, f"angle {angle_deg[np.argmax(np.abs(angle_deg))]:g} deg", "joint angles within +-360 deg")
     return JointKinematics(axis_point, axis / norm, np.deg2rad(angle_deg))
 
 

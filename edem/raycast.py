@@ -334,7 +334,7 @@ class RayCaster:
 
         n = len(origins)
         cast = self._cast_bruteforce if self.backend == "numpy" else self._cast_embree
-        if not len(self.triangles):
+        if not (len(self.triangles) and n):
             return RayHits(spring_length_mm=np.full(n, np.inf), triangle=np.full(n, -1, dtype=np.int64))
         if has_direction.all():  # the usual case: no gather, no scatter
             length, hit = cast(origins, dirs, h)

@@ -130,6 +130,20 @@ def timeseries_row(
     return dict(zip(TIMESERIES_COLUMNS, values))
 
 
+def make_output_dir(out_dir: str | Path) -> Path:
+    """Create the result directory (and its parents); a path that cannot be one is bad input."""
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise InputError("the output path exists and is not a directory", file=out, key="--out",
+                         expected="a directory (new or existing) for the results") from None
+    except OSError as exc:
+        raise InputError(f"cannot create the output directory: {exc.strerror}", file=out, key="--out",
+                         expected="a writable directory path whose names fit the file system (255 bytes each)") from None
+    return out
+
+
 def write_result_dir(
     out_dir: str | Path,
     summary: Mapping[str, Any],
@@ -146,8 +160,7 @@ def write_result_dir(
     Raises SolverError naming the file and key when a number is not finite (a result that
     contradicts itself is never written as if it were one).
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = make_output_dir(out_dir)
     check_finite_summary(summary, out / SUMMARY_FILE)
     columns = list(TIMESERIES_COLUMNS)
     if timeseries:

@@ -20,7 +20,8 @@ from edem.laws import LAWS
 from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, load_series_from_table
 from edem.mechanics import DOF_NAMES
 from edem.springs import Cartilage, Ligament
-from edem.tables import SceneTable
+from edem.tables import SceneTable, not_utf8
+from geometries.mesh_io import MAX_COORDINATE_MM
 from geometries.surface import TriangleSurface
 
 SECTIONS = {
@@ -99,10 +100,14 @@ def _parse_toml(path: Path) -> dict[str, Any]:
         raise InputError("scene file not found", file=path, expected="a TOML scene file or a built-in scene name (edem scenes)") from None
     except OSError as exc:
         raise InputError(f"cannot read the scene file: {exc.strerror}", file=path) from None
+    except UnicodeDecodeError as exc:
+        raise InputError(not_utf8(exc), file=path, expected="a UTF-8 text file (TOML is UTF-8 by definition)") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"malformed TOML: {exc}", file=path, expected="valid TOML (https://toml.io)") from None
+    except RecursionError:
+        raise InputError("arrays or tables nested too deeply to read", file=path, expected="valid TOML of ordinary depth") from None
 
 
 def builtin_scene_names() -> list[str]:
@@ -172,7 +177,9 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
     thickness = cart.optional_number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
     if spring_law.needs_thickness and thickness is None:
         raise InputError(f"the '{law}' law needs the undeformed thickness", file=file, key="cartilage.thickness_mm", expected="a thickness in mm > 0")
-    window = cart.number("max_spring_length_mm", spring_law.default_window_mm(thickness), positive=True, what="h_max in mm (> 0)")
+    # Beyond a kilometre the ray window is no longer a length on a joint (and its float32 reach overflows).
+    window = cart.number("max_spring_length_mm", spring_law.default_window_mm(thickness), positive=True,
+                         high=MAX_COORDINATE_MM, what=f"h_max in mm (> 0 and < {MAX_COORDINATE_MM:g})")
     if spring_law.needs_thickness and window < thickness:
         raise InputError(
             f"the ray window h_max = {window:g} mm is shorter than the thickness {thickness:g} mm",
@@ -189,6 +196,12 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         shear_modulus_mpa=cart.number("shear_modulus_mpa", 0.0, nonnegative=True, what="a shear modulus in MPa (>= 0)"),
     )
     mobile, fixed, reference_point, attachments, geo_description = _load_geometry(data["geometry"], path, cartilage, notes)
+    if not np.any(mobile.areas_mm2 > 0.0):
+        raise InputError(
+            f"the mobile surface has no triangle of non-zero area ({len(mobile.triangles)} triangles), so it carries no spring",
+            file=mobile.source or file, key="geometry.mobile" if mobile.source else "geometry",
+            expected="a surface mesh whose triangles have distinct corners",
+        )
     description = description or geo_description
 
     load = load_series_from_table(data["load"], path)

@@ -223,6 +223,17 @@ def run(
             )
             if not np.all(np.isfinite(u)):
                 raise SolverError(f"time point {k} (t = {t:g} s): the viscoelastic integration diverged (non-finite displacement)")
+        # A step that moves M farther than ten times the size of its spring bed (or turns it by more
+        # than a radian) has left the small-increment regime of the spring bed: the load's scale
+        # or units are wrong, and the next geometry would find no contact for a misleading reason.
+        runaway = np.linalg.norm(u[:3]) > 10.0 * length_scale or np.linalg.norm(u[3:]) > 1.0
+        if runaway or not (np.all(np.isfinite(u)) and np.all(np.isfinite(elastic_force))):
+            raise SolverError(
+                f"time point {k} (t = {t:g} s): the solution diverged: the step moves the mobile body by {np.linalg.norm(u[:3]):.3g} mm and "
+                f"{np.linalg.norm(u[3:]):.3g} rad, far beyond its contact region "
+                f"(load {np.abs(loads[k]).max():.3g} against {n_c} springs of modulus "
+                f"{cartilage.youngs_modulus_mpa:g} MPa): check the load's units and scale and the cartilage modulus"
+            )
         committed = elastic_force[:n_c, None] * normals
         if shear is not None:
             committed = committed + shear.force(u, solution.active[:n_c])

@@ -124,6 +124,14 @@ def _is_number(v: Any) -> bool:
 
 
 def _check_value(builder: str, name: str, spec: _P, value: Any) -> Any:
+    try:
+        return _checked_value(builder, name, spec, value)
+    except OverflowError:  # an integer such as 10**400 has no float64 value
+        raise InputError(f"{builder}: an integer too large for a float64", key=f"geometry.{name}",
+                         expected=spec.describe()) from None
+
+
+def _checked_value(builder: str, name: str, spec: _P, value: Any) -> Any:
     key = f"geometry.{name}"
 
     def bad(problem: str) -> InputError:

@@ -78,6 +78,9 @@ class MeshWarning(UserWarning):
 # --------------------------------------------------------------------------------------------
 
 
+#: largest coordinate magnitude a mesh may have, mm (1 km)
+MAX_COORDINATE_MM = 1e6
+
 def _where(surface: TriangleSurface) -> str:
     return surface.source or surface.name or "surface"
 
@@ -198,8 +201,12 @@ def _triangulate(points: np.ndarray, polys: list[_Cells], strips: list[_Cells]) 
     triangle_filter.PassLinesOff()
     triangle_filter.SetInputData(_vtk_polydata(points, joined(polys), joined(strips)))
     triangle_filter.Update()
-    connectivity = triangle_filter.GetOutput().GetPolys().GetConnectivityArray()
-    return vtk_to_numpy(connectivity).astype(np.int64).reshape(-1, 3)
+    cells = triangle_filter.GetOutput().GetPolys()
+    connectivity = vtk_to_numpy(cells.GetConnectivityArray()).astype(np.int64)
+    offsets = vtk_to_numpy(cells.GetOffsetsArray()).astype(np.int64)
+    # Degenerate input polygons can come out as cells of fewer than 3 points: keep triangles only.
+    starts = offsets[:-1][np.diff(offsets) == 3]
+    return connectivity[starts[:, None] + np.arange(3)]
 
 
 def _read_vtk(path: Path, key: str | None):
@@ -371,11 +378,16 @@ def read_surface(
     if units not in ("mm", "m"):
         raise InputError(f"unknown length unit '{units}'", file=file, key=key,
                          expected='units = "mm" or "m"')
-    if not path.exists():
+    try:
+        exists, is_file = path.exists(), path.is_file()
+    except OSError as exc:  # e.g. a name longer than the file system allows
+        raise InputError(f"cannot open the mesh file: {exc.strerror}", file=file, key=key,
+                         expected="a path the file system accepts") from None
+    if not exists:
         raise InputError("mesh file not found", file=file, key=key,
                          expected=f"an existing {SUPPORTED_FORMATS} file (paths are relative "
                          "to the scene file)")
-    if not path.is_file():
+    if not is_file:
         raise InputError("mesh path is not a file", file=file, key=key,
                          expected=f"a {SUPPORTED_FORMATS} file")
 
@@ -404,6 +416,14 @@ def read_surface(
             raise InputError(f"{int(bad.sum())} vertices have NaN or infinite coordinates "
                              f"(first: vertex {first})", file=file, key=key,
                              expected="finite coordinates")
+        # No joint is larger than a kilometre; beyond that, squared distances (KD-trees, areas)
+        # and Embree's float32 coordinates overflow or lose every digit.
+        huge = np.abs(points).max(axis=1) * (1000.0 if units == "m" else 1.0) > MAX_COORDINATE_MM
+        if huge.any():
+            first = int(np.flatnonzero(huge)[0])
+            raise InputError(f"{int(huge.sum())} vertices lie farther than {MAX_COORDINATE_MM:g} mm from "
+                             f"the origin (first: vertex {first}, {_fmt_point(points[first])})", file=file,
+                             key=key, expected=f"coordinates in {units} within +-{MAX_COORDINATE_MM:g} mm")
         tri = _triangulate(points, polys, strips)
     if len(tri) == 0:
         found = ", ".join(sorted(set(types))) or "none"
