@@ -33,13 +33,27 @@ def summary(run: RunResult) -> dict:
     }
 
 
+def centre_of_pressure_mm(run: RunResult, s: StepResult) -> np.ndarray:
+    """(3,) contact-force-weighted centroid of the springs at the step's pose, mm (global axes).
+
+    A step where no spring carries force has no centre of pressure: G's position is given then
+    (the point the joint load acts at)."""
+    force = s.pressure_mpa * s.area_mm2
+    total = float(force.sum())
+    if not total > 0.0:
+        return s.mobile_placement.points(run.scene.reference_point_mm[None])[0]
+    return force @ s.mobile_placement.points(run.scene.spring_centroid_mm) / total
+
+
 def timeseries_rows(run: RunResult) -> list[dict[str, float]]:
-    """One timeseries.csv row per time point of the run."""
-    return [
-        timeseries_row(s.step, s.time_s, s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa, s.contact_area_mm2,
-                       s.displacement_mm, s.rotation_rad, s.iterations, s.force_residual_n)
-        for s in run.steps
-    ]
+    """One timeseries.csv row per time point of the run, with the centre of pressure cop_*_mm."""
+    rows = []
+    for s in run.steps:
+        row = timeseries_row(s.step, s.time_s, s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa, s.contact_area_mm2,
+                             s.displacement_mm, s.rotation_rad, s.iterations, s.force_residual_n)
+        row.update(zip(("cop_x_mm", "cop_y_mm", "cop_z_mm"), map(float, centre_of_pressure_mm(run, s))))
+        rows.append(row)
+    return rows
 
 
 def pressure_frame(run: RunResult, s: StepResult) -> Frame:

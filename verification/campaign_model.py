@@ -24,7 +24,7 @@ from typing import Any
 
 from geometries.errors import InputError
 from verification.analyses import ANALYSES
-from verification.metrics import SERIES_METRICS, SPEC8_METRICS
+from verification.metrics import COP_METRICS, SERIES_METRICS, SPEC8_METRICS
 from verification.sides import check_side
 
 SCENES_DIR = Path(__file__).resolve().parent / "scenes"
@@ -58,6 +58,8 @@ for _side in ("a", "b"):
         METRICS[f"{_side}_{_name}"] = f"side {_side}: {_SERIES_DESCRIPTIONS[_name]} (timeseries.csv)"
 for _name in SERIES_METRICS:
     METRICS[f"a_at_b_{_name}"] = f"side a at side b's time points only: {_SERIES_DESCRIPTIONS[_name]}"
+
+METRICS.update(COP_METRICS)
 
 OUTCOMES = ("converges", "refused")
 

@@ -419,6 +419,22 @@ SERIES_METRICS = (
 )
 
 
+#: centre-of-pressure summaries of side a (DEM/EDEM result directories write cop_*_mm columns)
+COP_METRICS = {
+    "a_cop_x_mm": "side a: contact-force-weighted mean over the time points of the centre of pressure's x (mm)",
+    "a_cop_y_mm": "side a: contact-force-weighted mean over the time points of the centre of pressure's y (mm)",
+}
+
+
+def cop_metrics(series: dict[str, np.ndarray]) -> dict[str, float]:
+    """:data:`COP_METRICS` from a timeseries with cop_x_mm / cop_y_mm columns: each time point's
+    centre of pressure weighted by its contact force (mean pressure x contact area)."""
+    weight = np.asarray(series["mean_pressure_mpa"], float) * np.asarray(series["contact_area_mm2"], float)
+    if not weight.sum() > 0.0:
+        weight = np.ones_like(weight)
+    return {f"a_cop_{x}_mm": float(np.average(np.asarray(series[f"cop_{x}_mm"], float), weights=weight)) for x in "xy"}
+
+
 def series_metrics(series: dict[str, np.ndarray], prefix: str = "") -> dict[str, float]:
     """Summary values of a time series (timeseries.csv columns), keys prefixed with ``prefix``.
 

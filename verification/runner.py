@@ -203,13 +203,15 @@ def _series_metrics(wanted: set[str], a: dict[str, Any], b: dict[str, Any] | Non
     """a_* / b_* summaries of each side's time series, and a_at_b_* of a's at b's time points."""
     import numpy as np
 
-    from verification.metrics import SERIES_METRICS, matching_time_points, series_metrics
+    from verification.metrics import COP_METRICS, SERIES_METRICS, cop_metrics, matching_time_points, series_metrics
     from edem.resultdir import read_timeseries_csv
 
     def series(side: dict[str, Any]) -> dict[str, Any]:
         return read_timeseries_csv(Path(side["result_dir"]) / "timeseries.csv")
 
     out: dict[str, float] = {}
+    if wanted & set(COP_METRICS) and a["status"] == OK:
+        out.update(cop_metrics(series(a)))
     if wanted & {f"{p}_{n}" for p in "ab" for n in SERIES_METRICS}:
         for prefix, side in (("a_", a), ("b_", b)):
             if side is not None and side["status"] == OK:
