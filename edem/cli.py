@@ -43,6 +43,12 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _print_fe_size(size) -> None:
+    """One line before a long FE solve: what it will cost (fem_reference.sizing)."""
+    print(f"edem fe: about {size.cells:,} cells, {size.dofs:,} DOFs per solve, {size.solver} linear solver, "
+          f"~{size.memory_bytes / 1e9:.2g} GB estimated", file=sys.stderr, flush=True)
+
+
 def _fe(args: argparse.Namespace) -> int:
     """The FE reference of a scene (SPEC 5, 9): fem_reference.run_scene into a result directory."""
     from edem.scene import load_scene, parse_override
@@ -65,7 +71,8 @@ def _fe(args: argparse.Namespace) -> int:
 
             bar = tqdm(total=n_solves, desc=f"{scene.name} ({settings.method})", unit="step", file=sys.stderr)
         result = run_scene(scene, model=settings.model, mesh_size_mm=args.mesh_size, degree=args.degree, steps=steps, out_dir=out,
-                           progress=None if bar is None else (lambda k: bar.update(1)))
+                           progress=None if bar is None else (lambda k: bar.update(1)),
+                           on_size=_print_fe_size if rank == 0 else None)
     except (InputError, SolverError):
         if rank != 0:  # every rank fails alike: rank 0 alone reports it
             return 2

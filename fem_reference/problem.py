@@ -301,6 +301,9 @@ class SolverOptions:
     force_balance_rtol: float = 1e-6  # a converged solve must balance the load to this
     petsc_options: tuple[tuple[str, str], ...] = ()  # extra SNES options (without prefix)
     monitor: bool = False  # print the Newton residuals and translations (rank 0)
+    # inner linear solve: "direct" (MUMPS LU), "iterative" (Krylov + GAMG with the rigid-body
+    # near-nullspace) or "auto" (iterative past fem_reference.sizing.ITERATIVE_FROM_DOFS, not for TH)
+    linear_solver: str = "auto"
 
 
 @dataclass
@@ -488,6 +491,7 @@ class FEContactResult:
     method: str  # "nitsche" or "vi"
     outer_iterations: int = 0  # VI path: secant steps on the translation
     warnings: list[str] = field(default_factory=list)
+    linear_solver: str = "direct"  # the inner solve used: "direct" (LU) or "iterative" (Krylov + GAMG)
     # free rotations (empty without them): small rotation vector of the bone about G, the moment
     # of the contact force about G and |P_rot (M_c - moment)|
     rotation_axes: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))

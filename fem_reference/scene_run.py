@@ -200,6 +200,23 @@ def _selected_steps(steps: Sequence[int] | None, n: int) -> list[int]:
     return sorted(selected)
 
 
+def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: Sequence[int]):
+    """Size the first selected time point's solid before meshing; refuse (InputError) a run that
+    would not fit in memory (:mod:`fem_reference.sizing`). None when there is nothing to size."""
+    from fem_reference.sizing import check_fits, estimate, solid_size
+
+    if not selected:
+        return None
+    mask, thickness = FE_MODELS[settings.model].sizing_surface(scene, caster, fixed_placement(scene, selected[0]))
+    if not mask.any():
+        return None  # the model refuses this with its own message
+    edge = _mean_edge(scene.mobile.vertices_mm, scene.mobile.triangles[mask])
+    cells, vertices = solid_size(int(mask.sum()), edge, thickness, settings.mesh_size_mm, settings.layers_through_thickness)
+    size = estimate(cells, vertices, settings.element)
+    check_fits(size, settings.mesh_size_mm, file=scene.source, key="mesh_size_mm (--mesh-size, or [fe] in the scene)")
+    return size
+
+
 def _build_geometry(scene: Any, settings: FESettings, k: int, caster: RayCaster, solid_cache: dict) -> FEGeometry:
     """The model's solid and F's triangulation (the obstacle) at time point k."""
     f_pose = fixed_placement(scene, k)
@@ -333,14 +350,16 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
               degree: int | None = None, element: str | None = None,
               steps: Sequence[int] | None = None, out_dir: str | Path | None = None,
               layers_through_thickness: int | None = None, comm: Any = None,
-              progress: Callable[[int], None] | None = None) -> FERunResult:
+              progress: Callable[[int], None] | None = None,
+              on_size: Callable[[Any], None] | None = None) -> FERunResult:
     """Solve the FE reference of ``scene`` (an :class:`edem.scene.Scene`) at the selected time
     points and, with ``out_dir``, write the SPEC 9 result directory (rank 0 only).
 
     Settings come from the arguments, then the scene's ``[fe]`` table (model, mesh_size_mm,
     degree, element, layers_through_thickness), then the defaults (:func:`resolve_settings`).
     ``steps``: None (all) or time point indices (negative ones count from the end).
-    ``progress(k)`` is called after each solved time point.
+    ``progress(k)`` is called after each solved time point; ``on_size(size)`` once, with the
+    :class:`fem_reference.sizing.FESize` estimate, after the run was sized and found to fit.
 
     Raises InputError on bad settings and SolverError (FEConvergenceError for a Newton failure)
     naming the time point when one has no solution.
@@ -371,6 +390,9 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     if scene.cartilage.shear_modulus_mpa:
         warnings.append("cartilage.shear_modulus_mpa is ignored by the FE reference (the "
                         "continuum has its own shear stiffness; the contact is frictionless)")
+    size = _check_size(scene, settings, caster, selected)
+    if on_size is not None and size is not None:
+        on_size(size)
     step_log: list[tuple[str, str]] = []
     solid_cache: dict = {}
     mesh_cache: dict = {}
