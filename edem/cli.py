@@ -139,7 +139,11 @@ def _scenes(args: argparse.Namespace) -> int:
 
     names = builtin_scene_names()
     if args.render:
-        return _render(names, Path(args.render))
+        from reports.scene_renders import render_scene_pngs
+
+        for path in render_scene_pngs(names, args.render):
+            print(path)
+        return 0
     if args.write:
         target = Path(args.write)
         target.mkdir(parents=True, exist_ok=True)
@@ -153,42 +157,6 @@ def _scenes(args: argparse.Namespace) -> int:
         data = tomllib.loads(resolve_scene_path(name).read_text(encoding="utf-8"))
         summary = data.get("scene", {}).get("description", "").strip().splitlines()
         print(f"{name:28s} {summary[0] if summary else ''}")
-    return 0
-
-
-def _render(names: list[str], target: Path) -> int:
-    """PNG of each built-in scene's geometry, springs coloured by length at the first time point."""
-    import dataclasses
-    import tomllib
-
-    import numpy as np
-
-    from edem.raycast import RayCaster
-    from edem.scene import load_scene, resolve_scene_path
-    from edem.solver import fixed_placement
-    from geometries.builders import build_geometry
-    from geometries.render import render_geometry_png
-
-    target.mkdir(parents=True, exist_ok=True)
-    for name in names:
-        table = tomllib.loads(resolve_scene_path(name).read_text(encoding="utf-8"))["geometry"]
-        built = build_geometry(table["builtin"], {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm")})
-        scene = load_scene(name)
-        rotation, translation = fixed_placement(scene, 0).affine()
-        hits = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles).cast(
-            scene.mobile.centroids_mm, scene.mobile.unit_normals, scene.cartilage.max_spring_length_mm, rotation, translation
-        )
-        # Draw the tibia (and the ligaments' tibial ends) where the first time point puts them.
-        placed = dataclasses.replace(
-            built,
-            fixed=dataclasses.replace(built.fixed, vertices_mm=built.fixed.vertices_mm @ rotation.T + translation, _cache={}),
-            ligaments=tuple(dataclasses.replace(lig, fixed_point_mm=rotation @ lig.fixed_point_mm + translation) for lig in built.ligaments),
-        )
-        path = render_geometry_png(
-            placed, target / f"{name}.png", np.where(np.isfinite(hits.spring_length_mm), hits.spring_length_mm, np.nan),
-            scene.cartilage.max_spring_length_mm, title=name,
-        )
-        print(path)
     return 0
 
 
@@ -237,6 +205,13 @@ def _verify(args: argparse.Namespace) -> int:
     return summary["exit_status"]
 
 
+def _check(args: argparse.Namespace) -> int:
+    """`edem check`: the regression gate (SPEC 9)."""
+    from verification.check import run_check
+
+    return run_check(refresh=args.refresh, references=args.references, with_fe=not args.no_fe)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="edem", description="Discrete-element (DEM/EDEM) joint contact solver.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -250,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_run)
     p = sub.add_parser("fe", help="solve the FE reference (dolfinx) of a scene")
     p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
-    p.add_argument("--model", choices=("slab", "layer"), help="slab (twin of the threshold law) or layer (of the gap laws); overrides [fe] model")
+    p.add_argument("--model", help="an FE model (fem_reference.models): slab (twin of the threshold law) or layer (of the gap laws); overrides [fe] model")
     p.add_argument("--out", help="result directory (default results/<scene>-fe-<model>)")
     p.add_argument("--mesh-size", type=float, metavar="MM", help="element size in mm; overrides [fe] mesh_size_mm")
     p.add_argument("--degree", type=int, choices=(1, 2), help="element degree (2: P2, or Taylor-Hood at nu >= 0.49); overrides [fe] degree")
@@ -282,9 +257,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, help="worker processes (default: the CPU count; 1 runs in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on a Dask distributed cluster, e.g. tcp://host:8786")
     p.set_defaults(func=_verify)
-    from verification.check import add_parser as add_check_parser  # `edem check`: regression gate (SPEC 9)
-
-    add_check_parser(sub)
+    p = sub.add_parser("check", help="regression gate: rerun EDEM on stored references, exit 1 with a table when something drifted")
+    p.add_argument("--refresh", action="store_true", help="recompute the stored references (FE values too when the FE reference is available)")
+    p.add_argument("--references", metavar="DIR", help="reference directory (default verification/references/)")
+    p.add_argument("--no-fe", action="store_true", help="with --refresh: store EDEM baselines only")
+    p.set_defaults(func=_check)
     return parser
 
 

@@ -149,7 +149,6 @@ def _analytic_figures() -> tuple[Figure, ...]:
     )
 
 
-
 def campaign() -> Campaign:
     return Campaign(
         "edem-analytic",

@@ -21,7 +21,6 @@ def _ideal_standing_case() -> Case:
     )
 
 
-
 def campaign() -> Campaign:
     stability = {c.name: c for c in _stability_cases()}
     picks = ["nu-0.4999", "load-0", "pull-apart", "tangential-no-shear", "interpenetrating-start", "cylinder-axial-no-shear", "ve-exact-tau1e-04-dt1e+00", "ve-rk2-tau1e-04-dt1e+00"]

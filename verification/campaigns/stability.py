@@ -139,7 +139,6 @@ def _stability_cases() -> list[Case]:
     return cases
 
 
-
 def campaign() -> Campaign:
     return Campaign(
         "stability",
