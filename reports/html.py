@@ -60,8 +60,28 @@ def _matplotlib():
 # Figures
 
 
+def _histogram_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
+    """kind "histogram": the distribution of each metric of y over the cases, one panel each,
+    with its median and 5-95 % range."""
+    plt = _matplotlib()
+    names = [n for n in spec["cases"] if n in rows]
+    panels = list(spec["y"])
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 3.6), constrained_layout=True, squeeze=False)
+    for ax, metric in zip(axes[0], panels):
+        ys = np.array([_value(rows[n]["metrics"].get(metric)) for n in names])
+        ys = ys[np.isfinite(ys)]
+        if ys.size:
+            ax.hist(ys, bins=max(5, int(np.sqrt(ys.size))), color="tab:blue", alpha=0.8)
+            lo, mid, hi = np.percentile(ys, [5, 50, 95])
+            ax.axvline(mid, color="k", label=f"median {mid:.3g}")
+            ax.axvspan(lo, hi, color="grey", alpha=0.2, label=f"5-95 %: {lo:.3g} to {hi:.3g}")
+        _finish_panel(ax, False, False, metric.replace("_", " "), f"cases (of {len(names)})")
+    _save(plt, fig, spec["title"], path)
+
+
 def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
-    """Metrics of a series of cases against one of their parameters, one panel per metric."""
+    """Metrics of a series of cases against one of their parameters, one panel per metric
+    (kind "sweep": joined in order; kind "scatter": one unjoined point per case, e.g. a population)."""
     plt = _matplotlib()
     names = [n for n in spec["cases"] if n in rows]
     xs = np.array([_value(rows[n]["params"].get(spec["x"])) for n in names])
@@ -72,7 +92,10 @@ def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
     for ax, metric, log in zip(axes[0], panels, logy):
         ys = np.array([_value(rows[n]["metrics"].get(metric)) for n in names])
         ok = np.isfinite(xs) & np.isfinite(ys) & ((ys > 0) if log else True)
-        ax.plot(xs[ok], ys[ok], "o-", label=metric.replace("_", " "))
+        if spec["kind"] == "scatter":
+            ax.plot(xs[ok], ys[ok], "o", markersize=3, alpha=0.6, label=metric.replace("_", " "))
+        else:
+            ax.plot(xs[ok], ys[ok], "o-", label=metric.replace("_", " "))
         tols = [(x, rows[n]["tolerance"].get(metric)) for x, n in zip(xs, names)]
         tols = [(x, t) for x, t in tols if t is not None]
         if tols:
@@ -280,8 +303,10 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
         error = ""
         if not (path.is_file() and index.get(name) == key):
             try:
-                if spec["kind"] == "sweep":
+                if spec["kind"] in ("sweep", "scatter"):
                     _sweep_figure(spec, rows, path)
+                elif spec["kind"] == "histogram":
+                    _histogram_figure(spec, rows, path)
                 elif spec["kind"] == "timeseries":
                     _timeseries_figure(spec, rows, out_dir, path)
                 elif spec["kind"] == "error-vs-time":

@@ -128,7 +128,9 @@ class Figure:
     """A figure of the campaign's HTML report.
 
     kind "sweep": the metrics ``y`` of ``cases`` against their ``params[x]`` (one panel per
-    metric); kind "timeseries": timeseries.csv ``column`` of both sides of each case.
+    metric); kind "scatter": the same as unjoined points (a population); kind "histogram": the
+    distribution of each metric of ``y`` over the cases; kind "timeseries": timeseries.csv
+    ``column`` of both sides of each case.
     """
 
     name: str

@@ -62,11 +62,13 @@ def campaign(n: int = POPULATION_SIZE) -> Campaign:
     cases = tuple(_case(i, p) for i, p in enumerate(population_parameters(n)))
     names = tuple(c.name for c in cases)
     metrics = ("a_peak_pressure_mpa", "a_mean_contact_area_mm2", "a_cop_x_mm", "a_cop_y_mm")
-    figures = tuple(
+    figures = (
+        Figure("population-distributions", f"Distributions over {n} subjects: peak pressure (MPa), mean contact area (mm^2), stance-mean centre of pressure x (ML), y (AP) (mm)", "histogram", names, y=metrics),
+    ) + tuple(
         Figure(
             f"population-{param.replace('_', '-')}",
             f"Peak pressure (MPa), mean contact area (mm^2) and stance-mean centre of pressure x, y (mm) of {n} subjects against {param}",
-            "sweep",
+            "scatter",
             names,
             x=param,
             y=metrics,
