@@ -234,6 +234,8 @@ def solve_unilateral(
     s, k = forces(u)
     active = np.ones(m, bool)
     seen: set[bytes] = set()
+    max_approach = law.max_approach_mm()  # fixed over the solve; all inf for linear elements
+    bounded = bool(np.isfinite(max_approach).any())
     for iteration in range(1, max_iterations + 1):
         hessian = stiffness(k, active)
         if unrestrained_dofs(hessian, free, length_scale_mm):
@@ -254,9 +256,11 @@ def solve_unilateral(
             hessian = hessian + 1e-8 * everything
         step = np.zeros(6)
         step[free] = -np.linalg.solve(hessian[np.ix_(free, free)], gradient(u, s, active)[free])
-        approach, rate = directions @ u, directions @ step
-        room = law.max_approach_mm() - approach
-        alpha = min(1.0, float(np.min(0.99 * room[rate > 0] / rate[rate > 0], initial=np.inf)))
+        alpha = 1.0
+        if bounded:  # fraction to the boundary of the log elements' admissible approaches
+            rate = directions @ step
+            room = max_approach - directions @ u
+            alpha = min(1.0, float(np.min(0.99 * room[rate > 0] / rate[rate > 0], initial=np.inf)))
         slope = float(gradient(u, s, s > 0) @ step) if iteration > 1 else 0.0
         if slope < 0.0:
             # Armijo on Pi. The first, all-active step (DEM's) is taken whole: with non-negative

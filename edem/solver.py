@@ -207,7 +207,12 @@ def run(
                 directions, law, loads[k], fixed_dofs=scene.fixed_dofs, shear=shear, length_scale_mm=length_scale
             )
         except SolverError as exc:
-            raise SolverError(f"time point {k} (t = {t:g} s, {n_c} candidate springs): {exc}") from None
+            cause = (
+                f" (no spring is a candidate here: no part of the fixed body lies within h_max = "
+                f"{cartilage.max_spring_length_mm:g} mm of the mobile body along its normals, so only the ligaments resist)"
+                if n_c == 0 else ""
+            )
+            raise SolverError(f"time point {k} (t = {t:g} s, {n_c} candidate springs): {exc}{cause}") from None
         total_force = np.where(solution.active, solution.element_force_n, 0.0)
         if k == 0:
             warnings += weak_dofs_warning(directions, law, shear, solution, scene.fixed_dofs, length_scale)
