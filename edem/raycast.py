@@ -531,13 +531,12 @@ class RayCaster:
         pad = self._probe_shift_mm + self._step_mm
         lo = self._centre_mm - 0.5 * self._box_mm - pad
         hi = self._centre_mm + 0.5 * self._box_mm + pad
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inverse = 1.0 / dirs
+        # A zero direction component becomes a tiny one: its slab then holds the whole segment
+        # (origin inside it) or none of it (outside), with no 0/0.
+        inverse = 1.0 / np.where(dirs == 0.0, 1e-300, dirs)
+        with np.errstate(over="ignore", invalid="ignore"):
             a, b = (lo - origins) * inverse, (hi - origins) * inverse
-        # A zero direction component: the slab holds the whole line or none of it.
-        inside = (origins >= lo) & (origins <= hi)
-        near = np.where(np.isnan(a), np.where(inside, -np.inf, np.inf), np.minimum(a, b))
-        far = np.where(np.isnan(b), np.where(inside, np.inf, -np.inf), np.maximum(a, b))
+        near, far = np.minimum(a, b), np.maximum(a, b)
         enter = np.maximum(near.max(axis=1), 0.0)
         leave = np.minimum(far.min(axis=1), length)
         return enter <= leave
