@@ -25,6 +25,19 @@ FE_COMPARE_METRICS = SPEC8_METRICS + VALUE_METRICS + CHECK_METRICS
 #: generous: a relative error beyond 10 (1000 %) or a NaN means something is broken, not a model gap
 FE_COMPARE_TOL = {**{m: 10.0 for m in SPEC8_METRICS}, "force_residual_rel": 1e-6, "non_finite_outputs": 0.0}
 ERROR_PANELS = ("peak_pressure_rel_error", "contact_area_rel_error", "displacement_rel_error", "pressure_l2_rel_error")
+#: the table columns of DEM against the FE (values of both sides and the errors)
+FE_TABLE_COLUMNS = [
+    {"header": "DEM peak (MPa)", "metric": "a_at_b_peak_pressure_mpa"},
+    {"header": "FE peak (MPa)", "metric": "b_peak_pressure_mpa"},
+    {"header": "peak err", "metric": "peak_pressure_rel_error"},
+    {"header": "DEM area (mm^2)", "metric": "a_at_b_mean_contact_area_mm2"},
+    {"header": "FE area (mm^2)", "metric": "b_mean_contact_area_mm2"},
+    {"header": "area err", "metric": "contact_area_rel_error"},
+    {"header": "DEM |u| (mm)", "metric": "a_at_b_displacement_norm_mm"},
+    {"header": "FE |u| (mm)", "metric": "b_displacement_norm_mm"},
+    {"header": "disp err", "metric": "displacement_rel_error"},
+    {"header": "L2 err", "metric": "pressure_l2_rel_error"},
+]
 #: the two models of the ideal ankle: (prefix, scene, sides, what)
 CP_MODELS = (
     ("slab", "ideal-standing", ("dem", "fe-slab"), "ideal ankle (R 20 mm, 114 deg, plafond 1.5 mm above), threshold-law DEM vs the FE slab"),
@@ -90,20 +103,8 @@ def campaign() -> Campaign:
     cases = tuple(_cp_cases())
     sweeps = _cp_sweeps()
     figures = tuple(Figure(name, title, "sweep", names, x=x, y=ERROR_PANELS, logx=logx, logy=True) for name, title, x, names, logx in sweeps)
-    columns = [
-        {"header": "DEM peak (MPa)", "metric": "a_at_b_peak_pressure_mpa"},
-        {"header": "FE peak (MPa)", "metric": "b_peak_pressure_mpa"},
-        {"header": "peak err", "metric": "peak_pressure_rel_error"},
-        {"header": "DEM area (mm^2)", "metric": "a_at_b_mean_contact_area_mm2"},
-        {"header": "FE area (mm^2)", "metric": "b_mean_contact_area_mm2"},
-        {"header": "area err", "metric": "contact_area_rel_error"},
-        {"header": "DEM |u| (mm)", "metric": "a_at_b_displacement_norm_mm"},
-        {"header": "FE |u| (mm)", "metric": "b_displacement_norm_mm"},
-        {"header": "disp err", "metric": "displacement_rel_error"},
-        {"header": "L2 err", "metric": "pressure_l2_rel_error"},
-    ]
     analyses = tuple(
-        Analysis(f"{name}-table", f"{title}. Reported, no verdict", "table", names, {"columns": columns}) for name, title, _x, names, _l in sweeps
+        Analysis(f"{name}-table", f"{title}. Reported, no verdict", "table", names, {"columns": FE_TABLE_COLUMNS}) for name, title, _x, names, _l in sweeps
     )
     return Campaign(
         "cylinder-plane",
