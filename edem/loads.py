@@ -329,6 +329,9 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
         rotation = _axes(tab)
         force_n, moment_nmm = force_n @ rotation.T, moment_nmm @ rotation.T
         point_mm = None if point_mm is None else point_mm @ rotation.T
+    if not np.all(np.isfinite(force_n)):  # finite values times force_scale can overflow
+        raise tab.error("force_scale", f"the scaled force overflows (largest |force| before scaling "
+                        f"{np.abs(force_n / tab.number('force_scale', 1.0)).max():.3g} N)", "a scale that keeps the force finite")
     return LoadSeries(time_s, force_n, moment_nmm, frame, point_mm, in_ground)
 
 
@@ -336,7 +339,7 @@ def _axes(tab: SceneTable) -> np.ndarray:
     value = tab.table["axes"]
     try:
         return axes_matrix(value)
-    except ValueError as exc:
+    except (ValueError, TypeError) as exc:  # TypeError: neither a preset name nor a list
         raise tab.error("axes", f"{value!r}: {exc}",
                         f"a preset ({', '.join(AXES_PRESETS)}; \"opensim\": file x anterior, y up, z right onto scene x right, "
                         "y anterior, z up) or three signed file axes per scene axis, e.g. [\"z\", \"x\", \"y\"]") from None

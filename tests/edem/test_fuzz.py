@@ -69,6 +69,7 @@ shear_modulus_mpa = 0.5
 [load]
 file = "load.sto"
 moment_unit = "nmm"
+axes = "same"
 
 [kinematics]
 axis_point_mm = [0.0, 0.0, 0.0]
@@ -222,6 +223,15 @@ def _written_nan(out: Path) -> list[str]:
             if path.suffix in (".json", ".csv") and re.search(r"\bnan\b", path.read_text(errors="replace"), re.IGNORECASE):
                 bad.append(str(path))
     return bad
+
+
+@pytest.mark.parametrize("base", sorted(BASE_FILES))
+def test_unmutated_fuzz_bases_solve(tmp_path, base):
+    """The scenes the fuzz mutates are valid: their refusals are caused by the mutations."""
+    for name, text in BASE_FILES[base].items():
+        (tmp_path / name).write_text(text)
+    status, err = _run_in_process(["run", str(tmp_path / "scene.toml"), "--out", str(tmp_path / "out")])
+    assert status == 0, err
 
 
 def test_fuzzed_scenes_load_files_and_meshes_exit_0_or_2_without_traceback_or_nan(tmp_path):
