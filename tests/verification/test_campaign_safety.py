@@ -55,7 +55,15 @@ def start(tmp_path: Path, out: Path, n: int | str = N_CASES) -> subprocess.Popen
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     # a session of its own: signals go to the campaign and its workers as a terminal sends them
     return subprocess.Popen([sys.executable, str(script), str(out), str(n)], env=env, cwd=tmp_path,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=default_sigint)
+
+
+def default_sigint() -> None:
+    """A shell without job control starts its background jobs with SIGINT ignored, and Python then
+    keeps it ignored: give the child the terminal's default so the Ctrl-C tests hold however the
+    suite itself was started."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def finished_cases(out: Path) -> list[str]:
