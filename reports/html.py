@@ -258,8 +258,8 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
                 continue
             labels = [s["side"] for s in row["sides"][:2]]
             for k, (label, time_s, percent) in enumerate(instants):
-                title = f"{spec['title']}: {label}, t = {time_s:.3g} s ({percent:.0f} %)"
-                job = {"kind": "maps-at", "case": row["name"], "time_s": time_s, "labels": labels, "caption": f"{label}, {percent:.0f} %"}
+                title = f"{spec['title']}: {label}, {percent:.0f} % stance (t = {time_s:.3g} s)"
+                job = {"kind": "maps-at", "case": row["name"], "time_s": time_s, "labels": labels, "caption": f"{label}: {percent:.0f} % stance (t = {time_s:.3g} s)"}
                 jobs.append((f"{spec['name']}-{k}", title, job, involved))
             continue
         jobs.append((spec["name"], spec["title"], spec, involved))
