@@ -14,7 +14,8 @@ def _run(args: argparse.Namespace) -> int:
     from edem.scene import load_scene, parse_override
     from edem.solver import run
 
-    scene = load_scene(args.scene, dict(parse_override(o) for o in args.set))
+    overrides = dict(parse_override(o) for o in args.set)
+    scene = load_scene(args.scene, overrides)
     method = args.method or scene.method
     out = Path(args.out) if args.out else Path("results") / f"{scene.name}-{method}"
     n = len(scene.load.time_s)
@@ -29,6 +30,9 @@ def _run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     write_results(result, out)
+    from edem.provenance import record_provenance
+
+    record_provenance(out, args.scene, overrides, method=method)
     for warning in list(scene.warnings) + result.warnings:
         print(f"edem run: warning: {warning}", file=sys.stderr)
     last = result.steps[-1]
@@ -54,7 +58,8 @@ def _fe(args: argparse.Namespace) -> int:
     rank = world_rank()  # under mpirun every rank runs this; rank 0 alone reports
     bar = None
     try:
-        scene = load_scene(args.scene, dict(parse_override(o) for o in args.set))
+        overrides = dict(parse_override(o) for o in args.set)
+        scene = load_scene(args.scene, overrides)
         settings = resolve_settings(scene, model=args.model, mesh_size_mm=args.mesh_size, degree=args.degree)
         steps = parse_steps(args.steps, len(scene.load.time_s))
         out = Path(args.out) if args.out else Path("results") / f"{scene.name}-{settings.method}"
@@ -73,6 +78,9 @@ def _fe(args: argparse.Namespace) -> int:
             bar.close()
     if rank != 0:
         return 0
+    from edem.provenance import record_provenance
+
+    record_provenance(out, args.scene, overrides, {"model": settings.model, "mesh_size_mm": settings.mesh_size_mm, "degree": settings.degree})
     for warning in result.warnings:
         print(f"edem fe: warning: {warning}", file=sys.stderr)
     data = result.summary()
@@ -190,6 +198,9 @@ def _verify(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="edem", description="Discrete-element (DEM/EDEM) joint contact solver.")
+    from edem.provenance import software_version, source_revision
+
+    parser.add_argument("--version", action="version", version=f"edem {software_version()} (source {source_revision()})")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="solve a scene with the discrete method")
     p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")

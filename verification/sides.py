@@ -144,6 +144,9 @@ def _run_discrete(method: str) -> SideRunner:
             raise InputError(f"frames = {frames!r}", key="options.frames", expected=" or ".join(f'"{f}"' for f in FRAMES))
         scene = load_scene(scene_ref, overrides)
         _write_discrete(run(scene, method), out_dir, frames)
+        from edem.provenance import record_provenance
+
+        record_provenance(out_dir, scene_ref, overrides, method=method)
         return str(out_dir)
 
     runner.__doc__ = f"{method.upper()} (edem.solver.run) into a SPEC 9 result directory."
@@ -189,6 +192,9 @@ def _run_fe(model: str) -> SideRunner:
                 raise UnavailableError("FE reference not available: fem_reference.run_scene takes no steps= selection")
             kwargs["steps"] = list(kwargs["steps"])
         fem_reference.run_scene(scene, model=model, out_dir=out_dir, **kwargs)
+        from edem.provenance import record_provenance
+
+        record_provenance(out_dir, scene_ref, overrides, {"model": model, **{k: options[k] for k in ("mesh_size_mm", "degree") if k in options}})
         return str(out_dir)
 
     runner.__doc__ = f"The FE reference, {model} model (fem_reference.run_scene), SPEC 5."
