@@ -30,7 +30,7 @@ def _run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     write_results(result, out)
-    from edem.provenance import record_provenance
+    from edem.resultdir import record_provenance
 
     record_provenance(out, args.scene, overrides, method=method)
     for warning in list(scene.warnings) + result.warnings:
@@ -52,7 +52,8 @@ def _fe(args: argparse.Namespace) -> int:
     from edem.scene import load_scene, parse_override
 
     try:
-        from fem_reference.scene_run import parse_steps, resolve_settings, run_scene, world_rank
+        from fem_reference.scene_run import run_scene, world_rank
+        from fem_reference.settings import resolve_settings
     except ImportError as exc:
         raise InputError(f"the FE reference is not available ({exc})", expected="the `fe` extra: pip install -e '.[fe]'") from None
     rank = world_rank()  # under mpirun every rank runs this; rank 0 alone reports
@@ -60,13 +61,14 @@ def _fe(args: argparse.Namespace) -> int:
     try:
         overrides = dict(parse_override(o) for o in args.set)
         scene = load_scene(args.scene, overrides)
-        settings = resolve_settings(scene, model=args.model, mesh_size_mm=args.mesh_size, degree=args.degree)
+        settings = resolve_settings(scene, model=args.model, mesh_size_mm=args.mesh_size, degree=args.degree, argument_keys=FE_FLAGS)
         steps = parse_steps(args.steps, len(scene.load.time_s))
         out = Path(args.out) if args.out else Path("results") / f"{scene.name}-{settings.method}"
-        if rank == 0 and len(steps) > 1 and sys.stderr.isatty():
+        n_solves = len(scene.load.time_s) if steps is None else len(steps)
+        if rank == 0 and n_solves > 1 and sys.stderr.isatty():
             from tqdm import tqdm
 
-            bar = tqdm(total=len(steps), desc=f"{scene.name} ({settings.method})", unit="step", file=sys.stderr)
+            bar = tqdm(total=n_solves, desc=f"{scene.name} ({settings.method})", unit="step", file=sys.stderr)
         result = run_scene(scene, model=settings.model, mesh_size_mm=args.mesh_size, degree=args.degree, steps=steps, out_dir=out,
                            progress=None if bar is None else (lambda k: bar.update(1)))
     except (InputError, SolverError):
@@ -78,7 +80,7 @@ def _fe(args: argparse.Namespace) -> int:
             bar.close()
     if rank != 0:
         return 0
-    from edem.provenance import record_provenance
+    from edem.resultdir import record_provenance
 
     record_provenance(out, args.scene, overrides, {"model": settings.model, "mesh_size_mm": settings.mesh_size_mm, "degree": settings.degree})
     for warning in result.warnings:
@@ -92,6 +94,45 @@ def _fe(args: argparse.Namespace) -> int:
         f"  results: {out}/ (summary.json, timeseries.csv, pressure.pvd)"
     )
     return 0
+
+
+#: the `edem fe` flag of each resolve_settings argument (errors name what the user typed)
+FE_FLAGS = {"model": "--model", "mesh_size_mm": "--mesh-size", "degree": "--degree"}
+
+
+def parse_steps(text: str | None, n: int) -> list[int] | None:
+    """``--steps``: None = all; text "0,3,5-9,10:65:8" (a-b inclusive, a:b[:c] as Python slices;
+    negative indices count from the end) of a scene with n time points. Sorted, unique."""
+    if text is None:
+        return None
+    out: list[int] = []
+    expected = f"time point indices 0..{n - 1}: a comma list of N, A-B (inclusive) or A:B[:STEP]"
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            continue
+        try:
+            if ":" in part:
+                bits = [int(b) if b.strip() else None for b in part.split(":")]
+                if len(bits) > 3:
+                    raise ValueError
+                out += list(range(n))[slice(*bits)]
+            elif "-" in part[1:]:
+                i = part.index("-", 1)
+                a, b = int(part[:i]), int(part[i + 1:])
+                if b < a:
+                    raise ValueError
+                out += list(range(a, b + 1))
+            else:
+                out.append(int(part))
+        except ValueError:
+            raise InputError(f"cannot read the time point selection '{part}'", key="--steps", expected=expected) from None
+    selected = {i + n if i < 0 else i for i in out}
+    outside = [i for i in out if not 0 <= (i + n if i < 0 else i) < n]
+    if outside:
+        raise InputError(f"time point {outside[0]} does not exist (the scene has {n})", key="--steps", expected=expected)
+    if not selected:
+        raise InputError("the time point selection is empty", key="--steps", expected=expected)
+    return sorted(selected)
 
 
 def _scenes(args: argparse.Namespace) -> int:
@@ -186,11 +227,12 @@ def _verify(args: argparse.Namespace) -> int:
         return 0
     if not args.campaign:
         raise InputError("no campaign given", key="CAMPAIGN", expected="a campaign name (edem verify --list)")
+    from reports.html import write_campaign_report
     from verification.runner import format_summary, run_campaign
 
     campaign = get_campaign(args.campaign)
     out = Path(args.out) if args.out else Path("results") / "verify" / campaign.name
-    summary = run_campaign(campaign, out, jobs=args.jobs, scheduler=args.scheduler)
+    summary = run_campaign(campaign, out, jobs=args.jobs, scheduler=args.scheduler, report=write_campaign_report)
     print(format_summary(summary))
     print(f"report: {summary['report']}")
     return summary["exit_status"]
@@ -198,7 +240,7 @@ def _verify(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="edem", description="Discrete-element (DEM/EDEM) joint contact solver.")
-    from edem.provenance import software_version, source_revision
+    from edem.resultdir import software_version, source_revision
 
     parser.add_argument("--version", action="version", version=f"edem {software_version()} (source {source_revision()})")
     sub = parser.add_subparsers(dest="command", required=True)

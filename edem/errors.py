@@ -1,38 +1,5 @@
-"""Errors the user can act on (SPEC 9: exit status 2 on bad input, 1 on a failed check)."""
+"""The user-facing errors, defined in :mod:`geometries.errors` (the lowest layer that raises them)."""
 
-from __future__ import annotations
+from geometries.errors import InputError, SolverError
 
-from pathlib import Path
-
-
-class InputError(Exception):
-    """Bad input: names the file, the key and what was expected (SPEC 9, exit status 2)."""
-
-    def __init__(
-        self,
-        problem: str,
-        *,
-        file: str | Path | None = None,
-        key: str | None = None,
-        expected: str | None = None,
-    ) -> None:
-        self.problem = problem
-        self.file = None if file is None else str(file)
-        self.key = key
-        self.expected = expected
-        super().__init__(self.message())
-
-    def message(self) -> str:
-        where = []
-        if self.file:
-            where.append(self.file)
-        if self.key:
-            where.append(f"key '{self.key}'")
-        text = (": ".join([", ".join(where), self.problem]) if where else self.problem)
-        if self.expected:
-            text += f" (expected {self.expected})"
-        return text
-
-
-class SolverError(Exception):
-    """A solve that cannot reach equilibrium; the message says why (no contact, singular system...)."""
+__all__ = ["InputError", "SolverError"]

@@ -20,11 +20,12 @@ and ends with the KKT check of SPEC 2.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from edem.errors import SolverError
+from edem.laws import ElementLaw
 
 DOF_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
 
@@ -77,69 +78,6 @@ def generalised_directions(points_mm: np.ndarray, directions: np.ndarray, refere
     out[:, :3] = directions
     out[:, 3:] = cross_rows(points_mm - reference_point_mm, directions)
     return out
-
-
-@dataclass(frozen=True)
-class NormalLaw:
-    """Scalar force of every element as a function of its approach delta (SPEC 2-3).
-
-    Linear elements: s = s0 + c delta (the threshold law with the EDEM push-back in s0, the
-    linear gap law with s0 = A E' (t - h) / t, ligaments). Logarithmic elements (the gap-log law,
-    Blankevoort) have a thickness t > 0: with compression d = d0 + delta and a = c t = A E',
-    s = -a ln(1 - d / t) for d > 0 and its linear extension s = c d for d <= 0.
-    """
-
-    offset: np.ndarray  # s0 in N (linear) or d0 in mm (log)
-    stiffness_n_per_mm: np.ndarray  # c (for log elements: the stiffness at d = 0)
-    log_thickness_mm: np.ndarray  # t for log elements, 0 for linear ones
-
-    @staticmethod
-    def linear(offset_n: np.ndarray, stiffness_n_per_mm: np.ndarray) -> "NormalLaw":
-        return NormalLaw(np.asarray(offset_n, float), np.asarray(stiffness_n_per_mm, float), np.zeros(len(offset_n)))
-
-    @staticmethod
-    def concatenate(*laws: "NormalLaw") -> "NormalLaw":
-        return NormalLaw(*(np.concatenate([getattr(law, f) for law in laws]) for f in ("offset", "stiffness_n_per_mm", "log_thickness_mm")))
-
-    def _log_parts(self, approach_mm: np.ndarray):
-        t = self.log_thickness_mm
-        is_log = t > 0
-        d = self.offset + approach_mm
-        compressed = is_log & (d > 0)
-        ratio = np.where(compressed, d / np.where(is_log, t, 1.0), 0.0)
-        return is_log, compressed, d, ratio
-
-    def force_and_stiffness(self, approach_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        c = self.stiffness_n_per_mm
-        is_log, compressed, d, ratio = self._log_parts(approach_mm)
-        force = np.where(is_log, c * d, self.offset + c * approach_mm)
-        stiffness = c.copy()
-        if np.any(compressed):
-            inside = np.minimum(ratio[compressed], 1.0)
-            t = self.log_thickness_mm[compressed]
-            with np.errstate(divide="ignore"):
-                force[compressed] = -c[compressed] * t * np.log1p(-inside)
-                stiffness[compressed] = c[compressed] / (1.0 - inside)
-        return force, stiffness
-
-    def energy(self, approach_mm: np.ndarray) -> np.ndarray:
-        """phi_j with phi_j' = max(s_j, 0); +inf where a log element is compressed past t."""
-        c = self.stiffness_n_per_mm
-        is_log, compressed, d, ratio = self._log_parts(approach_mm)
-        linear_force = self.offset + c * approach_mm
-        out = np.where(is_log, 0.0, np.maximum(linear_force, 0.0) ** 2 / (2.0 * c))
-        if np.any(compressed):
-            inside = ratio[compressed]
-            t = self.log_thickness_mm[compressed]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                e = c[compressed] * t * t * ((1.0 - inside) * np.log1p(-np.minimum(inside, 1.0)) + inside)
-            out[compressed] = np.where(inside < 1.0, e, np.inf)
-        return out
-
-    def max_approach_mm(self) -> np.ndarray:
-        """Largest admissible approach: a log element cannot be compressed past its thickness."""
-        is_log = self.log_thickness_mm > 0
-        return np.where(is_log, self.log_thickness_mm - self.offset, np.inf)
 
 
 @dataclass(frozen=True)
@@ -240,7 +178,7 @@ def _balanceable(directions: np.ndarray, load: np.ndarray, free: np.ndarray, to_
 
 def solve_unilateral(
     directions: np.ndarray,
-    law: NormalLaw,
+    law: ElementLaw,
     load: np.ndarray,
     *,
     fixed_dofs: tuple[str, ...] = (),
@@ -252,7 +190,7 @@ def solve_unilateral(
 ) -> UnilateralSolution:
     """Equilibrium sum_j max(s_j(g_j . u), 0) g_j + shear(u) = T of the unilateral elements.
 
-    ``directions`` (m, 6) are the rows g_j and ``law`` gives s_j. ``shear`` applies to the first
+    ``directions`` (m, 6) are the rows g_j and ``law`` (:mod:`edem.laws`) gives s_j. ``shear`` applies to the first
     ``len(shear.normals)`` elements (the contact springs; ligaments carry no shear). This is the
     minimisation of the convex energy Pi by a semismooth Newton iteration: each step solves with
     the stiffness of the current active set, which adds elements as well as removes them (the

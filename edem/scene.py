@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from edem.errors import InputError
+from edem.laws import LAWS
 from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, load_series_from_table
 from edem.mechanics import DOF_NAMES
 from edem.springs import Cartilage, Ligament
@@ -42,7 +43,6 @@ SECTIONS = {
     "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness"},
 }
 FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm"}
-LAWS = ("threshold", "gap", "gap-log")
 
 
 @dataclass(frozen=True)
@@ -167,17 +167,18 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
     description = meta.string("description") if meta.has("description") else ""
 
     cart = SceneTable(data["cartilage"], file, "cartilage", SECTIONS["cartilage"])
-    law = cart.string("law", "threshold", LAWS)
+    law = cart.string("law", "threshold", tuple(LAWS))
+    spring_law = LAWS[law]
     thickness = cart.optional_number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
-    if law != "threshold" and thickness is None:
+    if spring_law.needs_thickness and thickness is None:
         raise InputError(f"the '{law}' law needs the undeformed thickness", file=file, key="cartilage.thickness_mm", expected="a thickness in mm > 0")
-    window = cart.number("max_spring_length_mm", 3.5 if law == "threshold" else 2.0 * (thickness or 0.0), positive=True, what="h_max in mm (> 0)")
-    if law != "threshold" and window < thickness:
+    window = cart.number("max_spring_length_mm", spring_law.default_window_mm(thickness), positive=True, what="h_max in mm (> 0)")
+    if spring_law.needs_thickness and window < thickness:
         raise InputError(
             f"the ray window h_max = {window:g} mm is shorter than the thickness {thickness:g} mm",
             file=file,
             key="cartilage.max_spring_length_mm",
-            expected="h_max >= thickness_mm for the gap laws (springs beyond h_max are not seen)",
+            expected=f"h_max >= thickness_mm for the {law} law (springs beyond h_max are not seen)",
         )
     cartilage = Cartilage(
         youngs_modulus_mpa=cart.number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),

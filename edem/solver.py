@@ -9,9 +9,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from edem.errors import SolverError
+from edem.laws import ElementLaw, stack_elements
 from edem.mechanics import (
     DOF_NAMES,
-    NormalLaw,
     ShearTerms,
     UnilateralSolution,
     assemble_stiffness,
@@ -89,7 +89,7 @@ def fixed_placement(scene: Scene, step: int) -> Placement:
 
 def weak_dofs_warning(
     directions: np.ndarray,
-    law: NormalLaw,
+    law: ElementLaw,
     shear: ShearTerms | None,
     solution: UnilateralSolution,
     fixed_dofs: tuple[str, ...],
@@ -115,11 +115,7 @@ def weak_dofs_warning(
 
 def compression_ratio(geometry: SpringGeometry, cartilage: Cartilage, approach_mm: np.ndarray) -> np.ndarray:
     """Compression over undeformed length of the candidate springs after an approach (strain)."""
-    length = geometry.spring_length_mm[geometry.candidate]
-    if cartilage.law == "threshold":
-        return approach_mm / length
-    t = float(cartilage.thickness_mm)
-    return (t - length + approach_mm) / t
+    return cartilage.spring_law.strain(geometry.spring_length_mm[geometry.candidate], approach_mm, cartilage.thickness_mm)
 
 
 def applied_loads(scene: Scene) -> np.ndarray:
@@ -179,7 +175,7 @@ def run(
         clock = time.perf_counter()
         cand = geometry.candidate
         n_c = int(cand.sum())
-        if cartilage.law in ("threshold", "gap-log") and np.any(geometry.spring_length_mm[cand] <= 0.0):
+        if cartilage.spring_law.needs_positive_length and np.any(geometry.spring_length_mm[cand] <= 0.0):
             # k = E'/h (threshold) and p = -E' ln(h/t) (gap-log) have no meaning once h <= 0.
             bad = int((geometry.spring_length_mm[cand] <= 0.0).sum())
             raise SolverError(
@@ -198,7 +194,7 @@ def run(
         stored_normal = np.einsum("ij,ij->i", stored_c, normals)
         shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals)
         lig_rows, lig_law, _ = ligament_elements(scene.ligaments, pose, f_pose, g_current)
-        law = NormalLaw.concatenate(contact_law(geometry, cartilage, stored_normal), lig_law)
+        law = stack_elements(contact_law(geometry, cartilage, stored_normal), lig_law)
         directions = generalised_directions(geometry.centroid_mm[cand], normals, g_current)
         if len(lig_rows):
             directions = np.vstack([directions, lig_rows])
@@ -268,7 +264,7 @@ def run(
 
 def viscoelastic_increment(
     directions: np.ndarray,
-    law: NormalLaw,
+    law: ElementLaw,
     shear: ShearTerms | None,
     elastic: UnilateralSolution,
     previous_load: np.ndarray,

@@ -1,9 +1,9 @@
-"""The geometry stage and the contact laws: springs and ligaments at one pose (SPEC 2-3).
+"""The geometry stage: springs and ligaments at one pose (SPEC 2-3).
 
 Pure functions on arrays. ``spring_geometry`` places the mobile springs at a pose, casts their
 rays against the fixed body and returns lengths and candidates; ``contact_law`` turns lengths,
-the cartilage and any stored (push-back) forces into the scalar law of ``edem.mechanics``;
-``ligament_elements`` does the same for the tension-only ligaments.
+the cartilage and any stored (push-back) forces into the element law of the cartilage's contact
+law (:mod:`edem.laws`); ``ligament_elements`` does the same for the tension-only ligaments.
 """
 
 from __future__ import annotations
@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from edem.mechanics import NormalLaw, ShearTerms, confined_modulus_mpa, generalised_directions
+from edem.laws import LAWS, ContactLaw, ElementLaw, LinearElements
+from edem.mechanics import ShearTerms, confined_modulus_mpa, generalised_directions
 from edem.raycast import RayCaster
 
 
@@ -46,7 +47,7 @@ class Cartilage:
 
     youngs_modulus_mpa: float
     poissons_ratio: float
-    law: str = "threshold"  # threshold | gap | gap-log
+    law: str = "threshold"  # a name of edem.laws.LAWS: threshold | gap | gap-log
     max_spring_length_mm: float = 3.5  # h_max: candidates (threshold) and ray window (all laws)
     thickness_mm: float | None = None  # undeformed combined thickness t (gap laws)
     shear_modulus_mpa: float = 0.0
@@ -54,6 +55,11 @@ class Cartilage:
     @property
     def confined_modulus_mpa(self) -> float:
         return confined_modulus_mpa(self.youngs_modulus_mpa, self.poissons_ratio)
+
+    @property
+    def spring_law(self) -> ContactLaw:
+        """The contact law object named by ``law`` (:data:`edem.laws.LAWS`)."""
+        return LAWS[self.law]
 
 
 @dataclass(frozen=True)
@@ -88,9 +94,7 @@ def spring_geometry(
     rotation, translation = fixed.affine()
     hits = caster.cast(c, n, cartilage.max_spring_length_mm, rotation=rotation, translation=translation)
     length = hits.spring_length_mm
-    candidate = np.isfinite(length)
-    if cartilage.law == "threshold":
-        candidate &= length <= cartilage.max_spring_length_mm
+    candidate = cartilage.spring_law.candidates(length, cartilage.max_spring_length_mm)
     return SpringGeometry(c, n, area_mm2, length, candidate)
 
 
@@ -98,23 +102,14 @@ def contact_law(
     geometry: SpringGeometry,
     cartilage: Cartilage,
     stored_normal_force_n: np.ndarray,
-) -> NormalLaw:
-    """Normal law of the candidate springs (SPEC 3, eq. 3.7 and 3.19).
-
-    threshold: s = s_stored + A E' / h * delta (incremental; the stiffness follows the current h);
-    gap: s = A E' (t - h + delta) / t; gap-log: s = -A E' ln(1 - (t - h + delta) / t).
-    ``stored_normal_force_n`` is the EDEM push-back per candidate spring (zero for DEM).
+) -> ElementLaw:
+    """Element law of the candidate springs under the cartilage's contact law (SPEC 3, eq. 3.7
+    and 3.19). ``stored_normal_force_n`` is the EDEM push-back per candidate spring (zero for DEM).
     """
     sel = geometry.candidate
-    area = geometry.area_mm2[sel]
-    length = geometry.spring_length_mm[sel]
-    e_conf = cartilage.confined_modulus_mpa
-    if cartilage.law == "threshold":
-        return NormalLaw.linear(stored_normal_force_n, area * e_conf / length)
-    t = float(cartilage.thickness_mm)
-    if cartilage.law == "gap":
-        return NormalLaw.linear(area * e_conf * (t - length) / t, area * e_conf / t)
-    return NormalLaw(t - length, area * e_conf / t, np.full(length.shape, t))
+    return cartilage.spring_law.elements(
+        geometry.area_mm2[sel], geometry.spring_length_mm[sel], cartilage.confined_modulus_mpa, cartilage.thickness_mm, stored_normal_force_n
+    )
 
 
 def shear_terms(
@@ -123,14 +118,14 @@ def shear_terms(
     reference_point_mm: np.ndarray,
     stored_tangential_force_n: np.ndarray,
 ) -> ShearTerms | None:
-    """Shear springs k_s = G / h (eq. 3.8; the gap laws use G / t) of the candidates, or None.
+    """Shear springs k_s = G / length (eq. 3.8; the law's shear length) of the candidates, or None.
 
     Frictionless cartilage (G = 0) stores no tangential force: None.
     """
     if cartilage.shear_modulus_mpa == 0.0:
         return None
     sel = geometry.candidate
-    h = geometry.spring_length_mm[sel] if cartilage.law == "threshold" else np.full(int(sel.sum()), float(cartilage.thickness_mm))
+    h = cartilage.spring_law.shear_length_mm(geometry.spring_length_mm[sel], cartilage.thickness_mm)
     return ShearTerms(
         arm_mm=geometry.centroid_mm[sel] - reference_point_mm,
         normals=geometry.normal[sel],
@@ -157,14 +152,14 @@ class Ligament:
 
 def ligament_elements(
     ligaments: tuple[Ligament, ...], mobile: Placement, fixed: Placement, reference_point_mm: np.ndarray
-) -> tuple[np.ndarray, NormalLaw, np.ndarray]:
+) -> tuple[np.ndarray, LinearElements, np.ndarray]:
     """Rows g = -B^T e, law s = k (L - L0) + k delta and current lengths (mm) of the ligaments.
 
     e is the unit vector from the ligament's point on M to its point on F; moving M by w changes
     the length by -e . w, so the tension grows with the approach delta = -e . w.
     """
     if not ligaments:
-        return np.zeros((0, 6)), NormalLaw.linear(np.zeros(0), np.zeros(0)), np.zeros(0)
+        return np.zeros((0, 6)), LinearElements(np.zeros(0), np.zeros(0)), np.zeros(0)
     pm = mobile.points(np.array([lig.mobile_point_mm for lig in ligaments]))
     pf = fixed.points(np.array([lig.fixed_point_mm for lig in ligaments]))
     span = pf - pm
@@ -172,4 +167,4 @@ def ligament_elements(
     e = span / length[:, None]
     k = np.array([lig.stiffness_n_per_mm for lig in ligaments])
     rest = np.array([lig.rest_length_mm for lig in ligaments])
-    return generalised_directions(pm, -e, reference_point_mm), NormalLaw.linear(k * (length - rest), k), length
+    return generalised_directions(pm, -e, reference_point_mm), LinearElements(k * (length - rest), k), length

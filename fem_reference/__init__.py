@@ -9,8 +9,9 @@ Importing this package does not import dolfinx; the solvers import the FE stack 
 * :mod:`fem_reference.contact`: :func:`solve_contact` (Nitsche, force control by a bordered
   semi-smooth Newton in PETSc SNES; P1, P2, Taylor-Hood) and :func:`solve_contact_vi`
   (variational-inequality cross-check, P1, axis-aligned plane).
-* :mod:`fem_reference.scene_run`: :func:`run_scene`, the FE reference of a whole scene (slab or
-  layer model, every time point, the SPEC 9 result directory of ``edem fe``).
+* :mod:`fem_reference.scene_run`: :func:`run_scene`, the FE reference of a whole scene (every
+  time point, the result directory of ``edem fe``); its models (slab, layer) are
+  :data:`fem_reference.models.FE_MODELS` and its settings :mod:`fem_reference.settings`.
 * :mod:`fem_reference.closed_forms`: Hertz line contact, confined compression, observed orders.
 * :mod:`fem_reference.meshes`: small tagged verification meshes (slab, Hertz block, cylinder
   layer). Facet tags: 1 bonded, 2 contact, 3 free, 4/5/6 zero x/y/z displacement.
@@ -30,7 +31,8 @@ from .problem import (
     Roller,
     SolverOptions,
 )
-from .scene_run import FERunResult, FESettings, FEStepResult, run_scene
+from .scene_run import FERunResult, FEStepResult, run_scene
+from .settings import FESettings
 
 
 def solve_contact(*args, **kwargs):  # noqa: D103 - thin lazy wrapper

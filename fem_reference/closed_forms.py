@@ -1,4 +1,4 @@
-"""Closed-form solutions used to verify the FE contact model (SPEC 5). numpy only. Units mm, N, MPa.
+"""Closed-form solutions used to verify the FE contact model (SPEC 5). numpy only (no dolfinx). Units mm, N, MPa.
 
 * Hertz line contact (plane strain) of a rigid cylinder, radius R, pressed with a load P' per
   unit length on an elastic half-space (E, nu):
@@ -18,11 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from edem.mechanics import confined_modulus_mpa
 
-def confined_modulus(youngs_modulus_mpa: float, poissons_ratio: float) -> float:
-    """E' = E (1 - nu) / ((1 + nu)(1 - 2 nu)) in MPa (= lambda + 2 mu)."""
-    e, nu = youngs_modulus_mpa, poissons_ratio
-    return e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
+
+#: E' = E (1 - nu) / ((1 + nu)(1 - 2 nu)) in MPa (= lambda + 2 mu): the one definition, the spring modulus.
+confined_modulus = confined_modulus_mpa
 
 
 def plane_strain_modulus(youngs_modulus_mpa: float, poissons_ratio: float) -> float:

@@ -4,16 +4,8 @@
 frictionless FE contact problem (:func:`fem_reference.contact.solve_contact`) and writes the same
 result directory as ``edem run``.
 
-Models (SPEC 5), built with :mod:`geometries.fe_solids`:
-
-* ``slab`` (twin of the ``threshold`` law): the conforming slab between M's candidate surface and
-  F. The spring lengths are ray-cast exactly as :func:`edem.springs.spring_geometry` does (M at
-  its initial pose, F at the time point's pose :func:`edem.solver.fixed_placement`; candidates:
-  a hit with 0 < h <= h_max). The slab's top vertices are then moved onto F along their
-  extrusion direction (a ray cast from the bottom vertex), so the slab touches F exactly where
-  it can: the initial gap is zero to round-off. Bonded to M.
-* ``layer`` (twin of the ``gap`` laws): a uniform layer of ``cartilage.thickness_mm`` bonded to
-  M; the initial gap to F comes from the geometry.
+Models (SPEC 5): :data:`fem_reference.models.FE_MODELS` (``slab``, the twin of the ``threshold``
+law, and ``layer``, the twin of the ``gap`` laws), built with :mod:`geometries.fe_solids`.
 
 The obstacle is F's triangulation at the time point's pose (:class:`RigidSurface`); the load is
 :func:`edem.solver.applied_loads` of that time point; the free rigid motions of the bone are the
@@ -28,7 +20,7 @@ that time point). Consecutive time points with the same geometry (no kinematics,
 at the same joint angle) reuse the mesh and start Newton from the previous solution scaled to
 the new load (exact for a slab whose contact set does not change: 0 Newton iterations).
 
-Defaults (arguments > the scene's ``[fe]`` table > these): model = the twin of the scene's law;
+Defaults (arguments > the scene's ``[fe]`` table > these, :mod:`fem_reference.settings`): model = the twin of the scene's law;
 degree 2 (P2; Taylor-Hood P2-P1 from nu = 0.49) at ``mesh_size_mm`` = 1.0, or P1 at 0.5 with
 degree 1. The size is the target in-plane edge (M's triangles are midpoint-subdivided until
 their mean edge is at most the size, so it acts in factors of 2) and sets the layers through the
@@ -37,9 +29,9 @@ thickness, ceil(thickness / size). Measured on the ideal ankle standing (slab, 3
 displacement, contact area) of P2 at 0.7 mm (402 k DOFs, 8 min, 8 GB); P1 at 0.5 mm 71 k DOFs,
 about 23 s, within 2 %; P1 at 1.0 mm 10 k DOFs, 2-4 s, within 2.5 % (a quick look).
 
-Result directory (SPEC 9, the layout of ``edem run``): summary.json (``n_dofs`` for
+Result directory (SPEC 9, the layout of ``edem run``, written by :mod:`edem.resultdir`): summary.json (``n_dofs`` for
 ``n_springs``, plus element, mesh size, Newton iterations, strains, the contact-area
-definitions), timeseries.csv with exactly ``edem.results.TIMESERIES_COLUMNS`` (``iterations`` =
+definitions), timeseries.csv with exactly ``edem.resultdir.TIMESERIES_COLUMNS`` (``iterations`` =
 Newton iterations), pressure.pvd + pressure_NNNN.vtp per solved time point: the FE contact
 surface in the reference configuration of that time point (point data: nodal pressure_mpa,
 spring_length_mm = local slab thickness or layer thickness + initial gap, in_contact, gap_mm;
@@ -55,33 +47,34 @@ Only rank 0 writes files; the sums and gathers are collective, so ``mpirun -n N`
 
 from __future__ import annotations
 
-import math
+import re
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
-from .problem import (
+from edem.mechanics import DOF_NAMES
+from edem.raycast import RayCaster
+from edem.resultdir import Frame, SurfaceFrame, timeseries_row, write_result_dir
+from edem.solver import applied_loads, fixed_placement
+from fem_reference.models import FE_MODELS, FEGeometry, contact_surface
+from fem_reference.problem import (
     AREA_DEFINITION_NITSCHE,
     FEContactProblem,
     FEConvergenceError,
     FEMesh,
     RigidSurface,
 )
+from fem_reference.settings import FESettings, resolve_settings
+from geometries.errors import InputError, SolverError
 
-MODELS = ("slab", "layer")
-ELEMENTS = ("auto", "P1", "P2", "TH")
-
-#: Default degree and mesh sizes (mm), chosen on the ideal ankle for 2 cores (module docstring).
-DEFAULT_DEGREE = 2
-DEFAULT_MESH_SIZE_MM = {1: 0.5, 2: 1.0}
-#: Nearly incompressible cartilage: Taylor-Hood (P2-P1 u-p) by default from this Poisson's ratio.
-TAYLOR_HOOD_FROM_NU = 0.49
 #: Free rigid motions whose contact stiffness is below this fraction of the largest are fixed.
 WEAK_MODE_RATIO = 1e-8
+
 STRAIN_WARNING = 0.10
 AREA_ON_MOBILE_DEFINITION = (
     "the contact indicator of contact_area_definition weighted, facet by facet, by the area of "
@@ -93,24 +86,6 @@ NOMINAL_STRAIN_DEFINITION = (
     "thickness: (approach of the rigid bone motion along the obstacle normal - initial gap) / "
     "(local slab thickness, or the layer thickness); max_principal_strain is the FE's largest "
     "|principal strain| at cell midpoints, which grows under refinement at the bonded edges")
-
-DOF_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
-
-
-@dataclass(frozen=True)
-class FESettings:
-    """The resolved FE settings of a run (from the arguments, then the scene's [fe] table, then
-    the defaults)."""
-
-    model: str
-    element: str  # P1 | P2 | TH
-    degree: int
-    mesh_size_mm: float
-    layers_through_thickness: int | None
-
-    @property
-    def method(self) -> str:
-        return f"fe-{self.model}"
 
 
 @dataclass
@@ -205,270 +180,34 @@ class FERunResult:
         }
 
 
-# --------------------------------------------------------------------------------------------
-# settings
-# --------------------------------------------------------------------------------------------
-
-
-def _input_error(*args: Any, **kwargs: Any) -> Exception:
-    from edem.errors import InputError
-
-    return InputError(*args, **kwargs)
-
-
-def _solver_error(message: str) -> Exception:
-    from edem.errors import SolverError
-
-    return SolverError(message)
-
-
-def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: float | None = None,
-                     degree: int | None = None, element: str | None = None,
-                     layers_through_thickness: int | None = None) -> FESettings:
-    """Arguments first, then the scene's ``[fe]`` table, then the defaults.
-
-    model: default the twin of the scene's law (threshold -> slab, gap laws -> layer).
-    element: "auto" (default) is P1 for degree 1 and P2 for degree 2, and Taylor-Hood (P2-P1 u-p,
-    degree 2) when nu >= 0.49 unless the degree is given as 1 (P1 then locks: the core warns).
-    mesh_size_mm: default :data:`DEFAULT_MESH_SIZE_MM` of the degree.
-    """
-    fe = dict(scene.fe or {})
-    file = scene.source
-
-    def pick(arg: Any, key: str) -> tuple[Any, str]:
-        if arg is not None:
-            return arg, {"model": "--model", "mesh_size_mm": "--mesh-size", "degree": "--degree",
-                         "element": "element",
-                         "layers_through_thickness": "layers_through_thickness"}[key]
-        return fe.get(key), f"fe.{key}"
-
-    law = scene.cartilage.law
-    value, key = pick(model, "model")
-    if value is None:
-        value = "slab" if law == "threshold" else "layer"
-    if value not in MODELS:
-        raise _input_error(f"unknown FE model {value!r}", file=file, key=key,
-                           expected="slab (twin of the threshold law) or layer (of the gap laws)")
-    model_ = str(value)
-
-    deg, deg_key = pick(degree, "degree")
-    if deg is not None and (isinstance(deg, bool) or deg not in (1, 2)):
-        raise _input_error(f"{deg!r} is not an element degree", file=file, key=deg_key,
-                           expected="1 or 2")
-    el, el_key = pick(element, "element")
-    if el is None:
-        el = "auto"
-    if el not in ELEMENTS:
-        raise _input_error(f"unknown element {el!r}", file=file, key=el_key,
-                           expected="auto, P1, P2 or TH (Taylor-Hood P2-P1)")
-    nu = float(scene.cartilage.poissons_ratio)
-    if el == "auto":
-        d = DEFAULT_DEGREE if deg is None else int(deg)
-        if nu >= TAYLOR_HOOD_FROM_NU and deg is None:
-            el = "TH"
-        else:
-            el = "P1" if d == 1 else ("TH" if nu >= TAYLOR_HOOD_FROM_NU else "P2")
-    el_degree = 1 if el == "P1" else 2
-    if deg is not None and int(deg) != el_degree:
-        raise _input_error(f"element {el} has degree {el_degree}, not {deg}", file=file,
-                           key=deg_key, expected=f"degree {el_degree} with element {el}")
-
-    size, size_key = pick(mesh_size_mm, "mesh_size_mm")
-    if size is None:
-        size = DEFAULT_MESH_SIZE_MM[el_degree]
-    if isinstance(size, bool) or not isinstance(size, (int, float)) or not (
-            math.isfinite(size) and size > 0):
-        raise _input_error(f"{size!r} is not a mesh size", file=file, key=size_key,
-                           expected="a length in mm > 0")
-    layers, layers_key = pick(layers_through_thickness, "layers_through_thickness")
-    if layers is not None and (isinstance(layers, bool) or not isinstance(layers, int)
-                               or layers < 1):
-        raise _input_error(f"{layers!r} is not a number of layers", file=file, key=layers_key,
-                           expected="an integer >= 1")
-    if model_ == "layer" and scene.cartilage.thickness_mm is None:
-        raise _input_error("the FE layer model needs the undeformed cartilage thickness",
-                           file=file, key="cartilage.thickness_mm",
-                           expected="a thickness in mm > 0 (or --model slab)")
-    return FESettings(model_, el, el_degree, float(size), layers)
-
-
-def parse_steps(text: str | Sequence[int] | None, n: int) -> list[int]:
-    """Time point indices: None = all; a list of ints; or text "0,3,5-9,10:65:8" (a-b inclusive,
-    a:b[:c] as Python slices; negative indices count from the end). Sorted, unique."""
-    if text is None:
+def _selected_steps(steps: Sequence[int] | None, n: int) -> list[int]:
+    """Sorted unique time point indices (None: all; negative ones count from the end)."""
+    if steps is None:
         return list(range(n))
-    out: list[int] = []
-    expected = ("time point indices 0..{}: a comma list of N, A-B (inclusive) or A:B[:STEP]"
-                .format(n - 1))
-    if isinstance(text, str):
-        for part in (p.strip() for p in text.split(",")):
-            if not part:
-                continue
-            try:
-                if ":" in part:
-                    bits = [int(b) if b.strip() else None for b in part.split(":")]
-                    if len(bits) > 3:
-                        raise ValueError
-                    out += list(range(n))[slice(*bits)]
-                elif "-" in part[1:]:
-                    i = part.index("-", 1)
-                    a, b = int(part[:i]), int(part[i + 1:])
-                    if b < a:
-                        raise ValueError
-                    out += list(range(a, b + 1))
-                else:
-                    out.append(int(part))
-            except ValueError:
-                raise _input_error(f"cannot read the time point selection '{part}'",
-                                   key="--steps", expected=expected) from None
-    else:
-        try:
-            out = [int(i) for i in text]
-        except (TypeError, ValueError):
-            raise _input_error(f"{text!r} is not a list of time point indices", key="steps",
-                               expected=expected) from None
-    sel = []
-    for i in out:
+    expected = f"time point indices 0..{n - 1} (negative ones count from the end)"
+    try:
+        given = [int(i) for i in steps]
+    except (TypeError, ValueError):
+        raise InputError(f"{steps!r} is not a list of time point indices", key="steps", expected=expected) from None
+    selected = set()
+    for i in given:
         j = i + n if i < 0 else i
         if not 0 <= j < n:
-            raise _input_error(f"time point {i} does not exist (the scene has {n})",
-                               key="--steps", expected=expected)
-        sel.append(j)
-    if not sel:
-        raise _input_error("the time point selection is empty", key="--steps", expected=expected)
-    return sorted(set(sel))
+            raise InputError(f"time point {i} does not exist (the scene has {n})", key="steps", expected=expected)
+        selected.add(j)
+    if not selected:
+        raise InputError("the time point selection is empty", key="steps", expected=expected)
+    return sorted(selected)
 
 
-# --------------------------------------------------------------------------------------------
-# geometry of one time point
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass
-class _Geometry:
-    solid: Any  # geometries.fe_solids.FESolid
-    obstacle: RigidSurface
-    key: tuple  # equal keys -> identical mesh and obstacle
-    warnings: list[str]
-
-
-def _spring_lengths(scene: Any, caster: Any, f_pose: Any) -> np.ndarray:
-    """Per mobile triangle: the signed ray length of its spring (inf: no hit / no spring)."""
-    from edem.springs import Placement, spring_geometry
-
-    geo = spring_geometry(scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2,
-                          Placement.identity(scene.reference_point_mm), caster, f_pose,
-                          scene.cartilage)
-    lengths = np.full(scene.mobile.n_triangles, np.inf)
-    lengths[scene.spring_triangle] = geo.spring_length_mm
-    return lengths
-
-
-def _snap_top_onto_fixed(solid: Any, caster: Any, f_pose: Any, window_mm: float,
-                         obstacle: RigidSurface) -> Any:
-    """Move the slab's top vertices onto F: along their extrusion direction (a ray cast from
-    the bottom vertex, as the springs measure), or where that ray misses F (at the rim of F) onto
-    the plane of the nearest triangle of F; intermediate layers follow in proportion. A vertex
-    that would move by more than half its column keeps its place (the caller warns)."""
-    from geometries.fe_solids import tet_volumes
-
-    pts = solid.points_mm
-    nl = int(solid.layer.max())
-    nv = int(np.sum(solid.layer == 0))
-    bottom = pts[:nv]
-    top = pts[nl * nv:]
-    span = top - bottom
-    h = np.linalg.norm(span, axis=1)
-    d = span / h[:, None]
-    rotation, translation = f_pose.affine()
-    hits = caster.cast(bottom, d, window_mm, rotation=rotation, translation=translation)
-    s = hits.spring_length_mm
-    ok = np.isfinite(s) & (s > 0.0) & (np.abs(s - h) <= 0.5 * h)
-    new_top = np.where(ok[:, None], bottom + s[:, None] * d, top)
-    rest = np.flatnonzero(~ok)
-    if rest.size:
-        gap, nu = obstacle.gap_and_normal(top[rest])
-        moved = top[rest] - gap[:, None] * nu
-        near = np.abs(gap) <= 0.5 * h[rest]
-        new_top[rest[near]] = moved[near]
-    frac = (np.arange(nl + 1) / nl)[:, None, None]
-    new = (bottom[None] + frac * (new_top - bottom)[None]).reshape(-1, 3)
-    if not np.all(tet_volumes(new, solid.tets) > 0):
-        return solid
-    return replace(solid, points_mm=new)
-
-
-def _build_geometry(scene: Any, settings: FESettings, k: int, caster: Any,
-                    solid_cache: dict) -> _Geometry:
-    from geometries import fe_solids
-
-    from edem.solver import fixed_placement
-
+def _build_geometry(scene: Any, settings: FESettings, k: int, caster: RayCaster, solid_cache: dict) -> FEGeometry:
+    """The model's solid and F's triangulation (the obstacle) at time point k."""
     f_pose = fixed_placement(scene, k)
     rotation, translation = f_pose.affine()
-    verts = f_pose.points(scene.fixed.vertices_mm)
-    obstacle = RigidSurface(verts, scene.fixed.triangles, candidates=16)
+    obstacle = RigidSurface(f_pose.points(scene.fixed.vertices_mm), scene.fixed.triangles, candidates=16)
     pose_key = (np.round(rotation, 14).tobytes(), np.round(translation, 12).tobytes())
-    warnings: list[str] = []
-    h_max = float(scene.cartilage.max_spring_length_mm)
-    size, layers = settings.mesh_size_mm, settings.layers_through_thickness
-    if settings.model == "layer":
-        if "solid" not in solid_cache:
-            try:
-                solid_cache["solid"] = fe_solids.layer_solid(
-                    scene.mobile, float(scene.cartilage.thickness_mm), size, layers)
-            except ValueError as exc:
-                raise _solver_error(f"building the FE layer failed: {exc}") from None
-        pts, _, _ = _contact_surface(solid_cache["solid"])
-        gap, _ = obstacle.gap_and_normal(pts)
-        overlap = float(-gap.min()) if len(gap) else 0.0
-        if overlap > 1e-9 * h_max:
-            warnings.append(
-                f"the layer overlaps the fixed body by up to {overlap:.3g} mm "
-                f"({int(np.sum(gap < 0))} contact-surface nodes): it starts pre-compressed")
-        return _Geometry(solid_cache["solid"], obstacle, ("layer", pose_key), warnings)
-    cached = solid_cache.get(("slab", pose_key))
-    if cached is not None:  # same pose of F: the same slab (its warnings were given once)
-        return _Geometry(cached, obstacle, ("slab", pose_key), warnings)
-    solid_cache.clear()
-    lengths = _spring_lengths(scene, caster, f_pose)
-    with np.errstate(invalid="ignore"):
-        cand = np.isfinite(lengths) & (lengths <= h_max)
-    bad = int(np.sum(cand & (lengths <= 0.0)))
-    if bad:
-        raise _solver_error(
-            f"{bad} springs are compressed past their length (h <= 0: the bodies interpenetrate); "
-            "the FE slab needs M and F apart (use the layer model for overlapping bodies)")
-    if not np.any(cand):
-        raise _solver_error(
-            f"no spring is a candidate: no part of the fixed body lies within h_max = {h_max:g} "
-            "mm of the mobile body along its normals (nothing to build the FE slab on)")
-    try:
-        solid = fe_solids.slab_solid(scene.mobile, lengths, h_max, size, layers)
-    except ValueError as exc:
-        raise _solver_error(f"building the FE slab failed: {exc}") from None
-    solid = _snap_top_onto_fixed(solid, caster, f_pose, 2.0 * h_max, obstacle)
-    pts, _, _ = _contact_surface(solid)
-    gap, _ = obstacle.gap_and_normal(pts)
-    off = np.abs(gap) > 1e-6 * h_max
-    if off.any():
-        warnings.append(
-            f"{int(off.sum())} of the slab's {len(pts)} contact-surface nodes could not be placed "
-            f"on the fixed body (initial gap from {float(gap.min()):.3g} to "
-            f"{float(gap.max()):.3g} mm; the slab is meant to touch it everywhere)")
-    solid_cache[("slab", pose_key)] = solid
-    return _Geometry(solid, obstacle, ("slab", pose_key), warnings)
-
-
-def _contact_surface(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(points, triangles, solid point index) of the solid's contact face."""
-    from geometries.fe_solids import CONTACT_TAG
-
-    faces = solid.faces(CONTACT_TAG)
-    used = np.unique(faces)
-    remap = np.full(len(solid.points_mm), -1, dtype=np.int64)
-    remap[used] = np.arange(used.size)
-    return solid.points_mm[used], remap[faces], used
+    return FE_MODELS[settings.model].build(scene, settings.mesh_size_mm, settings.layers_through_thickness,
+                                           caster, f_pose, obstacle, pose_key, solid_cache)
 
 
 def _mean_edge(points: np.ndarray, tris: np.ndarray) -> float:
@@ -488,7 +227,7 @@ def _mode_name(v: np.ndarray, names: tuple[str, str, str]) -> str:
     return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
 
 
-def _free_modes(scene: Any, geom: _Geometry, settings: FESettings, force: np.ndarray,
+def _free_modes(scene: Any, geom: FEGeometry, settings: FESettings, force: np.ndarray,
                 moment: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Free translation directions (k_t, 3) and rotation axes (k_r, 3) for this time point.
 
@@ -504,10 +243,10 @@ def _free_modes(scene: Any, geom: _Geometry, settings: FESettings, force: np.nda
     trans = trans.reshape(-1, 3)
     rots = rots.reshape(-1, 3)
     if len(trans) == 0:
-        raise _input_error("the FE reference needs at least one free translation of the bone",
+        raise InputError("the FE reference needs at least one free translation of the bone",
                            file=scene.source, key="constraints.fixed_dofs",
                            expected="at most two of tx, ty, tz fixed")
-    pts, tris, _ = _contact_surface(geom.solid)
+    pts, tris, _ = contact_surface(geom.solid)
     a, b, c = (pts[tris[:, i]] for i in range(3))
     cr = np.cross(b - a, c - a)
     area = 0.5 * np.linalg.norm(cr, axis=1)
@@ -520,14 +259,9 @@ def _free_modes(scene: Any, geom: _Geometry, settings: FESettings, force: np.nda
     vnorm /= np.maximum(np.linalg.norm(vnorm, axis=1), 1e-300)[:, None]
     gap, nu = geom.obstacle.gap_and_normal(pts)
     facing = np.einsum("ij,ij->i", nu, vnorm) < -0.1
-    if settings.model == "slab":
-        reach = facing & (gap <= 1e-3 * float(scene.cartilage.max_spring_length_mm))
-    else:
-        t = float(scene.cartilage.thickness_mm)
-        g0 = float(gap[facing].min()) if facing.any() else 0.0
-        reach = facing & (gap <= max(g0, 0.0) + 0.5 * t)
+    reach = FE_MODELS[settings.model].reach(scene, gap, facing)
     if not reach.any():
-        raise _solver_error("no part of the FE contact surface faces the fixed body within reach")
+        raise SolverError("no part of the FE contact surface faces the fixed body within reach")
     g = np.asarray(scene.reference_point_mm, dtype=float)
     arm = pts[reach] - g
     length = float(np.sqrt(np.mean(np.einsum("ij,ij->i", arm, arm)))) or 1.0
@@ -551,13 +285,13 @@ def _free_modes(scene: Any, geom: _Geometry, settings: FESettings, force: np.nda
         if abs(float(v @ gen_load)) > 1e-9 * max(scale, 1e-300):
             dof = (names_t[int(np.argmax(np.abs(vt)))] if np.linalg.norm(vt) >= np.linalg.norm(vr)
                    else names_r[int(np.argmax(np.abs(vr)))])
-            raise _solver_error(
+            raise SolverError(
                 f"frictionless FE contact cannot resist the {what} of the bone (every contact "
                 f"normal is perpendicular to it) and the load has a component along it "
                 f"({float(v @ gen_load):.4g} N): no equilibrium; fix it in [constraints] "
                 f"fixed_dofs (e.g. add \"{dof}\"; the constraint then carries that load)")
         if np.linalg.norm(vr) >= 1e-9 and np.linalg.norm(vt) >= 1e-9:
-            raise _solver_error(
+            raise SolverError(
                 f"frictionless FE contact cannot resist a combined rigid motion "
                 f"(translation {np.round(vt, 3).tolist()}, rotation {np.round(vr, 3).tolist()}): "
                 "fix more DOFs in [constraints] fixed_dofs")
@@ -572,7 +306,7 @@ def _free_modes(scene: Any, geom: _Geometry, settings: FESettings, force: np.nda
     trans = _orthonormal_rows(trans.T @ t_span)
     rots = _orthonormal_rows(rots.T @ r_span) if len(rots) else rots
     if len(trans) == 0:
-        raise _solver_error("frictionless FE contact resists no free translation of the bone")
+        raise SolverError("frictionless FE contact resists no free translation of the bone")
     return trans, rots, warnings
 
 
@@ -597,7 +331,7 @@ def _orthonormal_rows(cols: np.ndarray) -> np.ndarray:
 
 def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | None = None,
               degree: int | None = None, element: str | None = None,
-              steps: str | Sequence[int] | None = None, out_dir: str | Path | None = None,
+              steps: Sequence[int] | None = None, out_dir: str | Path | None = None,
               layers_through_thickness: int | None = None, comm: Any = None,
               progress: Callable[[int], None] | None = None) -> FERunResult:
     """Solve the FE reference of ``scene`` (an :class:`edem.scene.Scene`) at the selected time
@@ -605,7 +339,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
 
     Settings come from the arguments, then the scene's ``[fe]`` table (model, mesh_size_mm,
     degree, element, layers_through_thickness), then the defaults (:func:`resolve_settings`).
-    ``steps``: None (all), indices, or text such as "0,5-9,10:65:8" (:func:`parse_steps`).
+    ``steps``: None (all) or time point indices (negative ones count from the end).
     ``progress(k)`` is called after each solved time point.
 
     Raises InputError on bad settings and SolverError (FEConvergenceError for a Newton failure)
@@ -615,19 +349,16 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     settings = resolve_settings(scene, model=model, mesh_size_mm=mesh_size_mm, degree=degree,
                                 element=element, layers_through_thickness=layers_through_thickness)
     n_times = len(scene.load.time_s)
-    selected = parse_steps(steps, n_times)
+    selected = _selected_steps(steps, n_times)
     try:
-        from .contact import _fe_modules
+        from fem_reference.contact import _fe_modules
 
         mods = _fe_modules()
     except ImportError as exc:
-        raise _input_error(f"the FE reference needs dolfinx ({exc})",
+        raise InputError(f"the FE reference needs dolfinx ({exc})",
                            expected="the `fe` extra: pip install -e '.[fe]'") from None
     MPI = mods["MPI"]
     comm = MPI.COMM_WORLD if comm is None else comm
-
-    from edem.raycast import RayCaster
-    from edem.solver import applied_loads
 
     caster = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles)
     loads = applied_loads(scene)
@@ -682,7 +413,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             if progress is not None:
                 progress(k)
             continue
-        mesh_key = geom.key[0] if settings.model == "layer" else geom.key
+        fe_model = FE_MODELS[settings.model]
+        mesh_key = geom.key if fe_model.mesh_follows_pose else geom.key[0]
         if mesh_cache.get("key") != mesh_key:
             mesh_cache.clear()
             mesh, cell_tags, facet_tags = geom.solid.to_dolfinx(comm)
@@ -691,7 +423,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         if warm:  # same mesh and obstacle: start from the previous solution, scaled to the load
             ratio = float(np.linalg.norm(force)) / max(float(np.linalg.norm(previous["force"])),
                                                        1e-300)
-            t_warm = previous["t"] * (ratio if settings.model == "slab" else 1.0)
+            t_warm = previous["t"] * (ratio if fe_model.warm_start_scales_with_load else 1.0)
         problem = FEContactProblem(
             mesh=mesh_cache["mesh"],
             youngs_modulus_mpa=float(scene.cartilage.youngs_modulus_mpa),
@@ -708,7 +440,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             initial_field=previous["ut"] * ratio if warm else None,
             strain_warning=STRAIN_WARNING,
         )
-        from .contact import solve_contact
+        from fem_reference.contact import solve_contact  # dolfinx: imported on first use
 
         try:
             try:
@@ -727,7 +459,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             if type(exc).__name__ in ("SolverError", "InputError"):
                 exc.args = (f"{where}: {exc}",)
                 raise
-            raise _solver_error(f"{where}: the FE solve failed: {type(exc).__name__}: {exc}"
+            raise SolverError(f"{where}: the FE solve failed: {type(exc).__name__}: {exc}"
                                 ) from None
         step_warnings += [w for w in res.warnings if not w.startswith("max nominal strain")]
         previous = {"key": geom.key, "t": res.bone_displacement_mm.copy(),
@@ -758,16 +490,16 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         failure = comm.bcast(failure, root=0)
         if failure is not None:
             if failure[0] == "input":
-                raise _input_error(failure[1], file=str(out_dir),
+                raise InputError(failure[1], file=str(out_dir),
                                    expected="a writable directory (--out)")
-            raise _solver_error(failure[1])
+            raise SolverError(failure[1])
     return run
 
 
 def world_rank() -> int:
     """Rank in MPI.COMM_WORLD (0 without the FE stack)."""
     try:
-        from .contact import _fe_modules
+        from fem_reference.contact import _fe_modules
 
         return int(_fe_modules()["MPI"].COMM_WORLD.rank)
     except ImportError:
@@ -781,8 +513,6 @@ def _add(warnings: list[tuple[str, str]], step_warnings: list[str], where: str) 
 def _merge_warnings(general: list[str], per_step: list[tuple[str, str]]) -> list[str]:
     """One line per kind of warning (numbers ignored): the first occurrence, and how many other
     time points had it."""
-    import re
-
     order: dict[str, list[str]] = {}
     for where, w in per_step:
         order.setdefault(re.sub(r"\d+(\.\d+)?(e[-+]?\d+)?", "#", w), []).append(f"{where}: {w}")
@@ -794,20 +524,16 @@ def _merge_warnings(general: list[str], per_step: list[tuple[str, str]]) -> list
     return out
 
 
-def _surface_data(geom: _Geometry, settings: FESettings, scene: Any,
+def _surface_data(geom: FEGeometry, settings: FESettings, scene: Any,
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                              np.ndarray]:
     """Contact-surface points, triangles, local spring length (slab: thickness; layer:
     thickness + initial gap), initial gap, obstacle normal and undeformed thickness per point."""
-    pts, tris, used = _contact_surface(geom.solid)
+    pts, tris, used = contact_surface(geom.solid)
     gap, nu = geom.obstacle.gap_and_normal(pts)
-    if settings.model == "slab":
-        bottom = geom.solid.points_mm[geom.solid.bottom_vertex[used]]
-        thickness = np.linalg.norm(pts - bottom, axis=1)
-        length = thickness
-    else:
-        thickness = np.full(len(pts), float(scene.cartilage.thickness_mm))
-        length = thickness + gap
+    fe_model = FE_MODELS[settings.model]
+    thickness = fe_model.thickness_mm(scene, geom.solid, used, pts)
+    length = fe_model.spring_length_mm(thickness, gap)
     return pts, tris, length, gap, nu, thickness
 
 
@@ -816,7 +542,7 @@ def _mobile_mapping(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     was extruded from, per point and per facet the area ratio (contact face / M) of the columns
     (lumped at the points): a pressure times this ratio is the force per area of M, as the
     springs carry it."""
-    pts, tris, used = _contact_surface(solid)
+    pts, tris, used = contact_surface(solid)
     x = solid.points_mm
     top = used[tris]
     bottom = solid.bottom_vertex[top]
@@ -833,9 +559,9 @@ def _mobile_mapping(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return x[solid.bottom_vertex[used]], lumped_top / lumped_bottom, a_top / a_bottom
 
 
-def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: _Geometry,
+def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FEGeometry,
                settings: FESettings, clock: float) -> FEStepResult:
-    pts, tris, used = _contact_surface(geom.solid)
+    pts, tris, used = contact_surface(geom.solid)
     z = np.zeros(len(pts))
     zc = np.zeros(len(tris))
     gap, _ = geom.obstacle.gap_and_normal(pts)
@@ -860,15 +586,13 @@ def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: _G
 def _area_on_mobile(res: Any, solid: Any) -> float:
     """The Nitsche contact-area integral with each contact facet weighted by (area of the
     bonded triangle below it) / (its own area): the contact area measured on M."""
-    from scipy.spatial import cKDTree
-
-    from .contact import _fe_modules
+    from fem_reference.contact import _fe_modules
 
     m = _fe_modules()
     fem, ufl, dmesh = m["fem"], m["ufl"], m["dolfinx"].mesh
     s, pressure = res.fields["setup"], res.fields["pressure"]
     mesh = s.mesh
-    pts, tris, used = _contact_surface(solid)
+    pts, tris, used = contact_surface(solid)
     top = used[tris]  # solid point indices of the contact triangles
     bottom = solid.bottom_vertex[top]  # layer-0 points are the first ones: same indices
     x = solid.points_mm
@@ -887,7 +611,7 @@ def _area_on_mobile(res: Any, solid: Any) -> float:
         dist, idx = cKDTree(x[top].mean(axis=1)).query(centroids)
         size = float(np.ptp(x, axis=0).max()) or 1.0
         if float(dist.max()) > 1e-8 * size:
-            raise _solver_error("the FE contact facets do not match the solid's contact face")
+            raise SolverError("the FE contact facets do not match the solid's contact face")
         mesh.topology.create_connectivity(2, 3)
         f2c = mesh.topology.connectivity(2, 3)
         cells = np.array([f2c.links(f)[0] for f in facets], dtype=np.int32)
@@ -899,10 +623,8 @@ def _area_on_mobile(res: Any, solid: Any) -> float:
     return s.scalar(fem.form(ind * w * s.ds_c))
 
 
-def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: _Geometry,
+def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FEGeometry,
                  settings: FESettings, res: Any, clock: float, scene: Any) -> FEStepResult:
-    from scipy.spatial import cKDTree
-
     pts, tris, length, gap, nu, thickness = _surface_data(geom, settings, scene)
     area_on_mobile = _area_on_mobile(res, geom.solid)
     on_mobile, ratio_point, ratio_cell = _mobile_mapping(geom.solid)
@@ -910,7 +632,7 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
     dist, idx = cKDTree(xs).query(pts)
     size = float(np.ptp(pts, axis=0).max()) or 1.0
     if len(xs) != len(pts) or float(dist.max()) > 1e-8 * size:
-        raise _solver_error(
+        raise SolverError(
             f"time point {k}: the FE contact-surface nodes do not match the solid's contact face "
             f"({len(xs)} nodes for {len(pts)} vertices, farthest {float(dist.max()):.3g} mm)")
     p = np.clip(np.asarray(res.contact_pressure_mpa)[idx], 0.0, None)
@@ -920,7 +642,7 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
     for name, value in (("pressure", p), ("displacement", res.bone_displacement_mm),
                         ("rotation", res.bone_rotation_rad)):
         if not np.all(np.isfinite(value)):
-            raise _solver_error(f"time point {k}: the FE {name} is not finite")
+            raise SolverError(f"time point {k}: the FE {name} is not finite")
     rigid = (res.bone_displacement_mm[None, :]
              + np.cross(res.bone_rotation_rad, pts - np.asarray(scene.reference_point_mm)))
     approach = -np.einsum("ij,ij->i", rigid, nu) - gap
@@ -959,50 +681,15 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
 
 
 def write_fe_results(run: FERunResult, out_dir: str | Path) -> Path:
-    """summary.json, timeseries.csv (edem.results.TIMESERIES_COLUMNS), pressure.pvd with one
-    pressure_NNNN.vtp per solved time point (the FE contact surface in the reference
-    configuration of that time point: point data pressure_mpa, spring_length_mm, in_contact,
-    gap_mm, pressure_on_mobile_mpa, mobile_point_mm; cell data pressure_mpa, spring_length_mm,
-    in_contact, pressure_on_mobile_mpa) and fixed.vtp (see the module docstring)."""
-    import csv
-    import json
-
-    from edem.results import TIMESERIES_COLUMNS, write_pvd
-    from geometries.mesh_io import write_vtp
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    data = run.summary()
-    _check_finite(data)
-    (out / "summary.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    with open(out / "timeseries.csv", "w", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f)
-        writer.writerow(TIMESERIES_COLUMNS)
-        for s in run.steps:
-            row = [s.step, s.time_s, *s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa,
-                   s.contact_area_mm2, *s.displacement_mm, *s.rotation_rad, s.iterations,
-                   s.force_residual_n]
-            if len(row) != len(TIMESERIES_COLUMNS):  # pragma: no cover - layout guard
-                raise RuntimeError("timeseries row does not match TIMESERIES_COLUMNS")
-            values = [float(x) for x in row]
-            if not all(math.isfinite(x) for x in values):
-                raise _solver_error(f"time point {s.step}: non-finite value in timeseries.csv")
-            writer.writerow([str(int(x)) if isinstance(x, (int, np.integer)) else repr(float(x))
-                             for x in row])
-    entries = []
-    for s in run.steps:
-        name = f"pressure_{s.step:04d}.vtp"
-        write_vtp(out / name, s.points_mm, s.triangles, s.cell_data, s.point_data)
-        entries.append((s.time_s, name))
-    write_pvd(out / "pressure.pvd", entries)
-    write_vtp(out / "fixed.vtp", run.scene.fixed.vertices_mm, run.scene.fixed.triangles, {})
-    return out
-
-
-def _check_finite(data: dict) -> None:
-    for key, value in data.items():
-        values = value if isinstance(value, list) else [value]
-        if any(isinstance(v, float) and not math.isfinite(v) for v in values):
-            raise _solver_error(f"summary value {key} is not finite: {value}")
-
-
+    """The result directory (:mod:`edem.resultdir`): summary.json, timeseries.csv
+    (``iterations`` = Newton iterations), pressure.pvd with one pressure_NNNN.vtp per solved time
+    point (the FE contact surface in the reference configuration of that time point: point data
+    pressure_mpa, spring_length_mm, in_contact, gap_mm, pressure_on_mobile_mpa, mobile_point_mm;
+    cell data pressure_mpa, spring_length_mm, in_contact, pressure_on_mobile_mpa) and fixed.vtp
+    (see the module docstring)."""
+    rows = [timeseries_row(s.step, s.time_s, s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa, s.contact_area_mm2,
+                           s.displacement_mm, s.rotation_rad, s.iterations, s.force_residual_n)
+            for s in run.steps]
+    frames = [Frame(s.step, s.time_s, SurfaceFrame(s.points_mm, s.triangles, s.point_data, s.cell_data)) for s in run.steps]
+    fixed = SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles)
+    return write_result_dir(out_dir, run.summary(), rows, frames, fixed)

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from geometries.surface import TriangleSurface, midpoint_subdivision
 
 __all__ = [

@@ -35,7 +35,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from geometries.surface import TriangleSurface
 
 __all__ = [

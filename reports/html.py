@@ -181,7 +181,7 @@ def _grid_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Pa
 def _instant_times(spec: dict[str, Any], row: dict[str, Any], out_dir: Path) -> list[tuple[str, float, float]]:
     """(label, time_s, % of the span) of each instant of a "maps" figure, from side a's time series."""
     from verification.campaigns import instant_indices
-    from verification.resultdirs import read_timeseries_csv
+    from edem.resultdir import read_timeseries_csv
 
     series = read_timeseries_csv(out_dir / row["result_dirs"][0] / "timeseries.csv")
     time = series["time_s"]

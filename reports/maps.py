@@ -140,7 +140,7 @@ def render_pressure_maps(
     import pyvista as pv
 
     from verification.metrics import pressure_at_cells, project_onto_surface, same_mesh
-    from verification.resultdirs import read_result_dir
+    from edem.resultdir import read_result_dir
 
     heading = title
     a, b = read_result_dir(a_dir), read_result_dir(b_dir)

@@ -278,11 +278,63 @@ def table_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def pareto_front(points: list[tuple[float, float]]) -> list[bool]:
+    """For each (time, error): True when no other point is at least as good in both and better in one."""
+    out = []
+    for i, (t, e) in enumerate(points):
+        dominated = any(t2 <= t and e2 <= e and (t2 < t or e2 < e) for j, (t2, e2) in enumerate(points) if j != i)
+        out.append(not dominated)
+    return out
+
+
+def pareto_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Error (``settings["metric"]``) against side a's wall time; the non-dominated cases flagged
+    "front", one front per truth (side b). A case's family is its name up to the last '-' (dem, fe-p1, edem)."""
+    metric = analysis.settings["metric"]
+    entries = []
+    for name in analysis.cases:
+        row = rows.get(name)
+        if row is None or row["status"] in ("unavailable", "error") or not row.get("sides"):
+            continue
+        error = row["metrics"].get(metric)
+        time_s = row["sides"][0].get("wall_time_s")
+        if error is None or time_s is None:
+            continue
+        error, time_s = float(error), float(time_s)
+        if math.isfinite(error) and math.isfinite(time_s):
+            entries.append({"case": name, "family": name.rsplit("-", 1)[0], "time_s": time_s, "error": error, "truth_time_s": float(row["sides"][1]["wall_time_s"]) if len(row["sides"]) > 1 else None,
+                            "truth": row["sides"][1].get("side", "") if len(row["sides"]) > 1 else ""})
+    if not entries:
+        return {"columns": [], "rows": [], "status": UNAVAILABLE, "notes": ["no case has a value"], "values": {}}
+    # a front per truth (errors against different truths are not comparable)
+    for truth in dict.fromkeys(e["truth"] for e in entries):
+        group = [e for e in entries if e["truth"] == truth]
+        for entry, on in zip(group, pareto_front([(e["time_s"], e["error"]) for e in group])):
+            entry["front"] = on
+    entries.sort(key=lambda e: e["time_s"])
+    entries.sort(key=lambda e: (e["truth"], e["time_s"]))
+    out_rows = [{"cells": [e["case"], e["family"], e["truth"], _fmt(e["time_s"], 3), _fmt(e["error"], 3), "front" if e["front"] else ""], "flag": False} for e in entries]
+    truths = {}
+    for e in entries:
+        if e["truth_time_s"] is not None:
+            truths.setdefault(e["family"], []).append(e["truth_time_s"])
+    notes = [analysis.settings.get("truth", "")] + [f"{fam}: its truth took {min(ts):.3g} .. {max(ts):.3g} s per run" for fam, ts in truths.items()]
+    notes.append("Wall time of side a as run by the campaign (2 jobs sharing 2 cores: contention included); front = no other point against the same truth is both faster and more accurate (one front per truth: errors against different truths do not compare).")
+    return {
+        "columns": ["case", "family", "against", "wall time a (s)", metric, "Pareto"],
+        "rows": out_rows,
+        "status": REPORTED,
+        "notes": [n for n in notes if n],
+        "values": {"points": entries, "front": [e["case"] for e in entries if e["front"]]},
+    }
+
+
 ANALYSES: dict[str, Callable[[Any, dict[str, dict[str, Any]]], dict[str, Any]]] = {
     "order": order_analysis,
     "thesis": thesis_analysis,
     "sensitivity": sensitivity_analysis,
     "table": table_analysis,
+    "pareto": pareto_analysis,
 }
 
 

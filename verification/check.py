@@ -56,7 +56,7 @@ class CheckScene:
     fe_model: str = "slab"
 
     def scene_ref(self) -> str:
-        from verification.campaigns import SCENES_DIR
+        from verification.campaign_model import SCENES_DIR
 
         return str(SCENES_DIR / self.scene) if self.scene.endswith(".toml") else self.scene
 
@@ -123,7 +123,7 @@ def edem_quantities(result_dir: str | Path, scene) -> dict[str, Any]:
     """Per time point: peak pressure, contact area, displacement of G and the coarse field of an
     EDEM result directory of ``scene`` (binned by the spring centroids at M's initial pose)."""
     from verification.metrics import pressure_at_cells
-    from verification.resultdirs import read_result_dir
+    from edem.resultdir import read_result_dir
 
     result = read_result_dir(result_dir)
     series = result.timeseries
@@ -137,7 +137,7 @@ def fe_quantities(fe_dir: str | Path, edem_dir: str | Path, scene) -> dict[str, 
     spring at M's initial pose (centroid + length x normal: where the FE slab's contact face is;
     the FE's surface is built at that pose) and binned like EDEM's."""
     from verification.metrics import project_onto_surface
-    from verification.resultdirs import read_result_dir
+    from edem.resultdir import read_result_dir
 
     fe, edem = read_result_dir(fe_dir), read_result_dir(edem_dir)
     series = fe.timeseries

@@ -36,13 +36,9 @@ from typing import Any
 import numpy as np
 
 from edem.errors import InputError
+from edem.mechanics import confined_modulus_mpa
+from edem.resultdir import Frame, SurfaceFrame, timeseries_row, write_result_dir
 from edem.scene import Scene
-
-
-def confined_modulus_mpa(youngs_modulus_mpa: float, poissons_ratio: float) -> float:
-    """E' = E (1 - nu) / ((1 + nu)(1 - 2 nu)), the spring modulus of eq. 3.7."""
-    nu = poissons_ratio
-    return youngs_modulus_mpa * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
 
 
 @dataclass(frozen=True)
@@ -373,14 +369,6 @@ def write_closed_form_results(scene: Scene, solution: ClosedFormSolution, out_di
     in_contact and ray_hit, like `edem run`. summary.json adds "closed_form" (name, formula and
     the form's own numbers).
     """
-    import csv
-    import json
-
-    from edem.results import TIMESERIES_COLUMNS, write_pvd
-    from geometries.mesh_io import write_vtp
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     n_times = solution.time_s.shape[0]
     springs = scene.spring_triangle
     n_tri = scene.mobile.n_triangles
@@ -400,36 +388,23 @@ def write_closed_form_results(scene: Scene, solution: ClosedFormSolution, out_di
         "warnings": [],
         "closed_form": {"name": solution.name, "formula": solution.formula, **solution.extra},
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    with open(out / "timeseries.csv", "w", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f)
-        writer.writerow(TIMESERIES_COLUMNS)
-        for k in range(n_times):
-            writer.writerow(
-                [k, repr(float(solution.time_s[k])), *(repr(float(x)) for x in solution.force_n[k]),
-                 repr(float(solution.peak_pressure_mpa[k])), repr(float(solution.mean_pressure_mpa[k])),
-                 repr(float(solution.contact_area_mm2[k])), *(repr(float(x)) for x in solution.displacement_mm[k]),
-                 "0.0", "0.0", "0.0", 0, "0.0"]
-            )
-    entries = []
+    rows = [
+        timeseries_row(k, solution.time_s[k], solution.force_n[k], solution.peak_pressure_mpa[k], solution.mean_pressure_mpa[k],
+                       solution.contact_area_mm2[k], solution.displacement_mm[k], np.zeros(3), 0, 0.0)
+        for k in range(n_times)
+    ]
     length = np.zeros(n_tri)
     finite = np.isfinite(solution.spring_length_mm)
     length[springs] = np.where(finite, solution.spring_length_mm, 0.0)
     ray_hit = np.zeros(n_tri, np.int8)
     ray_hit[springs] = finite
+    frames = []
     for k in range(n_times):
         pressure = np.zeros(n_tri)
         pressure[springs] = solution.pressure_mpa[k]
         contact = np.zeros(n_tri, np.int8)
         contact[springs] = solution.in_contact[k]
-        name = f"pressure_{k:04d}.vtp"
-        write_vtp(
-            out / name,
-            scene.mobile.vertices_mm + solution.displacement_mm[k],
-            scene.mobile.triangles,
-            {"pressure_mpa": pressure, "spring_length_mm": length, "in_contact": contact, "ray_hit": ray_hit},
-        )
-        entries.append((float(solution.time_s[k]), name))
-    write_pvd(out / "pressure.pvd", entries)
-    write_vtp(out / "fixed.vtp", scene.fixed.vertices_mm, scene.fixed.triangles, {})
-    return out
+        cells = {"pressure_mpa": pressure, "spring_length_mm": length, "in_contact": contact, "ray_hit": ray_hit}
+        surface = SurfaceFrame(scene.mobile.vertices_mm + solution.displacement_mm[k], scene.mobile.triangles, {}, cells)
+        frames.append(Frame(k, float(solution.time_s[k]), surface))
+    return write_result_dir(out_dir, summary, rows, frames, SurfaceFrame(scene.fixed.vertices_mm, scene.fixed.triangles))

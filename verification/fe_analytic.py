@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from edem.errors import InputError
-from verification.resultdirs import write_static_result_dir
+from edem.resultdir import write_static_result_dir
 
 MATERIAL = {"youngs_modulus_mpa": 10.35, "poissons_ratio": 0.42}  # SPEC 7 cartilage
 

@@ -328,7 +328,7 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
     sampled at a's spring centroids (point data when b has it, e.g. FE nodal pressure, else cell
     data). Also returned: both wall times (summary.json) and the sampling distances.
     """
-    from verification.resultdirs import read_result_dir
+    from edem.resultdir import read_result_dir
 
     a, b = read_result_dir(a_dir), read_result_dir(b_dir)
     ta, tb = a.time_s, b.time_s

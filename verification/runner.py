@@ -6,8 +6,8 @@ directories). The case is cached under a key hashing its definition, the scene f
 file it references, the package version and the source of ``edem/``, ``geometries/`` and
 ``verification/`` (plus ``fem_reference/`` for FE cases): re-running an unchanged case only
 re-reads its metrics.json, and a code change invalidates it. Verdicts are re-judged on every run,
-so changing a tolerance needs no re-run. ``OUT/metrics.json`` gathers the campaign and the HTML
-report (:mod:`reports.html`) ends it.
+so changing a tolerance needs no re-run. ``OUT/metrics.json`` gathers the campaign; the HTML
+report is drawn by the caller (``edem verify`` passes :func:`reports.html.write_campaign_report`).
 
 After the cases, the campaign's analyses (:mod:`verification.analyses`: observed orders, the
 thesis's figures beside ours, parameter sensitivities) are computed from their metrics; they are
@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from edem.errors import InputError
-from verification.campaigns import Campaign, Case, validate_campaign
+from verification.campaign_model import Campaign, Case, validate_campaign
 from verification.sides import ERROR, OK, REFUSED, UNAVAILABLE, is_fe_side, run_side
 
 PASSED, FAILED = "passed", "failed"
@@ -158,7 +158,7 @@ def _thickness_metrics(a_dir: str, b_dir: str | None) -> dict[str, float]:
     """Mean and sd of a's ray-cast spring lengths; errors against the closed form's thickness."""
     import numpy as np
 
-    from verification.resultdirs import read_result_dir
+    from edem.resultdir import read_result_dir
 
     a = read_result_dir(a_dir)
     frame = a.frame(0)
@@ -176,7 +176,7 @@ def _thickness_metrics(a_dir: str, b_dir: str | None) -> dict[str, float]:
 
 
 def _stability_metrics(case: Case, a: dict[str, Any]) -> dict[str, float]:
-    from verification.resultdirs import non_finite_count, read_result_dir
+    from edem.resultdir import non_finite_count, read_result_dir
 
     out: dict[str, float] = {}
     actual = {OK: "converges", REFUSED: "refused"}.get(a["status"], a["status"])
@@ -204,7 +204,7 @@ def _series_metrics(wanted: set[str], a: dict[str, Any], b: dict[str, Any] | Non
     import numpy as np
 
     from verification.metrics import SERIES_METRICS, matching_time_points, series_metrics
-    from verification.resultdirs import read_timeseries_csv
+    from edem.resultdir import read_timeseries_csv
 
     def series(side: dict[str, Any]) -> dict[str, Any]:
         return read_timeseries_csv(Path(side["result_dir"]) / "timeseries.csv")
@@ -243,7 +243,7 @@ def compute_metrics(case: Case, sides: list[dict[str, Any]]) -> tuple[dict[str, 
     metrics.update(_series_metrics(wanted, a, b))
     if both and wanted & {"half_width_rel_error", "half_width_fit_rel_error"}:
         from verification.fe_analytic import half_width_errors
-        from verification.resultdirs import read_result_dir
+        from edem.resultdir import read_result_dir
 
         metrics.update(half_width_errors(read_result_dir(a["result_dir"]).summary, read_result_dir(b["result_dir"]).summary))
     return {k: v for k, v in metrics.items() if k in wanted}, comparison
@@ -409,16 +409,18 @@ def run_campaign(
     jobs: int | None = None,
     scheduler: str | None = None,
     progress: bool | None = None,
-    report: bool = True,
+    report: Callable[[dict[str, Any], Path], Path] | None = None,
     on_case: Callable[[str, bool], None] | None = None,
 ) -> dict[str, Any]:
-    """Run (or take from the cache) every case of the campaign; write metrics.json and the report.
+    """Run (or take from the cache) every case of the campaign; write metrics.json.
 
     ``jobs``: worker processes (default: the CPU count; 1 runs in this process). ``scheduler``:
     the address of a Dask distributed scheduler to run the cases on instead (its workers must
     see ``out_dir``). ``progress``: a tqdm bar on stderr (default: when stderr is a terminal).
-    ``on_case(name, cached)`` is called as each case is done. Returns the campaign summary
-    (also in ``out_dir/metrics.json``), with "exit_status" and "report".
+    ``on_case(name, cached)`` is called as each case is done. ``report(summary, out_dir)``, when
+    given, draws the report (the caller passes it: reports are a higher layer, e.g.
+    :func:`reports.html.write_campaign_report`) and returns its path. Returns the campaign summary
+    (also in ``out_dir/metrics.json``), with "exit_status" and "report" (None without one).
     """
     validate_campaign(campaign)
     out = Path(out_dir)
@@ -515,9 +517,7 @@ def run_campaign(
     }
     summary["report"] = None
     if report:
-        from reports.html import write_campaign_report
-
-        summary["report"] = str(write_campaign_report(summary, out))
+        summary["report"] = str(report(summary, out))
     write_json(out / "metrics.json", summary)
     return summary
 

@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from edem.errors import InputError, SolverError
+from edem.results import write_results
 
 OK, REFUSED, UNAVAILABLE, ERROR = "ok", "refused", "unavailable", "error"
 
@@ -109,29 +110,12 @@ FRAMES = ("all", "peak")
 
 def _write_discrete(result: Any, out_dir: Path, frames: str) -> None:
     """write_results, or (frames "peak") the same summary and time series with one pressure map."""
-    import dataclasses
-
-    from edem.results import write_results
-
     if frames == "all":
         write_results(result, out_dir)
         return
-    import csv
-    import json
-    import numbers
-
-    from edem.results import TIMESERIES_COLUMNS, summary, timeseries_rows
-
     peak = max(range(len(result.steps)), key=lambda k: result.steps[k].peak_pressure_mpa)
-    write_results(dataclasses.replace(result, steps=[result.steps[peak]]), out_dir)  # that step's map
-    data = summary(result)
-    data["frames"] = f"pressure map of the peak-pressure time point only (step {result.steps[peak].step})"
-    (out_dir / "summary.json").write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    with open(out_dir / "timeseries.csv", "w", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f)
-        writer.writerow(TIMESERIES_COLUMNS)
-        for row in timeseries_rows(result):
-            writer.writerow([str(int(x)) if isinstance(x, numbers.Integral) else repr(float(x)) for x in row])
+    note = f"pressure map of the peak-pressure time point only (step {result.steps[peak].step})"
+    write_results(result, out_dir, frame_steps=[peak], note=note)
 
 
 def _run_discrete(method: str) -> SideRunner:
@@ -144,7 +128,7 @@ def _run_discrete(method: str) -> SideRunner:
             raise InputError(f"frames = {frames!r}", key="options.frames", expected=" or ".join(f'"{f}"' for f in FRAMES))
         scene = load_scene(scene_ref, overrides)
         _write_discrete(run(scene, method), out_dir, frames)
-        from edem.provenance import record_provenance
+        from edem.resultdir import record_provenance
 
         record_provenance(out_dir, scene_ref, overrides, method=method)
         return str(out_dir)
@@ -192,7 +176,7 @@ def _run_fe(model: str) -> SideRunner:
                 raise UnavailableError("FE reference not available: fem_reference.run_scene takes no steps= selection")
             kwargs["steps"] = list(kwargs["steps"])
         fem_reference.run_scene(scene, model=model, out_dir=out_dir, **kwargs)
-        from edem.provenance import record_provenance
+        from edem.resultdir import record_provenance
 
         record_provenance(out_dir, scene_ref, overrides, {"model": model, **{k: options[k] for k in ("mesh_size_mm", "degree") if k in options}})
         return str(out_dir)
@@ -228,6 +212,39 @@ def _run_closed_form(scene_ref: str, overrides: dict[str, Any], out_dir: Path, o
     return str(out_dir)
 
 
+# Truth sides of the error-vs-runtime campaign: fixed settings whatever the case's options say.
+
+TRUTH_FE = {"mesh_size_mm": 1.0, "degree": 2}  # the FE slab, P2 at 1.0 mm (71 k DOFs on the ideal ankle)
+TRUTH_STEPS = 128
+
+
+def _run_fe_truth(scene_ref: str, overrides: dict[str, Any], out_dir: Path, options: dict[str, Any]) -> str:
+    """The FE slab at TRUTH_FE on the scene's own geometry mesh (a geometry.mesh_size_mm override
+    of the case, which sweeps the springs, is dropped), ignoring the case's options."""
+    kept = {k: v for k, v in overrides.items() if k != "geometry.mesh_size_mm"}
+    return _run_fe("slab")(scene_ref, kept, out_dir, dict(TRUTH_FE))
+
+
+def resample_load(overrides: dict[str, Any], n_steps: int) -> dict[str, Any]:
+    """The overrides with the load history load.time_s / load.force_n linearly re-sampled at
+    n_steps equal increments of the same time span."""
+    import numpy as np
+
+    times = np.asarray(overrides["load.time_s"], dtype=float)
+    forces = np.asarray(overrides["load.force_n"], dtype=float).reshape(len(times), 3)
+    new_t = np.linspace(times[0], times[-1], n_steps + 1)
+    new_f = np.stack([np.interp(new_t, times, forces[:, j]) for j in range(3)], axis=1)
+    return {**overrides, "load.time_s": new_t.tolist(), "load.force_n": new_f.tolist()}
+
+
+def _run_edem_truth(scene_ref: str, overrides: dict[str, Any], out_dir: Path, options: dict[str, Any]) -> str:
+    """EDEM over the case's load history (load.time_s / load.force_n overrides) re-sampled at
+    TRUTH_STEPS equal increments."""
+    if "load.time_s" not in overrides or "load.force_n" not in overrides:
+        raise InputError("the edem-128-steps side needs a load history", key="overrides", expected="load.time_s and load.force_n overrides")
+    return _run_discrete("edem")(scene_ref, resample_load(overrides, TRUTH_STEPS), out_dir, options)
+
+
 SIDES: dict[str, SideRunner] = {
     "edem": _run_discrete("edem"),
     "dem": _run_discrete("dem"),
@@ -235,6 +252,8 @@ SIDES: dict[str, SideRunner] = {
     "fe-layer": _run_fe("layer"),
     "fe-problem:hertz-line": _run_fe_problem("hertz-line"),
     "fe-problem:confined-compression": _run_fe_problem("confined-compression"),
+    "fe-slab-truth": _run_fe_truth,
+    "edem-128-steps": _run_edem_truth,
 }
 CLOSED_FORM_PREFIX = "closed-form:"
 

@@ -8,7 +8,7 @@ import json
 import tomllib
 
 from edem.cli import main
-from edem.provenance import resolved_scene
+from edem.resultdir import resolved_scene
 
 
 def _rows(path):

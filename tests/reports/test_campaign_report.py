@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from verification.campaigns import Campaign, Figure, get_campaign
+from reports.html import write_campaign_report
 from verification.runner import run_campaign
 
 CHECK_IMAGES_JS = """<script>
@@ -45,7 +46,7 @@ def report(tmp_path_factory) -> Path:
         ),
     )
     out = tmp_path_factory.mktemp("campaign")
-    summary = run_campaign(campaign, out, jobs=1)
+    summary = run_campaign(campaign, out, jobs=1, report=write_campaign_report)
     return Path(summary["report"])
 
 

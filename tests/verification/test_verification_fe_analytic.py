@@ -15,6 +15,7 @@ from verification.analyses import run_analysis
 from verification.campaigns import CONFINED_SIZES_MM, HERTZ_SIZES_MM, Analysis, Campaign, get_campaign
 from verification.fe_analytic import CONFINED, HERTZ, MATERIAL, half_width_errors, observed_orders, write_exact_result
 from verification.resultdirs import read_result_dir
+from reports.html import write_campaign_report
 from verification.runner import run_campaign
 from verification.sides import side_names
 
@@ -131,7 +132,7 @@ def test_fe_analytic_campaign_converges_at_the_tested_orders(tmp_path):
     """The whole campaign (about 25 s on 2 cores): every case within its tolerance, the Hertz peak
     pressure and displacement orders above 1.5 (P2), confined compression exact."""
     pytest.importorskip("dolfinx_solver")
-    summary = run_campaign(get_campaign("fe-analytic"), tmp_path / "fe-analytic", jobs=2)
+    summary = run_campaign(get_campaign("fe-analytic"), tmp_path / "fe-analytic", jobs=2, report=write_campaign_report)
     assert summary["exit_status"] == 0, [(r["name"], r["verdicts"]) for r in summary["cases"] if r["status"] != "passed"]
     checks = {c["metric"] + ":" + c["label"][:5]: c for c in summary["analyses"][0]["values"]["checks"]}
     assert checks["peak_pressure_rel_error:Hertz"]["mean_order"] > 1.5

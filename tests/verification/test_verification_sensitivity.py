@@ -12,6 +12,7 @@ from edem.scene import load_scene
 from verification.analyses import grid_of, run_analysis
 from verification.campaigns import SCENES_DIR, SENSITIVITY_HMAX_MM, SENSITIVITY_MODULUS_MPA, Analysis, get_campaign, sensitivity_campaign
 from verification.resultdirs import read_result_dir
+from reports.html import write_campaign_report
 from verification.runner import run_campaign
 from verification.sides import expand_array_overrides, run_side
 
@@ -89,7 +90,7 @@ def test_sensitivity_analysis_of_a_hand_grid():
 def test_a_small_sensitivity_grid_end_to_end(tmp_path):
     """3 x 3 runs: the figures are drawn, the changes are those of the cases' peaks, and the
     peak falls as h_max grows (softer springs) at every modulus."""
-    summary = run_campaign(sensitivity_campaign(3), tmp_path / "sens", jobs=2)
+    summary = run_campaign(sensitivity_campaign(3), tmp_path / "sens", jobs=2, report=write_campaign_report)
     assert summary["exit_status"] == 0, [(r["name"], r["sides"][0]["message"][:200]) for r in summary["cases"] if r["status"] != "passed"]
     rows = {r["name"]: r for r in summary["cases"]}
     xs, ys, z = grid_of(rows, tuple(rows), "h_max_mm", "ligament_modulus_mpa", "a_peak_pressure_mpa")

@@ -23,6 +23,7 @@ from verification.campaigns import (
 )
 from verification.metrics import series_metrics
 from verification.resultdirs import read_timeseries_csv
+from reports.html import write_campaign_report
 from verification.runner import run_campaign
 
 
@@ -97,7 +98,7 @@ def ideal_stance(tmp_path_factory):
     mp.setattr(sides, "fe_availability", lambda: "FE reference not available: test")
     out = tmp_path_factory.mktemp("stance")
     try:
-        summary = run_campaign(campaign, out, jobs=1)
+        summary = run_campaign(campaign, out, jobs=1, report=write_campaign_report)
     finally:
         mp.undo()
     return summary, out

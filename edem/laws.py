@@ -1,0 +1,240 @@
+"""Contact laws of the spring bed: one class per law, registered in :data:`LAWS` (SPEC 2-3).
+
+A contact law says, for the springs of the mobile body (area A, ray length h, confined modulus
+E' of eq. 3.7, undeformed thickness t where the law has one):
+
+* which springs with a ray hit are candidates (:meth:`ContactLaw.candidates`) and how far the
+  rays look by default (:meth:`ContactLaw.default_window_mm`);
+* the scalar element law s(delta) of the candidates, with its energy (:meth:`ContactLaw.elements`,
+  returning :class:`LinearElements` or :class:`LogElements`);
+* the length the shear springs k_s = G / length use (:meth:`ContactLaw.shear_length_mm`);
+* the strain, compression over undeformed length (:meth:`ContactLaw.strain`);
+* its FE twin: the name of the FE model of :mod:`fem_reference.models` that is its continuum.
+
+Element laws map the approach delta of every element (mm, along its generalised direction) to
+its force s (N, compression > 0) and stiffness ds/ddelta (N/mm); the energy phi has
+phi' = max(s, 0). :func:`stack_elements` joins the element laws of the springs and ligaments so
+the solver sees one law over all its elements.
+
+To add a law: one subclass of :class:`ContactLaw` here, added to :data:`LAWS`, plus its tests.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+# --------------------------------------------------------------------------------------------
+# element laws: s(delta) of a set of unilateral elements, vectorised
+
+
+@dataclass(frozen=True)
+class LinearElements:
+    """s = s0 + c delta per element (the threshold law with the EDEM push-back in s0, the
+    linear gap law with s0 = A E' (t - h) / t, ligaments)."""
+
+    offset_n: np.ndarray  # (m,) s0 in N
+    stiffness_n_per_mm: np.ndarray  # (m,) c in N/mm
+
+    def __len__(self) -> int:
+        return int(self.offset_n.shape[0])
+
+    def force_and_stiffness(self, approach_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(s, ds/ddelta) at the approaches (m,)."""
+        return self.offset_n + self.stiffness_n_per_mm * approach_mm, self.stiffness_n_per_mm.copy()
+
+    def energy(self, approach_mm: np.ndarray) -> np.ndarray:
+        """phi with phi' = max(s, 0): max(s, 0)^2 / (2 c)."""
+        return np.maximum(self.offset_n + self.stiffness_n_per_mm * approach_mm, 0.0) ** 2 / (2.0 * self.stiffness_n_per_mm)
+
+    def max_approach_mm(self) -> np.ndarray:
+        """Largest admissible approach: unbounded."""
+        return np.full(len(self), np.inf)
+
+
+@dataclass(frozen=True)
+class LogElements:
+    """The logarithmic law (Blankevoort): with compression d = d0 + delta and a = c t = A E',
+    s = -a ln(1 - d / t) for d > 0 and its linear extension s = c d for d <= 0."""
+
+    compression_mm: np.ndarray  # (m,) d0 in mm
+    stiffness_n_per_mm: np.ndarray  # (m,) c, the stiffness at d = 0
+    thickness_mm: np.ndarray  # (m,) t > 0
+
+    def __len__(self) -> int:
+        return int(self.compression_mm.shape[0])
+
+    def _parts(self, approach_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        d = self.compression_mm + approach_mm
+        compressed = d > 0
+        return d, compressed, np.where(compressed, d / self.thickness_mm, 0.0)
+
+    def force_and_stiffness(self, approach_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(s, ds/ddelta) at the approaches (m,); +inf once compressed past t."""
+        c = self.stiffness_n_per_mm
+        d, compressed, ratio = self._parts(approach_mm)
+        force = c * d
+        stiffness = c.copy()
+        if np.any(compressed):
+            inside = np.minimum(ratio[compressed], 1.0)
+            t = self.thickness_mm[compressed]
+            with np.errstate(divide="ignore"):
+                force[compressed] = -c[compressed] * t * np.log1p(-inside)
+                stiffness[compressed] = c[compressed] / (1.0 - inside)
+        return force, stiffness
+
+    def energy(self, approach_mm: np.ndarray) -> np.ndarray:
+        """phi with phi' = max(s, 0); +inf where an element is compressed past t."""
+        c = self.stiffness_n_per_mm
+        _, compressed, ratio = self._parts(approach_mm)
+        out = np.zeros(len(self))
+        if np.any(compressed):
+            inside = ratio[compressed]
+            t = self.thickness_mm[compressed]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                e = c[compressed] * t * t * ((1.0 - inside) * np.log1p(-np.minimum(inside, 1.0)) + inside)
+            out[compressed] = np.where(inside < 1.0, e, np.inf)
+        return out
+
+    def max_approach_mm(self) -> np.ndarray:
+        """Largest admissible approach: an element cannot be compressed past its thickness."""
+        return self.thickness_mm - self.compression_mm
+
+
+@dataclass(frozen=True)
+class StackedElements:
+    """Element laws one after the other (contact springs, then ligaments): one law over all."""
+
+    parts: tuple[LinearElements | LogElements | StackedElements, ...]
+
+    def __len__(self) -> int:
+        return sum(len(p) for p in self.parts)
+
+    def _split(self, approach_mm: np.ndarray) -> list[np.ndarray]:
+        return np.split(approach_mm, np.cumsum([len(p) for p in self.parts])[:-1])
+
+    def force_and_stiffness(self, approach_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        pairs = [p.force_and_stiffness(a) for p, a in zip(self.parts, self._split(approach_mm))]
+        return np.concatenate([f for f, _ in pairs]), np.concatenate([k for _, k in pairs])
+
+    def energy(self, approach_mm: np.ndarray) -> np.ndarray:
+        return np.concatenate([p.energy(a) for p, a in zip(self.parts, self._split(approach_mm))])
+
+    def max_approach_mm(self) -> np.ndarray:
+        return np.concatenate([p.max_approach_mm() for p in self.parts])
+
+
+ElementLaw = LinearElements | LogElements | StackedElements
+
+
+def stack_elements(*laws: ElementLaw) -> ElementLaw:
+    """One element law over the elements of ``laws``, in order (a single law is returned as is)."""
+    kept = tuple(law for law in laws if len(law)) or laws[:1]
+    return kept[0] if len(kept) == 1 else StackedElements(kept)
+
+
+# --------------------------------------------------------------------------------------------
+# contact laws
+
+
+class ContactLaw:
+    """A spring-bed contact law. Subclasses set the class attributes and the methods below.
+
+    Arrays are per candidate spring: ``area_mm2`` A, ``spring_length_mm`` h (signed ray length),
+    ``approach_mm`` delta; ``thickness_mm`` is the undeformed combined thickness t (None for
+    laws without one).
+    """
+
+    name: ClassVar[str]
+    #: whether the law needs cartilage.thickness_mm
+    needs_thickness: ClassVar[bool] = False
+    #: whether h <= 0 (interpenetrating bodies) leaves the law without meaning
+    needs_positive_length: ClassVar[bool] = True
+    #: name of the FE model (fem_reference.models) that is this law's continuum twin
+    fe_twin: ClassVar[str]
+
+    def default_window_mm(self, thickness_mm: float | None) -> float:
+        """h_max when the scene gives none (mm)."""
+        raise NotImplementedError
+
+    def candidates(self, spring_length_mm: np.ndarray, window_mm: float) -> np.ndarray:
+        """(n,) bool: which springs with a finite ray length take part (eq. 4.4 for the threshold law)."""
+        return np.isfinite(spring_length_mm)
+
+    def elements(self, area_mm2: np.ndarray, spring_length_mm: np.ndarray, confined_modulus_mpa: float,
+                 thickness_mm: float | None, stored_normal_force_n: np.ndarray) -> ElementLaw:
+        """The element law s(delta) of the candidates (N); ``stored_normal_force_n`` is the EDEM
+        push-back per candidate (zero for DEM)."""
+        raise NotImplementedError
+
+    def shear_length_mm(self, spring_length_mm: np.ndarray, thickness_mm: float | None) -> np.ndarray:
+        """Length of the shear springs k_s = G / length (eq. 3.8), mm."""
+        raise NotImplementedError
+
+    def strain(self, spring_length_mm: np.ndarray, approach_mm: np.ndarray, thickness_mm: float | None) -> np.ndarray:
+        """Compression over undeformed length after an approach (dimensionless)."""
+        raise NotImplementedError
+
+
+class ThresholdLaw(ContactLaw):
+    """Linear springs of the current length h, candidates h <= h_max: s = s_stored + A E' / h delta
+    (incremental: the stiffness follows the current h; eq. 3.7)."""
+
+    name = "threshold"
+    fe_twin = "slab"
+
+    def default_window_mm(self, thickness_mm: float | None) -> float:
+        return 3.5
+
+    def candidates(self, spring_length_mm: np.ndarray, window_mm: float) -> np.ndarray:
+        return np.isfinite(spring_length_mm) & (spring_length_mm <= window_mm)
+
+    def elements(self, area_mm2, spring_length_mm, confined_modulus_mpa, thickness_mm, stored_normal_force_n):
+        return LinearElements(np.asarray(stored_normal_force_n, float), area_mm2 * confined_modulus_mpa / spring_length_mm)
+
+    def shear_length_mm(self, spring_length_mm, thickness_mm):
+        return spring_length_mm
+
+    def strain(self, spring_length_mm, approach_mm, thickness_mm):
+        return approach_mm / spring_length_mm
+
+
+class GapLaw(ContactLaw):
+    """Linear springs of the undeformed thickness t: s = A E' (t - h + delta) / t (eq. 3.19)."""
+
+    name = "gap"
+    needs_thickness = True
+    needs_positive_length = False
+    fe_twin = "layer"
+
+    def default_window_mm(self, thickness_mm: float | None) -> float:
+        return 2.0 * float(thickness_mm)
+
+    def elements(self, area_mm2, spring_length_mm, confined_modulus_mpa, thickness_mm, stored_normal_force_n):
+        t = float(thickness_mm)
+        return LinearElements(area_mm2 * confined_modulus_mpa * (t - spring_length_mm) / t, area_mm2 * confined_modulus_mpa / t)
+
+    def shear_length_mm(self, spring_length_mm, thickness_mm):
+        return np.full(spring_length_mm.shape, float(thickness_mm))
+
+    def strain(self, spring_length_mm, approach_mm, thickness_mm):
+        t = float(thickness_mm)
+        return (t - spring_length_mm + approach_mm) / t
+
+
+class GapLogLaw(GapLaw):
+    """Blankevoort's logarithmic springs: s = -A E' ln(1 - (t - h + delta) / t), which stiffens
+    without bound as the compression approaches t."""
+
+    name = "gap-log"
+    needs_positive_length = True
+
+    def elements(self, area_mm2, spring_length_mm, confined_modulus_mpa, thickness_mm, stored_normal_force_n):
+        t = float(thickness_mm)
+        return LogElements(t - spring_length_mm, area_mm2 * confined_modulus_mpa / t, np.full(spring_length_mm.shape, t))
+
+
+#: every contact law by name (the scene's ``cartilage.law``)
+LAWS: dict[str, ContactLaw] = {law.name: law for law in (ThresholdLaw(), GapLaw(), GapLogLaw())}

@@ -1,0 +1,477 @@
+"""The result directory: the one module that writes and reads it (SPEC 9).
+
+Every producer writes the same layout through :func:`write_result_dir` (``edem run`` through
+:func:`edem.results.write_results`, ``edem fe`` through :mod:`fem_reference.scene_run`, the closed
+forms of :mod:`verification.closed_forms`, the FE problems of :mod:`verification.fe_analytic`),
+and every consumer (``edem compare``, the campaign metrics, the reports) reads it through
+:func:`read_result_dir`.
+
+Layout of ``OUT/``:
+
+``summary.json``
+    One JSON object. Keys every producer writes: ``scene`` (name), ``method`` (``edem``, ``dem``,
+    ``fe-slab``, ``fe-layer``, ``closed-form:<name>``, ``fe-problem:<name>``...), ``steps``
+    (time points written), ``wall_time_s``, ``peak_pressure_mpa`` (max over the time points),
+    ``max_contact_area_mm2``, ``final_displacement_mm`` (3 floats, of the reference point G),
+    ``max_force_residual_n`` and ``warnings`` (list of strings). Usually also
+    ``n_springs`` (discrete) or ``n_dofs`` (FE), ``final_rotation_rad``,
+    ``max_moment_residual_nmm`` and ``law``; producers add their own keys (FE: element, mesh
+    size, strains...; closed forms: ``closed_form``). Every number is finite.
+``timeseries.csv``
+    A header row, then one row per written time point. The columns are
+    :data:`TIMESERIES_COLUMNS` in that order (``iterations``: active-set or Newton iterations),
+    then any extra columns a producer adds (readers look columns up by name). Integers as
+    integers, floats as Python ``repr`` (exact round trip); every value finite.
+``pressure.pvd``
+    A ParaView collection: one ``<DataSet timestep=... file="pressure_NNNN.vtp"/>`` per written
+    time point (NNNN = the time point's index in the scene's load history).
+``pressure_NNNN.vtp``
+    VTK XML PolyData (:func:`geometries.mesh_io.write_vtp`): a triangulated surface in mm with
+    cell and/or point arrays. Discrete runs and closed forms: the mobile surface at its pose,
+    cell data ``pressure_mpa``, ``spring_length_mm``, ``in_contact``, ``ray_hit``. FE runs: the
+    FE contact surface with point and cell data ``pressure_mpa`` (and more, see
+    :mod:`fem_reference.scene_run`).
+``fixed.vtp``
+    The fixed body as in the scene (optional).
+``scene.toml``
+    The resolved scene (:func:`record_provenance`: every producer of a scene's directory calls
+    it): the scene after every override, file paths absolute, its name pinned, the method in
+    ``[solver]`` and FE settings in ``[fe]``; ``edem run DIR/scene.toml`` (or ``edem fe``)
+    reproduces the run exactly. summary.json then also holds ``overrides`` (dotted keys and
+    values), ``scene_source`` (the scene argument as given), ``software_version`` and
+    ``source_revision`` (git commit, ``-dirty`` with uncommitted changes; "unknown" outside git).
+
+To extend the format, change this module only: new summary keys go in the producer's summary
+dict, new time-series columns are extra keys of the rows given to :func:`write_result_dir`, new
+files are written by :func:`write_result_dir` from new fields of :class:`Frame` or new arguments.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib.metadata
+import json
+import math
+import numbers
+import subprocess
+import tomllib
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from geometries.errors import InputError, SolverError
+from geometries.mesh_io import write_vtp
+
+SUMMARY_FILE = "summary.json"
+TIMESERIES_FILE = "timeseries.csv"
+COLLECTION_FILE = "pressure.pvd"
+FIXED_FILE = "fixed.vtp"
+
+TIMESERIES_COLUMNS = (
+    "step",
+    "time_s",
+    "force_x_n",
+    "force_y_n",
+    "force_z_n",
+    "peak_pressure_mpa",
+    "mean_pressure_mpa",
+    "contact_area_mm2",
+    "disp_x_mm",
+    "disp_y_mm",
+    "disp_z_mm",
+    "rot_x_rad",
+    "rot_y_rad",
+    "rot_z_rad",
+    "iterations",
+    "force_residual_n",
+)
+
+
+@dataclass(frozen=True)
+class SurfaceFrame:
+    """One pressure_NNNN.vtp: a triangulated surface (mm) with its point and cell arrays."""
+
+    points_mm: np.ndarray  # (n_points, 3)
+    triangles: np.ndarray  # (n_triangles, 3) int64
+    point_data: dict[str, np.ndarray] = field(default_factory=dict)
+    cell_data: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def centroids_mm(self) -> np.ndarray:
+        return self.points_mm[self.triangles].mean(axis=1)
+
+    @property
+    def areas_mm2(self) -> np.ndarray:
+        a, b, c = (self.points_mm[self.triangles[:, i]] for i in range(3))
+        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One written time point of pressure.pvd: its index in the load history, time and surface."""
+
+    step: int
+    time_s: float
+    surface: SurfaceFrame
+
+
+def timeseries_row(
+    step: int,
+    time_s: float,
+    force_n: Sequence[float],
+    peak_pressure_mpa: float,
+    mean_pressure_mpa: float,
+    contact_area_mm2: float,
+    displacement_mm: Sequence[float],
+    rotation_rad: Sequence[float],
+    iterations: int,
+    force_residual_n: float,
+) -> dict[str, float]:
+    """One timeseries.csv row as {column: value} (:data:`TIMESERIES_COLUMNS`; forces in N,
+    pressures in MPa, area in mm^2, displacement of G in mm, rotation vector in rad)."""
+    values = [int(step), float(time_s), *np.asarray(force_n, float).reshape(3), float(peak_pressure_mpa),
+              float(mean_pressure_mpa), float(contact_area_mm2), *np.asarray(displacement_mm, float).reshape(3),
+              *np.asarray(rotation_rad, float).reshape(3), int(iterations), float(force_residual_n)]
+    return dict(zip(TIMESERIES_COLUMNS, values))
+
+
+def write_result_dir(
+    out_dir: str | Path,
+    summary: Mapping[str, Any],
+    timeseries: Sequence[Mapping[str, float]],
+    frames: Sequence[Frame],
+    fixed: SurfaceFrame | None = None,
+) -> Path:
+    """Write a result directory (layout in the module docstring); returns its path.
+
+    ``timeseries``: one row per time point, {column: value} with at least
+    :data:`TIMESERIES_COLUMNS` (:func:`timeseries_row`); extra keys of the first row become extra
+    columns. ``frames``: the pressure maps listed in pressure.pvd. ``fixed``: the fixed body.
+
+    Raises SolverError naming the file and key when a number is not finite (a result that
+    contradicts itself is never written as if it were one).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    check_finite_summary(summary, out / SUMMARY_FILE)
+    columns = list(TIMESERIES_COLUMNS)
+    if timeseries:
+        columns += [c for c in timeseries[0] if c not in TIMESERIES_COLUMNS]
+    lines = []
+    for row in timeseries:
+        missing = [c for c in columns if c not in row]
+        if missing:
+            raise ValueError(f"timeseries row {row.get('step')} lacks the column(s) {', '.join(missing)}")
+        for column in columns:
+            value = row[column]
+            if not math.isfinite(float(value)):
+                raise SolverError(f"{out / TIMESERIES_FILE}: time point {row['step']}, column '{column}' is not finite ({value})")
+        lines.append([_csv_number(row[c]) for c in columns])
+    (out / SUMMARY_FILE).write_text(json.dumps(dict(summary), indent=2) + "\n", encoding="utf-8")
+    with open(out / TIMESERIES_FILE, "w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f)
+        writer.writerow(columns)
+        writer.writerows(lines)
+    entries = []
+    for frame in frames:
+        name = f"pressure_{frame.step:04d}.vtp"
+        write_surface_frame(out / name, frame.surface.points_mm, frame.surface.triangles, frame.surface.point_data, frame.surface.cell_data)
+        entries.append((float(frame.time_s), name))
+    write_pvd(out / COLLECTION_FILE, entries)
+    if fixed is not None:
+        write_surface_frame(out / FIXED_FILE, fixed.points_mm, fixed.triangles, fixed.point_data, fixed.cell_data)
+    return out
+
+
+def write_static_result_dir(
+    out_dir: str | Path,
+    *,
+    summary: dict[str, Any],
+    force_n: np.ndarray,
+    displacement_mm: np.ndarray,
+    peak_pressure_mpa: float,
+    mean_pressure_mpa: float,
+    contact_area_mm2: float,
+    points_mm: np.ndarray,
+    triangles: np.ndarray,
+    point_data: dict[str, np.ndarray] | None = None,
+    cell_data: dict[str, np.ndarray] | None = None,
+    iterations: int = 0,
+    force_residual_n: float = 0.0,
+) -> Path:
+    """A result directory of one static solution (one time point, t = 0).
+
+    ``summary`` holds the keys that are not derived from the numbers given here (scene, method,
+    wall_time_s, warnings and anything specific); the common scalars are filled in. The surface
+    (``points_mm`` (n, 3) mm, ``triangles`` (m, 3)) carries point and/or cell arrays.
+    """
+    disp = np.asarray(displacement_mm, dtype=np.float64).reshape(3)
+    data = {
+        "steps": 1,
+        "peak_pressure_mpa": float(peak_pressure_mpa),
+        "max_contact_area_mm2": float(contact_area_mm2),
+        "final_displacement_mm": [float(x) for x in disp],
+        "max_force_residual_n": float(force_residual_n),
+        "warnings": [],
+        **summary,
+    }
+    row = timeseries_row(0, 0.0, force_n, peak_pressure_mpa, mean_pressure_mpa, contact_area_mm2, disp, np.zeros(3), iterations, force_residual_n)
+    surface = SurfaceFrame(np.asarray(points_mm, dtype=np.float64), triangles, point_data or {}, cell_data or {})
+    return write_result_dir(out_dir, data, [row], [Frame(0, 0.0, surface)])
+
+
+def _csv_number(x: Any) -> str:
+    return str(int(x)) if isinstance(x, numbers.Integral) else repr(float(x))
+
+
+def check_finite_summary(summary: Mapping[str, Any], file: str | Path = SUMMARY_FILE) -> None:
+    """SolverError naming the key when a top-level number (or list of numbers) is NaN or inf."""
+    for key, value in summary.items():
+        values = value if isinstance(value, list) else [value]
+        if any(isinstance(v, float) and not math.isfinite(v) for v in values):
+            raise SolverError(f"{file}: summary value {key} is not finite: {value}")
+
+
+def write_pvd(path: Path, entries: list[tuple[float, str]]) -> None:
+    """A ParaView collection file listing one dataset per time value."""
+    lines = ['<?xml version="1.0"?>', '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">', "  <Collection>"]
+    lines += [f'    <DataSet timestep="{t!r}" part="0" file={quoteattr(name)}/>' for t, name in entries]
+    lines += ["  </Collection>", "</VTKFile>", ""]
+    Path(path).write_text("\n".join(lines), encoding="utf-8")
+
+
+def write_surface_frame(
+    path: str | Path,
+    points_mm: np.ndarray,
+    triangles: np.ndarray,
+    point_data: dict[str, np.ndarray] | None = None,
+    cell_data: dict[str, np.ndarray] | None = None,
+) -> Path:
+    """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only)."""
+    write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data)
+    return Path(path)
+
+
+# --------------------------------------------------------------------------------------------
+# reading
+
+
+@dataclass(frozen=True)
+class ResultDir:
+    """A result directory as read: summary, time series columns and one surface file per time."""
+
+    path: Path
+    summary: dict[str, Any]
+    timeseries: dict[str, np.ndarray]  # column -> (n_times,) float
+    frames: tuple[tuple[float, Path], ...]  # (time_s, .vtp path) from pressure.pvd
+
+    @property
+    def time_s(self) -> np.ndarray:
+        return self.timeseries["time_s"]
+
+    def frame(self, index: int) -> SurfaceFrame:
+        return read_surface_frame(self.frames[index][1])
+
+
+def read_result_dir(path: str | Path) -> ResultDir:
+    """Read summary.json, timeseries.csv and the pressure.pvd index of a result directory.
+
+    Raises InputError naming the file when something of the layout is missing or unreadable.
+    """
+    root = Path(path)
+    expected = "a result directory of edem run / edem fe (summary.json, timeseries.csv, pressure.pvd)"
+    if not root.is_dir():
+        raise InputError("not a directory", file=root, expected=expected)
+    try:
+        summary = json.loads((root / SUMMARY_FILE).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError("no summary.json here", file=root, expected=expected) from None
+    except ValueError as exc:
+        raise InputError(f"summary.json is not valid JSON: {exc}", file=root / SUMMARY_FILE) from None
+    series = read_timeseries_csv(root / TIMESERIES_FILE)
+    pvd = root / COLLECTION_FILE
+    try:
+        tree = ET.parse(pvd)
+    except FileNotFoundError:
+        raise InputError("no pressure.pvd here", file=root, expected=expected) from None
+    except ET.ParseError as exc:
+        raise InputError(f"pressure.pvd is not valid XML: {exc}", file=pvd) from None
+    frames = tuple(
+        (float(node.get("timestep", "0")), root / str(node.get("file")))
+        for node in tree.getroot().iter("DataSet")
+    )
+    if not frames:
+        raise InputError("pressure.pvd lists no data set", file=pvd, expected="one <DataSet> per time point")
+    return ResultDir(root, summary, series, frames)
+
+
+def read_timeseries_csv(path: str | Path) -> dict[str, np.ndarray]:
+    """Columns of a timeseries.csv as float arrays."""
+    path = Path(path)
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = list(csv.reader(f))
+    except FileNotFoundError:
+        raise InputError("no timeseries.csv here", file=path.parent, expected="a SPEC 9 result directory") from None
+    if not rows:
+        raise InputError("empty timeseries.csv", file=path, expected="a header and one row per time point")
+    header = rows[0]
+    try:
+        data = np.array(rows[1:], dtype=float).reshape(-1, len(header))
+    except ValueError:
+        raise InputError("timeseries.csv has non-numeric or ragged rows", file=path, expected="numbers, one per column") from None
+    if "time_s" not in header:
+        raise InputError("timeseries.csv has no time_s column", file=path, expected="the SPEC 9 columns")
+    return {name: data[:, i] for i, name in enumerate(header)}
+
+
+def read_surface_frame(path: str | Path) -> SurfaceFrame:
+    """Points, triangles and the point/cell arrays of a .vtp (polygons fan-triangulated by VTK)."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkFiltersCore import vtkTriangleFilter
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("surface file listed in pressure.pvd is missing", file=path, expected="a .vtp file")
+    reader = vtkXMLPolyDataReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    poly = reader.GetOutput()
+    if poly is None or poly.GetNumberOfPoints() == 0:
+        raise InputError("unreadable or empty surface", file=path, expected="VTK XML PolyData with triangles")
+    polys = poly.GetPolys()
+    offsets = vtk_to_numpy(polys.GetOffsetsArray()).astype(np.int64)
+    if np.any(np.diff(offsets) != 3) or poly.GetNumberOfCells() != polys.GetNumberOfCells():
+        triangulate = vtkTriangleFilter()
+        triangulate.SetInputData(poly)
+        triangulate.PassVertsOff()
+        triangulate.PassLinesOff()
+        triangulate.Update()
+        poly = triangulate.GetOutput()
+        polys = poly.GetPolys()
+    triangles = vtk_to_numpy(polys.GetConnectivityArray()).astype(np.int64).reshape(-1, 3)
+    points = vtk_to_numpy(poly.GetPoints().GetData()).astype(np.float64)
+
+    def arrays(data) -> dict[str, np.ndarray]:
+        out = {}
+        for i in range(data.GetNumberOfArrays()):
+            array = data.GetArray(i)
+            if array is not None and array.GetName():
+                out[array.GetName()] = np.asarray(vtk_to_numpy(array), dtype=np.float64)
+        return out
+
+    return SurfaceFrame(points, triangles, arrays(poly.GetPointData()), arrays(poly.GetCellData()))
+
+
+def non_finite_count(result_dir: str | Path) -> int:
+    """Number of NaN/inf values in a result directory: summary numbers, time series, every array.
+
+    The stability campaign requires 0 (SPEC 2-4: no NaN in any output, whatever the input).
+    """
+    result = read_result_dir(result_dir)
+    count = 0
+
+    def walk(value: Any) -> int:
+        if isinstance(value, bool):
+            return 0
+        if isinstance(value, (int, float)):
+            return 0 if math.isfinite(value) else 1
+        if isinstance(value, dict):
+            return sum(walk(v) for v in value.values())
+        if isinstance(value, list):
+            return sum(walk(v) for v in value)
+        return 0
+
+    count += walk(result.summary)
+    count += sum(int(np.count_nonzero(~np.isfinite(v))) for v in result.timeseries.values())
+    for _, path in result.frames:
+        frame = read_surface_frame(path)
+        count += int(np.count_nonzero(~np.isfinite(frame.points_mm)))
+        for data in (frame.point_data, frame.cell_data):
+            count += sum(int(np.count_nonzero(~np.isfinite(v))) for v in data.values())
+    return count
+
+
+# ---------------------------------------------------------------------------------------------
+# Provenance: what makes a scene's result directory reproducible
+
+SOURCE_ROOT = Path(__file__).resolve().parents[1]
+SCENE_FILE = "scene.toml"
+#: scene keys that name files, relative to the scene file: (section, key)
+FILE_KEYS = (("geometry", "mobile"), ("geometry", "fixed"), ("load", "file"), ("kinematics", "file"))
+
+
+def software_version() -> str:
+    """The installed ``edem`` package version ("unknown" when it is not installed)."""
+    try:
+        return importlib.metadata.version("edem")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+@lru_cache(maxsize=1)
+def source_revision() -> str:
+    """The git commit of the source tree (``-dirty`` when it has uncommitted changes), or "unknown"."""
+    def git(*args: str) -> str:
+        return subprocess.run(["git", "-C", str(SOURCE_ROOT), *args], capture_output=True, text=True, check=True, timeout=20).stdout.strip()
+
+    try:
+        commit = git("rev-parse", "HEAD")
+        dirty = git("status", "--porcelain", "--untracked-files=no", "--", "edem", "geometries", "fem_reference", "verification", "reports")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return commit + ("-dirty" if dirty else "") if commit else "unknown"
+
+
+def resolved_scene(scene_ref: str | Path, overrides: dict[str, Any] | None = None, fe_settings: dict[str, Any] | None = None,
+                   method: str | None = None) -> dict[str, Any]:
+    """The scene's TOML data after ``overrides``, file paths made absolute, its name pinned.
+
+    ``fe_settings`` (model, mesh_size_mm, degree) are written into ``[fe]``, ``method`` (a
+    ``--method`` given on the command line) into ``[solver]``. Overrides must
+    already be plain dotted keys (``verification.sides.expand_array_overrides`` expands the
+    ``array[*].key`` form).
+    """
+    from edem.scene import apply_overrides, resolve_scene_path
+
+    path = resolve_scene_path(scene_ref)
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    if overrides:
+        apply_overrides(data, dict(overrides))
+    meta = data.setdefault("scene", {})
+    meta.setdefault("name", path.stem)  # the resolved file is called scene.toml: keep the scene's own name
+    for section, key in FILE_KEYS:
+        value = data.get(section, {}).get(key) if isinstance(data.get(section), dict) else None
+        if isinstance(value, str):
+            data[section][key] = str((path.parent / value).resolve())
+    if method:
+        data.setdefault("solver", {})["method"] = method
+    if fe_settings:
+        data.setdefault("fe", {}).update({k: v for k, v in fe_settings.items() if v is not None})
+    return data
+
+
+def record_provenance(out_dir: str | Path, scene_ref: str | Path, overrides: dict[str, Any] | None = None,
+                      fe_settings: dict[str, Any] | None = None, method: str | None = None) -> None:
+    """Write ``scene.toml`` into a result directory and the provenance keys into its summary.json
+    (arguments as :func:`resolved_scene`)."""
+    import tomli_w
+
+    out = Path(out_dir)
+    (out / SCENE_FILE).write_text(tomli_w.dumps(resolved_scene(scene_ref, overrides, fe_settings, method)), encoding="utf-8")
+    path = out / "summary.json"
+    summary = json.loads(path.read_text(encoding="utf-8"))
+    summary.update(
+        overrides=dict(overrides or {}),
+        scene_source=str(scene_ref),
+        software_version=software_version(),
+        source_revision=source_revision(),
+    )
+    path.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")

@@ -1,0 +1,216 @@
+"""FE models of a scene's cartilage: one class per model, registered in :data:`FE_MODELS`.
+
+A model builds, for one time point, the solid bonded to the mobile body M (a
+:class:`geometries.fe_solids.FESolid`) and says how its contact surface relates to the springs:
+
+* ``slab`` (:class:`SlabModel`, twin of the ``threshold`` law): the conforming slab between M's
+  candidate surface and F. The spring lengths are ray-cast exactly as
+  :func:`edem.springs.spring_geometry` does (M at its initial pose, F at the time point's pose;
+  candidates: a hit with 0 < h <= h_max). The slab's top vertices are then moved onto F along
+  their extrusion direction (a ray cast from the bottom vertex), so the slab touches F exactly
+  where it can: the initial gap is zero to round-off. It depends on F's pose.
+* ``layer`` (:class:`LayerModel`, twin of the ``gap`` laws): a uniform layer of
+  ``cartilage.thickness_mm`` bonded to M; the initial gap to F comes from the geometry. One
+  mesh for every pose.
+
+To add a model: one subclass of :class:`FEModel` here, added to :data:`FE_MODELS`; a contact law
+names it as its ``fe_twin``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar
+
+import numpy as np
+
+from edem.raycast import RayCaster
+from edem.springs import Placement, spring_geometry
+from fem_reference.problem import RigidSurface
+from geometries import fe_solids
+from geometries.errors import SolverError
+
+
+@dataclass
+class FEGeometry:
+    """The solid and obstacle of one time point."""
+
+    solid: Any  # geometries.fe_solids.FESolid
+    obstacle: RigidSurface
+    key: tuple  # equal keys -> identical mesh and obstacle
+    warnings: list[str]
+
+
+def contact_surface(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(points (n, 3) mm, triangles (m, 3), solid point index (n,)) of the solid's contact face."""
+    faces = solid.faces(fe_solids.CONTACT_TAG)
+    used = np.unique(faces)
+    remap = np.full(len(solid.points_mm), -1, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    return solid.points_mm[used], remap[faces], used
+
+
+class FEModel:
+    """An FE model of the cartilage. Subclasses set the class attributes and the methods."""
+
+    name: ClassVar[str]
+    #: what it is, for messages
+    what: ClassVar[str]
+    #: whether it needs cartilage.thickness_mm
+    needs_thickness: ClassVar[bool] = False
+    #: whether the mesh changes with F's pose (else one mesh serves every time point)
+    mesh_follows_pose: ClassVar[bool] = True
+    #: whether the previous time point's bone translation, scaled with the load, is a good start
+    warm_start_scales_with_load: ClassVar[bool] = True
+
+    def build(self, scene: Any, mesh_size_mm: float, layers: int | None, caster: RayCaster, f_pose: Placement,
+              obstacle: RigidSurface, pose_key: tuple, cache: dict) -> FEGeometry:
+        """The solid of this time point (``cache`` keeps solids between time points)."""
+        raise NotImplementedError
+
+    def reach(self, scene: Any, gap_mm: np.ndarray, facing: np.ndarray) -> np.ndarray:
+        """(n,) bool: contact-surface vertices that face F and can reach it under load."""
+        raise NotImplementedError
+
+    def thickness_mm(self, scene: Any, solid: Any, used: np.ndarray, points_mm: np.ndarray) -> np.ndarray:
+        """(n,) undeformed thickness under each contact-surface point (``used``: solid indices)."""
+        raise NotImplementedError
+
+    def spring_length_mm(self, thickness_mm: np.ndarray, gap_mm: np.ndarray) -> np.ndarray:
+        """(n,) the spring length a contact-surface point stands for."""
+        raise NotImplementedError
+
+
+def _spring_lengths(scene: Any, caster: RayCaster, f_pose: Placement) -> np.ndarray:
+    """Per mobile triangle: the signed ray length of its spring (inf: no hit / no spring)."""
+    geo = spring_geometry(scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2,
+                          Placement.identity(scene.reference_point_mm), caster, f_pose,
+                          scene.cartilage)
+    lengths = np.full(scene.mobile.n_triangles, np.inf)
+    lengths[scene.spring_triangle] = geo.spring_length_mm
+    return lengths
+
+
+def _snap_top_onto_fixed(solid: Any, caster: RayCaster, f_pose: Placement, window_mm: float,
+                         obstacle: RigidSurface) -> Any:
+    """Move the slab's top vertices onto F: along their extrusion direction (a ray cast from
+    the bottom vertex, as the springs measure), or where that ray misses F (at the rim of F) onto
+    the plane of the nearest triangle of F; intermediate layers follow in proportion. A vertex
+    that would move by more than half its column keeps its place (the caller warns)."""
+    pts = solid.points_mm
+    nl = int(solid.layer.max())
+    nv = int(np.sum(solid.layer == 0))
+    bottom = pts[:nv]
+    top = pts[nl * nv:]
+    span = top - bottom
+    h = np.linalg.norm(span, axis=1)
+    d = span / h[:, None]
+    rotation, translation = f_pose.affine()
+    hits = caster.cast(bottom, d, window_mm, rotation=rotation, translation=translation)
+    s = hits.spring_length_mm
+    ok = np.isfinite(s) & (s > 0.0) & (np.abs(s - h) <= 0.5 * h)
+    new_top = np.where(ok[:, None], bottom + s[:, None] * d, top)
+    rest = np.flatnonzero(~ok)
+    if rest.size:
+        gap, nu = obstacle.gap_and_normal(top[rest])
+        moved = top[rest] - gap[:, None] * nu
+        near = np.abs(gap) <= 0.5 * h[rest]
+        new_top[rest[near]] = moved[near]
+    frac = (np.arange(nl + 1) / nl)[:, None, None]
+    new = (bottom[None] + frac * (new_top - bottom)[None]).reshape(-1, 3)
+    if not np.all(fe_solids.tet_volumes(new, solid.tets) > 0):
+        return solid
+    return replace(solid, points_mm=new)
+
+
+class SlabModel(FEModel):
+    """The slab between M's candidate surface and F, touching F (twin of the threshold law)."""
+
+    name = "slab"
+    what = "twin of the threshold law"
+
+    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
+        key = ("slab", pose_key)
+        warnings: list[str] = []
+        cached = cache.get(key)
+        if cached is not None:  # same pose of F: the same slab (its warnings were given once)
+            return FEGeometry(cached, obstacle, key, warnings)
+        cache.clear()
+        h_max = float(scene.cartilage.max_spring_length_mm)
+        lengths = _spring_lengths(scene, caster, f_pose)
+        with np.errstate(invalid="ignore"):
+            cand = np.isfinite(lengths) & (lengths <= h_max)
+        bad = int(np.sum(cand & (lengths <= 0.0)))
+        if bad:
+            raise SolverError(
+                f"{bad} springs are compressed past their length (h <= 0: the bodies interpenetrate); "
+                "the FE slab needs M and F apart (use the layer model for overlapping bodies)")
+        if not np.any(cand):
+            raise SolverError(
+                f"no spring is a candidate: no part of the fixed body lies within h_max = {h_max:g} "
+                "mm of the mobile body along its normals (nothing to build the FE slab on)")
+        try:
+            solid = fe_solids.slab_solid(scene.mobile, lengths, h_max, mesh_size_mm, layers)
+        except ValueError as exc:
+            raise SolverError(f"building the FE slab failed: {exc}") from None
+        solid = _snap_top_onto_fixed(solid, caster, f_pose, 2.0 * h_max, obstacle)
+        pts, _, _ = contact_surface(solid)
+        gap, _ = obstacle.gap_and_normal(pts)
+        off = np.abs(gap) > 1e-6 * h_max
+        if off.any():
+            warnings.append(
+                f"{int(off.sum())} of the slab's {len(pts)} contact-surface nodes could not be placed "
+                f"on the fixed body (initial gap from {float(gap.min()):.3g} to "
+                f"{float(gap.max()):.3g} mm; the slab is meant to touch it everywhere)")
+        cache[key] = solid
+        return FEGeometry(solid, obstacle, key, warnings)
+
+    def reach(self, scene, gap_mm, facing):
+        return facing & (gap_mm <= 1e-3 * float(scene.cartilage.max_spring_length_mm))
+
+    def thickness_mm(self, scene, solid, used, points_mm):
+        return np.linalg.norm(points_mm - solid.points_mm[solid.bottom_vertex[used]], axis=1)
+
+    def spring_length_mm(self, thickness_mm, gap_mm):
+        return thickness_mm
+
+
+class LayerModel(FEModel):
+    """A uniform layer of the cartilage thickness bonded to M (twin of the gap laws)."""
+
+    name = "layer"
+    what = "twin of the gap laws"
+    needs_thickness = True
+    mesh_follows_pose = False
+    warm_start_scales_with_load = False
+
+    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
+        if "solid" not in cache:
+            try:
+                cache["solid"] = fe_solids.layer_solid(scene.mobile, float(scene.cartilage.thickness_mm), mesh_size_mm, layers)
+            except ValueError as exc:
+                raise SolverError(f"building the FE layer failed: {exc}") from None
+        warnings: list[str] = []
+        pts, _, _ = contact_surface(cache["solid"])
+        gap, _ = obstacle.gap_and_normal(pts)
+        overlap = float(-gap.min()) if len(gap) else 0.0
+        if overlap > 1e-9 * float(scene.cartilage.max_spring_length_mm):
+            warnings.append(
+                f"the layer overlaps the fixed body by up to {overlap:.3g} mm "
+                f"({int(np.sum(gap < 0))} contact-surface nodes): it starts pre-compressed")
+        return FEGeometry(cache["solid"], obstacle, ("layer", pose_key), warnings)
+
+    def reach(self, scene, gap_mm, facing):
+        t = float(scene.cartilage.thickness_mm)
+        g0 = float(gap_mm[facing].min()) if facing.any() else 0.0
+        return facing & (gap_mm <= max(g0, 0.0) + 0.5 * t)
+
+    def thickness_mm(self, scene, solid, used, points_mm):
+        return np.full(len(points_mm), float(scene.cartilage.thickness_mm))
+
+    def spring_length_mm(self, thickness_mm, gap_mm):
+        return thickness_mm + gap_mm
+
+
+#: every FE model by name (``[fe] model``, ``edem fe --model``)
+FE_MODELS: dict[str, FEModel] = {m.name: m for m in (SlabModel(), LayerModel())}

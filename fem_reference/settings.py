@@ -1,0 +1,112 @@
+"""The resolved settings of an FE reference run: model, element, degree, mesh size, layers.
+
+:func:`resolve_settings` takes the arguments first, then the scene's ``[fe]`` table, then the
+defaults below. Callers that take the arguments from elsewhere (the command line) pass
+``argument_keys`` so that errors name what the user typed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from edem.laws import LAWS
+from fem_reference.models import FE_MODELS
+from geometries.errors import InputError
+
+ELEMENTS = ("auto", "P1", "P2", "TH")
+
+#: Default degree and mesh sizes (mm), chosen on the ideal ankle for 2 cores (fem_reference.scene_run).
+DEFAULT_DEGREE = 2
+DEFAULT_MESH_SIZE_MM = {1: 0.5, 2: 1.0}
+#: Nearly incompressible cartilage: Taylor-Hood (P2-P1 u-p) by default from this Poisson's ratio.
+TAYLOR_HOOD_FROM_NU = 0.49
+
+
+@dataclass(frozen=True)
+class FESettings:
+    """The resolved FE settings of a run (from the arguments, then the scene's [fe] table, then
+    the defaults)."""
+
+    model: str  # a name of fem_reference.models.FE_MODELS
+    element: str  # P1 | P2 | TH
+    degree: int
+    mesh_size_mm: float
+    layers_through_thickness: int | None
+
+    @property
+    def method(self) -> str:
+        return f"fe-{self.model}"
+
+
+def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: float | None = None,
+                     degree: int | None = None, element: str | None = None,
+                     layers_through_thickness: int | None = None,
+                     argument_keys: Mapping[str, str] | None = None) -> FESettings:
+    """Arguments first, then the scene's ``[fe]`` table, then the defaults.
+
+    model: default the FE twin of the scene's contact law (:mod:`edem.laws`: threshold -> slab,
+    gap laws -> layer).
+    element: "auto" (default) is P1 for degree 1 and P2 for degree 2, and Taylor-Hood (P2-P1 u-p,
+    degree 2) when nu >= 0.49 unless the degree is given as 1 (P1 then locks: the core warns).
+    mesh_size_mm: default :data:`DEFAULT_MESH_SIZE_MM` of the degree.
+    argument_keys: how errors name an argument given here (default: its parameter name).
+    """
+    fe = dict(scene.fe or {})
+    file = scene.source
+    names = dict(argument_keys or {})
+
+    def pick(arg: Any, key: str) -> tuple[Any, str]:
+        if arg is not None:
+            return arg, names.get(key, key)
+        return fe.get(key), f"fe.{key}"
+
+    value, key = pick(model, "model")
+    if value is None:
+        value = LAWS[scene.cartilage.law].fe_twin
+    if value not in FE_MODELS:
+        raise InputError(f"unknown FE model {value!r}", file=file, key=key,
+                         expected=" or ".join(f"{m.name} ({m.what})" for m in FE_MODELS.values()))
+    fe_model = FE_MODELS[str(value)]
+
+    deg, deg_key = pick(degree, "degree")
+    if deg is not None and (isinstance(deg, bool) or deg not in (1, 2)):
+        raise InputError(f"{deg!r} is not an element degree", file=file, key=deg_key,
+                         expected="1 or 2")
+    el, el_key = pick(element, "element")
+    if el is None:
+        el = "auto"
+    if el not in ELEMENTS:
+        raise InputError(f"unknown element {el!r}", file=file, key=el_key,
+                         expected="auto, P1, P2 or TH (Taylor-Hood P2-P1)")
+    nu = float(scene.cartilage.poissons_ratio)
+    if el == "auto":
+        d = DEFAULT_DEGREE if deg is None else int(deg)
+        if nu >= TAYLOR_HOOD_FROM_NU and deg is None:
+            el = "TH"
+        else:
+            el = "P1" if d == 1 else ("TH" if nu >= TAYLOR_HOOD_FROM_NU else "P2")
+    el_degree = 1 if el == "P1" else 2
+    if deg is not None and int(deg) != el_degree:
+        raise InputError(f"element {el} has degree {el_degree}, not {deg}", file=file,
+                         key=deg_key, expected=f"degree {el_degree} with element {el}")
+
+    size, size_key = pick(mesh_size_mm, "mesh_size_mm")
+    if size is None:
+        size = DEFAULT_MESH_SIZE_MM[el_degree]
+    if isinstance(size, bool) or not isinstance(size, (int, float)) or not (
+            math.isfinite(size) and size > 0):
+        raise InputError(f"{size!r} is not a mesh size", file=file, key=size_key,
+                         expected="a length in mm > 0")
+    layers, layers_key = pick(layers_through_thickness, "layers_through_thickness")
+    if layers is not None and (isinstance(layers, bool) or not isinstance(layers, int)
+                               or layers < 1):
+        raise InputError(f"{layers!r} is not a number of layers", file=file, key=layers_key,
+                         expected="an integer >= 1")
+    if fe_model.needs_thickness and scene.cartilage.thickness_mm is None:
+        raise InputError(f"the FE {fe_model.name} model needs the undeformed cartilage thickness",
+                         file=file, key="cartilage.thickness_mm",
+                         expected="a thickness in mm > 0 (or the slab model)")
+    return FESettings(fe_model.name, el, el_degree, float(size), layers)

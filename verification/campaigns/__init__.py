@@ -1,0 +1,90 @@
+"""The campaign registry (SPEC 1, 8): one module per campaign, registered here by hand.
+
+Each module of this package defines ``campaign()``, returning its :class:`Campaign`. To add a
+campaign: write ``verification/campaigns/<name>.py`` with ``campaign()`` and add the module to
+:data:`CAMPAIGN_MODULES`. The data model (cases, figures, analyses) is
+:mod:`verification.campaign_model`; the sides a case may run are :data:`verification.sides.SIDES`
+and the analysis kinds :data:`verification.analyses.ANALYSES`.
+
+Campaigns: ``edem-analytic`` (EDEM/DEM against closed forms), ``stability`` (stiff and extreme
+input, each ending in its declared outcome, no NaN anywhere), ``fe-analytic`` (the FE reference
+against Hertz line contact and confined compression on three meshes each, with observed orders),
+``stance`` (EDEM vs DEM over the built-in stance scenes, the thesis's figures beside ours, DEM
+vs the FE slab at five instants), ``sensitivity`` (h_max x ligament modulus, 20 x 20 EDEM
+stances, the thesis's fig. 4.3.10), ``quick`` (a subset for CI), and EDEM/DEM against the FE
+reference: ``cylinder-plane``, ``subject``, ``error-vs-runtime``.
+"""
+
+from __future__ import annotations
+
+from geometries.errors import InputError
+from verification.campaign_model import (
+    METRICS,
+    SCENES_DIR,
+    Analysis,
+    Campaign,
+    Case,
+    Expect,
+    Figure,
+    ramp_overrides,
+    validate_campaign,
+)
+from verification.campaigns import (
+    cylinder_plane,
+    edem_analytic,
+    error_vs_runtime,
+    fe_analytic,
+    quick,
+    sensitivity,
+    stability,
+    stance,
+    subject,
+)
+from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, HERTZ_SIZES_MM
+from verification.campaigns.sensitivity import SENSITIVITY_HMAX_MM, SENSITIVITY_MODULUS_MPA
+from verification.campaigns.sensitivity import campaign as sensitivity_campaign
+from verification.campaigns.stance import (
+    STANCE_INSTANTS,
+    STANCE_SCENES,
+    THESIS_STANCE,
+    fe_instant_case_name,
+    instant_indices,
+    scene_instants,
+)
+
+#: the registered campaign modules, in the order `edem verify --list` shows them
+CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime)
+
+
+def campaigns() -> dict[str, Campaign]:
+    """Every campaign by name."""
+    built = (module.campaign() for module in CAMPAIGN_MODULES)
+    return {campaign.name: campaign for campaign in built}
+
+
+def get_campaign(name: str) -> Campaign:
+    """The named campaign, or InputError listing the known ones."""
+    known = campaigns()
+    if name not in known:
+        raise InputError(f"unknown campaign '{name}'", key="CAMPAIGN", expected="one of " + ", ".join(known) + " (edem verify --list)")
+    return known[name]
+
+
+def describe_campaigns() -> str:
+    """What `edem verify --list` prints: each campaign, then one line per case."""
+    lines = []
+    for campaign in campaigns().values():
+        lines.append(f"{campaign.name} ({len(campaign.cases)} cases): {campaign.description}")
+        for case in campaign.cases:
+            versus = " vs ".join(case.sides)
+            lines.append(f"  {case.name:32s} [{versus}] {case.description}")
+        lines.append("")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+__all__ = [
+    "CAMPAIGN_MODULES", "CONFINED_SIZES_MM", "HERTZ_SIZES_MM", "METRICS", "SCENES_DIR", "SENSITIVITY_HMAX_MM",
+    "SENSITIVITY_MODULUS_MPA", "STANCE_INSTANTS", "STANCE_SCENES", "THESIS_STANCE", "Analysis", "Campaign", "Case",
+    "Expect", "Figure", "campaigns", "describe_campaigns", "fe_instant_case_name", "get_campaign", "instant_indices",
+    "ramp_overrides", "scene_instants", "sensitivity_campaign", "validate_campaign",
+]

@@ -1,0 +1,66 @@
+"""``sensitivity``: h_max x ligament modulus, 20 x 20 EDEM stances (the thesis's fig. 4.3.10)."""
+
+from __future__ import annotations
+
+from verification.campaign_model import Analysis, Campaign, Case, Expect, Figure
+from verification.campaigns.stance import THESIS_FLAG_REL
+
+
+SENSITIVITY_SCENE = "ideal-stance"
+SENSITIVITY_GRID = 20
+SENSITIVITY_HMAX_MM = (2.5, 4.5)
+SENSITIVITY_MODULUS_MPA = (200.0, 350.0)
+THESIS_SENSITIVITY = {"hmax_change": -0.30, "modulus_change": 0.03}  # SPEC 7: peak -30 % from h_max 2.5 to 4.5; ~3 % over the moduli
+
+
+def _grid(bounds: tuple[float, float], n: int) -> list[float]:
+    lo, hi = bounds
+    return [round(lo + (hi - lo) * k / (n - 1), 9) for k in range(n)]
+
+
+def sensitivity_case_name(h_max_mm: float, modulus_mpa: float) -> str:
+    return f"hmax{h_max_mm:.4f}-E{modulus_mpa:.2f}"
+
+
+def _sensitivity_cases(n: int = SENSITIVITY_GRID) -> list[Case]:
+    cases = []
+    for h in _grid(SENSITIVITY_HMAX_MM, n):
+        for e in _grid(SENSITIVITY_MODULUS_MPA, n):
+            cases.append(
+                Case(
+                    sensitivity_case_name(h, e),
+                    f"EDEM ideal stance, h_max {h:.4g} mm, ligament modulus {e:.4g} MPa (all four ligaments)",
+                    SENSITIVITY_SCENE,
+                    ("edem",),
+                    ("a_peak_pressure_mpa", "a_mean_contact_area_mm2", "outcome_mismatch"),
+                    {"outcome_mismatch": 0.0},  # every run of the grid must solve its stance
+                    overrides={"cartilage.max_spring_length_mm": h, "ligaments[*].youngs_modulus_mpa": e},
+                    expect=Expect("converges"),
+                    options={"frames": "peak"},
+                    params={"h_max_mm": h, "ligament_modulus_mpa": e},
+                )
+            )
+    return cases
+
+
+def campaign(n: int = SENSITIVITY_GRID) -> Campaign:
+    cases = tuple(_sensitivity_cases(n))
+    names = tuple(c.name for c in cases)
+    return Campaign(
+        "sensitivity",
+        f"Peak pressure (max over the ideal stance, EDEM) on a {n} x {n} grid of h_max in [2.5, 4.5] mm and ligament modulus in [200, 350] MPa (thesis fig. 4.3.10).",
+        cases,
+        (
+            Figure("sensitivity-heatmap", "Peak pressure over the stance (MPa) against h_max and the ligament modulus", "heatmap", names, x="h_max_mm", y=("a_peak_pressure_mpa",), param2="ligament_modulus_mpa"),
+            Figure("sensitivity-cuts", "Line cuts: peak pressure against h_max at three moduli, against the modulus at three h_max", "cuts", names, x="h_max_mm", y=("a_peak_pressure_mpa",), param2="ligament_modulus_mpa"),
+        ),
+        (
+            Analysis(
+                "sensitivity-changes",
+                "Relative change of the peak pressure across each parameter's range, beside the thesis's (SPEC 7); reported, no verdict",
+                "sensitivity",
+                names,
+                {"x": "h_max_mm", "y": "ligament_modulus_mpa", "metric": "a_peak_pressure_mpa", "thesis_x_change": THESIS_SENSITIVITY["hmax_change"], "thesis_y_change": THESIS_SENSITIVITY["modulus_change"], "flag_rel": THESIS_FLAG_REL},
+            ),
+        ),
+    )

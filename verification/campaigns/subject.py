@@ -1,0 +1,57 @@
+"""``subject``: standing and toe-off on the subject-like ankle, DEM and EDEM vs the FE slab (P2,
+1.0 mm), without ligaments (the FE models none), toe-off with ``ty`` fixed on both sides (its
+load has an antero-posterior component the frictionless FE cannot resist otherwise)."""
+
+from __future__ import annotations
+
+from verification.campaign_model import Analysis, Campaign, Case
+from verification.campaigns.cylinder_plane import FE_COARSE, FE_COMPARE_METRICS, FE_COMPARE_TOL
+
+
+SUBJECT_SCENES = (
+    ("subject-standing", {"ligaments": []}, "333 N vertical at 0 deg; scene constraints (tx, rx, ry, rz fixed)"),
+    ("subject-toe-off", {"ligaments": [], "constraints.fixed_dofs": ["tx", "ty", "rx", "ry", "rz"]}, "4190 N at 16.31 deg; ty fixed on both sides too (the load's antero-posterior component: the frictionless FE cannot resist it)"),
+)
+
+
+def campaign() -> Campaign:
+    cases = []
+    for scene, overrides, what in SUBJECT_SCENES:
+        for method in ("dem", "edem"):
+            cases.append(
+                Case(
+                    f"{scene}-{method}-vs-fe",
+                    f"{scene}: {method.upper()} vs the FE slab (P2, 1.0 mm), {what}; ligaments removed from the discrete side (the FE models none). Generous tolerances",
+                    scene,
+                    (method, "fe-slab"),
+                    FE_COMPARE_METRICS,
+                    dict(FE_COMPARE_TOL),
+                    overrides=dict(overrides),
+                    options=dict(FE_COARSE),
+                    maps=method == "dem",
+                )
+            )
+    columns = [
+        {"header": "discrete peak (MPa)", "metric": "a_at_b_peak_pressure_mpa"},
+        {"header": "FE peak (MPa)", "metric": "b_peak_pressure_mpa"},
+        {"header": "peak err", "metric": "peak_pressure_rel_error"},
+        {"header": "mean p err", "metric": "mean_pressure_rel_error"},
+        {"header": "discrete area (cm^2)", "metric": "a_at_b_mean_contact_area_mm2", "scale": 0.01},
+        {"header": "FE area (cm^2)", "metric": "b_mean_contact_area_mm2", "scale": 0.01},
+        {"header": "area err", "metric": "contact_area_rel_error"},
+        {"header": "discrete |u| (mm)", "metric": "a_at_b_displacement_norm_mm"},
+        {"header": "FE |u| (mm)", "metric": "b_displacement_norm_mm"},
+        {"header": "disp err", "metric": "displacement_rel_error"},
+        {"header": "L2 err", "metric": "pressure_l2_rel_error"},
+    ]
+    names = tuple(c.name for c in cases)
+    return Campaign(
+        "subject",
+        "Standing and toe-off on the subject-like ankle: DEM and EDEM (no ligaments) vs the FE slab (P2, 1.0 mm); toe-off with ty fixed on both sides.",
+        tuple(cases),
+        (),
+        (Analysis("subject-metrics", "Subject-like ankle: discrete vs FE slab (SPEC 8 metrics). Reported, no verdict", "table", names, {"columns": columns}),),
+    )
+
+
+# ---------------------------------------------------------------------------------------------
