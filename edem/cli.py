@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 from pathlib import Path
 
 from edem.errors import InputError, SolverError
@@ -152,8 +153,8 @@ def _scenes(args: argparse.Namespace) -> int:
 
     for name in names:
         data = tomllib.loads(resolve_scene_path(name).read_text(encoding="utf-8"))
-        summary = data.get("scene", {}).get("description", "").strip().splitlines()
-        print(f"{name:28s} {summary[0] if summary else ''}")
+        description = " ".join(data.get("scene", {}).get("description", "").split())  # the whole description, rewrapped
+        print(textwrap.fill(f"{name:24s} {description}", width=110, subsequent_indent=" " * 25, break_on_hyphens=False, break_long_words=False) + "\n")
     return 0
 
 
@@ -223,7 +224,7 @@ def _verify(args: argparse.Namespace) -> int:
     from verification.campaigns import describe_campaigns, get_campaign
 
     if args.list:
-        print(describe_campaigns(), end="")
+        print(describe_campaigns(args.campaign), end="")
         return 0
     if not args.campaign:
         raise InputError("no campaign given", key="CAMPAIGN", expected="a campaign name (edem verify --list)")
@@ -271,7 +272,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("result_dirs", nargs="+", help="result directories of edem run")
     p.add_argument("--column", default="disp_norm_mm", help="a timeseries.csv column, or disp_norm_mm (default)")
     p.add_argument("--label", action="append", help="legend label per directory (repeat)")
-    p.add_argument("--out", required=True, help="PNG file to write")
+    p.add_argument("--out", help="PNG file to write (default: <first dir>/<column>.png, or <column>-vs-<other dirs>.png)")
     p.set_defaults(func=_plot)
     p = sub.add_parser("compare", help="SPEC 8 metrics between two result directories (B is the reference)")
     p.add_argument("a_dir", metavar="A_DIR", help="result directory of the method under test (edem run)")
@@ -281,7 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_compare)
     p = sub.add_parser("verify", help="run a verification campaign, ending in an HTML report")
     p.add_argument("campaign", nargs="?", metavar="CAMPAIGN", help="a campaign name (see --list)")
-    p.add_argument("--list", action="store_true", help="list the campaigns and their cases")
+    p.add_argument("--list", action="store_true", help="list the campaigns (one line each, with case count and expected time); with CAMPAIGN, its cases")
     p.add_argument("--out", help="output directory (default results/verify/<campaign>); finished cases are cached there")
     p.add_argument("--jobs", type=int, help="worker processes (default: the CPU count; 1 runs in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on a Dask distributed cluster, e.g. tcp://host:8786")

@@ -26,6 +26,7 @@ from geometries.errors import InputError
 from verification.analyses import ANALYSES
 from verification.metrics import SERIES_METRICS, SPEC8_METRICS
 from verification.sides import check_side
+from verification.verdicts import Basis, bases_for
 
 SCENES_DIR = Path(__file__).resolve().parent / "scenes"
 
@@ -90,6 +91,13 @@ class Case:
     options: dict[str, Any] = field(default_factory=dict)  # side options (FE: mesh_size_mm, degree)
     params: dict[str, float] = field(default_factory=dict)  # x values for the report's figures
     maps: bool = False  # render pressure maps of a against b in the report
+    #: why each tolerance has its value (verification.verdicts.Basis), beyond the standard ones
+    #: (verification.verdicts.STANDARD_BASES); validate_campaign refuses a tolerance without one
+    basis: dict[str, Basis] = field(default_factory=dict)
+
+    def bases(self) -> dict[str, Basis]:
+        """The basis of every tolerance (the case's own, then the standard ones)."""
+        return bases_for(self.tolerance, self.basis)
 
     def scene_ref(self) -> str:
         """The argument for edem.scene.load_scene: a built-in name or an absolute TOML path."""
@@ -159,6 +167,8 @@ class Campaign:
     cases: tuple[Case, ...]
     figures: tuple[Figure, ...] = ()
     analyses: tuple[Analysis, ...] = ()
+    #: wall time of a full run with 2 jobs on 2 cores, no cache (docs/campaigns.md says how measured)
+    expected_time_s: float | None = None
 
     def case(self, name: str) -> Case:
         for case in self.cases:
@@ -170,6 +180,12 @@ class Campaign:
 def uniform_tolerance(value: float, names: tuple[str, ...] = SPEC8_METRICS) -> dict[str, float]:
     """The same largest admissible value for every metric of ``names``."""
     return {name: value for name in names}
+
+
+def uniform_basis(kind: str, reason: str, names: tuple[str, ...] = SPEC8_METRICS) -> dict[str, Basis]:
+    """The same :class:`Basis` for every metric of ``names``."""
+    basis = Basis(kind, reason)
+    return {name: basis for name in names}
 
 
 def ramp_overrides(n_steps: int, force_n: float, duration_s: float = 1.0) -> dict[str, Any]:
@@ -197,6 +213,10 @@ def validate_campaign(campaign: Campaign) -> None:
         stray = [m for m in case.tolerance if m not in case.metrics]
         if stray:
             raise InputError(f"tolerance on unreported metric(s) {', '.join(stray)}", key=key, expected="tolerances on the case's own metrics")
+        try:
+            case.bases()
+        except KeyError as exc:
+            raise InputError(f"tolerance without a stated reason: {exc.args[0]}", key=key, expected="a verification.verdicts.Basis per tolerance (Case.basis)") from None
         if any(not isinstance(v, (int, float)) or math.isnan(v) for v in case.tolerance.values()):
             raise InputError("tolerances must be numbers", key=key, expected="metric -> max value")
     for figure in campaign.figures:

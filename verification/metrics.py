@@ -240,6 +240,7 @@ def _scalars(series: dict[str, np.ndarray], k: int) -> dict[str, Any]:
         "mean": float(series["mean_pressure_mpa"][k]),
         "area": float(series["contact_area_mm2"][k]),
         "disp": np.array([series[f"disp_{x}_mm"][k] for x in "xyz"], dtype=np.float64),
+        "load": float(np.linalg.norm([series[f"force_{x}_n"][k] for x in "xyz"])),
     }
 
 
@@ -346,6 +347,7 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
         entry: dict[str, Any] = {
             "time_a_s": float(ta[ka]),
             "time_b_s": float(tb[kb]),
+            "load_n": sb["load"],
             "peak_pressure_a_mpa": sa["peak"],
             "peak_pressure_b_mpa": sb["peak"],
             "mean_pressure_a_mpa": sa["mean"],
@@ -376,7 +378,39 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
         "n_common_points": min(e["n_common_points"] for e in per_time),
         "max_projection_distance_mm": max(e["max_projection_distance_mm"] for e in per_time),
         "per_time": per_time,
+        "peak_load_index": int(np.argmax([e["load_n"] for e in per_time])),
+        "warnings": scene_differences(a_dir, b_dir),
     }
+
+
+def scene_differences(a_dir: str | Path, b_dir: str | Path) -> list[str]:
+    """What makes two runs not like for like: different ligaments or constraints in their resolved
+    scenes (scene.toml, edem.resultdir.record_provenance), or ligaments on one side of an FE
+    comparison (the FE models none). Empty when they match or a directory has no resolved scene."""
+    import tomllib
+
+    from edem.resultdir import SCENE_FILE, read_result_dir
+
+    scenes, methods = [], []
+    for directory in (a_dir, b_dir):
+        path = Path(directory) / SCENE_FILE
+        try:
+            scenes.append(tomllib.loads(path.read_text(encoding="utf-8")))
+        except (OSError, tomllib.TOMLDecodeError):
+            return []
+        methods.append(str(read_result_dir(directory).summary.get("method", "")))
+    ligaments = [sorted((str(l.get("name", "")), l.get("youngs_modulus_mpa"), l.get("area_mm2")) for l in s.get("ligaments", [])) for s in scenes]
+    fixed = [sorted(s.get("constraints", {}).get("fixed_dofs", [])) for s in scenes]
+    out = []
+    for k, (method, ligs) in enumerate(zip(methods, ligaments)):
+        if method.startswith("fe-") and ligaments[1 - k]:
+            out.append(f"{'ab'[k]} is the FE reference, which models no ligaments; {'ab'[1 - k]} has {len(ligaments[1 - k])} "
+                       f"({', '.join(n for n, *_ in ligaments[1 - k])}): not like for like (remove the [[ligaments]] tables of the scene)")
+    if not any(m.startswith("fe-") for m in methods) and ligaments[0] != ligaments[1]:
+        out.append(f"the ligaments differ: a has {[n for n, *_ in ligaments[0]] or 'none'}, b has {[n for n, *_ in ligaments[1]] or 'none'} (or their moduli or areas)")
+    if fixed[0] != fixed[1]:
+        out.append(f"the constraints differ: a fixes {fixed[0] or 'nothing'}, b fixes {fixed[1] or 'nothing'}")
+    return out
 
 
 def matching_time_points(time_a: np.ndarray, time_b: np.ndarray) -> list[int] | None:
@@ -444,7 +478,8 @@ def series_metrics(series: dict[str, np.ndarray], prefix: str = "") -> dict[str,
 
 def format_metrics_table(comparison: dict[str, Any]) -> str:
     """Plain-text table of a :func:`compare_result_dirs` result (what `edem compare` prints)."""
-    last = comparison["per_time"][-1]
+    per_time = comparison["per_time"]
+    last = per_time[comparison.get("peak_load_index", len(per_time) - 1)]  # the headline instant: the peak load
     rows = [
         ("peak pressure (MPa)", last["peak_pressure_a_mpa"], last["peak_pressure_b_mpa"], "peak_pressure_rel_error"),
         ("mean pressure (MPa)", last["mean_pressure_a_mpa"], last["mean_pressure_b_mpa"], "mean_pressure_rel_error"),
@@ -462,7 +497,7 @@ def format_metrics_table(comparison: dict[str, Any]) -> str:
     lines = [
         f"a: {comparison['a']} ({comparison['a_method']}, {comparison['wall_time_a_s']:.3g} s)",
         f"b: {comparison['b']} ({comparison['b_method']}, {comparison['wall_time_b_s']:.3g} s), the reference",
-        f"compared: {comparison['mode']} ({len(comparison['per_time'])}), values at t = {last['time_a_s']:g} s",
+        f"compared: {comparison['mode']} ({len(per_time)}); values at the peak-load instant t = {last['time_a_s']:g} s (|F| = {last.get('load_n', math.nan):.4g} N)",
         head,
         "-" * len(head),
     ]
@@ -478,4 +513,5 @@ def format_metrics_table(comparison: dict[str, Any]) -> str:
         f"(b's {comparison['per_time'][-1]['b_pressure_source']} values; largest distance between compared points "
         f"{comparison['max_projection_distance_mm']:.3g} mm)"
     )
+    lines += [f"warning: {w}" for w in comparison.get("warnings", [])]
     return "\n".join(lines)

@@ -17,6 +17,10 @@ from edem.cli import main
 from verification.campaigns import SCENES_DIR, Campaign, Case, Expect, get_campaign
 from verification.metrics import SPEC8_METRICS
 from verification.runner import case_key, run_campaign
+from verification.verdicts import CLOSED_FORM, MODEL_BAND, Basis
+
+EXACT = {m: Basis(CLOSED_FORM, "test: exact") for m in SPEC8_METRICS}
+BAND = {m: Basis(MODEL_BAND, "test: a declared band") for m in SPEC8_METRICS}
 
 
 def tiny_campaign(**changes) -> Campaign:
@@ -37,18 +41,18 @@ def test_campaign_end_to_end_then_cache_hit(tmp_path):
     out = tmp_path / "tiny"
     first = run_campaign(tiny_campaign(), out, jobs=2, report=False)
     assert first["computed"] == 2 and first["exit_status"] == 0
-    assert first["counts"]["passed"] == 2 and first["outcomes"] == {"converges": 1, "refused": 1}
+    assert first["counts"]["verified"] == 1 and first["counts"]["refused as declared"] == 1 and first["outcomes"] == {"converges": 1, "refused": 1}
 
     data = json.loads((out / "metrics.json").read_text())
     plates = next(r for r in data["cases"] if r["name"] == "flat-plates-dem")
     assert set(plates["metrics"]) == set(SPEC8_METRICS)
-    assert all(v["verdict"] == "pass" and v["tolerance"] == 1e-9 for v in plates["verdicts"].values())
+    assert all(v["verdict"] == "met" and v["tolerance"] == 1e-9 and v["kind"] == "closed-form" and v["reason"] for v in plates["verdicts"].values())
     assert plates["wall_time_s"] > 0 and [s["side"] for s in plates["sides"]] == ["dem", "closed-form:flat-plates"]
     for rel in plates["result_dirs"]:
         assert (out / rel / "pressure.pvd").is_file() and (out / rel / "summary.json").is_file()
     case_json = json.loads((out / "cases" / "flat-plates-dem" / "metrics.json").read_text())
     assert case_json["key"] == case_key(tiny_campaign().cases[0])
-    assert case_json["status"] == "passed" and case_json["verdicts"]["displacement_rel_error"]["verdict"] == "pass"
+    assert case_json["status"] == "verified" and case_json["verdicts"]["displacement_rel_error"]["verdict"] == "met"
     pull = next(r for r in data["cases"] if r["name"] == "pull-apart")
     assert pull["outcome"] == "refused" and "no equilibrium" in pull["sides"][0]["message"]
 
@@ -116,7 +120,7 @@ def test_source_digest_covers_the_solver_package():
 
 def test_fe_side_is_reported_unavailable_not_faked(tmp_path, monkeypatch):
     monkeypatch.setattr(sides, "fe_availability", lambda *entry_point: "FE reference not available: test")
-    fe_case = Case("vs-fe", "DEM against the FE slab", "flat-plates.toml", ("dem", "fe-slab"), SPEC8_METRICS, {m: 0.1 for m in SPEC8_METRICS})
+    fe_case = Case("vs-fe", "DEM against the FE slab", "flat-plates.toml", ("dem", "fe-slab"), SPEC8_METRICS, {m: 0.1 for m in SPEC8_METRICS}, basis=BAND)
     summary = run_campaign(Campaign("fe", "FE", (fe_case,)), tmp_path / "fe", jobs=1, report=False)
     row = summary["cases"][0]
     assert row["status"] == "unavailable" and summary["exit_status"] == 0
@@ -164,11 +168,11 @@ def test_fe_side_calls_run_scene_and_compares_nodal_pressure(tmp_path, monkeypat
     write_results(run(load_scene(SCENES_DIR / "flat-plates.toml"), "dem"), tmp_path / "dem-copy")
     monkeypatch.setattr(fem_reference, "run_scene", stand_in, raising=False)
     monkeypatch.setattr(sides, "fe_availability", lambda: None)
-    case = Case("vs-fe", "DEM against FE", "flat-plates.toml", ("dem", "fe-layer"), SPEC8_METRICS, {m: 1e-9 for m in SPEC8_METRICS}, options={"mesh_size_mm": 0.5, "degree": 2})
+    case = Case("vs-fe", "DEM against FE", "flat-plates.toml", ("dem", "fe-layer"), SPEC8_METRICS, {m: 1e-9 for m in SPEC8_METRICS}, options={"mesh_size_mm": 0.5, "degree": 2}, basis=EXACT)
     summary = run_campaign(Campaign("fe", "FE", (case,)), tmp_path / "fe", jobs=1, report=False)
     assert calls == {"model": "layer", "mesh_size_mm": 0.5, "degree": 2}
     row = summary["cases"][0]
-    assert row["status"] == "passed", row["verdicts"]
+    assert row["status"] == "verified", row["verdicts"]
     assert row["metrics"]["pressure_l2_rel_error"] < 1e-12  # point data (1 MPa) used, not the cells (5 MPa)
 
 
@@ -188,7 +192,7 @@ def test_cli_verify_exit_status_follows_the_verdicts(tmp_path, monkeypatch, caps
     monkeypatch.setattr("verification.campaigns.campaigns", lambda: {"tiny": tiny, "tiny-failing": failing})
     assert main(["verify", "tiny", "--out", str(tmp_path / "ok"), "--jobs", "1"]) == 0
     out = capsys.readouterr().out
-    assert "2 passed" in out and f"report: {tmp_path / 'ok' / 'report.html'}" in out
+    assert "1 verified, 1 refused as declared" in out and f"report: {tmp_path / 'ok' / 'report.html'}" in out
     assert main(["verify", "tiny-failing", "--out", str(tmp_path / "bad"), "--jobs", "1"]) == 1
     out = capsys.readouterr().out
     assert "flat-plates-dem" in out and "peak_pressure_rel_error" in out
@@ -246,5 +250,5 @@ def test_declared_outcomes_are_checked_not_assumed(tmp_path):
         "wrongly-refused": ("failed", 1.0),
         "wrong-message": ("failed", 1.0),
         "missing-warning": ("failed", 1.0),
-        "right": ("passed", 0.0),
+        "right": ("refused as declared", 0.0),
     }
