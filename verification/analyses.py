@@ -396,7 +396,7 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
             "Cartilage thickness (a cylinder with a bonded layer, gap law against the FE layer, 333 N): peak-pressure error "
             + ", ".join(f"{100 * e:.0f} % at {t:g} mm" for t, e, _a in layers if e is not None)
             + "; contact-area error " + ", ".join(f"{100 * a:.0f} %" for _t, _e, a in layers if a is not None)
-            + ": the thicker the layer relative to the contact width, the more the continuum spreads the load the springs cannot."
+            + ": the thicker the layer, the more the continuum spreads the load sideways, which independent springs cannot do."
         )
     low, layer_base = ok.get(s["low_load"]), ok.get(s["layer_base"])
     if low is not None and layer_base is not None:

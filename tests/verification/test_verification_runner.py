@@ -64,6 +64,9 @@ def test_campaign_end_to_end_then_cache_hit(tmp_path):
     assert second["computed"] == 0 and second["cached"] == 2 and seen == [True, True]
     assert file_mtimes(out / "cases") == before  # nothing rewritten
     assert [r["metrics"] for r in second["cases"]] == [r["metrics"] for r in first["cases"]]
+    # a cached case keeps the wall time of the run that computed it (not the re-read's)
+    assert [r["wall_time_s"] for r in second["cases"]] == [r["wall_time_s"] for r in first["cases"]]
+    assert second["cases_wall_time_s"] == first["cases_wall_time_s"] and all(r["cached"] for r in second["cases"])
 
 
 def test_cache_counts_executions_and_tolerance_changes_need_no_rerun(tmp_path, monkeypatch):
