@@ -1,4 +1,4 @@
-"""The `edem` command line (SPEC 9). Exit status 0 success, 1 failed check, 2 bad input."""
+"""The `edem` command line (README.md#command-line). Exit status 0 success, 1 failed check, 2 bad input."""
 
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _fe(args: argparse.Namespace) -> int:
-    """The FE reference of a scene (SPEC 5, 9): fem_reference.run_scene into a result directory."""
+    """The FE reference of a scene (docs/method.md#6-the-fe-reference-and-its-discrete-twins, docs/result-format.md): fem_reference.run_scene into a result directory."""
     from edem.scene import load_scene, parse_override
 
     try:
@@ -202,7 +202,7 @@ def _plot(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    """SPEC 8 metrics of result directory A against the reference B; writes metrics.json."""
+    """comparison metrics (docs/method.md#7-comparison-metrics) of result directory A against the reference B; writes metrics.json."""
     from verification.metrics import compare_result_dirs, format_metrics_table
     from verification.runner import write_json
 
@@ -274,7 +274,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--label", action="append", help="legend label per directory (repeat)")
     p.add_argument("--out", help="PNG file to write (default: <first dir>/<column>.png, or <column>-vs-<other dirs>.png)")
     p.set_defaults(func=_plot)
-    p = sub.add_parser("compare", help="SPEC 8 metrics between two result directories (B is the reference)")
+    p = sub.add_parser("compare", help="comparison metrics (docs/method.md#7-comparison-metrics) between two result directories (B is the reference)")
     p.add_argument("a_dir", metavar="A_DIR", help="result directory of the method under test (edem run)")
     p.add_argument("b_dir", metavar="B_DIR", help="result directory of the reference (edem fe, or another run)")
     p.add_argument("--out", help="where metrics.json goes (default results/compare/<A>-vs-<B>)")
@@ -287,7 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, help="worker processes (default: the CPU count; 1 runs in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on a Dask distributed cluster, e.g. tcp://host:8786")
     p.set_defaults(func=_verify)
-    from verification.check import add_parser as add_check_parser  # `edem check`: regression gate (SPEC 9)
+    from verification.check import add_parser as add_check_parser  # `edem check`: regression gate (docs/campaigns.md#verdicts)
 
     add_check_parser(sub)
     return parser

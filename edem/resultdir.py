@@ -1,4 +1,4 @@
-"""The result directory: the one module that writes and reads it (SPEC 9).
+"""The result directory: the one module that writes and reads it (docs/result-format.md).
 
 Every producer writes the same layout through :func:`write_result_dir` (``edem run`` through
 :func:`edem.results.write_results`, ``edem fe`` through :mod:`fem_reference.scene_run`, the closed
@@ -318,7 +318,7 @@ def read_timeseries_csv(path: str | Path) -> dict[str, np.ndarray]:
         with open(path, newline="", encoding="utf-8") as f:
             rows = list(csv.reader(f))
     except FileNotFoundError:
-        raise InputError("no timeseries.csv here", file=path.parent, expected="a SPEC 9 result directory") from None
+        raise InputError("no timeseries.csv here", file=path.parent, expected="a result directory (docs/result-format.md)") from None
     if not rows:
         raise InputError("empty timeseries.csv", file=path, expected="a header and one row per time point")
     header = rows[0]
@@ -327,7 +327,7 @@ def read_timeseries_csv(path: str | Path) -> dict[str, np.ndarray]:
     except ValueError:
         raise InputError("timeseries.csv has non-numeric or ragged rows", file=path, expected="numbers, one per column") from None
     if "time_s" not in header:
-        raise InputError("timeseries.csv has no time_s column", file=path, expected="the SPEC 9 columns")
+        raise InputError("timeseries.csv has no time_s column", file=path, expected="the docs/result-format.md columns")
     return {name: data[:, i] for i, name in enumerate(header)}
 
 
@@ -373,7 +373,7 @@ def read_surface_frame(path: str | Path) -> SurfaceFrame:
 def non_finite_count(result_dir: str | Path) -> int:
     """Number of NaN/inf values in a result directory: summary numbers, time series, every array.
 
-    The stability campaign requires 0 (SPEC 2-4: no NaN in any output, whatever the input).
+    The stability campaign requires 0 (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#2-edem-the-time-dependent-incremental-method, docs/method.md#4-viscoelastic-edem-thesis-chapter-6: no NaN in any output, whatever the input).
     """
     result = read_result_dir(result_dir)
     count = 0

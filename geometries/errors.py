@@ -1,4 +1,4 @@
-"""Errors the user can act on (SPEC 9: exit status 2 on bad input, 1 on a failed check)."""
+"""Errors the user can act on (docs/result-format.md: exit status 2 on bad input, 1 on a failed check)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from pathlib import Path
 
 
 class InputError(Exception):
-    """Bad input: names the file, the key and what was expected (SPEC 9, exit status 2)."""
+    """Bad input: names the file, the key and what was expected (docs/result-format.md, exit status 2)."""
 
     def __init__(
         self,

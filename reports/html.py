@@ -1,4 +1,4 @@
-"""One HTML page per campaign (SPEC 1, 9): cases, verdicts, figures, scenes, versions, run times.
+"""One HTML page per campaign (docs/campaigns.md, docs/result-format.md): cases, verdicts, figures, scenes, versions, run times.
 
 :func:`write_campaign_report` takes the campaign summary of :func:`verification.runner.run_campaign`
 (the content of the campaign's metrics.json) and writes ``report.html`` next to it, with its

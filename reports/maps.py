@@ -1,7 +1,7 @@
 """Pressure maps of two result directories side by side (pyvista off-screen, imported only here).
 
 Three panels: side a (EDEM/DEM), side b (the FE reference, or another run) and their difference
-a - b on a's surface (b at a's spring centroids, paired as in the SPEC 8 L2 metric). a and b
+a - b on a's surface (b at a's spring centroids, paired as in the L2 metric (docs/method.md#7-comparison-metrics)). a and b
 share one colour scale [0, p_max]; the difference uses the same span, [-p_max, p_max], on a
 diverging map whose middle is white, so colours compare across the three panels and exact
 agreement is white. Every panel is drawn unlit (flat colours), so a colour reads off its bar.

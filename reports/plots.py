@@ -14,7 +14,7 @@ DERIVED = {"disp_norm_mm": ("disp_x_mm", "disp_y_mm", "disp_z_mm")}
 
 
 def read_timeseries(result_dir: str | Path) -> dict[str, np.ndarray]:
-    """Columns of a result directory's timeseries.csv (SPEC 9) as float arrays."""
+    """Columns of a result directory's timeseries.csv (docs/result-format.md) as float arrays."""
     path = Path(result_dir) / "timeseries.csv"
     try:
         with open(path, newline="", encoding="utf-8") as f:

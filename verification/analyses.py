@@ -175,7 +175,7 @@ def thesis_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]
         "columns": ["scene", "quantity", "method", "ours", "thesis", "difference", "note"],
         "rows": out_rows,
         "status": (FLAGGED if any(v["flag"] for v in values) else REPORTED) if available else UNAVAILABLE,
-        "notes": [f"Reported, no verdict: the thesis's figures come from its own meshes and loads (SPEC 7); differences beyond {100 * flag_rel:.0f} % are flagged."],
+        "notes": [f"Reported, no verdict: the thesis's figures come from its own meshes and loads (docs/references.md#the-thesiss-figures); differences beyond {100 * flag_rel:.0f} % are flagged."],
         "values": {"rows": values},
     }
 
@@ -244,7 +244,7 @@ def sensitivity_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str,
         "rows": out_rows,
         "status": REPORTED,
         "notes": [
-            "Reported, no verdict (SPEC 7: the thesis's fig. 4.3.10 from its own mesh and stance). A change is (value at the highest - value at the lowest) / value at the "
+            "Reported, no verdict (docs/references.md#the-thesiss-figures: the thesis's fig. 4.3.10 from its own mesh and stance). A change is (value at the highest - value at the lowest) / value at the "
             f"lowest, at each value of the other parameter; flagged when it differs from the thesis's by more than {100 * flag_rel:.0f} % of it (and {100 * floor:.0f} points)."
         ],
         "values": values,

@@ -1,4 +1,4 @@
-"""The campaign data model (SPEC 1, 8): cases, figures, analyses, campaigns and their validation.
+"""The campaign data model (docs/campaigns.md, docs/method.md#7-comparison-metrics): cases, figures, analyses, campaigns and their validation.
 
 A :class:`Case` names a scene (a built-in scene or a TOML file of ``verification/scenes/``) with
 ``--set``-like overrides, the sides it runs (a subject and, optionally, the reference it is judged
@@ -24,7 +24,7 @@ from typing import Any
 
 from geometries.errors import InputError
 from verification.analyses import ANALYSES
-from verification.metrics import SERIES_METRICS, SPEC8_METRICS
+from verification.metrics import SERIES_METRICS, COMPARISON_METRICS
 from verification.sides import check_side
 from verification.verdicts import Basis, bases_for
 
@@ -32,11 +32,11 @@ SCENES_DIR = Path(__file__).resolve().parent / "scenes"
 
 #: every metric a case may report, with what it measures
 METRICS: dict[str, str] = {
-    "peak_pressure_rel_error": "|peak_a - peak_b| / peak_b (max over compared time points), SPEC 8",
-    "mean_pressure_rel_error": "relative error of the mean pressure (contact force / contact area), SPEC 8",
-    "contact_area_rel_error": "relative error of the contact area, SPEC 8",
-    "displacement_rel_error": "|u_a - u_b| / |u_b| of the bone displacement, SPEC 8",
-    "pressure_l2_rel_error": "area-weighted L2 relative error of the pressure at a's spring centroids, SPEC 8",
+    "peak_pressure_rel_error": "|peak_a - peak_b| / peak_b (max over compared time points), docs/method.md#7-comparison-metrics",
+    "mean_pressure_rel_error": "relative error of the mean pressure (contact force / contact area), docs/method.md#7-comparison-metrics",
+    "contact_area_rel_error": "relative error of the contact area, docs/method.md#7-comparison-metrics",
+    "displacement_rel_error": "|u_a - u_b| / |u_b| of the bone displacement, docs/method.md#7-comparison-metrics",
+    "pressure_l2_rel_error": "area-weighted L2 relative error of the pressure at a's spring centroids, docs/method.md#7-comparison-metrics",
     "thickness_mean_mm": "mean ray-cast spring length of side a (springs with a hit)",
     "thickness_sd_mm": "standard deviation of those lengths",
     "thickness_mean_rel_error": "|mean length - exact thickness| / exact thickness",
@@ -177,12 +177,12 @@ class Campaign:
         raise KeyError(name)
 
 
-def uniform_tolerance(value: float, names: tuple[str, ...] = SPEC8_METRICS) -> dict[str, float]:
+def uniform_tolerance(value: float, names: tuple[str, ...] = COMPARISON_METRICS) -> dict[str, float]:
     """The same largest admissible value for every metric of ``names``."""
     return {name: value for name in names}
 
 
-def uniform_basis(kind: str, reason: str, names: tuple[str, ...] = SPEC8_METRICS) -> dict[str, Basis]:
+def uniform_basis(kind: str, reason: str, names: tuple[str, ...] = COMPARISON_METRICS) -> dict[str, Basis]:
     """The same :class:`Basis` for every metric of ``names``."""
     basis = Basis(kind, reason)
     return {name: basis for name in names}

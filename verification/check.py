@@ -1,4 +1,4 @@
-"""`edem check`: the regression gate against stored references (SPEC 9).
+"""`edem check`: the regression gate against stored references (docs/campaigns.md#verdicts).
 
 For a fixed set of scenes (:data:`CHECK_SCENES`: ideal and subject standing, ideal toe-off, the
 flat plates) ``verification/references/<name>.json`` stores what EDEM computed when the
@@ -151,7 +151,7 @@ def fe_quantities(fe_dir: str | Path, edem_dir: str | Path, scene) -> dict[str, 
 
 
 def _quantities(series: dict[str, np.ndarray], fields: list) -> dict[str, Any]:
-    """The stored quantities per time point of a SPEC 9 time series and its binned pressure fields."""
+    """The stored quantities per time point of a docs/campaigns.md#verdicts time series and its binned pressure fields."""
     return {
         "time_s": series["time_s"].tolist(),
         "peak_pressure_mpa": series["peak_pressure_mpa"].tolist(),
@@ -162,7 +162,7 @@ def _quantities(series: dict[str, np.ndarray], fields: list) -> dict[str, Any]:
 
 
 def differences(values: dict[str, Any], reference: dict[str, Any]) -> dict[str, float]:
-    """Largest relative difference over the time points of each quantity (SPEC 8 definitions)."""
+    """Largest relative difference over the time points of each quantity (docs/method.md#7-comparison-metrics definitions)."""
     from verification.metrics import relative_error
 
     if len(values["time_s"]) != len(reference["time_s"]) or not np.allclose(values["time_s"], reference["time_s"]):

@@ -1,4 +1,4 @@
-"""Comparison metrics of SPEC 8 and the surface sampling they need (pure numpy/scipy on arrays).
+"""Comparison metrics of docs/method.md#7-comparison-metrics and the surface sampling they need (pure numpy/scipy on arrays).
 
 For one comparison of a side ``a`` (EDEM/DEM) against a reference ``b`` (FE or a closed form) at
 the same load: relative errors of peak pressure, mean pressure, contact area and bone
@@ -7,7 +7,7 @@ of the pressure field on common points: b's pressure is sampled at a's springs (
 ends when b is another surface such as an FE slab's contact face) by projecting each point onto
 b's triangulated surface (:func:`sample_onto` for nodal fields,
 exact for fields linear on the surface; :func:`sample_cells_onto` for piecewise-constant ones).
-:func:`compare_result_dirs` applies all of it to two SPEC 9 result directories.
+:func:`compare_result_dirs` applies all of it to two result directories (docs/result-format.md).
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-#: SPEC 8 metric names (each a relative error, 0 = identical) in the order they are printed.
-SPEC8_METRICS = (
+#: docs/method.md#7-comparison-metrics metric names (each a relative error, 0 = identical) in the order they are printed.
+COMPARISON_METRICS = (
     "peak_pressure_rel_error",
     "mean_pressure_rel_error",
     "contact_area_rel_error",
@@ -34,7 +34,7 @@ SPEC8_METRICS = (
 
 
 def relative_error(value: float | np.ndarray, reference: float | np.ndarray) -> float:
-    """|value - reference| / |reference| (Euclidean norms for vectors), SPEC 8.
+    """|value - reference| / |reference| (Euclidean norms for vectors), docs/method.md#7-comparison-metrics.
 
     A zero reference gives 0 when the value is zero too and +inf otherwise (never NaN).
     """
@@ -48,27 +48,27 @@ def relative_error(value: float | np.ndarray, reference: float | np.ndarray) -> 
 
 
 def peak_pressure_error(peak_mpa: float, reference_peak_mpa: float) -> float:
-    """Relative error of the peak contact pressure (SPEC 8)."""
+    """Relative error of the peak contact pressure (docs/method.md#7-comparison-metrics)."""
     return relative_error(peak_mpa, reference_peak_mpa)
 
 
 def mean_pressure_error(mean_mpa: float, reference_mean_mpa: float) -> float:
-    """Relative error of the mean contact pressure (contact force over contact area, SPEC 8)."""
+    """Relative error of the mean contact pressure (contact force over contact area, docs/method.md#7-comparison-metrics)."""
     return relative_error(mean_mpa, reference_mean_mpa)
 
 
 def contact_area_error(area_mm2: float, reference_area_mm2: float) -> float:
-    """Relative error of the contact area (SPEC 8)."""
+    """Relative error of the contact area (docs/method.md#7-comparison-metrics)."""
     return relative_error(area_mm2, reference_area_mm2)
 
 
 def displacement_error(displacement_mm: np.ndarray, reference_displacement_mm: np.ndarray) -> float:
-    """|u - u_ref| / |u_ref| of the bone displacement vectors (SPEC 8)."""
+    """|u - u_ref| / |u_ref| of the bone displacement vectors (docs/method.md#7-comparison-metrics)."""
     return relative_error(displacement_mm, reference_displacement_mm)
 
 
 def l2_relative_error(values: np.ndarray, reference: np.ndarray, weights: np.ndarray | None = None) -> float:
-    """sqrt(sum w (v - r)^2 / sum w r^2): the L2 relative error of a field on common points (SPEC 8).
+    """sqrt(sum w (v - r)^2 / sum w r^2): the L2 relative error of a field on common points (docs/method.md#7-comparison-metrics).
 
     ``weights`` are the quadrature weights of the points (e.g. the spring areas in mm^2); equal
     weights by default. A zero reference field gives 0 if the values vanish too, +inf otherwise.
@@ -261,7 +261,7 @@ def same_mesh(frame_a, frame_b) -> bool:
 
 
 def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[str, float]:
-    """L2 relative error of a's pressure against b's at a's spring centroids (SPEC 8).
+    """L2 relative error of a's pressure against b's at a's spring centroids (docs/method.md#7-comparison-metrics).
 
     a's points are the centroids of its non-degenerate triangles (the EDEM springs), weighted by
     their areas. When b has nodal pressure (FE point data) it is interpolated at the projections
@@ -319,7 +319,7 @@ def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[
 
 
 def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm: float | None = None) -> dict[str, Any]:
-    """SPEC 8 metrics of result directory a against the reference b (both in the SPEC 9 layout).
+    """comparison metrics (docs/method.md#7-comparison-metrics) of result directory a against the reference b (both in the docs/result-format.md layout).
 
     When both have the same time points every time point is compared and each metric is the
     largest over them (``per_time`` keeps them all); when b's time points are a subset of a's
@@ -363,7 +363,7 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
         }
         entry.update(field_error(a.frame(frame_index(a, ka)), b.frame(frame_index(b, kb)), max_distance_mm))
         per_time.append(entry)
-    metrics = {name: max(float(e[name]) for e in per_time) for name in SPEC8_METRICS}
+    metrics = {name: max(float(e[name]) for e in per_time) for name in COMPARISON_METRICS}
     return {
         "a": str(a.path),
         "b": str(b.path),

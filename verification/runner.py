@@ -1,6 +1,6 @@
 """Run a campaign: cases in parallel processes (or on a Dask cluster), cached by their inputs.
 
-Each case runs in ``OUT/cases/<case>/``: one SPEC 9 result directory per side (``a-<side>``,
+Each case runs in ``OUT/cases/<case>/``: one result directory (docs/result-format.md) per side (``a-<side>``,
 ``b-<side>``) and ``metrics.json`` (every metric, the tolerance verdicts, wall times, the result
 directories). The case is cached under a key hashing its definition, the scene file and every
 file it references, the package version and the source of ``edem/``, ``geometries/`` and
@@ -15,7 +15,7 @@ cheap and never cached.
 
 Each case ends in one verdict of :mod:`verification.verdicts` (verified, flagged, refused as
 declared, ran; failed, error, unavailable), from its tolerances and the basis of each. Exit
-status of a campaign (SPEC 9): 0 unless a case failed or crashed or a judged analysis failed (an
+status of a campaign (docs/result-format.md): 0 unless a case failed or crashed or a judged analysis failed (an
 observed order below its minimum); flagged cases (outside a declared model band) and cases whose
 side is unavailable (FE reference not installed) are reported and do not fail the campaign.
 """
@@ -228,7 +228,7 @@ def _series_metrics(wanted: set[str], a: dict[str, Any], b: dict[str, Any] | Non
 
 def compute_metrics(case: Case, sides: list[dict[str, Any]]) -> tuple[dict[str, float], dict[str, Any] | None]:
     """The case's metrics from its side outcomes (only those it declares) and the comparison."""
-    from verification.metrics import SPEC8_METRICS, compare_result_dirs
+    from verification.metrics import COMPARISON_METRICS, compare_result_dirs
 
     wanted = set(case.metrics)
     metrics: dict[str, float] = {}
@@ -238,7 +238,7 @@ def compute_metrics(case: Case, sides: list[dict[str, Any]]) -> tuple[dict[str, 
     if wanted & {"outcome_mismatch", "non_finite_outputs", "force_residual_rel"}:
         metrics.update(_stability_metrics(case, a))
     both = a["status"] == OK and b is not None and b["status"] == OK
-    if both and wanted & set(SPEC8_METRICS):
+    if both and wanted & set(COMPARISON_METRICS):
         comparison = compare_result_dirs(a["result_dir"], b["result_dir"])
         metrics.update(comparison["metrics"])
     if a["status"] == OK and wanted & {"thickness_mean_mm", "thickness_sd_mm", "thickness_mean_rel_error", "thickness_faceting_ratio"}:

@@ -1,4 +1,4 @@
-"""`edem check`, the regression gate (SPEC 9): EDEM rerun against the stored references of
+"""`edem check`, the regression gate (docs/result-format.md): EDEM rerun against the stored references of
 verification/references/ (EDEM baselines and FE values). Drift against the stored baseline is the
 gate (exit 1 with a table); the model error against the stored FE values is reported separately,
 flagged beyond the declared band, never a failure; 2 on bad input. Perturbations go to copies in tmp_path."""

@@ -1,5 +1,5 @@
 """The fe-analytic campaign: FE problems of the fem_reference core against their closed forms
-(Hertz line contact, confined compression), written as SPEC 9 result directories, and the
+(Hertz line contact, confined compression), written as result directories (docs/result-format.md), and the
 observed convergence orders computed from a mesh sweep (verification/fe_analytic.py,
 verification/analyses.py)."""
 

@@ -15,12 +15,12 @@ import verification.runner as runner
 import verification.sides as sides
 from edem.cli import main
 from verification.campaigns import SCENES_DIR, Campaign, Case, Expect, get_campaign
-from verification.metrics import SPEC8_METRICS
+from verification.metrics import COMPARISON_METRICS
 from verification.runner import case_key, run_campaign
 from verification.verdicts import CLOSED_FORM, MODEL_BAND, Basis
 
-EXACT = {m: Basis(CLOSED_FORM, "test: exact") for m in SPEC8_METRICS}
-BAND = {m: Basis(MODEL_BAND, "test: a declared band") for m in SPEC8_METRICS}
+EXACT = {m: Basis(CLOSED_FORM, "test: exact") for m in COMPARISON_METRICS}
+BAND = {m: Basis(MODEL_BAND, "test: a declared band") for m in COMPARISON_METRICS}
 
 
 def tiny_campaign(**changes) -> Campaign:
@@ -45,7 +45,7 @@ def test_campaign_end_to_end_then_cache_hit(tmp_path):
 
     data = json.loads((out / "metrics.json").read_text())
     plates = next(r for r in data["cases"] if r["name"] == "flat-plates-dem")
-    assert set(plates["metrics"]) == set(SPEC8_METRICS)
+    assert set(plates["metrics"]) == set(COMPARISON_METRICS)
     assert all(v["verdict"] == "met" and v["tolerance"] == 1e-9 and v["kind"] == "closed-form" and v["reason"] for v in plates["verdicts"].values())
     assert plates["wall_time_s"] > 0 and [s["side"] for s in plates["sides"]] == ["dem", "closed-form:flat-plates"]
     for rel in plates["result_dirs"]:
@@ -82,7 +82,7 @@ def test_cache_counts_executions_and_tolerance_changes_need_no_rerun(tmp_path, m
     run_campaign(tiny_campaign(), out, jobs=1, report=False)
     assert sorted(calls) == ["flat-plates-dem", "pull-apart"]
     calls.clear()
-    strict = tiny_campaign(tolerance={**{m: 1e-9 for m in SPEC8_METRICS}, "displacement_rel_error": 0.0, "pressure_l2_rel_error": -1.0})
+    strict = tiny_campaign(tolerance={**{m: 1e-9 for m in COMPARISON_METRICS}, "displacement_rel_error": 0.0, "pressure_l2_rel_error": -1.0})
     judged = run_campaign(strict, out, jobs=1, report=False)
     assert calls == []  # the tolerance is judged, not hashed
     row = next(r for r in judged["cases"] if r["name"] == "flat-plates-dem")
@@ -123,7 +123,7 @@ def test_source_digest_covers_the_solver_package():
 
 def test_fe_side_is_reported_unavailable_not_faked(tmp_path, monkeypatch):
     monkeypatch.setattr(sides, "fe_availability", lambda *entry_point: "FE reference not available: test")
-    fe_case = Case("vs-fe", "DEM against the FE slab", "flat-plates.toml", ("dem", "fe-slab"), SPEC8_METRICS, {m: 0.1 for m in SPEC8_METRICS}, basis=BAND)
+    fe_case = Case("vs-fe", "DEM against the FE slab", "flat-plates.toml", ("dem", "fe-slab"), COMPARISON_METRICS, {m: 0.1 for m in COMPARISON_METRICS}, basis=BAND)
     summary = run_campaign(Campaign("fe", "FE", (fe_case,)), tmp_path / "fe", jobs=1, report=False)
     row = summary["cases"][0]
     assert row["status"] == "unavailable" and summary["exit_status"] == 0
@@ -171,7 +171,7 @@ def test_fe_side_calls_run_scene_and_compares_nodal_pressure(tmp_path, monkeypat
     write_results(run(load_scene(SCENES_DIR / "flat-plates.toml"), "dem"), tmp_path / "dem-copy")
     monkeypatch.setattr(fem_reference, "run_scene", stand_in, raising=False)
     monkeypatch.setattr(sides, "fe_availability", lambda: None)
-    case = Case("vs-fe", "DEM against FE", "flat-plates.toml", ("dem", "fe-layer"), SPEC8_METRICS, {m: 1e-9 for m in SPEC8_METRICS}, options={"mesh_size_mm": 0.5, "degree": 2}, basis=EXACT)
+    case = Case("vs-fe", "DEM against FE", "flat-plates.toml", ("dem", "fe-layer"), COMPARISON_METRICS, {m: 1e-9 for m in COMPARISON_METRICS}, options={"mesh_size_mm": 0.5, "degree": 2}, basis=EXACT)
     summary = run_campaign(Campaign("fe", "FE", (case,)), tmp_path / "fe", jobs=1, report=False)
     assert calls == {"model": "layer", "mesh_size_mm": 0.5, "degree": 2}
     row = summary["cases"][0]
@@ -191,7 +191,7 @@ def test_a_crashing_side_is_an_error_with_exit_status_1(tmp_path, monkeypatch):
 
 
 def test_cli_verify_exit_status_follows_the_verdicts(tmp_path, monkeypatch, capsys):
-    tiny, failing = tiny_campaign(), tiny_campaign(tolerance={m: -1.0 for m in SPEC8_METRICS})
+    tiny, failing = tiny_campaign(), tiny_campaign(tolerance={m: -1.0 for m in COMPARISON_METRICS})
     monkeypatch.setattr("verification.campaigns.campaigns", lambda: {"tiny": tiny, "tiny-failing": failing})
     assert main(["verify", "tiny", "--out", str(tmp_path / "ok"), "--jobs", "1"]) == 0
     out = capsys.readouterr().out
@@ -215,7 +215,7 @@ def test_cli_compare_prints_the_table_and_writes_metrics_json(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "peak pressure (MPa)" in out and "pressure field (L2)" in out
     data = json.loads((tmp_path / "cmp" / "metrics.json").read_text())
-    assert set(data["metrics"]) == set(SPEC8_METRICS) and data["metrics"]["displacement_rel_error"] < 1e-3
+    assert set(data["metrics"]) == set(COMPARISON_METRICS) and data["metrics"]["displacement_rel_error"] < 1e-3
     assert main(["compare", str(tmp_path / "nothing"), str(b)]) == 2
 
 

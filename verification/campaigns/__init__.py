@@ -1,4 +1,4 @@
-"""The campaign registry (SPEC 1, 8): one module per campaign, registered here by hand.
+"""The campaign registry (docs/campaigns.md, docs/method.md#7-comparison-metrics): one module per campaign, registered here by hand.
 
 Each module of this package defines ``campaign()``, returning its :class:`Campaign`. To add a
 campaign: write ``verification/campaigns/<name>.py`` with ``campaign()`` and add the module to

@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 from verification.campaign_model import Analysis, Campaign, Case, Figure, uniform_basis
-from verification.metrics import SPEC8_METRICS
+from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import INVARIANT, SANITY, Basis
 
 #: wall time with 2 jobs on 2 cores, nothing cached (measured: 646 s, 2 jobs on a shared 2-core machine (load 6-8))
@@ -32,9 +32,9 @@ VALUE_METRICS = (
     "b_displacement_norm_mm",
 )
 CHECK_METRICS = ("force_residual_rel", "non_finite_outputs")
-FE_COMPARE_METRICS = SPEC8_METRICS + VALUE_METRICS + CHECK_METRICS
+FE_COMPARE_METRICS = COMPARISON_METRICS + VALUE_METRICS + CHECK_METRICS
 #: generous: a relative error beyond 10 (1000 %) or a NaN means something is broken, not a model gap
-FE_COMPARE_TOL = {**{m: 10.0 for m in SPEC8_METRICS}, "force_residual_rel": 1e-6, "non_finite_outputs": 0.0}
+FE_COMPARE_TOL = {**{m: 10.0 for m in COMPARISON_METRICS}, "force_residual_rel": 1e-6, "non_finite_outputs": 0.0}
 #: why: these bounds catch a broken run only, so such a case "ran" (its errors are reported, not judged)
 SANITY_BASIS = uniform_basis(SANITY, "1000 %: catches a broken run (a wrong load, a lost contact), not a model gap; the errors are reported, not judged")
 FE_COMPARE_BASIS = {**SANITY_BASIS, "force_residual_rel": Basis(INVARIANT, "equilibrium of the discrete side, 1e-6 of the load")}

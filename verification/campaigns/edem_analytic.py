@@ -8,7 +8,7 @@ import math
 from verification.campaign_model import Campaign, Case, Figure, uniform_basis, uniform_tolerance
 from verification.campaign_model import ramp_overrides
 from verification.closed_forms import confined_modulus_mpa, log_law_edem_max_error
-from verification.metrics import SPEC8_METRICS
+from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import CLOSED_FORM, MODEL_BAND, Basis
 
 #: wall time with 2 jobs on 2 cores, nothing cached (measured: 11 s for the 28 cases of the former quick job that include all 18 of these)
@@ -59,7 +59,7 @@ def _analytic_cases() -> list[Case]:
             "DEM, parallel plates 2 mm apart, 400 N: p = F/A, d = F h/(E' A)",
             PLATES,
             ("dem", "closed-form:flat-plates"),
-            SPEC8_METRICS,
+            COMPARISON_METRICS,
             uniform_tolerance(ROUND_OFF),
             basis=EXACT_BED,
         ),
@@ -68,7 +68,7 @@ def _analytic_cases() -> list[Case]:
             "EDEM (one step from the initial pose) on the same plates: same closed form",
             PLATES,
             ("edem", "closed-form:flat-plates"),
-            SPEC8_METRICS,
+            COMPARISON_METRICS,
             uniform_tolerance(ROUND_OFF),
             basis=EXACT_BED,
         ),
@@ -77,7 +77,7 @@ def _analytic_cases() -> list[Case]:
             "DEM over 100, 200, 400 N (each time point static): p = F/A, d = F h/(E' A) per point",
             PLATES,
             ("dem", "closed-form:flat-plates"),
-            SPEC8_METRICS,
+            COMPARISON_METRICS,
             uniform_tolerance(ROUND_OFF),
             overrides={"load.time_s": [0.0, 1.0, 2.0], "load.force_n": [[0.0, 0.0, 100.0], [0.0, 0.0, 200.0], [0.0, 0.0, 400.0]]},
             basis=EXACT_BED,
@@ -87,7 +87,7 @@ def _analytic_cases() -> list[Case]:
             "DEM, plate under a plane tilted 3 deg, rotations fixed: p(x) = E' d / h(x) (midpoint-rule O(dx^2) from the integral)",
             "tilted-plane.toml",
             ("dem", "closed-form:tilted-plane"),
-            SPEC8_METRICS,
+            COMPARISON_METRICS,
             uniform_tolerance(TILT_TOL),
             basis=uniform_basis(CLOSED_FORM, f"centroid quadrature of 1/h(x), second order: dx^2 tan^2(a) / (9 h_min^2) = {TILT_TOL:.2g}"),
         ),
@@ -97,7 +97,7 @@ def _analytic_cases() -> list[Case]:
             "L2 dominated by the faceted candidate boundary",
             "cylinder-plane.toml",
             ("dem", "closed-form:cylinder-plane"),
-            SPEC8_METRICS,
+            COMPARISON_METRICS,
             cylinder_tolerance(0.94)[0],
             params={"mesh_size_mm": 0.94},
             basis=cylinder_tolerance(0.94)[1],
@@ -107,7 +107,7 @@ def _analytic_cases() -> list[Case]:
             "the same cylinder meshed at 0.47 mm: the faceting errors shrink",
             "cylinder-plane.toml",
             ("dem", "closed-form:cylinder-plane"),
-            SPEC8_METRICS,
+            COMPARISON_METRICS,
             cylinder_tolerance(0.47)[0],
             overrides={"geometry.mesh_size_mm": 0.47},
             params={"mesh_size_mm": 0.47},

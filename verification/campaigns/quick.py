@@ -18,7 +18,7 @@ from verification.campaigns import cylinder_plane, subject
 from verification.campaigns.edem_analytic import _analytic_cases, _analytic_figures
 from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, _fe_analytic_cases
 from verification.campaigns.stability import _stability_cases
-from verification.metrics import SPEC8_METRICS
+from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import INVARIANT, MODEL_BAND, MODEL_BAND_REASON, MODEL_BAND_REL, Basis
 
 BAND_METRICS = ("peak_pressure_rel_error", "contact_area_rel_error")
@@ -71,7 +71,7 @@ def _ideal_standing_case() -> Case:
         "ideal standing (333 N): EDEM's first step starts from the initial pose, so it equals DEM (an identity, not an accuracy check)",
         "ideal-standing",
         ("edem", "dem"),
-        SPEC8_METRICS,
+        COMPARISON_METRICS,
         uniform_tolerance(1e-9),
         maps=True,
         basis=uniform_basis(INVARIANT, "EDEM's first step from the initial pose is DEM by construction: identical to round-off"),

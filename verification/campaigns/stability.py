@@ -131,7 +131,7 @@ def _stability_cases() -> list[Case]:
             refused(r"nothing resists motion along tx|no equilibrium"),
         ),
     ]
-    # Kelvin-Voigt springs over tau x dt (SPEC 4): ramp to 300 N in 3 steps, hold 2 steps.
+    # Kelvin-Voigt springs over tau x dt (docs/method.md#4-viscoelastic-edem-thesis-chapter-6): ramp to 300 N in 3 steps, hold 2 steps.
     # exact integrator: converges everywhere, pressure = F/A at every time point (it follows the
     # load); RK2: converges for dt <= 2 tau, refused beyond.
     for tau in (1e-4, 1e-2, 1.0, 1e2, 1e4):

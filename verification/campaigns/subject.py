@@ -54,7 +54,7 @@ def campaign() -> Campaign:
         "Standing and toe-off on the subject-like ankle: DEM and EDEM (no ligaments) vs the FE slab (P2, 1.0 mm); toe-off with ty fixed on both sides.",
         tuple(cases),
         (),
-        (Analysis("subject-metrics", "Subject-like ankle: discrete vs FE slab (SPEC 8 metrics). Reported, no verdict", "table", names, {"columns": columns}),),
+        (Analysis("subject-metrics", "Subject-like ankle: discrete vs FE slab (comparison metrics (docs/method.md#7-comparison-metrics)). Reported, no verdict", "table", names, {"columns": columns}),),
     )
 
 
