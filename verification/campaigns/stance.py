@@ -14,7 +14,7 @@ from verification.campaign_model import Analysis, Campaign, Case, Expect, Figure
 from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import INVARIANT, MODEL_BAND_REL, Basis
 
-#: wall time with 2 jobs on 2 cores, nothing cached (measured: about 20 min (two 65-point stances and ten FE instants))
+#: wall time with 2 jobs on 2 cores, nothing cached (reported by a user on this machine: about 20 min, two 65-point stances and ten FE instants)
 EXPECTED_TIME_S = 1200.0
 
 
