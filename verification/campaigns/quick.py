@@ -14,10 +14,11 @@ from __future__ import annotations
 import dataclasses
 
 from verification.campaign_model import Analysis, Campaign, Case, Figure, uniform_basis, uniform_tolerance
-from verification.campaigns import cylinder_plane, subject
+from verification.campaigns.cylinder_plane import campaign as cylinder_plane_campaign
 from verification.campaigns.edem_analytic import _analytic_cases, _analytic_figures
 from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, _fe_analytic_cases
 from verification.campaigns.stability import _stability_cases
+from verification.campaigns.subject import campaign as subject_campaign
 from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import INVARIANT, MODEL_BAND, MODEL_BAND_REASON, MODEL_BAND_REL, Basis
 
@@ -50,7 +51,7 @@ def _banded(case: Case) -> Case:
 def trust_cases() -> list[Case]:
     """DEM vs the FE reference: the ideal ankle over Poisson's ratio, the layer over thickness and
     at a low load, the subject-like ankle standing."""
-    cp = {c.name: c for c in cylinder_plane.campaign().cases}
+    cp = {c.name: c for c in cylinder_plane_campaign().cases}
     names = [f"slab-F333-nu{nu:g}" for nu in sorted(TRUST_NUS, reverse=True)]  # the slowest FE (highest nu) starts first
     names += [f"layer-F333-nu0.42-t{t:g}" for t in TRUST_THICKNESS_MM] + [f"layer-F{TRUST_LOW_LOAD_N:g}-nu0.42-t2"]
     cases = []
@@ -59,7 +60,7 @@ def trust_cases() -> list[Case]:
         p1 = n.startswith("slab") and case.params["poissons_ratio"] <= 0.42
         description = case.description.replace("FE P2 at 1.0 mm", "FE P1 at 1.0 mm") if p1 else case.description
         cases.append(_banded(dataclasses.replace(case, maps=n == "slab-F333-nu0.42", options=dict(FE_P1) if p1 else case.options, description=description)))
-    sub = {c.name: c for c in subject.campaign().cases}
+    sub = {c.name: c for c in subject_campaign().cases}
     standing = sub["subject-standing-dem-vs-fe"]
     cases.append(_banded(dataclasses.replace(standing, options=dict(FE_P1), description=standing.description.replace("(P2, 1.0 mm)", "(P1, 1.0 mm)"))))
     return cases
