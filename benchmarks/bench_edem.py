@@ -15,11 +15,10 @@ import time
 
 import numpy as np
 
-from edem.loads import JointKinematics, LoadSeries
+from edem.loads import JointKinematics
 from edem.raycast import RayCaster
 from edem.scene import Scene
 from edem.solver import run
-from edem.springs import Cartilage
 from geometries.builders import build_geometry
 
 
@@ -28,18 +27,11 @@ def stance_like_scene(mesh_size_mm: float, n_steps: int) -> Scene:
     t = np.linspace(0.0, 0.64, n_steps)
     s = t / t[-1]
     force = np.column_stack([60.0 * s, -40.0 * np.sin(np.pi * s), 50.0 + 4140.0 * s])
-    areas = geometry.mobile.areas_mm2
-    return Scene(
-        name=f"stance-like-{geometry.mobile.n_triangles}",
-        description="benchmark",
-        source="<benchmark>",
-        mobile=geometry.mobile,
-        fixed=geometry.fixed,
-        reference_point_mm=(geometry.mobile.centroids_mm * areas[:, None]).sum(axis=0) / areas.sum(),
-        cartilage=Cartilage(10.35, 0.42, "threshold", 3.5),
-        load=LoadSeries(t, force, np.zeros_like(force), frame="fixed"),
+    return Scene.from_arrays(
+        geometry.mobile.vertices_mm, geometry.mobile.triangles, geometry.fixed.vertices_mm, geometry.fixed.triangles, force,
+        youngs_modulus_mpa=10.35, poissons_ratio=0.42, time_s=t, load_frame="fixed", fixed_dofs=("tx", "rx", "ry", "rz"),
         kinematics=JointKinematics(geometry.ankle_axis_point_mm, geometry.ankle_axis_direction, np.radians(16.31) * s),
-        fixed_dofs=("tx", "rx", "ry", "rz"),
+        name=f"stance-like-{geometry.mobile.n_triangles}", description="benchmark",
     )
 
 

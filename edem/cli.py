@@ -141,7 +141,11 @@ def _scenes(args: argparse.Namespace) -> int:
 
     names = builtin_scene_names()
     if args.render:
-        return _render(names, Path(args.render))
+        from reports.scene_renders import render_scene_pngs
+
+        for path in render_scene_pngs(names, args.render):
+            print(path)
+        return 0
     if args.write:
         target = Path(args.write)
         target.mkdir(parents=True, exist_ok=True)
@@ -155,42 +159,6 @@ def _scenes(args: argparse.Namespace) -> int:
         data = tomllib.loads(resolve_scene_path(name).read_text(encoding="utf-8"))
         description = " ".join(data.get("scene", {}).get("description", "").split())  # the whole description, rewrapped
         print(textwrap.fill(f"{name:24s} {description}", width=110, subsequent_indent=" " * 25, break_on_hyphens=False, break_long_words=False) + "\n")
-    return 0
-
-
-def _render(names: list[str], target: Path) -> int:
-    """PNG of each built-in scene's geometry, springs coloured by length at the first time point."""
-    import dataclasses
-    import tomllib
-
-    import numpy as np
-
-    from edem.raycast import RayCaster
-    from edem.scene import load_scene, resolve_scene_path
-    from edem.solver import fixed_placement
-    from geometries.builders import build_geometry
-    from geometries.render import render_geometry_png
-
-    target.mkdir(parents=True, exist_ok=True)
-    for name in names:
-        table = tomllib.loads(resolve_scene_path(name).read_text(encoding="utf-8"))["geometry"]
-        built = build_geometry(table["builtin"], {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm")})
-        scene = load_scene(name)
-        rotation, translation = fixed_placement(scene, 0).affine()
-        hits = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles).cast(
-            scene.mobile.centroids_mm, scene.mobile.unit_normals, scene.cartilage.max_spring_length_mm, rotation, translation
-        )
-        # Draw the tibia (and the ligaments' tibial ends) where the first time point puts them.
-        placed = dataclasses.replace(
-            built,
-            fixed=dataclasses.replace(built.fixed, vertices_mm=built.fixed.vertices_mm @ rotation.T + translation, _cache={}),
-            ligaments=tuple(dataclasses.replace(lig, fixed_point_mm=rotation @ lig.fixed_point_mm + translation) for lig in built.ligaments),
-        )
-        path = render_geometry_png(
-            placed, target / f"{name}.png", np.where(np.isfinite(hits.spring_length_mm), hits.spring_length_mm, np.nan),
-            scene.cartilage.max_spring_length_mm, title=name,
-        )
-        print(path)
     return 0
 
 
@@ -239,11 +207,29 @@ def _verify(args: argparse.Namespace) -> int:
     return summary["exit_status"]
 
 
+def _check(args: argparse.Namespace) -> int:
+    """`edem check`: the regression gate (README.md#command-line)."""
+    from verification.check import run_check
+
+    return run_check(refresh=args.refresh, references=args.references, with_fe=not args.no_fe)
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: the package version and the git revision, computed only when asked (keeps --help fast)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings=option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from edem.resultdir import software_version, source_revision
+
+        print(f"edem {software_version()} (source {source_revision()})")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="edem", description="Discrete-element (DEM/EDEM) joint contact solver.")
-    from edem.resultdir import software_version, source_revision
-
-    parser.add_argument("--version", action="version", version=f"edem {software_version()} (source {source_revision()})")
+    parser.add_argument("--version", action=_VersionAction, help="print the version and the source revision, then exit")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="solve a scene with the discrete method")
     p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
@@ -255,7 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_run)
     p = sub.add_parser("fe", help="solve the FE reference (dolfinx) of a scene")
     p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
-    p.add_argument("--model", choices=("slab", "layer"), help="slab (twin of the threshold law) or layer (of the gap laws); overrides [fe] model")
+    p.add_argument("--model", help="an FE model (fem_reference.models): slab (twin of the threshold law) or layer (of the gap laws); overrides [fe] model")
     p.add_argument("--out", help="result directory (default results/<scene>-fe-<model>)")
     p.add_argument("--mesh-size", type=float, metavar="MM", help="element size in mm; overrides [fe] mesh_size_mm")
     p.add_argument("--degree", type=int, choices=(1, 2), help="element degree (2: P2, or Taylor-Hood at nu >= 0.49); overrides [fe] degree")
@@ -287,9 +273,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, help="worker processes (default: the CPU count; 1 runs in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on a Dask distributed cluster, e.g. tcp://host:8786")
     p.set_defaults(func=_verify)
-    from verification.check import add_parser as add_check_parser  # `edem check`: regression gate (docs/campaigns.md#verdicts)
-
-    add_check_parser(sub)
+    p = sub.add_parser("check", help="regression gate: rerun EDEM on stored references, exit 1 with a table when something drifted")
+    p.add_argument("--refresh", action="store_true", help="recompute the stored references (FE values too when the FE reference is available)")
+    p.add_argument("--references", metavar="DIR", help="reference directory (default verification/references/)")
+    p.add_argument("--no-fe", action="store_true", help="with --refresh: store EDEM baselines only")
+    p.set_defaults(func=_check)
     return parser
 
 

@@ -24,7 +24,6 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from edem.errors import InputError
 from edem.tables import SceneTable, is_number
@@ -437,6 +436,9 @@ def resample_pchip(time_s: np.ndarray, values: np.ndarray, new_time_s: np.ndarra
         raise ValueError(f"values must have {t.size} rows, got shape {v.shape}")
     if new_t.size and (new_t.min() < t[0] or new_t.max() > t[-1]):
         raise ValueError(f"new_time_s must lie within [{t[0]}, {t[-1]}]")
+    # scipy.interpolate takes over a second to import: only scenes with a PCHIP history pay it.
+    from scipy.interpolate import PchipInterpolator
+
     return PchipInterpolator(t, v, axis=0, extrapolate=False)(new_t)
 
 

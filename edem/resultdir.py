@@ -49,6 +49,7 @@ files are written by :func:`write_result_dir` from new fields of :class:`Frame` 
 from __future__ import annotations
 
 import csv
+import html
 import importlib.metadata
 import json
 import math
@@ -61,12 +62,10 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
 from geometries.errors import InputError, SolverError
-from geometries.mesh_io import write_vtp
 
 SUMMARY_FILE = "summary.json"
 TIMESERIES_FILE = "timeseries.csv"
@@ -241,7 +240,7 @@ def check_finite_summary(summary: Mapping[str, Any], file: str | Path = SUMMARY_
 def write_pvd(path: Path, entries: list[tuple[float, str]]) -> None:
     """A ParaView collection file listing one dataset per time value."""
     lines = ['<?xml version="1.0"?>', '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">', "  <Collection>"]
-    lines += [f'    <DataSet timestep="{t!r}" part="0" file={quoteattr(name)}/>' for t, name in entries]
+    lines += [f'    <DataSet timestep="{t!r}" part="0" file="{html.escape(name, quote=True)}"/>' for t, name in entries]
     lines += ["  </Collection>", "</VTKFile>", ""]
     Path(path).write_text("\n".join(lines), encoding="utf-8")
 
@@ -254,6 +253,8 @@ def write_surface_frame(
     cell_data: dict[str, np.ndarray] | None = None,
 ) -> Path:
     """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only)."""
+    from geometries.mesh_io import write_vtp  # VTK (and the mesh module) only once a .vtp is written
+
     write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data)
     return Path(path)
 

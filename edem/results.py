@@ -64,10 +64,30 @@ def pressure_frame(run: RunResult, s: StepResult) -> Frame:
 
 
 def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int] | None = None, note: str | None = None) -> Path:
-    """Write the result directory of a DEM/EDEM run; returns the directory.
+    """Write the result directory of a DEM/EDEM run (layout: :mod:`edem.resultdir`).
 
-    ``frame_steps``: positions in ``run.steps`` whose pressure maps are written (default: all).
-    ``note``: recorded as the summary's "frames" entry when only some maps are written.
+    Parameters
+    ----------
+    run : RunResult
+        From :func:`edem.solver.solve`.
+    out_dir : str or Path
+        The directory (created if needed): summary.json, timeseries.csv, pressure.pvd with
+        one pressure_NNNN.vtp per time point (the mobile surface at its pose, cell data
+        ``pressure_mpa`` in MPa, ``spring_length_mm``, ``in_contact``, ``ray_hit``), fixed.vtp.
+    frame_steps : list of int, optional
+        Positions in ``run.steps`` whose pressure maps are written (default: all).
+    note : str, optional
+        Recorded as the summary's "frames" entry when only some maps are written.
+
+    Returns
+    -------
+    Path
+        ``out_dir``.
+
+    Raises
+    ------
+    SolverError
+        When a value to write is not finite (naming the file and key).
     """
     data = summary(run)
     if note is not None:

@@ -21,7 +21,9 @@ from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, loa
 from edem.mechanics import DOF_NAMES
 from edem.springs import Cartilage, Ligament
 from edem.tables import SceneTable
+from geometries.builders import build_geometry
 from geometries.surface import TriangleSurface
+
 
 SECTIONS = {
     "scene": {"name", "description"},
@@ -91,6 +93,130 @@ class Scene:
     def spring_area_mm2(self) -> np.ndarray:
         return self.mobile.areas_mm2[self.spring_triangle]
 
+    @classmethod
+    def from_arrays(
+        cls,
+        mobile_vertices_mm: np.ndarray,
+        mobile_triangles: np.ndarray,
+        fixed_vertices_mm: np.ndarray,
+        fixed_triangles: np.ndarray,
+        force_n: np.ndarray,
+        *,
+        youngs_modulus_mpa: float,
+        poissons_ratio: float,
+        time_s: np.ndarray | None = None,
+        moment_nmm: np.ndarray | None = None,
+        load_frame: str = "global",
+        law: str = "threshold",
+        max_spring_length_mm: float | None = None,
+        thickness_mm: float | None = None,
+        shear_modulus_mpa: float = 0.0,
+        fixed_dofs: tuple[str, ...] = (),
+        reference_point_mm: np.ndarray | None = None,
+        kinematics: JointKinematics | None = None,
+        ligaments: tuple[Ligament, ...] = (),
+        viscoelastic: Viscoelastic | None = None,
+        method: str = "edem",
+        name: str = "scene",
+        description: str = "",
+    ) -> Scene:
+        """A scene from meshes and loads already in memory (no TOML file, no mesh cleaning).
+
+        Parameters
+        ----------
+        mobile_vertices_mm, fixed_vertices_mm : (n_vertices, 3) float, mm
+            Vertices of the mobile body M (it moves; its triangles carry the springs) and of the
+            fixed body F.
+        mobile_triangles, fixed_triangles : (n_triangles, 3) int
+            Vertex indices; the right-hand-rule normals of each body point towards the other.
+        force_n : (3,) or (n_times, 3) float, N
+            Load on M per time point.
+        youngs_modulus_mpa, poissons_ratio : float
+            The cartilage (MPa; -1 < nu < 0.5).
+        time_s : (n_times,) float, s, optional
+            Strictly increasing times; default 0, 1, 2, ...
+        moment_nmm : (3,) or (n_times, 3) float, N mm, optional
+            Moment about the reference point; default zero.
+        load_frame : {"global", "fixed"}
+            Axes of the load components: global, or the fixed body's (they turn with
+            ``kinematics``), as ``[load] frame``.
+        law : str
+            A contact law of :data:`edem.laws.LAWS` (``threshold``, ``gap``, ``gap-log``).
+        max_spring_length_mm : float, optional
+            h_max, the ray window; default the law's (3.5 mm, or twice the thickness).
+        thickness_mm : float, optional
+            Undeformed combined cartilage thickness (the gap laws need it).
+        shear_modulus_mpa : float
+            Shear spring modulus (0: frictionless).
+        fixed_dofs : tuple of str
+            Fixed DOFs of M among tx, ty, tz, rx, ry, rz.
+        reference_point_mm : (3,) float, optional
+            G, the point M's rotations and moments refer to; default the area-weighted centroid
+            of M's triangles.
+        kinematics, ligaments, viscoelastic, method, name, description
+            As the scene file's ``[kinematics]``, ``[[ligaments]]``, ``[viscoelastic]``,
+            ``[solver] method`` and ``[scene]``.
+
+        Returns
+        -------
+        Scene
+
+        Raises
+        ------
+        InputError
+            A value or shape that does not fit, naming the argument.
+        """
+        source = "<arrays>"
+
+        def surface(vertices: np.ndarray, triangles: np.ndarray, what: str) -> TriangleSurface:
+            v = np.asarray(vertices, dtype=np.float64)
+            t = np.asarray(triangles)
+            if v.ndim != 2 or v.shape[1] != 3 or not np.isfinite(v).all():
+                raise InputError(f"shape {v.shape} or non-finite values", file=source, key=f"{what}_vertices_mm", expected="(n, 3) finite floats in mm")
+            if t.ndim != 2 or t.shape[1] != 3 or t.shape[0] == 0 or not np.issubdtype(t.dtype, np.integer) or t.min() < 0 or t.max() >= len(v):
+                raise InputError(f"shape {t.shape} or indices outside the {len(v)} vertices", file=source, key=f"{what}_triangles", expected="(m, 3) integer vertex indices")
+            return TriangleSurface(v, t.astype(np.int64), name=what, source=source)
+
+        mobile = surface(mobile_vertices_mm, mobile_triangles, "mobile")
+        fixed = surface(fixed_vertices_mm, fixed_triangles, "fixed")
+        if law not in LAWS:
+            raise InputError(f"unknown contact law {law!r}", file=source, key="law", expected="one of " + ", ".join(LAWS))
+        spring_law = LAWS[law]
+        if spring_law.needs_thickness and thickness_mm is None:
+            raise InputError(f"the '{law}' law needs the undeformed thickness", file=source, key="thickness_mm", expected="a thickness in mm > 0")
+        window = spring_law.default_window_mm(thickness_mm) if max_spring_length_mm is None else float(max_spring_length_mm)
+        if not -1.0 < poissons_ratio < 0.5 or youngs_modulus_mpa <= 0 or window <= 0:
+            raise InputError("the cartilage is out of range", file=source, key="youngs_modulus_mpa, poissons_ratio, max_spring_length_mm",
+                             expected="E > 0, -1 < nu < 0.5, h_max > 0")
+        unknown = [d for d in fixed_dofs if d not in DOF_NAMES]
+        if unknown:
+            raise InputError(f"unknown DOF(s) {', '.join(unknown)}", file=source, key="fixed_dofs", expected="a subset of " + ", ".join(DOF_NAMES))
+        force = np.atleast_2d(np.asarray(force_n, dtype=np.float64))
+        times = np.arange(len(force), dtype=np.float64) if time_s is None else np.asarray(time_s, dtype=np.float64)
+        moment = np.zeros_like(force) if moment_nmm is None else np.atleast_2d(np.asarray(moment_nmm, dtype=np.float64))
+        try:
+            load = LoadSeries(times, force, moment, frame=load_frame)
+        except ValueError as exc:
+            raise InputError(str(exc), file=source, key="force_n, moment_nmm, time_s, load_frame", expected="one finite row of 3 per time point") from None
+        if reference_point_mm is None:
+            areas = mobile.areas_mm2
+            reference_point_mm = (mobile.centroids_mm * areas[:, None]).sum(axis=0) / areas.sum()
+        return cls(
+            name=name,
+            description=description,
+            source=source,
+            mobile=mobile,
+            fixed=fixed,
+            reference_point_mm=np.asarray(reference_point_mm, dtype=np.float64),
+            cartilage=Cartilage(float(youngs_modulus_mpa), float(poissons_ratio), law, window, thickness_mm, float(shear_modulus_mpa)),
+            load=load,
+            kinematics=kinematics,
+            fixed_dofs=tuple(fixed_dofs),
+            ligaments=tuple(ligaments),
+            viscoelastic=viscoelastic,
+            method=method,
+        )
+
 
 def _parse_toml(path: Path) -> dict[str, Any]:
     try:
@@ -147,7 +273,24 @@ def apply_overrides(data: dict[str, Any], overrides: dict[str, Any]) -> None:
 def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
     """Read, validate and build a scene (geometry, springs, loads) from a TOML file or built-in name.
 
-    ``overrides`` maps dotted keys ('cartilage.poissons_ratio') to values set before validation.
+    Parameters
+    ----------
+    scene : str or Path
+        A scene TOML file (layout in the README), or the name of a built-in scene
+        (:func:`builtin_scene_names`).
+    overrides : dict, optional
+        Dotted keys ('cartilage.poissons_ratio') to values, set before validation (as ``--set``).
+
+    Returns
+    -------
+    Scene
+        Surfaces in mm (one spring per non-degenerate mobile triangle), the cartilage, the load
+        history (n_times,) and the optional kinematics, constraints, ligaments, viscoelasticity.
+
+    Raises
+    ------
+    InputError
+        Naming the file, the key and what was expected.
     """
     path = resolve_scene_path(scene)
     data = _parse_toml(path)
@@ -280,7 +423,6 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if "builtin" in table:
-            from geometries.builders import build_geometry
             from geometries.mesh_io import check_pair_distance
 
             if not isinstance(table["builtin"], str):

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from edem.errors import SolverError
+from edem.errors import InputError, SolverError
 from edem.laws import ElementLaw, stack_elements
 from edem.mechanics import (
     DOF_NAMES,
@@ -25,6 +25,10 @@ from edem.raycast import RayCaster
 from edem.scene import Scene, Viscoelastic
 from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, shear_terms, spring_geometry
 from edem.viscoelastic import check_rk2_stability, integrator_weights
+
+
+#: the discrete methods: DEM (static, from M's initial pose at every time point) and EDEM (docs/method.md#2-edem-the-time-dependent-incremental-method)
+METHODS = ("edem", "dem")
 
 
 @dataclass
@@ -144,8 +148,8 @@ def run(
     then the forces are committed and M is moved by u. Springs that left contact keep no force.
     """
     method = method or scene.method
-    if method not in ("dem", "edem"):
-        raise ValueError(f"unknown method {method!r}")
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}", key="method", expected=" or ".join(METHODS))
     started = time.perf_counter()
     caster = caster or RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles)
     cartilage = scene.cartilage
@@ -260,6 +264,36 @@ def run(
         if progress is not None:
             progress(k)
     return RunResult(scene, method, steps, time.perf_counter() - started, warnings, seconds)
+
+
+def solve(scene: Scene, method: str | None = None, *, progress: Callable[[int], None] | None = None) -> RunResult:
+    """Solve every time point of a scene with the discrete method.
+
+    Parameters
+    ----------
+    scene : Scene
+        From :func:`edem.scene.load_scene` or :meth:`edem.scene.Scene.from_arrays`.
+    method : {"edem", "dem"}, optional
+        EDEM (incremental, with the push-back of the springs' stored forces) or DEM (static at
+        every time point); default the scene's ``method``.
+    progress : callable, optional
+        Called with the time point index after each solved time point.
+
+    Returns
+    -------
+    RunResult
+        ``steps[k]`` per time point: ``displacement_mm`` (3,) and ``rotation_rad`` (3,) of M,
+        ``pressure_mpa`` (n_springs,), ``in_contact`` (n_springs,), ``contact_area_mm2``,
+        ``peak_pressure_mpa``, residuals; ``warnings``; wall time.
+
+    Raises
+    ------
+    InputError
+        An unknown method.
+    SolverError
+        A time point without equilibrium (the message names it and says why).
+    """
+    return run(scene, method, progress=progress)
 
 
 def viscoelastic_increment(

@@ -19,7 +19,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from edem.errors import InputError
+
 
 RK2_STABILITY_LIMIT = 2.0  # dt / tau
 
@@ -41,8 +44,6 @@ def integrator_weights(dt_s: float, relaxation_time_s: float, integrator: str) -
 
 def check_rk2_stability(time_s, relaxation_time_s: float, allow_unstable: bool, file: str | None = None) -> list[str]:
     """Refuse RK2 beyond dt > 2 tau (or warn when the scene insists), docs/method.md#4-viscoelastic-edem-thesis-chapter-6."""
-    import numpy as np
-
     dt = float(np.max(np.diff(time_s), initial=0.0))
     if dt <= RK2_STABILITY_LIMIT * relaxation_time_s:
         return []

@@ -1,6 +1,7 @@
 """FEniCSx (dolfinx) reference models: linear-elastic frictionless contact with force control.
 
-Importing this package does not import dolfinx; the solvers import the FE stack on first use.
+Importing this package does not import dolfinx; the solvers import the FE stack on first use
+(:func:`fem_reference.contact._fe_modules`).
 
 * :mod:`fem_reference.problem`: :class:`FEContactProblem` (mesh source, material, element,
   obstacle, load, free translations, rollers, Nitsche and solver options) and
@@ -19,6 +20,7 @@ Importing this package does not import dolfinx; the solvers import the FE stack 
 Units: mm, N, MPa.
 """
 
+from .contact import solve_contact, solve_contact_vi
 from .problem import (
     FEContactProblem,
     FEContactResult,
@@ -34,21 +36,6 @@ from .problem import (
 from .scene_run import FERunResult, FEStepResult, run_scene
 from .settings import FESettings
 
-
-def solve_contact(*args, **kwargs):  # noqa: D103 - thin lazy wrapper
-    from .contact import solve_contact as _solve
-
-    return _solve(*args, **kwargs)
-
-
-def solve_contact_vi(*args, **kwargs):  # noqa: D103 - thin lazy wrapper
-    from .contact import solve_contact_vi as _solve
-
-    return _solve(*args, **kwargs)
-
-
-solve_contact.__doc__ = "Nitsche contact, force control: see fem_reference.contact.solve_contact."
-solve_contact_vi.__doc__ = "VI cross-check; see fem_reference.contact.solve_contact_vi."
 
 __all__ = [
     "FEContactProblem", "FEContactResult", "FEConvergenceError", "FEMesh", "NitscheParameters",

@@ -12,14 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from .problem import (
-    TAG_BONDED,
-    TAG_CONTACT,
-    TAG_FREE,
-    TAG_ROLLER_X,
-    TAG_ROLLER_Y,
-    FEMesh,
-)
+from fem_reference.problem import TAG_ROLLER_X, TAG_ROLLER_Y, FEMesh
+from geometries.fe_solids import BONDED_TAG, CONTACT_TAG, FREE_TAG
 
 
 def _dolfinx() -> Any:
@@ -45,20 +39,20 @@ def box_slab(comm: Any, lx: float, ly: float, thickness: float, n: tuple[int, in
     fdim = 2
     tol = 1e-9 * max(lx, ly, thickness)
     markers = [
-        (TAG_BONDED, lambda x: np.isclose(x[2], 0.0, atol=tol)),
-        (TAG_CONTACT, lambda x: np.isclose(x[2], thickness, atol=tol)),
+        (BONDED_TAG, lambda x: np.isclose(x[2], 0.0, atol=tol)),
+        (CONTACT_TAG, lambda x: np.isclose(x[2], thickness, atol=tol)),
     ]
     if quarter:
         markers += [
             (TAG_ROLLER_X, lambda x: np.isclose(x[0], 0.0, atol=tol)),
             (TAG_ROLLER_Y, lambda x: np.isclose(x[1], 0.0, atol=tol)),
-            (TAG_FREE, lambda x: np.isclose(x[0], lx, atol=tol) | np.isclose(x[1], ly, atol=tol)),
+            (FREE_TAG, lambda x: np.isclose(x[0], lx, atol=tol) | np.isclose(x[1], ly, atol=tol)),
         ]
         return FEMesh(mesh, _tag_facets(dolfinx, mesh, fdim, markers))
     markers += [
-        (TAG_ROLLER_X if confined else TAG_FREE,
+        (TAG_ROLLER_X if confined else FREE_TAG,
          lambda x: np.isclose(x[0], 0.0, atol=tol) | np.isclose(x[0], lx, atol=tol)),
-        (TAG_ROLLER_Y if confined else TAG_FREE,
+        (TAG_ROLLER_Y if confined else FREE_TAG,
          lambda x: np.isclose(x[1], 0.0, atol=tol) | np.isclose(x[1], ly, atol=tol)),
     ]
     return FEMesh(mesh, _tag_facets(dolfinx, mesh, fdim, markers))
@@ -169,16 +163,16 @@ def hertz_block(comm: Any, *, width: float, height: float, slice_thickness: floa
         vols = [tag for _, tag in g.model.getEntities(3)]
         g.model.addPhysicalGroup(3, vols, 1)
         g.model.addPhysicalGroup(2, _surfaces_in_box(g, (x0, 0, 0), (width, t, 0), eps),
-                                 TAG_BONDED)
+                                 BONDED_TAG)
         g.model.addPhysicalGroup(2, _surfaces_in_box(g, (x0, 0, height), (width, t, height), eps),
-                                 TAG_CONTACT)
+                                 CONTACT_TAG)
         sides = _surfaces_in_box(g, (width, 0, 0), (width, t, height), eps)
         if half:
             g.model.addPhysicalGroup(2, _surfaces_in_box(g, (0, 0, 0), (0, t, height), eps),
                                      TAG_ROLLER_X)
         else:
             sides += _surfaces_in_box(g, (x0, 0, 0), (x0, t, height), eps)
-        g.model.addPhysicalGroup(2, sides, TAG_FREE)
+        g.model.addPhysicalGroup(2, sides, FREE_TAG)
         g.model.addPhysicalGroup(2, _surfaces_in_box(g, (x0, 0, 0), (width, 0, height), eps)
                                  + _surfaces_in_box(g, (x0, t, 0), (width, t, height), eps),
                                  TAG_ROLLER_Y)
@@ -246,12 +240,12 @@ def cylinder_layer_quarter(comm: Any, *, bone_radius: float = 20.0, thickness: f
                 bonded.append(s)
             else:
                 free.append(s)  # end face at the arc's half-angle
-        g.model.addPhysicalGroup(2, bonded, TAG_BONDED)
-        g.model.addPhysicalGroup(2, contact, TAG_CONTACT)
+        g.model.addPhysicalGroup(2, bonded, BONDED_TAG)
+        g.model.addPhysicalGroup(2, contact, CONTACT_TAG)
         g.model.addPhysicalGroup(2, xsym, TAG_ROLLER_X)
         if ysym:
             g.model.addPhysicalGroup(2, ysym, TAG_ROLLER_Y)
-        g.model.addPhysicalGroup(2, free, TAG_FREE)
+        g.model.addPhysicalGroup(2, free, FREE_TAG)
         g.model.mesh.generate(3)
 
     return _gmsh_to_dolfinx(comm, gmsh, build)

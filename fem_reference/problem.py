@@ -23,18 +23,14 @@ from typing import Any, Literal, Sequence
 
 import numpy as np
 
-try:  # a failed solve is a SolverError for the CLI when the edem package is importable
-    from edem.errors import SolverError as _SolverErrorBase
-except Exception:  # pragma: no cover - fem_reference must stay usable on its own
-    _SolverErrorBase = RuntimeError  # type: ignore[misc,assignment]
+from geometries.errors import SolverError
+from geometries.fe_solids import BONDED_TAG, CONTACT_TAG
 
 
 ElementName = Literal["auto", "P1", "P2", "TH"]
 
-#: Facet tags used by the mesh builders of :mod:`fem_reference.meshes`.
-TAG_BONDED = 1
-TAG_CONTACT = 2
-TAG_FREE = 3
+#: Facet tags of the mesh builders of :mod:`fem_reference.meshes`: bonded, contact and free are
+#: those of :mod:`geometries.fe_solids` (BONDED_TAG, CONTACT_TAG, FREE_TAG); the rollers add:
 TAG_ROLLER_X = 4  # face with zero x-displacement (symmetry plane / roller)
 TAG_ROLLER_Y = 5
 TAG_ROLLER_Z = 6
@@ -42,7 +38,7 @@ TAG_ROLLER_Z = 6
 AXES = {"x": 0, "y": 1, "z": 2}
 
 
-class FEConvergenceError(_SolverErrorBase):
+class FEConvergenceError(SolverError):
     """The FE contact solve did not converge; carries the SNES reason and the last residual."""
 
     def __init__(self, message: str, *, reason: str = "", residual_norm: float = float("nan"),
@@ -330,8 +326,8 @@ class FEContactProblem:
     poissons_ratio: float
     obstacle: Obstacle
     force_n: Sequence[float]
-    bonded_tag: int = TAG_BONDED
-    contact_tag: int = TAG_CONTACT
+    bonded_tag: int = BONDED_TAG
+    contact_tag: int = CONTACT_TAG
     rollers: tuple[Roller, ...] = ()
     element: ElementName = "auto"
     free_dofs: Any = None

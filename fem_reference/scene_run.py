@@ -61,6 +61,7 @@ from edem.mechanics import DOF_NAMES
 from edem.raycast import RayCaster
 from edem.resultdir import Frame, SurfaceFrame, timeseries_row, write_result_dir
 from edem.solver import applied_loads, fixed_placement
+from fem_reference.contact import _fe_modules, solve_contact
 from fem_reference.models import FE_MODELS, FEGeometry, contact_surface
 from fem_reference.problem import (
     AREA_DEFINITION_NITSCHE,
@@ -276,7 +277,7 @@ def _free_modes(scene: Any, geom: FEGeometry, settings: FESettings, force: np.nd
     kt = len(trans)
     gen_load = np.concatenate([trans @ force, rots @ moment / length])
     scale = float(np.linalg.norm(np.concatenate([force, moment / length])))
-    names_t, names_r = ("tx", "ty", "tz"), ("rx", "ry", "rz")
+    names_t, names_r = DOF_NAMES[:3], DOF_NAMES[3:]
     for v in vec[:, weak].T:
         vt, vr = trans.T @ v[:kt], rots.T @ v[kt:]
         what = (f"translation {_mode_name(vt, names_t)}" if np.linalg.norm(vr) < 1e-9 else
@@ -351,8 +352,6 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     n_times = len(scene.load.time_s)
     selected = _selected_steps(steps, n_times)
     try:
-        from fem_reference.contact import _fe_modules
-
         mods = _fe_modules()
     except ImportError as exc:
         raise InputError(f"the FE reference needs dolfinx ({exc})",
@@ -382,9 +381,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         clock = time.perf_counter()
         try:
             geom = _build_geometry(scene, settings, k, caster, solid_cache)
-        except Exception as exc:
-            if type(exc).__name__ in ("SolverError", "InputError"):
-                exc.args = (f"{where}: {exc}",)
+        except (SolverError, InputError) as exc:
+            exc.args = (f"{where}: {exc}",)
             raise
         step_warnings = list(geom.warnings)
         force, moment = loads[k, :3].astype(float), loads[k, 3:].astype(float)
@@ -398,9 +396,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             continue
         try:
             trans, rots, mode_warnings = _free_modes(scene, geom, settings, force, moment)
-        except Exception as exc:
-            if type(exc).__name__ in ("SolverError", "InputError"):
-                exc.args = (f"{where}: {exc}",)
+        except (SolverError, InputError) as exc:
+            exc.args = (f"{where}: {exc}",)
             raise
         step_warnings += mode_warnings
         if np.linalg.norm(trans @ force) == 0.0 and (
@@ -440,7 +437,6 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             initial_field=previous["ut"] * ratio if warm else None,
             strain_warning=STRAIN_WARNING,
         )
-        from fem_reference.contact import solve_contact  # dolfinx: imported on first use
 
         try:
             try:
@@ -455,10 +451,10 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         except FEConvergenceError as exc:
             exc.args = (f"{where}: {exc}",)
             raise
+        except (SolverError, InputError) as exc:
+            exc.args = (f"{where}: {exc}",)
+            raise
         except Exception as exc:
-            if type(exc).__name__ in ("SolverError", "InputError"):
-                exc.args = (f"{where}: {exc}",)
-                raise
             raise SolverError(f"{where}: the FE solve failed: {type(exc).__name__}: {exc}"
                                 ) from None
         step_warnings += [w for w in res.warnings if not w.startswith("max nominal strain")]
@@ -499,8 +495,6 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
 def world_rank() -> int:
     """Rank in MPI.COMM_WORLD (0 without the FE stack)."""
     try:
-        from fem_reference.contact import _fe_modules
-
         return int(_fe_modules()["MPI"].COMM_WORLD.rank)
     except ImportError:
         return 0
@@ -586,8 +580,6 @@ def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FE
 def _area_on_mobile(res: Any, solid: Any) -> float:
     """The Nitsche contact-area integral with each contact facet weighted by (area of the
     bonded triangle below it) / (its own area): the contact area measured on M."""
-    from fem_reference.contact import _fe_modules
-
     m = _fe_modules()
     fem, ufl, dmesh = m["fem"], m["ufl"], m["dolfinx"].mesh
     s, pressure = res.fields["setup"], res.fields["pressure"]

@@ -1,12 +1,18 @@
-"""Errors the user can act on (docs/result-format.md: exit status 2 on bad input, 1 on a failed check)."""
+"""Errors the user can act on (docs/result-format.md: exit status 2 on bad input, 1 on a failed check).
+
+Defined in the lowest layer that raises them; :mod:`edem` re-exports them.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 
-class InputError(Exception):
-    """Bad input: names the file, the key and what was expected (docs/result-format.md, exit status 2)."""
+class InputError(ValueError):
+    """Bad input: names the file, the key and what was expected (docs/result-format.md, exit status 2).
+
+    A ValueError, so code that guards against bad values catches it too.
+    """
 
     def __init__(
         self,

@@ -28,7 +28,9 @@ from typing import Any
 
 import numpy as np
 
+from geometries.builders import gmsh_model
 from geometries.surface import TriangleSurface, midpoint_subdivision
+
 
 __all__ = [
     "FESolid",
@@ -85,8 +87,6 @@ class FESolid:
         """Write a gmsh MSH 4.1 file (via the gmsh API, discrete entities) with physical groups
         1 bonded, 2 contact, 3 free (surfaces) and 10 volume, named bonded/contact/free/
         cartilage."""
-        from geometries.builders import gmsh_model
-
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         with gmsh_model("fe_solid") as gmsh:

@@ -19,7 +19,9 @@ class TriangleSurface:
     triangles: np.ndarray  # (n_triangles, 3) int64
     name: str = ""
     source: str = ""  # file it was read from, for error messages
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+    # Derived arrays, computed on first use. Not an init field, so dataclasses.replace (new
+    # vertices, say) starts with an empty cache instead of sharing stale centroids and normals.
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def n_triangles(self) -> int:

@@ -18,11 +18,17 @@ from typing import Any
 
 import numpy as np
 
+from edem.resultdir import read_timeseries_csv
+from reports.maps import render_pressure_maps
+from reports.plots import plot_timeseries
+from verification.analyses import grid_of
+from verification.campaigns import instant_indices
+from verification.status import Status
 from verification.verdicts import CASE_VERDICTS, VERDICT_MEANINGS, headline
 
 #: case verdicts (verification.verdicts) and analysis statuses
-STATUS_COLOURS = {"verified": "#1b7f3a", "flagged": "#c05600", "refused as declared": "#1b5e9a", "ran": "#555555", "reported": "#555555",
-                  "failed": "#b3261e", "error": "#b3261e", "unavailable": "#8a6d00"}
+STATUS_COLOURS = {Status.VERIFIED: "#1b7f3a", Status.FLAGGED: "#c05600", Status.REFUSED_AS_DECLARED: "#1b5e9a", Status.RAN: "#555555",
+                  Status.REPORTED: "#555555", Status.FAILED: "#b3261e", Status.ERROR: "#b3261e", Status.UNAVAILABLE: "#8a6d00"}
 
 
 def _value(v: Any) -> float:
@@ -154,8 +160,6 @@ def _save(plt: Any, fig: Any, title: str, path: Path) -> None:
 
 
 def _timeseries_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], out_dir: Path, path: Path) -> None:
-    from reports.plots import plot_timeseries
-
     dirs, labels = [], []
     for name in spec["cases"]:
         row = rows.get(name)
@@ -172,8 +176,6 @@ def _timeseries_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], ou
 def _grid_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
     """kind "heatmap": the metric y[0] over the grid of params x and param2; kind "cuts": line cuts
     of it against x at the lowest, middle and highest param2, and against param2 likewise."""
-    from verification.analyses import grid_of
-
     plt = _matplotlib()
     metric = spec["y"][0]
     xs, ys, z = grid_of(rows, tuple(spec["cases"]), spec["x"], spec["param2"], metric)
@@ -206,9 +208,6 @@ def _grid_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Pa
 
 def _instant_times(spec: dict[str, Any], row: dict[str, Any], out_dir: Path) -> list[tuple[str, float, float]]:
     """(label, time_s, % of the span) of each instant of a "maps" figure, from side a's time series."""
-    from verification.campaigns import instant_indices
-    from edem.resultdir import read_timeseries_csv
-
     series = read_timeseries_csv(out_dir / row["result_dirs"][0] / "timeseries.csv")
     time = series["time_s"]
     force = np.column_stack([series[f"force_{x}_n"] for x in "xyz"])
@@ -264,14 +263,14 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
     for spec in summary.get("figures", []):
         involved = [keys.get(n) for n in spec["cases"]]
         present = [rows[n] for n in spec["cases"] if n in rows]
-        if present and all(r["status"] in ("unavailable", "error") or not r["result_dirs"] for r in present):
-            why = next((s["message"].splitlines()[0] for s in present[0]["sides"] if s["status"] != "ok" and s.get("message")), present[0]["status"])
+        if present and all(r["status"] in (Status.UNAVAILABLE, Status.ERROR) or not r["result_dirs"] for r in present):
+            why = next((s["message"].splitlines()[0] for s in present[0]["sides"] if s["status"] != Status.OK and s.get("message")), present[0]["status"])
             jobs.append((spec["name"], spec["title"], {"kind": "note", "error": f"case {present[0]['name']} is {present[0]['status']}: {why}", "unavailable": True}, None))
             continue
         if spec["kind"] == "maps":
             row = present[0]
             if len(row["result_dirs"]) < 2:
-                why = next((f"{s['side']} {s['status']}: {s['message'].splitlines()[0]}" for s in row["sides"] if s["status"] != "ok" and s.get("message")), "one side wrote no result directory")
+                why = next((f"{s['side']} {s['status']}: {s['message'].splitlines()[0]}" for s in row["sides"] if s["status"] != Status.OK and s.get("message")), "one side wrote no result directory")
                 jobs.append((spec["name"], spec["title"], {"kind": "note", "error": f"not drawn: {why}", "unavailable": True}, None))
                 continue
             if not spec.get("instants"):
@@ -314,13 +313,9 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
                 elif spec["kind"] == "error-vs-time":
                     _error_time_figure(spec, rows, path)
                 elif spec["kind"] == "maps":
-                    from reports.maps import render_pressure_maps
-
                     row = rows[spec["case"]]
                     render_pressure_maps(out_dir / row["result_dirs"][0], out_dir / row["result_dirs"][1], path, labels=tuple(s["side"] for s in row["sides"][:2]))
                 elif spec["kind"] == "maps-at":
-                    from reports.maps import render_pressure_maps
-
                     row = rows[spec["case"]]
                     render_pressure_maps(
                         out_dir / row["result_dirs"][0], out_dir / row["result_dirs"][1], path,
@@ -441,7 +436,7 @@ def _links_cell(row: dict[str, Any]) -> str:
                 f'{html.escape(side["side"])}: <a href="{html.escape(rel)}/">{html.escape(side["result_dir"])}</a> '
                 f'(<a href="{html.escape(rel)}/pressure.pvd">pressure.pvd</a>, <a href="{html.escape(rel)}/summary.json">summary</a>)'
             )
-        elif side["status"] != "ok":
+        elif side["status"] != Status.OK:
             first = side["message"].splitlines()[0] if side["message"] else ""
             links.append(f'{html.escape(side["side"])}: <i>{html.escape(side["status"])}</i> {html.escape(first)}')
     return '<td class="links">' + "<br>".join(links) + "</td>"

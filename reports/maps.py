@@ -18,6 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
+from edem.errors import InputError
+from edem.resultdir import read_result_dir
+from verification.metrics import pressure_at_cells, project_onto_surface, same_mesh
+
 
 def contact_outline_edges(triangles: np.ndarray, in_contact: np.ndarray) -> np.ndarray:
     """(n, 2) vertex pairs of the edges bounding the contact region of a triangulated surface.
@@ -67,8 +71,6 @@ def _contact(frame, pressure_cells: np.ndarray) -> np.ndarray:
 
 def _frame_at(result, time_s: float):
     """The pressure map of a result directory at ``time_s`` (InputError naming pressure.pvd if none)."""
-    from edem.errors import InputError
-
     times = np.array([t for t, _ in result.frames])
     j = int(np.argmin(np.abs(times - time_s)))
     if not np.isclose(times[j], time_s, rtol=1e-9, atol=1e-9):
@@ -138,9 +140,6 @@ def render_pressure_maps(
     region along its mean normal. ``title`` is written above the panels.
     """
     import pyvista as pv
-
-    from verification.metrics import pressure_at_cells, project_onto_surface, same_mesh
-    from edem.resultdir import read_result_dir
 
     heading = title
     a, b = read_result_dir(a_dir), read_result_dir(b_dir)

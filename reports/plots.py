@@ -2,27 +2,20 @@
 
 from __future__ import annotations
 
-import csv
-import json
 from pathlib import Path
 
 import numpy as np
 
 from edem.errors import InputError
+from edem.resultdir import TIMESERIES_FILE, read_result_dir, read_timeseries_csv
 
 DERIVED = {"disp_norm_mm": ("disp_x_mm", "disp_y_mm", "disp_z_mm")}
 
 
 def read_timeseries(result_dir: str | Path) -> dict[str, np.ndarray]:
-    """Columns of a result directory's timeseries.csv (docs/result-format.md) as float arrays."""
-    path = Path(result_dir) / "timeseries.csv"
-    try:
-        with open(path, newline="", encoding="utf-8") as f:
-            rows = list(csv.reader(f))
-    except FileNotFoundError:
-        raise InputError("no timeseries.csv here", file=path, expected="a result directory of edem run / edem fe") from None
-    header, data = rows[0], np.array(rows[1:], dtype=float).reshape(-1, len(rows[0]))
-    columns = {name: data[:, i] for i, name in enumerate(header)}
+    """Columns of a result directory's timeseries.csv as float arrays, plus the derived
+    :data:`DERIVED` columns (``disp_norm_mm``)."""
+    columns = read_timeseries_csv(Path(result_dir) / TIMESERIES_FILE)
     for name, parts in DERIVED.items():
         if all(p in columns for p in parts):
             columns[name] = np.sqrt(sum(columns[p] ** 2 for p in parts))
@@ -67,7 +60,7 @@ def plot_timeseries(result_dirs: list[str | Path], column: str, out_png: str | P
 
 def _default_label(directory: Path) -> str:
     try:
-        summary = json.loads((directory / "summary.json").read_text(encoding="utf-8"))
+        summary = read_result_dir(directory).summary
         return f"{summary['scene']} ({summary['method']})"
-    except (OSError, KeyError, ValueError):
+    except (InputError, KeyError):
         return directory.name

@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from edem.loads import LoadSeries
 from edem.scene import Scene
-from edem.springs import Cartilage
 from geometries.surface import TriangleSurface
 
 
@@ -53,33 +51,14 @@ def make_scene(
     fixed: TriangleSurface,
     force_n,
     *,
-    time_s=None,
-    moment_nmm=None,
     youngs_modulus_mpa: float = 10.35,
     poissons_ratio: float = 0.42,
-    law: str = "threshold",
     max_spring_length_mm: float = 3.5,
-    thickness_mm: float | None = None,
-    shear_modulus_mpa: float = 0.0,
-    fixed_dofs=(),
-    reference_point_mm=None,
-    **extra,
+    **options,
 ) -> Scene:
-    force = np.atleast_2d(np.asarray(force_n, float))
-    time = np.arange(len(force), dtype=float) if time_s is None else np.asarray(time_s, float)
-    moment = np.zeros_like(force) if moment_nmm is None else np.atleast_2d(np.asarray(moment_nmm, float))
-    if reference_point_mm is None:
-        a = mobile.areas_mm2
-        reference_point_mm = (mobile.centroids_mm * a[:, None]).sum(axis=0) / a.sum()
-    return Scene(
-        name="test",
-        description="",
-        source="<test>",
-        mobile=mobile,
-        fixed=fixed,
-        reference_point_mm=np.asarray(reference_point_mm, float),
-        cartilage=Cartilage(youngs_modulus_mpa, poissons_ratio, law, max_spring_length_mm, thickness_mm, shear_modulus_mpa),
-        load=LoadSeries(time, force, moment),
-        fixed_dofs=tuple(fixed_dofs),
-        **extra,
+    """Scene.from_arrays with the tests' cartilage (E 10.35 MPa, nu 0.42, h_max 3.5 mm)."""
+    return Scene.from_arrays(
+        mobile.vertices_mm, mobile.triangles, fixed.vertices_mm, fixed.triangles, force_n,
+        youngs_modulus_mpa=youngs_modulus_mpa, poissons_ratio=poissons_ratio, max_spring_length_mm=max_spring_length_mm,
+        name="test", **options,
     )

@@ -3,59 +3,16 @@
 Layers, lowest first: geometries <- edem <- fem_reference <- verification <- reports. A module
 may import its own layer or a lower one; the command line (edem/cli.py, edem/__main__.py) is the
 one place that sees every layer. Imports are read with ``ast`` (at module top and inside
-functions alike), so a lazy import does not hide an upward dependency.
+functions alike, :func:`verification.sources.import_graph`), so a lazy import does not hide an
+upward dependency.
 """
 
 from __future__ import annotations
 
-import ast
-from pathlib import Path
+from verification.sources import PACKAGES, import_graph
 
-ROOT = Path(__file__).resolve().parents[1]
-LAYERS = ("geometries", "edem", "fem_reference", "verification", "reports")
+LAYERS = PACKAGES
 COMMAND_LINE = {"edem.cli", "edem.__main__"}
-
-
-def module_files(root: Path = ROOT) -> dict[str, Path]:
-    """Dotted module name -> file of every module of the five packages."""
-    out = {}
-    for package in LAYERS:
-        for path in sorted((root / package).rglob("*.py")):
-            parts = path.relative_to(root).with_suffix("").parts
-            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-            out[name] = path
-    return out
-
-
-def imported_modules(name: str, path: Path, known: set[str]) -> set[str]:
-    """The project modules ``name`` imports (``from pkg import sub`` counts as importing pkg.sub)."""
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.Import):
-            targets = [alias.name for alias in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")[: len(package.split(".")) - (node.level - 1)]
-                source = ".".join(base + ([node.module] if node.module else []))
-            else:
-                source = node.module or ""
-            targets = [source] + [f"{source}.{alias.name}" for alias in node.names]
-        else:
-            continue
-        for target in targets:
-            if target.split(".")[0] not in LAYERS:
-                continue
-            while target not in known and "." in target:  # a name inside a module: the module
-                target = target.rpartition(".")[0]
-            if target in known and target != name:
-                found.add(target)
-    return found
-
-
-def import_graph(root: Path = ROOT) -> dict[str, set[str]]:
-    files = module_files(root)
-    return {name: imported_modules(name, path, set(files)) for name, path in files.items()}
 
 
 def layer(module: str) -> int:
@@ -116,7 +73,7 @@ def test_the_parser_sees_known_imports():
     assert "fem_reference.problem" in graph["fem_reference"]  # from .problem import (...)
     assert "verification.campaigns.stance" in graph["verification.campaigns"]  # from pkg import module
     assert "reports.maps" in graph["reports.html"]  # imported inside a function
-    assert {"geometries", "reports", "verification", "fem_reference"} <= {m.split(".")[0] for m in graph["edem.cli"]}
+    assert {"reports", "verification", "fem_reference"} <= {m.split(".")[0] for m in graph["edem.cli"]}
 
 
 def test_checks_catch_an_upward_import_and_a_cycle():

@@ -28,12 +28,16 @@ its declared band (the thesis's figures) and "unavailable" when their cases coul
 from __future__ import annotations
 
 import math
+import traceback
+import warnings
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-PASSED, FAILED, REPORTED, FLAGGED, UNAVAILABLE = "verified", "failed", "reported", "flagged", "unavailable"
+from verification.fe_analytic import observed_orders
+from verification.status import ERROR, FAILED, FLAGGED, OK, REFUSED, REPORTED, UNAVAILABLE, VERIFIED
+
 
 
 def _fmt(value: Any, digits: int = 4) -> str:
@@ -61,7 +65,7 @@ def _metric(row: dict[str, Any], metric: str) -> float | None:
 def _unavailable_message(row: dict[str, Any]) -> str:
     """The first line of the message of the first side that did not run (or "no value")."""
     for side in row.get("sides", []):
-        if side.get("status") not in ("ok", None):
+        if side.get("status") not in (OK, None):
             first = (side.get("message") or "").splitlines()
             return first[0] if first else side["status"]
     return "no value"
@@ -72,23 +76,21 @@ def _unavailable_message(row: dict[str, Any]) -> str:
 
 
 def order_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    from verification.fe_analytic import observed_orders
-
     settings = analysis.settings
     roundoff = float(settings.get("roundoff", 0.0))
     out_rows, values, notes = [], [], []
-    status = PASSED
+    status = VERIFIED
     judged = False
     for check in settings["checks"]:
         case_rows = [rows[n] for n in check["cases"] if n in rows]
-        unavailable = [r for r in case_rows if r["status"] == "unavailable"]
+        unavailable = [r for r in case_rows if r["status"] == UNAVAILABLE]
         sizes = [float(r["params"][check["x"]]) for r in case_rows]
         errors = [_metric(r, check["metric"]) for r in case_rows]
         entry: dict[str, Any] = {"label": check["label"], "metric": check["metric"], "mode": check["mode"], "sizes": sizes, "values": errors, "orders": [], "mean_order": None,
-                                 "min_order": check.get("min_order"), "verdict": "reported"}
+                                 "min_order": check.get("min_order"), "verdict": REPORTED}
         if unavailable or len(case_rows) != len(check["cases"]) or any(e is None for e in errors):
             why = _unavailable_message(unavailable[0]) if unavailable else "a case has no value"
-            entry["verdict"] = "unavailable"
+            entry["verdict"] = UNAVAILABLE
             out_rows.append({"cells": [check["label"], ", ".join(_fmt(h) for h in sizes), "–", "–", "–", _fmt(check.get("min_order")), f"unavailable: {why}"]})
             values.append(entry)
             if check.get("min_order") is not None and not unavailable:
@@ -103,7 +105,7 @@ def order_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
             finite = [o for o in orders if math.isfinite(o)]
             entry["orders"] = orders
             entry["mean_order"] = float(np.mean(finite)) if finite else math.nan
-            verdict = "reported"
+            verdict = REPORTED
             if check.get("min_order") is not None:
                 judged = True
                 ok = entry["mean_order"] >= float(check["min_order"])
@@ -130,9 +132,9 @@ def order_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
                 "flag": verdict == "fail",
             }
         )
-    if not judged and status == PASSED:
+    if not judged and status == VERIFIED:
         status = REPORTED
-    if all(v["verdict"] == "unavailable" for v in values):
+    if all(v["verdict"] == UNAVAILABLE for v in values):
         status = UNAVAILABLE
     notes.append("vs-exact: log(e_i / e_i+1) / log(h_i / h_i+1) between successive meshes; richardson: log(|f1 - f2| / |f2 - f3|) / log(r).")
     return {
@@ -156,10 +158,10 @@ def thesis_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]
         scale = float(spec.get("scale", 1.0))
         thesis = spec.get("thesis")
         label = [spec.get("scene", ""), spec["quantity"], spec.get("method", "")]
-        if row is None or row["status"] in ("unavailable", "error") or _metric(row, spec["metric"]) is None:
+        if row is None or row["status"] in (UNAVAILABLE, ERROR) or _metric(row, spec["metric"]) is None:
             why = "case not run" if row is None else _unavailable_message(row)
-            if row is not None and any(s.get("status") == "refused" for s in row.get("sides", [])):
-                side = next(s for s in row["sides"] if s.get("status") == "refused")
+            if row is not None and any(s.get("status") == REFUSED for s in row.get("sides", [])):
+                side = next(s for s in row["sides"] if s.get("status") == REFUSED)
                 why = f"{side['side']} refused: {why}"
             values.append({**spec, "ours": None, "difference": None, "flag": False, "note": why})
             out_rows.append({"cells": label + ["–", _fmt(thesis), "–", why]})
@@ -203,7 +205,6 @@ def sensitivity_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str,
     if not np.isfinite(z).any():
         return {"columns": [], "rows": [], "status": UNAVAILABLE, "notes": ["no case has a value"], "values": {}}
     # relative change from the lowest to the highest value of one parameter, at each value of the other
-    import warnings
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows of a partly failed grid stay NaN
@@ -266,8 +267,8 @@ def table_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         note = ""
         if row is None:
             note = "case not run"
-        elif any(s.get("status") != "ok" for s in row.get("sides", [])):
-            side = next(s for s in row["sides"] if s.get("status") != "ok")
+        elif any(s.get("status") != OK for s in row.get("sides", [])):
+            side = next(s for s in row["sides"] if s.get("status") != OK)
             note = f"{side['side']} {side['status']}: {_unavailable_message(row)}"
         values.append({"case": name, "values": {c["metric"]: v for c, v in zip(columns, numbers)}, "note": note})
         out_rows.append({"cells": [name] + [_fmt(v) for v in numbers] + [note]})
@@ -297,7 +298,7 @@ def pareto_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]
     entries = []
     for name in analysis.cases:
         row = rows.get(name)
-        if row is None or row["status"] in ("unavailable", "error") or not row.get("sides"):
+        if row is None or row["status"] in (UNAVAILABLE, ERROR) or not row.get("sides"):
             continue
         error = row["metrics"].get(metric)
         time_s = row["sides"][0].get("wall_time_s")
@@ -447,9 +448,8 @@ def run_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     try:
         result = ANALYSES[analysis.kind](analysis, rows)
     except Exception as exc:  # a bug in an analysis must not sink the campaign's report
-        import traceback
 
-        result = {"columns": [], "rows": [], "status": "error", "notes": [f"{type(exc).__name__}: {exc}", traceback.format_exc()[-1200:]], "values": {}}
+        result = {"columns": [], "rows": [], "status": ERROR, "notes": [f"{type(exc).__name__}: {exc}", traceback.format_exc()[-1200:]], "values": {}}
     return {"name": analysis.name, "title": analysis.title, "kind": analysis.kind, **result}
 
 
@@ -463,6 +463,6 @@ def format_analysis(result: dict[str, Any]) -> str:
         for k, r in enumerate(table):
             mark = "!" if k and result["rows"][k - 1].get("flag") else " "
             lines.append(mark + " " + "  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip())
-    if result["status"] == "error":
+    if result["status"] == ERROR:
         lines += result.get("notes", [])[:1]
     return "\n".join(lines)

@@ -60,6 +60,16 @@ for _side in ("a", "b"):
 for _name in SERIES_METRICS:
     METRICS[f"a_at_b_{_name}"] = f"side a at side b's time points only: {_SERIES_DESCRIPTIONS[_name]}"
 
+#: side a's values at side b's time points beside b's own: peak pressure, mean area, |u|
+VALUES_AT_REFERENCE_TIMES = (
+    "a_at_b_peak_pressure_mpa",
+    "b_peak_pressure_mpa",
+    "a_at_b_mean_contact_area_mm2",
+    "b_mean_contact_area_mm2",
+    "a_at_b_displacement_norm_mm",
+    "b_displacement_norm_mm",
+)
+
 OUTCOMES = ("converges", "refused")
 
 

@@ -27,7 +27,6 @@ end of each spring (where the FE slab's contact face lies) and binned by the sam
 
 from __future__ import annotations
 
-import argparse
 import datetime as _dt
 import json
 import math
@@ -41,6 +40,15 @@ from typing import Any
 import numpy as np
 
 from edem.errors import InputError
+from edem.resultdir import read_result_dir
+from edem.results import write_results
+from edem.scene import load_scene
+from edem.solver import run
+from verification.campaign_model import SCENES_DIR
+from verification.metrics import l2_relative_error, pressure_at_cells, project_onto_surface, relative_error
+from verification.runner import json_safe, software_versions
+from verification.sides import OK, fe_availability, run_side
+
 
 REFERENCES_DIR = Path(__file__).resolve().parent / "references"
 FIELD_VOXEL_MM = 2.0
@@ -57,8 +65,6 @@ class CheckScene:
     fe_model: str = "slab"
 
     def scene_ref(self) -> str:
-        from verification.campaign_model import SCENES_DIR
-
         return str(SCENES_DIR / self.scene) if self.scene.endswith(".toml") else self.scene
 
 
@@ -106,7 +112,6 @@ def field_difference(field: dict[str, Any], reference: dict[str, Any]) -> float:
     for cell, p in zip(field["cells"], field["pressure_mpa"]):
         values.setdefault(tuple(cell), [0.0, 0.0])[0] = float(p)
     pairs = np.array(list(values.values()), dtype=np.float64).reshape(-1, 2)
-    from verification.metrics import l2_relative_error
 
     return l2_relative_error(pairs[:, 0], pairs[:, 1])
 
@@ -114,9 +119,6 @@ def field_difference(field: dict[str, Any], reference: dict[str, Any]) -> float:
 def edem_quantities(result_dir: str | Path, scene) -> dict[str, Any]:
     """Per time point: peak pressure, contact area, displacement of G and the coarse field of an
     EDEM result directory of ``scene`` (binned by the spring centroids at M's initial pose)."""
-    from verification.metrics import pressure_at_cells
-    from edem.resultdir import read_result_dir
-
     result = read_result_dir(result_dir)
     series = result.timeseries
     centroids, areas = scene.mobile.centroids_mm, scene.mobile.areas_mm2  # the frames' triangles, in order
@@ -128,9 +130,6 @@ def fe_quantities(fe_dir: str | Path, edem_dir: str | Path, scene) -> dict[str, 
     """The FE result's quantities per time point; its pressure sampled at the far end of each EDEM
     spring at M's initial pose (centroid + length x normal: where the FE slab's contact face is;
     the FE's surface is built at that pose) and binned like EDEM's."""
-    from verification.metrics import project_onto_surface
-    from edem.resultdir import read_result_dir
-
     fe, edem = read_result_dir(fe_dir), read_result_dir(edem_dir)
     series = fe.timeseries
     centroids, normals, areas = scene.mobile.centroids_mm, scene.mobile.unit_normals, scene.mobile.areas_mm2
@@ -163,8 +162,6 @@ def _quantities(series: dict[str, np.ndarray], fields: list) -> dict[str, Any]:
 
 def differences(values: dict[str, Any], reference: dict[str, Any]) -> dict[str, float]:
     """Largest relative difference over the time points of each quantity (docs/method.md#7-comparison-metrics definitions)."""
-    from verification.metrics import relative_error
-
     if len(values["time_s"]) != len(reference["time_s"]) or not np.allclose(values["time_s"], reference["time_s"]):
         raise InputError("the scene's time points differ from the stored reference's", key="time_s", expected=f"{reference['time_s']} (edem check --refresh after a scene change)")
     out = {}
@@ -179,10 +176,6 @@ def differences(values: dict[str, Any], reference: dict[str, Any]) -> dict[str, 
 
 
 def _run_edem(check: CheckScene, out_dir: Path) -> tuple[dict[str, Any], Path, Any]:
-    from edem.results import write_results
-    from edem.scene import load_scene
-    from edem.solver import run
-
     scene = load_scene(check.scene_ref(), dict(check.overrides))
     result_dir = write_results(run(scene, "edem"), out_dir / "edem")
     return edem_quantities(result_dir, scene), result_dir, scene
@@ -190,9 +183,6 @@ def _run_edem(check: CheckScene, out_dir: Path) -> tuple[dict[str, Any], Path, A
 
 def refresh_reference(check: CheckScene, references: Path, *, with_fe: bool = True, log=print) -> dict[str, Any]:
     """Recompute and write ``references/<name>.json`` (FE values when the FE reference can run)."""
-    from verification.runner import json_safe, software_versions
-    from verification.sides import OK, fe_availability, run_side
-
     with tempfile.TemporaryDirectory(prefix=f"edem-check-{check.name}-") as tmp:
         start = time.perf_counter()
         edem, edem_dir, scene = _run_edem(check, Path(tmp))
@@ -302,12 +292,3 @@ def run_check(*, refresh: bool = False, references: str | Path | None = None, sc
     summary = f"{len(flagged)} of {sum(1 for r in model_rows if r['value'] is not None)} model errors flagged beyond the band"
     print(f"edem check: {'FAILED: drift' if drifted else 'ok: no drift'} ({len(scenes)} scenes against {directory}); {summary}", file=out)
     return 1 if drifted else 0
-
-
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    """Register `edem check` on the CLI's subcommands (edem/cli.py)."""
-    p = sub.add_parser("check", help="regression gate: rerun EDEM on stored references, exit 1 with a table when something drifted")
-    p.add_argument("--refresh", action="store_true", help="recompute the stored references (FE values too when the FE reference is available)")
-    p.add_argument("--references", metavar="DIR", help=f"reference directory (default {REFERENCES_DIR})")
-    p.add_argument("--no-fe", action="store_true", help="with --refresh: store EDEM baselines only")
-    p.set_defaults(func=lambda args: run_check(refresh=args.refresh, references=args.references, with_fe=not args.no_fe))

@@ -38,7 +38,8 @@ import numpy as np
 from edem.errors import InputError
 from edem.mechanics import confined_modulus_mpa
 from edem.resultdir import Frame, SurfaceFrame, timeseries_row, write_result_dir
-from edem.scene import Scene
+from edem.scene import Scene, apply_overrides, load_scene, resolve_scene_path
+from geometries.builders import builder_defaults, builder_names
 
 
 @dataclass(frozen=True)
@@ -69,9 +70,6 @@ def geometry_parameters(scene_ref: str | Path, overrides: dict[str, Any] | None 
     Returns the parameters with the generator's name under "builtin"; raises InputError for
     scenes built from mesh files (no closed form knows their shape).
     """
-    from edem.scene import apply_overrides, resolve_scene_path
-    from geometries.builders import builder_defaults, builder_names
-
     path = resolve_scene_path(scene_ref)
     data = tomllib.loads(path.read_text(encoding="utf-8"))
     if overrides:
@@ -353,8 +351,6 @@ CLOSED_FORMS: dict[str, Callable[[Scene, dict[str, Any]], ClosedFormSolution]] =
 
 def solve_closed_form(name: str, scene_ref: str | Path, overrides: dict[str, Any] | None = None) -> tuple[Scene, ClosedFormSolution]:
     """Load the scene (with overrides) and evaluate the named closed form on it."""
-    from edem.scene import load_scene
-
     if name not in CLOSED_FORMS:
         raise InputError(f"unknown closed form '{name}'", key="sides", expected="closed-form:" + " | closed-form:".join(CLOSED_FORMS))
     scene = load_scene(scene_ref, overrides or {})

@@ -19,6 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from edem.errors import InputError
+from edem.resultdir import read_result_dir
+
+
 #: docs/method.md#7-comparison-metrics metric names (each a relative error, 0 = identical) in the order they are printed.
 COMPARISON_METRICS = (
     "peak_pressure_rel_error",
@@ -276,8 +280,6 @@ def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[
     closest point of that face to the centroid is off the spring's line by up to h tan(angle).
     Springs without a hit (length 0) are sampled at their centroids.
     """
-    from edem.errors import InputError
-
     areas = frame_a.areas_mm2
     keep = areas > 0.0
     points = frame_a.centroids_mm[keep]
@@ -329,8 +331,6 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
     sampled at a's spring centroids (point data when b has it, e.g. FE nodal pressure, else cell
     data). Also returned: both wall times (summary.json) and the sampling distances.
     """
-    from edem.resultdir import read_result_dir
-
     a, b = read_result_dir(a_dir), read_result_dir(b_dir)
     ta, tb = a.time_s, b.time_s
     same = ta.shape == tb.shape and np.allclose(ta, tb, rtol=1e-9, atol=1e-12) and len(a.frames) == len(b.frames) == len(ta)
@@ -430,8 +430,6 @@ def matching_time_points(time_a: np.ndarray, time_b: np.ndarray) -> list[int] | 
 def frame_index(result, k: int) -> int:
     """Index into ``result.frames`` of time point k: k when every time point has a pressure map,
     else the map written at that time (result directories may hold maps of some time points only)."""
-    from edem.errors import InputError
-
     n = len(result.time_s)
     k = k % n
     if len(result.frames) == n:

@@ -3,9 +3,11 @@
 Each case runs in ``OUT/cases/<case>/``: one result directory (docs/result-format.md) per side (``a-<side>``,
 ``b-<side>``) and ``metrics.json`` (every metric, the tolerance verdicts, wall times, the result
 directories). The case is cached under a key hashing its definition, the scene file and every
-file it references, the package version and the source of ``edem/``, ``geometries/`` and
-``verification/`` (plus ``fem_reference/`` for FE cases): re-running an unchanged case only
-re-reads its metrics.json, and a code change invalidates it. Verdicts are re-judged on every run,
+file it references, the package version and the source of the modules that compute it: those its
+sides name (:func:`verification.sides.side_modules`) and the metrics, with everything they
+import, plus the files of this runner and of the side runners. Re-running an unchanged case only
+re-reads its metrics.json; a change to code it uses invalidates it, a change elsewhere (another
+campaign, a report) does not. Verdicts are re-judged on every run,
 so changing a tolerance needs no re-run. ``OUT/metrics.json`` gathers the campaign; the HTML
 report is drawn by the caller (``edem verify`` passes :func:`reports.html.write_campaign_report`).
 
@@ -15,7 +17,7 @@ cheap and never cached.
 
 Each case ends in one verdict of :mod:`verification.verdicts` (verified, flagged, refused as
 declared, ran; failed, error, unavailable), from its tolerances and the basis of each. Exit
-status of a campaign (docs/result-format.md): 0 unless a case failed or crashed or a judged analysis failed (an
+status of a campaign (docs/campaigns.md#verdicts): 0 unless a case failed or crashed or a judged analysis failed (an
 observed order below its minimum); flagged cases (outside a declared model band) and cases whose
 side is unavailable (FE reference not installed) are reported and do not fail the campaign.
 """
@@ -38,19 +40,32 @@ import shutil
 import sys
 import time
 import tomllib
+import traceback
 from collections.abc import Callable, Iterable
-from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from edem.errors import InputError
-from verification.campaign_model import Campaign, Case, validate_campaign
-from verification.sides import ERROR, OK, REFUSED, UNAVAILABLE, is_fe_side, run_side
+import numpy as np
 
-from verification.verdicts import FAILED, FLAGGED, count_verdicts, headline
-from verification.verdicts import case_verdict, tolerance_verdicts
-ROOT = Path(__file__).resolve().parents[1]
-SOURCE_PACKAGES = ("edem", "geometries", "verification")
+from edem.errors import InputError
+from edem.resultdir import non_finite_count, read_result_dir, read_timeseries_csv
+from edem.scene import apply_overrides, resolve_scene_path
+from verification import sources
+from verification.analyses import format_analysis, run_analysis
+from verification.campaign_model import Campaign, Case, validate_campaign
+from verification.fe_analytic import FE_PROBLEMS, half_width_errors
+from verification.metrics import SERIES_METRICS, COMPARISON_METRICS, compare_result_dirs, matching_time_points, series_metrics
+from verification.sides import run_side, side_modules
+from verification.status import ERROR, FAILED, FLAGGED, OK, REFUSED, UNAVAILABLE
+from verification.verdicts import case_verdict, count_verdicts, headline, tolerance_verdicts
+
+
+#: where the hashed sources are read (a test points it at a copy)
+SOURCE_ROOT = sources.ROOT
+#: the glue every case runs through: their own source is hashed (what they import, per side)
+CASE_GLUE_MODULES = ("verification.runner", "verification.sides", "verification.fe_analytic")
+#: what computes the metrics of every case (hashed with everything it imports)
+METRIC_MODULES = ("verification.metrics", "edem.resultdir")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -59,8 +74,6 @@ SOURCE_PACKAGES = ("edem", "geometries", "verification")
 
 def json_safe(value: Any) -> Any:
     """numpy scalars/arrays to Python, non-finite floats to the strings "inf", "-inf", "nan"."""
-    import numpy as np
-
     if isinstance(value, dict):
         return {str(k): json_safe(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -94,15 +107,9 @@ def write_json(path: Path, data: Any) -> None:
 # Cache keys
 
 
-@lru_cache(maxsize=None)
-def _source_digest(packages: tuple[str, ...]) -> str:
-    digest = hashlib.sha256()
-    for package in packages:
-        base = ROOT / package
-        for path in sorted(p for p in base.rglob("*") if p.is_file() and p.suffix in (".py", ".toml") and "__pycache__" not in p.parts):
-            digest.update(str(path.relative_to(ROOT)).encode())
-            digest.update(path.read_bytes())
-    return digest.hexdigest()
+def _source_digest(modules: tuple[str, ...]) -> str:
+    """sha256 of the source of ``modules`` (a package name: all its modules)."""
+    return sources.source_digest(modules, SOURCE_ROOT)
 
 
 def _package_version() -> str:
@@ -114,8 +121,6 @@ def _package_version() -> str:
 
 def referenced_files(scene_path: Path, overrides: dict[str, Any]) -> list[Path]:
     """Files a scene reads besides itself: mesh files of [geometry], load and kinematics files."""
-    from edem.scene import apply_overrides
-
     try:
         data = tomllib.loads(scene_path.read_text(encoding="utf-8"))
     except (OSError, tomllib.TOMLDecodeError):
@@ -131,13 +136,12 @@ def referenced_files(scene_path: Path, overrides: dict[str, Any]) -> list[Path]:
 
 def case_key(case: Case) -> str:
     """sha256 of everything a case's results depend on (module docstring)."""
-    from edem.scene import resolve_scene_path
-
     digest = hashlib.sha256()
     digest.update(json.dumps(json_safe(case.definition()), sort_keys=True).encode())
     digest.update(_package_version().encode())
-    packages = SOURCE_PACKAGES + (("fem_reference",) if any(is_fe_side(s) for s in case.sides) else ())
-    digest.update(_source_digest(packages).encode())
+    roots = METRIC_MODULES + tuple(m for side in case.sides for m in side_modules(side))
+    digest.update(sources.closure_digest(tuple(sorted(set(roots))), SOURCE_ROOT).encode())
+    digest.update(_source_digest(CASE_GLUE_MODULES).encode())
     try:
         scene_path = resolve_scene_path(case.scene_ref())
         files = [scene_path] + referenced_files(scene_path, case.overrides)
@@ -159,10 +163,6 @@ def _side_dir_name(index: int, side: str) -> str:
 
 def _thickness_metrics(a_dir: str, b_dir: str | None) -> dict[str, float]:
     """Mean and sd of a's ray-cast spring lengths; errors against the closed form's thickness."""
-    import numpy as np
-
-    from edem.resultdir import read_result_dir
-
     a = read_result_dir(a_dir)
     frame = a.frame(0)
     hit = (frame.cell_data.get("ray_hit", np.ones(frame.triangles.shape[0])) > 0) & (frame.areas_mm2 > 0)
@@ -179,8 +179,6 @@ def _thickness_metrics(a_dir: str, b_dir: str | None) -> dict[str, float]:
 
 
 def _stability_metrics(case: Case, a: dict[str, Any]) -> dict[str, float]:
-    from edem.resultdir import non_finite_count, read_result_dir
-
     out: dict[str, float] = {}
     actual = {OK: "converges", REFUSED: "refused"}.get(a["status"], a["status"])
     if case.expect is not None:
@@ -204,11 +202,6 @@ def _stability_metrics(case: Case, a: dict[str, Any]) -> dict[str, float]:
 
 def _series_metrics(wanted: set[str], a: dict[str, Any], b: dict[str, Any] | None) -> dict[str, float]:
     """a_* / b_* summaries of each side's time series, and a_at_b_* of a's at b's time points."""
-    import numpy as np
-
-    from verification.metrics import SERIES_METRICS, matching_time_points, series_metrics
-    from edem.resultdir import read_timeseries_csv
-
     def series(side: dict[str, Any]) -> dict[str, Any]:
         return read_timeseries_csv(Path(side["result_dir"]) / "timeseries.csv")
 
@@ -228,8 +221,6 @@ def _series_metrics(wanted: set[str], a: dict[str, Any], b: dict[str, Any] | Non
 
 def compute_metrics(case: Case, sides: list[dict[str, Any]]) -> tuple[dict[str, float], dict[str, Any] | None]:
     """The case's metrics from its side outcomes (only those it declares) and the comparison."""
-    from verification.metrics import COMPARISON_METRICS, compare_result_dirs
-
     wanted = set(case.metrics)
     metrics: dict[str, float] = {}
     comparison = None
@@ -245,17 +236,11 @@ def compute_metrics(case: Case, sides: list[dict[str, Any]]) -> tuple[dict[str, 
         metrics.update(_thickness_metrics(a["result_dir"], b["result_dir"] if both else None))
     metrics.update(_series_metrics(wanted, a, b))
     if both and wanted & {"half_width_rel_error", "half_width_fit_rel_error"}:
-        from verification.fe_analytic import half_width_errors
-        from edem.resultdir import read_result_dir
-
         metrics.update(half_width_errors(read_result_dir(a["result_dir"]).summary, read_result_dir(b["result_dir"]).summary))
     return {k: v for k, v in metrics.items() if k in wanted}, comparison
 
 
 def _scene_description(case: Case) -> str:
-    from edem.scene import resolve_scene_path
-    from verification.fe_analytic import FE_PROBLEMS
-
     if case.scene.startswith("fe-problem:"):
         return FE_PROBLEMS.get(case.scene.split(":", 1)[1], "")
     try:
@@ -288,7 +273,6 @@ def execute_case(case: Case, case_dir: str, key: str) -> dict[str, Any]:
         if not any(s["status"] in (UNAVAILABLE, ERROR) for s in sides):
             record["metrics"], record["comparison"] = compute_metrics(case, sides)
     except Exception as exc:  # a bug in the metrics: report it with the case
-        import traceback
 
         sides.append({"side": "metrics", "status": ERROR, "result_dir": None, "message": f"{type(exc).__name__}: {exc}\n" + traceback.format_exc()[-1500:], "wall_time_s": 0.0, "error_type": type(exc).__name__})
     record["scene_description"] = _scene_description(case)
@@ -487,7 +471,6 @@ def run_campaign(
         )
     counts = count_verdicts([r["status"] for r in case_rows])
     outcomes = {o: sum(1 for r in case_rows if r["outcome"] == o) for o in ("converges", "refused")}
-    from verification.analyses import run_analysis
 
     by_name = {r["name"]: r for r in case_rows}
     analyses = [run_analysis(analysis, by_name) for analysis in campaign.analyses]
@@ -555,8 +538,6 @@ def format_summary(summary: dict[str, Any]) -> str:
         message = next(s["message"] for s in row["sides"] if s["status"] == UNAVAILABLE)
         lines.append(f"{row['name']}: {message}")
     if summary.get("analyses"):
-        from verification.analyses import format_analysis
-
         for result in summary["analyses"]:
             lines.append("")
             lines.append(format_analysis(result))

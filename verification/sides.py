@@ -26,20 +26,39 @@ says so with the message, which the stability campaign checks against its declar
 
 from __future__ import annotations
 
+import copy
 import importlib
 import importlib.util
+import inspect
 import re
 import time
+import tomllib
 import traceback
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from edem.errors import InputError, SolverError
 from edem.results import write_results
+from edem.scene import apply_overrides, load_scene, resolve_scene_path
+from edem.solver import run
+from verification.closed_forms import CLOSED_FORMS, solve_closed_form, write_closed_form_results
+from verification.fe_analytic import FE_PROBLEMS, run_fe_problem, write_exact_result
+from verification.status import ERROR, OK, REFUSED, UNAVAILABLE
 
-OK, REFUSED, UNAVAILABLE, ERROR = "ok", "refused", "unavailable", "error"
+
+# The modules whose source a side's results depend on, with all they import (verification.sources):
+# a campaign case's cache key hashes them, so editing anything else keeps its results.
+DISCRETE_MODULES = ("edem.scene", "edem.solver", "edem.results")
+FE_MODULES = ("edem.scene", "fem_reference.scene_run", "fem_reference.contact")
+FE_PROBLEM_MODULES = ("verification.fe_analytic", "fem_reference")
+CLOSED_FORM_MODULES = ("edem.scene", "verification.closed_forms")
+FE_EXACT_MODULES = ("verification.fe_analytic",)
+#: for a side runner that does not say (a stand-in): every package that can compute results
+ANY_MODULES = ("geometries", "edem", "fem_reference", "verification")
 
 
 @dataclass(frozen=True)
@@ -72,10 +91,6 @@ def expand_array_overrides(scene_ref: str, overrides: dict[str, Any]) -> dict[st
     """
     if not any(ARRAY_OVERRIDE.match(k) for k in overrides):
         return dict(overrides)
-    import copy
-    import tomllib
-
-    from edem.scene import apply_overrides, resolve_scene_path
 
     path = resolve_scene_path(scene_ref)
     data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -120,9 +135,6 @@ def _write_discrete(result: Any, out_dir: Path, frames: str) -> None:
 
 def _run_discrete(method: str) -> SideRunner:
     def runner(scene_ref: str, overrides: dict[str, Any], out_dir: Path, options: dict[str, Any]) -> str:
-        from edem.scene import load_scene
-        from edem.solver import run
-
         frames = str(options.get("frames", "all"))
         if frames not in FRAMES:
             raise InputError(f"frames = {frames!r}", key="options.frames", expected=" or ".join(f'"{f}"' for f in FRAMES))
@@ -134,6 +146,7 @@ def _run_discrete(method: str) -> SideRunner:
         return str(out_dir)
 
     runner.__doc__ = f"{method.upper()} (edem.solver.run) into a result directory (docs/result-format.md)."
+    runner.modules = DISCRETE_MODULES
     return runner
 
 
@@ -161,13 +174,9 @@ def _run_fe(model: str) -> SideRunner:
             raise UnavailableError(why)
         import fem_reference
 
-        from edem.scene import load_scene
-
         scene = load_scene(scene_ref, overrides)
         kwargs = {k: options[k] for k in ("mesh_size_mm", "degree", "steps") if k in options}
         if "steps" in kwargs:
-            import inspect
-
             try:
                 params = inspect.signature(fem_reference.run_scene).parameters
             except (TypeError, ValueError):
@@ -182,6 +191,7 @@ def _run_fe(model: str) -> SideRunner:
         return str(out_dir)
 
     runner.__doc__ = f"The FE reference, {model} model (fem_reference.run_scene), docs/method.md#6-the-fe-reference-and-its-discrete-twins."
+    runner.modules = FE_MODULES
     return runner
 
 
@@ -190,19 +200,16 @@ def _run_fe_problem(name: str) -> SideRunner:
         why = fe_availability("solve_contact")
         if why is not None:
             raise UnavailableError(why)
-        from verification.fe_analytic import run_fe_problem
 
         run_fe_problem(name, out_dir, options)
         return str(out_dir)
 
     runner.__doc__ = f"The FE core on the closed-form problem {name} (verification.fe_analytic), docs/method.md#6-the-fe-reference-and-its-discrete-twins."
+    runner.modules = FE_PROBLEM_MODULES
     return runner
 
 
 def _run_closed_form(scene_ref: str, overrides: dict[str, Any], out_dir: Path, options: dict[str, Any], name: str) -> str:
-    from verification.closed_forms import solve_closed_form, write_closed_form_results
-    from verification.fe_analytic import FE_PROBLEMS, write_exact_result
-
     if name in FE_PROBLEMS:
         write_exact_result(name, out_dir, options)
         return str(out_dir)
@@ -228,8 +235,6 @@ def _run_fe_truth(scene_ref: str, overrides: dict[str, Any], out_dir: Path, opti
 def resample_load(overrides: dict[str, Any], n_steps: int) -> dict[str, Any]:
     """The overrides with the load history load.time_s / load.force_n linearly re-sampled at
     n_steps equal increments of the same time span."""
-    import numpy as np
-
     times = np.asarray(overrides["load.time_s"], dtype=float)
     forces = np.asarray(overrides["load.force_n"], dtype=float).reshape(len(times), 3)
     new_t = np.linspace(times[0], times[-1], n_steps + 1)
@@ -244,6 +249,9 @@ def _run_edem_truth(scene_ref: str, overrides: dict[str, Any], out_dir: Path, op
         raise InputError("the edem-128-steps side needs a load history", key="overrides", expected="load.time_s and load.force_n overrides")
     return _run_discrete("edem")(scene_ref, resample_load(overrides, TRUTH_STEPS), out_dir, options)
 
+
+_run_fe_truth.modules = FE_MODULES
+_run_edem_truth.modules = DISCRETE_MODULES
 
 SIDES: dict[str, SideRunner] = {
     "edem": _run_discrete("edem"),
@@ -260,10 +268,14 @@ CLOSED_FORM_PREFIX = "closed-form:"
 
 def side_names() -> list[str]:
     """Every side a case may name (closed forms as closed-form:<name>)."""
-    from verification.closed_forms import CLOSED_FORMS
-    from verification.fe_analytic import FE_PROBLEMS
-
     return list(SIDES) + [CLOSED_FORM_PREFIX + name for name in (*CLOSED_FORMS, *FE_PROBLEMS)]
+
+
+def side_modules(side: str) -> tuple[str, ...]:
+    """The modules whose source (with what they import) the side's results depend on."""
+    if side.startswith(CLOSED_FORM_PREFIX):
+        return FE_EXACT_MODULES if side[len(CLOSED_FORM_PREFIX):] in FE_PROBLEMS else CLOSED_FORM_MODULES
+    return getattr(SIDES.get(side), "modules", ANY_MODULES)
 
 
 def is_fe_side(side: str) -> bool:

@@ -38,6 +38,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from verification.status import ERROR, FAILED, FLAGGED, RAN, REFUSED_AS_DECLARED, UNAVAILABLE, VERIFIED
+
 CLOSED_FORM, FE_CONVERGENCE, DECLARED_OUTCOME, MODEL_BAND, INVARIANT, SANITY = (
     "closed-form", "fe-convergence", "declared-outcome", "model-band", "invariant", "sanity",
 )
@@ -45,9 +47,7 @@ BASIS_KINDS = (CLOSED_FORM, FE_CONVERGENCE, DECLARED_OUTCOME, MODEL_BAND, INVARI
 #: kinds whose tolerance, once met, makes an accuracy or robustness claim
 CLAIM_KINDS = (CLOSED_FORM, FE_CONVERGENCE, DECLARED_OUTCOME, MODEL_BAND)
 
-VERIFIED, FLAGGED, REFUSED_AS_DECLARED, RAN, FAILED, ERROR, UNAVAILABLE = (
-    "verified", "flagged", "refused as declared", "ran", "failed", "error", "unavailable",
-)
+
 #: every case verdict, in the order the headline counts them
 CASE_VERDICTS = (VERIFIED, FLAGGED, REFUSED_AS_DECLARED, RAN, FAILED, ERROR, UNAVAILABLE)
 #: what each verdict means, for the report's legend

@@ -203,7 +203,6 @@ def _analytic_figures() -> tuple[Figure, ...]:
     )
 
 
-
 def campaign() -> Campaign:
     return Campaign(
         "edem-analytic",

@@ -158,7 +158,6 @@ def _stability_cases() -> list[Case]:
     return [_with_bases(case) for case in cases]
 
 
-
 def campaign() -> Campaign:
     return Campaign(
         "stability",

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from edem.scene import resolve_scene_path
-from verification.campaign_model import Analysis, Campaign, Case, Expect, Figure
+from verification.campaign_model import VALUES_AT_REFERENCE_TIMES, Analysis, Campaign, Case, Expect, Figure
 from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import INVARIANT, MODEL_BAND_REL, Basis
 
@@ -53,14 +53,7 @@ def _slug(text: str) -> str:
     return "-".join(text.lower().split())
 
 
-FE_INSTANT_METRICS = COMPARISON_METRICS + (
-    "a_at_b_peak_pressure_mpa",
-    "b_peak_pressure_mpa",
-    "a_at_b_mean_contact_area_mm2",
-    "b_mean_contact_area_mm2",
-    "a_at_b_displacement_norm_mm",
-    "b_displacement_norm_mm",
-)
+FE_INSTANT_METRICS = COMPARISON_METRICS + VALUES_AT_REFERENCE_TIMES
 
 
 def fe_instant_case_name(scene: str, label: str) -> str:
