@@ -18,11 +18,7 @@ import numpy as np
 from geometries.builders import BuiltGeometry
 from geometries.surface import TriangleSurface
 
-__all__ = ["render_geometry_png", "quiet_offscreen_vtk", "add_orientation_triad", "colour_bar_args", "place_bar_title", "ANATOMICAL_LABELS"]
-
-#: the built-in ankles' axes (docs/conventions.md): positive direction -> (label, opposite label)
-ANATOMICAL_LABELS = {"x": ("lateral", "medial"), "y": ("anterior", "posterior"), "z": ("superior", "inferior")}
-
+__all__ = ["render_geometry_png", "quiet_offscreen_vtk", "add_orientation_triad", "colour_bar_args", "place_bar_title"]
 
 def quiet_offscreen_vtk() -> None:
     """Off-screen pyvista without VTK's "bad X server connection" notice on stderr.
