@@ -170,7 +170,7 @@ def _plot(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    """comparison metrics (docs/method.md#7-comparison-metrics) of result directory A against the reference B; writes metrics.json."""
+    """The comparison metrics (docs/method.md#7-comparison-metrics) of result directory A against the reference B; writes metrics.json."""
     from verification.metrics import compare_result_dirs, format_metrics_table
     from verification.runner import write_json
 
@@ -260,7 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--label", action="append", help="legend label per directory (repeat)")
     p.add_argument("--out", help="PNG file to write (default: <first dir>/<column>.png, or <column>-vs-<other dirs>.png)")
     p.set_defaults(func=_plot)
-    p = sub.add_parser("compare", help="comparison metrics (docs/method.md#7-comparison-metrics) between two result directories (B is the reference)")
+    p = sub.add_parser("compare", help="comparison metrics between two result directories (B is the reference; docs/method.md#7-comparison-metrics)")
     p.add_argument("a_dir", metavar="A_DIR", help="result directory of the method under test (edem run)")
     p.add_argument("b_dir", metavar="B_DIR", help="result directory of the reference (edem fe, or another run)")
     p.add_argument("--out", help="where metrics.json goes (default results/compare/<A>-vs-<B>)")

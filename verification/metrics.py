@@ -321,7 +321,7 @@ def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[
 
 
 def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm: float | None = None) -> dict[str, Any]:
-    """comparison metrics (docs/method.md#7-comparison-metrics) of result directory a against the reference b (both in the docs/result-format.md layout).
+    """The comparison metrics (docs/method.md#7-comparison-metrics) of result directory a against the reference b (both in the docs/result-format.md layout).
 
     When both have the same time points every time point is compared and each metric is the
     largest over them (``per_time`` keeps them all); when b's time points are a subset of a's

@@ -1,4 +1,4 @@
-"""comparison metrics (docs/method.md#7-comparison-metrics): hand-computed relative errors, exact surface sampling, two result directories."""
+"""The comparison metrics (docs/method.md#7-comparison-metrics): hand-computed relative errors, exact surface sampling, two result directories."""
 
 from __future__ import annotations
 
