@@ -29,6 +29,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(PY) benchmarks/bench_edem.py
 	$(PY) benchmarks/bench_raycast.py
+	$(PY) benchmarks/bench_thin_layer.py
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

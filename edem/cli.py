@@ -17,6 +17,8 @@ def _run(args: argparse.Namespace) -> int:
 
     overrides = dict(parse_override(o) for o in args.set)
     scene = load_scene(args.scene, overrides)
+    for warning in scene.warnings:  # said before the solve, so a refused run keeps them
+        print(f"edem run: warning: {warning}", file=sys.stderr)
     method = args.method or scene.method
     out = Path(args.out) if args.out else Path("results") / f"{scene.name}-{method}"
     n = len(scene.load.time_s)
@@ -34,7 +36,7 @@ def _run(args: argparse.Namespace) -> int:
     from edem.resultdir import record_provenance
 
     record_provenance(out, args.scene, overrides, method=method)
-    for warning in list(scene.warnings) + result.warnings:
+    for warning in result.warnings:
         print(f"edem run: warning: {warning}", file=sys.stderr)
     last = result.steps[-1]
     print(
@@ -43,7 +45,7 @@ def _run(args: argparse.Namespace) -> int:
         f"  peak pressure {max(s.peak_pressure_mpa for s in result.steps):.4g} MPa, "
         f"max contact area {max(s.contact_area_mm2 for s in result.steps):.4g} mm^2, "
         f"final displacement [{', '.join(f'{x:.4g}' for x in last.displacement_mm)}] mm\n"
-        f"  results: {out}/ (summary.json, timeseries.csv, pressure.pvd)"
+        f"  results: {out}/ (summary.json, timeseries.csv and .sto, pressure.pvd, fixed.pvd)"
     )
     return 0
 

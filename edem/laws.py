@@ -154,6 +154,10 @@ class ContactLaw:
     needs_positive_length: ClassVar[bool] = True
     #: name of the FE model (fem_reference.models) that is this law's continuum twin
     fe_twin: ClassVar[str]
+    #: under ``coupling = "thin-layer"`` (edem.thin_layer_contact), what the element offset s0 is:
+    #: "carried" (a force carried into the step, the EDEM push-back: the layer starts deflected by
+    #: C s0) or "overlap" (geometric: the layer must be compressed by t - h); None: cannot couple
+    thin_layer: ClassVar[str | None] = None
 
     def default_window_mm(self, thickness_mm: float | None) -> float:
         """h_max when the scene gives none (mm)."""
@@ -184,6 +188,7 @@ class ThresholdLaw(ContactLaw):
 
     name = "threshold"
     fe_twin = "slab"
+    thin_layer = "carried"
 
     def default_window_mm(self, thickness_mm: float | None) -> float:
         return 3.5
@@ -208,6 +213,7 @@ class GapLaw(ContactLaw):
     needs_thickness = True
     needs_positive_length = False
     fe_twin = "layer"
+    thin_layer = "overlap"
 
     def default_window_mm(self, thickness_mm: float | None) -> float:
         return 2.0 * float(thickness_mm)
@@ -230,6 +236,7 @@ class GapLogLaw(GapLaw):
 
     name = "gap-log"
     needs_positive_length = True
+    thin_layer = None  # the coupled layer is linear
 
     def elements(self, area_mm2, spring_length_mm, confined_modulus_mpa, thickness_mm, stored_normal_force_n):
         t = float(thickness_mm)

@@ -10,9 +10,11 @@ Units: time in s, force in N, moment in N·mm, lengths in mm, angles in degrees 
 scene tables, radians in `JointKinematics.angle_rad`. OpenSim writes moments in N·m: they are
 converted to N·mm (x 1000) when read from .sto/.mot unless the table says `moment_unit = "nmm"`.
 
-OpenSim axes are X anterior, Y superior, Z right. No axis mapping is applied here: users map them
-onto the scene's axes by naming the columns in `force_columns` / `moment_columns` in scene-axis
-order, a leading "-" negating a column (e.g. `force_columns = ["..._fz", "..._fx", "..._fy"]`).
+OpenSim axes are X anterior, Y superior, Z right; the scene's are its own. The file's axes are
+never guessed: `axes = "opensim"` (or three signed axis names) maps them onto the scene's, and an
+auto-detected JointReaction triple is refused without it (edem.joint_reaction). Columns can also
+be picked one by one with `force_columns` / `moment_columns` in scene-axis order, a leading "-"
+negating a column.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from edem.errors import InputError
+from edem.joint_reaction import AXES_PRESETS, JointReactionColumns, axes_matrix
 from edem.tables import SceneTable, is_number
 
 NM_TO_NMM = 1000.0
@@ -33,7 +36,8 @@ NM_TO_NMM = 1000.0
 
 LOAD_KEYS = (
     "force_n", "moment_nmm", "time_s", "file", "time_column", "force_columns",
-    "moment_columns", "moment_unit", "force_scale", "time_range_s", "frame",
+    "moment_columns", "moment_unit", "force_scale", "time_range_s", "frame", "axes", "mobile_body",
+    "fixed_body",
 )
 """Keys allowed in the `[load]` table."""
 
@@ -62,12 +66,16 @@ class LoadSeries:
     reference point G; all finite float64, n >= 1. Arrays are read-only. ``frame`` says in which
     axes the components are given: "global", or "fixed" (the fixed body's axes, so the load turns
     with the joint angle of `[kinematics]`, as a joint reaction expressed in the tibial frame does).
+    ``point_mm`` (n, 3), when given, is the point the moment is taken about (in the same frame;
+    a JointReaction's joint centre); the solver moves the moment to G. None: about G.
     """
 
     time_s: np.ndarray
     force_n: np.ndarray
     moment_nmm: np.ndarray
     frame: str = "global"
+    point_mm: np.ndarray | None = None
+    in_ground: bool = False  # a JointReaction expressed in OpenSim's ground (taken as the scene's axes)
 
     def __post_init__(self) -> None:
         t = np.asarray(self.time_s, dtype=np.float64)
@@ -87,6 +95,11 @@ class LoadSeries:
         object.__setattr__(self, "time_s", _readonly(t))
         object.__setattr__(self, "force_n", _readonly(f))
         object.__setattr__(self, "moment_nmm", _readonly(m))
+        if self.point_mm is not None:
+            p = np.asarray(self.point_mm, dtype=np.float64)
+            if p.shape != (n, 3) or not np.isfinite(p).all():
+                raise ValueError(f"point_mm must be finite with shape ({n}, 3), got {p.shape}")
+            object.__setattr__(self, "point_mm", _readonly(p))
 
 
 @dataclass(frozen=True, eq=False)
@@ -204,6 +217,11 @@ def _read_opensim(path: Path, key: str) -> _DataFile:
     return _parse_rows(path, key, rows[0][1], rows[1:], in_degrees)
 
 
+def read_opensim_table(path: Path, key: str) -> _DataFile:
+    """An OpenSim .sto/.mot as a table (columns, values, the inDegrees flag); InputError naming ``key`` when malformed."""
+    return _read_opensim(path, key)
+
+
 def _read_data_file(path: Path, key: str) -> _DataFile:
     suffix = path.suffix.lower()
     if suffix == ".csv":
@@ -248,12 +266,13 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
             if tab.has(key):
                 raise tab.error(key, f"'{key}' cannot be combined with 'file'",
                                 "column names in time_column / moment_columns instead")
-        time_s, force_n, moment_nmm = _load_from_file(tab)
+        time_s, force_n, moment_nmm, point_mm, file_frame = _load_from_file(tab)
     elif tab.has("force_n"):
         for key in _FILE_ONLY_LOAD_KEYS:
             if tab.has(key):
                 raise tab.error(key, f"'{key}' only applies with 'file'", "no column keys for inline loads")
         time_s, force_n, moment_nmm = _load_inline(tab)
+        point_mm, file_frame = None, None
     else:
         raise tab.error("force_n", "no load given", "'force_n' (static or with 'time_s') or 'file'")
 
@@ -267,10 +286,30 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
             raise tab.error("time_range_s", f"no time point in [{t0}, {t1}]; the load spans "
                                             f"[{time_s[0]}, {time_s[-1]}] s", "a range containing load time points")
         time_s, force_n, moment_nmm = time_s[keep], force_n[keep], moment_nmm[keep]
-    frame = tab.string("frame", "global")
+        point_mm = None if point_mm is None else point_mm[keep]
+    in_ground = file_frame == "ground"
+    file_frame = "global" if in_ground else file_frame
+    frame = tab.string("frame", file_frame or "global")
     if frame not in ("global", "fixed"):
         raise tab.error("frame", f"'{frame}' is not a frame", "'global' or 'fixed' (the fixed body's axes, turning with [kinematics])")
-    return LoadSeries(time_s, force_n, moment_nmm, frame)
+    if file_frame is not None and frame != file_frame:
+        raise tab.error("frame", f"frame = '{frame}' but the file's columns are expressed in the {file_frame} frame",
+                        f"frame = '{file_frame}' or no frame key")
+    if tab.has("axes"):
+        rotation = _axes(tab)
+        force_n, moment_nmm = force_n @ rotation.T, moment_nmm @ rotation.T
+        point_mm = None if point_mm is None else point_mm @ rotation.T
+    return LoadSeries(time_s, force_n, moment_nmm, frame, point_mm, in_ground)
+
+
+def _axes(tab: SceneTable) -> np.ndarray:
+    value = tab.table["axes"]
+    try:
+        return axes_matrix(value)
+    except ValueError as exc:
+        raise tab.error("axes", f"{value!r}: {exc}",
+                        f"a preset ({', '.join(AXES_PRESETS)}; \"opensim\": file x anterior, y up, z right onto scene x right, "
+                        "y anterior, z up) or three signed file axes per scene axis, e.g. [\"z\", \"x\", \"y\"]") from None
 
 
 def _load_inline(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -290,7 +329,9 @@ def _load_inline(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return time_s, force, moment
 
 
-def _load_from_file(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _load_from_file(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, str | None]:
+    """time, force, moment (file axes), the point the moment is about (mm) or None, and the frame
+    the columns are expressed in ("global", "fixed") when the file says (JointReaction) or None."""
     path = tab.path("file", "a .csv, .sto or .mot file")
     data = _read_data_file(path, tab.key("file"))
     opensim = path.suffix.lower() in _OPENSIM_SUFFIXES
@@ -301,6 +342,7 @@ def _load_from_file(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray
     data.check_time(time_s, time_key)
 
     moment_names: list[str] | None
+    reaction: tuple[float, list[str] | None, str] | None = None  # sign, point columns, frame
     if tab.has("force_columns"):
         force_key = tab.key("force_columns")
         force_names = tab.strings("force_columns", 3)
@@ -317,6 +359,7 @@ def _load_from_file(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray
         p = prefixes[0]
         force_names = [p + "_fx", p + "_fy", p + "_fz"]
         moment_names = [p + "_mx", p + "_my", p + "_mz"]
+        reaction = _joint_reaction(tab, data, p)
     else:
         force_key = tab.key("file")
         force_names = list(_CSV_DEFAULT_FORCE)
@@ -339,7 +382,52 @@ def _load_from_file(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray
         raise tab.error("moment_unit", f"got {unit!r}", "'nm' (N·m) or 'nmm' (N·mm)")
     if unit == "nm":
         moment = moment * NM_TO_NMM
-    return time_s, force, moment
+    if reaction is None:
+        return time_s, force, moment, None, None
+    sign, point_names, frame = reaction
+    point = None
+    if point_names is not None:
+        point = np.column_stack([data.column(name, tab.key("file")) for name in point_names]) * 1000.0  # m -> mm
+    return time_s, sign * force, sign * moment, point, frame
+
+
+def _joint_reaction(tab: SceneTable, data: _DataFile, prefix: str) -> tuple[float, list[str] | None, str]:
+    """Sign (+1: the load is on the mobile body, -1: on the fixed one), the joint-centre columns
+    and the scene frame of an auto-detected JointReaction triple; refuses what it cannot place."""
+    key = tab.key("file")
+    columns = JointReactionColumns.parse(prefix)
+    if not tab.has("axes"):
+        raise data.error(key, f"the axes of the JointReaction columns '{prefix}_*' are OpenSim's (x anterior, y up, z right) "
+                              "and are not guessed",
+                         '[load] axes = "opensim" (onto scene x right, y anterior, z up), axes = "same" (meshes in '
+                         'OpenSim\'s own axes) or three signed axes, e.g. ["z", "x", "y"]')
+    if columns is None:
+        return 1.0, None, "global"
+    mobile = tab.string("mobile_body") if tab.has("mobile_body") else None
+    fixed = tab.string("fixed_body") if tab.has("fixed_body") else None
+    if mobile is None:
+        raise data.error(key, f"the columns give the load of joint '{columns.joint}' on body '{columns.body}'; "
+                              "which body is the scene's mobile one is not said",
+                         f"[load] mobile_body = \"{columns.body}\" (and fixed_body = the other) so the load's sign is known")
+    if columns.body == mobile:
+        sign = 1.0
+    elif columns.body == fixed:
+        sign = -1.0  # the load on F; M carries its reaction
+    else:
+        raise data.error(key, f"the load is on body '{columns.body}', neither mobile_body '{mobile}' nor fixed_body '{fixed}'",
+                         "a JointReaction of the joint between the scene's two bodies (on_child or on_parent)")
+    if columns.frame == fixed:
+        frame = "fixed"
+    elif columns.frame == mobile:
+        frame = "global"  # the scene's frame is M's (M moves only by the solved increments)
+    elif columns.frame == "ground":
+        frame = "ground"
+    else:
+        raise data.error(key, f"the load is expressed in frame '{columns.frame}': only the mobile body's frame "
+                              f"('{mobile}'), the fixed body's ('{fixed}', turning with the joint) or ground are placed in the scene",
+                         "JointReaction express_in_frame = child, parent or ground")
+    point_names = columns.names("p")
+    return sign, (point_names if all(n in data.columns for n in point_names) else None), frame
 
 
 # --------------------------------------------------------------------------- [kinematics]

@@ -40,6 +40,14 @@ Layout of ``OUT/``:
     reproduces the run exactly. summary.json then also holds ``overrides`` (dotted keys and
     values), ``scene_source`` (the scene argument as given), ``software_version`` and
     ``source_revision`` (git commit, ``-dirty`` with uncommitted changes; "unknown" outside git).
+``fixed.pvd`` + ``fixed_NNNN.vtp``
+    The fixed body placed at each time point (optional; discrete runs): open it with
+    pressure.pvd in ParaView to see the true relative pose when the fixed body moves.
+``timeseries.sto``
+    The time series as an OpenSim storage file (optional; discrete runs): ``time`` first, then
+    every other column of timeseries.csv under the same name and units; tab separated, the
+    header OpenSim's ``TimeSeriesTable`` reads (``version=1``, ``nRows``, ``nColumns``,
+    ``inDegrees=no``, ``endheader``).
 
 To extend the format, change this module only: new summary keys go in the producer's summary
 dict, new time-series columns are extra keys of the rows given to :func:`write_result_dir`, new
@@ -71,6 +79,8 @@ SUMMARY_FILE = "summary.json"
 TIMESERIES_FILE = "timeseries.csv"
 COLLECTION_FILE = "pressure.pvd"
 FIXED_FILE = "fixed.vtp"
+FIXED_COLLECTION_FILE = "fixed.pvd"
+STO_FILE = "timeseries.sto"
 
 TIMESERIES_COLUMNS = (
     "step",
@@ -146,12 +156,17 @@ def write_result_dir(
     timeseries: Sequence[Mapping[str, float]],
     frames: Sequence[Frame],
     fixed: SurfaceFrame | None = None,
+    *,
+    fixed_frames: Sequence[Frame] = (),
+    opensim_sto: bool = False,
 ) -> Path:
     """Write a result directory (layout in the module docstring); returns its path.
 
     ``timeseries``: one row per time point, {column: value} with at least
     :data:`TIMESERIES_COLUMNS` (:func:`timeseries_row`); extra keys of the first row become extra
     columns. ``frames``: the pressure maps listed in pressure.pvd. ``fixed``: the fixed body.
+    ``fixed_frames``: the fixed body per time point (fixed.pvd). ``opensim_sto``: also write the
+    time series as timeseries.sto.
 
     Raises SolverError naming the file and key when a number is not finite (a result that
     contradicts itself is never written as if it were one).
@@ -177,15 +192,36 @@ def write_result_dir(
         writer = csv.writer(f)
         writer.writerow(columns)
         writer.writerows(lines)
-    entries = []
-    for frame in frames:
-        name = f"pressure_{frame.step:04d}.vtp"
-        write_surface_frame(out / name, frame.surface.points_mm, frame.surface.triangles, frame.surface.point_data, frame.surface.cell_data)
-        entries.append((float(frame.time_s), name))
-    write_pvd(out / COLLECTION_FILE, entries)
+    _write_series(out, "pressure", frames, COLLECTION_FILE)
     if fixed is not None:
         write_surface_frame(out / FIXED_FILE, fixed.points_mm, fixed.triangles, fixed.point_data, fixed.cell_data)
+    if fixed_frames:
+        _write_series(out, "fixed", fixed_frames, FIXED_COLLECTION_FILE)
+    if opensim_sto:
+        write_sto(out / STO_FILE, columns, [[float(row[c]) for c in columns] for row in timeseries], name=str(summary.get("scene", "edem")))
     return out
+
+
+def _write_series(out: Path, prefix: str, frames: Sequence[Frame], collection: str) -> None:
+    """<prefix>_NNNN.vtp per frame and the ParaView collection listing them."""
+    entries = []
+    for frame in frames:
+        name = f"{prefix}_{frame.step:04d}.vtp"
+        write_surface_frame(out / name, frame.surface.points_mm, frame.surface.triangles, frame.surface.point_data, frame.surface.cell_data)
+        entries.append((float(frame.time_s), name))
+    write_pvd(out / collection, entries)
+
+
+def write_sto(path: str | Path, columns: Sequence[str], rows: Sequence[Sequence[float]], *, name: str = "edem") -> Path:
+    """An OpenSim storage (.sto) file: ``time`` (from the ``time_s`` column) first, then the other
+    columns; every value written with ``repr`` (exact round trip). Values must be finite."""
+    columns = list(columns)
+    order = [columns.index("time_s")] + [i for i, c in enumerate(columns) if c != "time_s"]
+    labels = ["time"] + [columns[i] for i in order[1:]]
+    lines = [name, "version=1", f"nRows={len(rows)}", f"nColumns={len(labels)}", "inDegrees=no", "endheader", "\t".join(labels)]
+    lines += ["\t".join(repr(float(row[i])) for i in order) for row in rows]
+    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return Path(path)
 
 
 def write_static_result_dir(

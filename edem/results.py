@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from edem.loads import JointKinematics
+from edem.opensim_model import BodyPoses
 from edem.resultdir import TIMESERIES_COLUMNS, Frame, SurfaceFrame, timeseries_row, write_pvd, write_result_dir
 from edem.solver import RunResult, StepResult
 
@@ -34,12 +36,29 @@ def summary(run: RunResult) -> dict:
 
 
 def timeseries_rows(run: RunResult) -> list[dict[str, float]]:
-    """One timeseries.csv row per time point of the run."""
-    return [
-        timeseries_row(s.step, s.time_s, s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa, s.contact_area_mm2,
-                       s.displacement_mm, s.rotation_rad, s.iterations, s.force_residual_n)
-        for s in run.steps
-    ]
+    """One timeseries.csv row per time point of the run: the common columns, then the joint's
+    pose (joint_angle_deg, or coord_<name> of an OpenSim model in rad or m), the contact resultant
+    sum p A n (N) and its moment about G (N mm), the centre of pressure (mm; G when nothing is in
+    contact) and each ligament's tension (N); DEM adds remeasured_imbalance (edem.consistency).
+    n points from M to F: the resultant is the load the contact carries, which balances the
+    applied load with the ligaments and the constraints."""
+    rows = []
+    kinematics = run.scene.kinematics
+    for s in run.steps:
+        row = timeseries_row(s.step, s.time_s, s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa, s.contact_area_mm2,
+                             s.displacement_mm, s.rotation_rad, s.iterations, s.force_residual_n)
+        if isinstance(kinematics, JointKinematics):
+            row["joint_angle_deg"] = float(np.degrees(kinematics.angle_rad[s.step]))
+        elif isinstance(kinematics, BodyPoses):
+            row.update({f"coord_{name}": float(values[s.step]) for name, values in kinematics.coordinates.items()})
+        row.update(zip(("contact_force_x_n", "contact_force_y_n", "contact_force_z_n"), s.contact_force_n))
+        row.update(zip(("contact_moment_x_nmm", "contact_moment_y_nmm", "contact_moment_z_nmm"), s.contact_moment_nmm))
+        row.update(zip(("cop_x_mm", "cop_y_mm", "cop_z_mm"), s.centre_of_pressure_mm))
+        row.update({f"ligament_{lig.name}_n": float(f) for lig, f in zip(run.scene.ligaments, np.maximum(s.ligament_force_n, 0.0))})
+        if s.remeasured_imbalance is not None:
+            row["remeasured_imbalance"] = float(s.remeasured_imbalance)
+        rows.append(row)
+    return rows
 
 
 def pressure_frame(run: RunResult, s: StepResult) -> Frame:
@@ -95,4 +114,11 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
     chosen = range(len(run.steps)) if frame_steps is None else frame_steps
     frames = [pressure_frame(run, run.steps[k]) for k in chosen]
     fixed = SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles)
-    return write_result_dir(out_dir, data, timeseries_rows(run), frames, fixed)
+    return write_result_dir(out_dir, data, timeseries_rows(run), frames, fixed,
+                            fixed_frames=[fixed_frame(run, run.steps[k]) for k in chosen], opensim_sto=True)
+
+
+def fixed_frame(run: RunResult, s: StepResult) -> Frame:
+    """The fixed body placed where the step's kinematics put it (scene axes, mm)."""
+    fixed = run.scene.fixed
+    return Frame(s.step, s.time_s, SurfaceFrame(s.fixed_placement.points(fixed.vertices_mm), fixed.triangles))

@@ -35,6 +35,7 @@ SECTIONS = {
         "max_spring_length_mm",
         "thickness_mm",
         "shear_modulus_mpa",
+        "coupling",
     },
     "load": None,  # checked by edem.loads
     "kinematics": None,  # checked by edem.loads
@@ -43,8 +44,10 @@ SECTIONS = {
     "viscoelastic": {"relaxation_time_s", "integrator", "allow_unstable"},
     "solver": {"method"},
     "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness"},
+    "opensim": None,  # checked by edem.opensim_model
 }
 FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm"}
+COUPLINGS = ("none", "thin-layer")
 
 
 @dataclass(frozen=True)
@@ -68,7 +71,7 @@ class Scene:
     reference_point_mm: np.ndarray
     cartilage: Cartilage
     load: LoadSeries
-    kinematics: JointKinematics | None = None
+    kinematics: JointKinematics | Any | None = None  # or edem.opensim_model.BodyPoses (F's pose per time point)
     fixed_dofs: tuple[str, ...] = ()
     ligaments: tuple[Ligament, ...] = ()
     viscoelastic: Viscoelastic | None = None
@@ -300,6 +303,9 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
     unknown = sorted(set(data) - set(SECTIONS))
     if unknown:
         raise InputError(f"unknown section [{unknown[0]}]", file=file, key=unknown[0], expected="sections " + ", ".join(SECTIONS))
+    from_model = "opensim" in data
+    if from_model:
+        data.setdefault("geometry", {})
     for section in ("geometry", "cartilage", "load"):
         if not isinstance(data.get(section), dict):
             raise InputError(f"missing section [{section}]", file=file, key=section, expected=f"a [{section}] table (README.md#scene-files)")
@@ -323,7 +329,16 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             key="cartilage.max_spring_length_mm",
             expected=f"h_max >= thickness_mm for the {law} law (springs beyond h_max are not seen)",
         )
+    coupling = cart.string("coupling", "none", COUPLINGS)
+    if coupling == "thin-layer" and spring_law.thin_layer is None:
+        raise InputError(
+            "the thin-layer coupling is linear: it has no logarithmic law",
+            file=file,
+            key="cartilage.coupling",
+            expected='law = "gap" or "threshold" with coupling = "thin-layer", or coupling = "none"',
+        )
     cartilage = Cartilage(
+        coupling=coupling,
         youngs_modulus_mpa=cart.number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
         poissons_ratio=cart.number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
         law=law,
@@ -331,13 +346,18 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         thickness_mm=thickness,
         shear_modulus_mpa=cart.number("shear_modulus_mpa", 0.0, nonnegative=True, what="a shear modulus in MPa (>= 0)"),
     )
-    mobile, fixed, reference_point, attachments, geo_description = _load_geometry(data["geometry"], path, cartilage, notes)
-    description = description or geo_description
-
     load = load_series_from_table(data["load"], path)
-    kinematics = None
-    if "kinematics" in data:
-        kinematics = angle_series_from_table(data["kinematics"], path, load.time_s)
+    if from_model:
+        from edem.opensim_model import model_geometry
+
+        mobile, fixed, reference_point, kinematics, load = model_geometry(data, path, cartilage, load, notes)
+        attachments, geo_description = {}, ""
+    else:
+        mobile, fixed, reference_point, attachments, geo_description = _load_geometry(data["geometry"], path, cartilage, notes)
+        kinematics = None
+        if "kinematics" in data:
+            kinematics = angle_series_from_table(data["kinematics"], path, load.time_s)
+    description = description or geo_description
 
     constraints = SceneTable(data.get("constraints", {}), file, "constraints", SECTIONS["constraints"])
     fixed_dofs = constraints.table.get("fixed_dofs", [])

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from edem.consistency import DEM_IMBALANCE_FRACTION, check_contact_kept, check_increment, remeasured_imbalance, remeasured_warning
 from edem.errors import InputError, SolverError
+from edem.joint_reaction import transfer_moment
 from edem.laws import ElementLaw, stack_elements
 from edem.mechanics import (
     DOF_NAMES,
@@ -21,9 +23,11 @@ from edem.mechanics import (
     solve_unilateral,
     unrestrained_dofs,
 )
+from edem.opensim_model import BodyPoses
 from edem.raycast import RayCaster
 from edem.scene import Scene, Viscoelastic
 from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, shear_terms, spring_geometry
+from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 from edem.viscoelastic import check_rk2_stability, integrator_weights
 
 
@@ -52,6 +56,13 @@ class StepResult:
     mobile_placement: Placement  # pose of M after the step (for the pressure maps)
     fixed_placement: Placement
     area_mm2: np.ndarray  # (n_springs,) spring areas
+    # DEM: the load fraction the springs measured again at the solved pose leave unbalanced (None: EDEM)
+    remeasured_imbalance: float | None = None
+    # sum of p A n over the springs (N), its moment about G (N mm) and the centre of pressure (mm),
+    # springs where the solve measured them (so they balance the load with ligaments and constraints)
+    contact_force_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    contact_moment_nmm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    centre_of_pressure_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def contact_area_mm2(self) -> float:
@@ -83,10 +94,13 @@ class RunResult:
 
 
 def fixed_placement(scene: Scene, step: int) -> Placement:
-    """Pose of F at a time point: the joint angle about the scene's axis (docs/method.md#2-edem-the-time-dependent-incremental-method step 1)."""
+    """Pose of F at a time point: the joint angle about the scene's axis (docs/method.md#2-edem-the-time-dependent-incremental-method step 1), or the
+    pose an OpenSim model gives it at the motion's coordinates."""
     kin = scene.kinematics
     if kin is None:
         return Placement.identity()
+    if isinstance(kin, BodyPoses):  # F's full pose from an OpenSim model
+        return Placement(kin.rotation[step], kin.translation_mm[step], np.zeros(3))
     rotation = rotation_matrix(kin.axis_direction * kin.angle_rad[step])
     return Placement(rotation, np.zeros(3), kin.axis_point_mm)
 
@@ -117,20 +131,64 @@ def weak_dofs_warning(
     ]
 
 
+def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> list[str]:
+    """Say so when a gap-law bed starts compressed (t larger than the gap h): it pushes the
+    bodies apart before any load, so the first time point's result includes that preload."""
+    if cartilage.thickness_mm is None:
+        return []
+    t = float(cartilage.thickness_mm)
+    h = geometry.spring_length_mm[geometry.candidate]
+    compressed = h < t * (1.0 - 1e-9)
+    if not np.any(compressed):
+        return []
+    return [
+        f"the {cartilage.law} bed starts pre-compressed: {int(compressed.sum())} springs are shorter than the "
+        f"thickness t = {t:g} mm, by up to {float((t - h).max()):.3g} mm (the gap between the surfaces is less "
+        "than t): the bodies push apart before any load; check thickness_mm against the gap"
+    ]
+
+
 def compression_ratio(geometry: SpringGeometry, cartilage: Cartilage, approach_mm: np.ndarray) -> np.ndarray:
     """Compression over undeformed length of the candidate springs after an approach (strain)."""
     return cartilage.spring_law.strain(geometry.spring_length_mm[geometry.candidate], approach_mm, cartilage.thickness_mm)
 
 
 def applied_loads(scene: Scene) -> np.ndarray:
-    """(n, 6) force and moment per time point in global axes (turned with F for frame = "fixed")."""
+    """(n, 6) force and moment about G per time point in global axes (turned with F for frame = "fixed").
+
+    A moment given about another point (``load.point_mm``, e.g. a JointReaction's joint centre,
+    placed with F for frame = "fixed") is moved to G: M_G = M_P + (P - G) x F.
+    """
     load = scene.load
-    force, moment = load.force_n, load.moment_nmm
+    force, moment, point = load.force_n, load.moment_nmm, load.point_mm
     if load.frame == "fixed" and scene.kinematics is not None:
-        rotations = [fixed_placement(scene, k).rotation for k in range(len(load.time_s))]
+        placements = [fixed_placement(scene, k) for k in range(len(load.time_s))]
+        rotations = [p.rotation for p in placements]
         force = np.einsum("kij,kj->ki", rotations, force)
         moment = np.einsum("kij,kj->ki", rotations, moment)
+        if point is not None:
+            point = np.array([p.points(x[None])[0] for p, x in zip(placements, point)])
+    if point is not None:
+        moment = transfer_moment(moment, force, point, scene.reference_point_mm)
     return np.hstack([force, moment])
+
+
+def constrained_moment_warning(loads: np.ndarray, fixed_dofs: tuple[str, ...]) -> list[str]:
+    """Say so when the applied moment about G has components along fixed rotations: the
+    constraint carries them and the spring bed never sees them (never dropped silently)."""
+    fixed = [i for i, name in enumerate(DOF_NAMES[3:]) if name in fixed_dofs]
+    if not fixed:
+        return []
+    largest = np.abs(loads[:, 3:][:, fixed]).max(axis=0)
+    scale = max(float(np.abs(loads[:, 3:]).max()), 1e-300)
+    carried = [f"{DOF_NAMES[3 + i]} (up to {m:.4g} N mm)" for i, m in zip(fixed, largest) if m > 1e-9 * scale]
+    if not carried:
+        return []
+    return [
+        f"the applied moment about G has components about {', '.join(carried)}, which [constraints] fixed_dofs "
+        "carry: the contact does not see them (free these rotations, or move G, e.g. to the joint centre, "
+        "if the contact should carry them)"
+    ]
 
 
 def run(
@@ -146,6 +204,8 @@ def run(
     that time, the stored spring forces of the springs still in contact push back (eq. 3.17),
     the increment solves K u = T_k - p with the active set handled as in DEM (eq. 3.18-3.19),
     then the forces are committed and M is moved by u. Springs that left contact keep no force.
+    With ``cartilage.coupling = "thin-layer"`` each solve is the coupled layer's
+    (:mod:`edem.thin_layer_contact`) and the committed forces are its coupled pressure field.
     """
     method = method or scene.method
     if method not in METHODS:
@@ -159,7 +219,7 @@ def run(
     length_scale = float(np.sqrt(((spring_centroid - g0) ** 2).sum(axis=1).mean()))
     load = scene.load
     loads = applied_loads(scene)
-    warnings: list[str] = []
+    warnings: list[str] = constrained_moment_warning(loads, scene.fixed_dofs)
     viscous = scene.viscoelastic if method == "edem" else None
     if scene.viscoelastic is not None and viscous is None:
         warnings.append("[viscoelastic] is ignored by DEM, a static method: use --method edem")
@@ -167,7 +227,10 @@ def run(
         warnings += check_rk2_stability(load.time_s, viscous.relaxation_time_s, viscous.allow_unstable, scene.source)
     stored = np.zeros((n_springs, 3))  # committed (elastic) spring forces: the EDEM push-back
     pose = Placement.identity(g0)
+    layer_mesh = coupled_layer_mesh(scene) if cartilage.coupling == "thin-layer" else None
     steps: list[StepResult] = []
+    unbalanced: list[tuple[int, float]] = []  # DEM time points whose re-measured springs miss the load
+    free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
     seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
         clock = time.perf_counter()
@@ -203,13 +266,20 @@ def run(
         if len(lig_rows):
             directions = np.vstack([directions, lig_rows])
         try:
-            solution = solve_unilateral(
-                directions, law, loads[k], fixed_dofs=scene.fixed_dofs, shear=shear, length_scale_mm=length_scale
-            )
+            if layer_mesh is None:
+                solution = solve_unilateral(
+                    directions, law, loads[k], fixed_dofs=scene.fixed_dofs, shear=shear, length_scale_mm=length_scale
+                )
+            else:
+                coupled = CoupledStep.build(layer_mesh, geometry, cartilage, stored_normal, directions[:n_c], lig_rows, lig_law)
+                solution = coupled.solve(loads[k], scene.fixed_dofs, shear, length_scale)
         except SolverError as exc:
             raise SolverError(f"time point {k} (t = {t:g} s, {n_c} candidate springs): {exc}") from None
         total_force = np.where(solution.active, solution.element_force_n, 0.0)
+        if layer_mesh is not None and solution.max_penetration_mm > 1e-9 * cartilage.max_spring_length_mm:
+            warnings.append(f"time point {k} (t = {t:g} s): the layer's surface penetrates the fixed body by {solution.max_penetration_mm:.3g} mm out of contact")
         if k == 0:
+            warnings += precompression_warning(geometry, cartilage)
             warnings += weak_dofs_warning(directions, law, shear, solution, scene.fixed_dofs, length_scale)
         overstrained = int((solution.active[:n_c] & (compression_ratio(geometry, cartilage, directions[:n_c] @ solution.displacement) >= 1.0)).sum())
         if overstrained:
@@ -222,17 +292,41 @@ def run(
         else:
             dt = float(t - load.time_s[k - 1]) if k else 0.0
             previous = loads[k - 1] if k else np.zeros(6)
-            u, elastic_force = viscoelastic_increment(
-                directions, law, shear, solution, previous, loads[k], dt, viscous, scene.fixed_dofs
-            )
+            if layer_mesh is None:
+                u, elastic_force = viscoelastic_increment(
+                    directions, law, shear, solution, previous, loads[k], dt, viscous, scene.fixed_dofs
+                )
+            else:
+                weights = integrator_weights(dt, viscous.relaxation_time_s, viscous.integrator)
+                u, elastic_force = coupled.viscoelastic_increment(solution, stored_normal, previous, loads[k], weights, shear, scene.fixed_dofs)
             if not np.all(np.isfinite(u)):
                 raise SolverError(f"time point {k} (t = {t:g} s): the viscoelastic integration diverged (non-finite displacement)")
+        contact = directions[:n_c].T @ total_force[:n_c]
+        if shear is not None:
+            contact = contact + shear.generalised_force(solution.displacement, solution.active[:n_c])
+        spring_force = total_force[:n_c]
+        centre = (spring_force @ geometry.centroid_mm[cand]) / spring_force.sum() if spring_force.sum() > 0 else g_current
+        where = f"time point {k} (t = {t:g} s)"
+        check_contact_kept(loads[k, :3], geometry.normal, spring_area, int(solution.active[:n_c].sum()), free, u, where)
+        check_increment(u, geometry.centroid_mm[cand][solution.active[:n_c]], g_current, cartilage, where)
         committed = elastic_force[:n_c, None] * normals
         if shear is not None:
             committed = committed + shear.force(u, solution.active[:n_c])
         stored = np.zeros((n_springs, 3))
         stored[cand] = committed
         pose = Placement(rotation_matrix(u[3:]) @ pose.rotation, pose.translation_mm + u[:3], g0)
+        if method == "dem":
+            clock_remeasure = time.perf_counter()
+            imbalance, scale = remeasured_imbalance(
+                pose=pose, fixed_pose=f_pose, initial=geometry, spring_centroid_mm=spring_centroid, spring_normal=spring_normal,
+                spring_area_mm2=spring_area, caster=caster, cartilage=cartilage, ligaments=scene.ligaments, reference_point_mm=g0,
+                shear=shear, u=u, active=solution.active, model_force_n=total_force, load=loads[k], free=free, length_scale_mm=length_scale,
+            )
+            seconds["geometry"] += time.perf_counter() - clock_remeasure
+            clock += time.perf_counter() - clock_remeasure  # counted as geometry, not as solve
+            remeasured = imbalance / scale if scale > 0 else 0.0
+            if remeasured > DEM_IMBALANCE_FRACTION:
+                unbalanced.append((k, remeasured))
         pressure = np.zeros(n_springs)
         pressure[cand] = total_force[:n_c] / spring_area[cand]
         viscous_pressure = np.zeros(n_springs)
@@ -259,10 +353,17 @@ def run(
                 mobile_placement=pose,
                 fixed_placement=f_pose,
                 area_mm2=spring_area,
+                remeasured_imbalance=remeasured if method == "dem" else None,
+                contact_force_n=contact[:3],
+                contact_moment_nmm=contact[3:],
+                centre_of_pressure_mm=centre,
             )
         )
         if progress is not None:
             progress(k)
+    if unbalanced:
+        worst = max(unbalanced, key=lambda item: item[1])
+        warnings.append(remeasured_warning(len(unbalanced), worst[0], worst[1]))
     return RunResult(scene, method, steps, time.perf_counter() - started, warnings, seconds)
 
 

@@ -51,6 +51,7 @@ class Cartilage:
     max_spring_length_mm: float = 3.5  # h_max: candidates (threshold) and ray window (all laws)
     thickness_mm: float | None = None  # undeformed combined thickness t (gap laws)
     shear_modulus_mpa: float = 0.0
+    coupling: str = "none"  # none (independent springs) | thin-layer (edem.thin_layer)
 
     @property
     def confined_modulus_mpa(self) -> float:

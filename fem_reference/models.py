@@ -123,6 +123,20 @@ def _snap_top_onto_fixed(solid: Any, caster: RayCaster, f_pose: Placement, windo
     return replace(solid, points_mm=new)
 
 
+def _build_solid(kind: str, build) -> tuple[Any, list[str]]:
+    """The FE solid ``build()`` makes and the warnings it gave (rim triangles dropped...);
+    SolverError when it cannot be built (its message names the triangles)."""
+    import warnings as python_warnings
+
+    with python_warnings.catch_warnings(record=True) as caught:
+        python_warnings.simplefilter("always")
+        try:
+            solid = build()
+        except ValueError as exc:
+            raise SolverError(f"building the FE {kind} failed: {exc}") from None
+    return solid, [str(w.message) for w in caught]
+
+
 class SlabModel(FEModel):
     """The slab between M's candidate surface and F, touching F (twin of the threshold law)."""
 
@@ -149,10 +163,8 @@ class SlabModel(FEModel):
             raise SolverError(
                 f"no spring is a candidate: no part of the fixed body lies within h_max = {h_max:g} "
                 "mm of the mobile body along its normals (nothing to build the FE slab on)")
-        try:
-            solid = fe_solids.slab_solid(scene.mobile, lengths, h_max, mesh_size_mm, layers)
-        except ValueError as exc:
-            raise SolverError(f"building the FE slab failed: {exc}") from None
+        solid, built_notes = _build_solid("slab", lambda: fe_solids.slab_solid(scene.mobile, lengths, h_max, mesh_size_mm, layers))
+        warnings += built_notes
         solid = _snap_top_onto_fixed(solid, caster, f_pose, 2.0 * h_max, obstacle)
         pts, _, _ = contact_surface(solid)
         gap, _ = obstacle.gap_and_normal(pts)
@@ -186,11 +198,9 @@ class LayerModel(FEModel):
 
     def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
         if "solid" not in cache:
-            try:
-                cache["solid"] = fe_solids.layer_solid(scene.mobile, float(scene.cartilage.thickness_mm), mesh_size_mm, layers)
-            except ValueError as exc:
-                raise SolverError(f"building the FE layer failed: {exc}") from None
-        warnings: list[str] = []
+            cache["solid"], cache["solid_notes"] = _build_solid(
+                "layer", lambda: fe_solids.layer_solid(scene.mobile, float(scene.cartilage.thickness_mm), mesh_size_mm, layers))
+        warnings: list[str] = cache.pop("solid_notes", [])  # the construction's notes, given once
         pts, _, _ = contact_surface(cache["solid"])
         gap, _ = obstacle.gap_and_normal(pts)
         overlap = float(-gap.min()) if len(gap) else 0.0

@@ -22,6 +22,7 @@ prisms share conforming faces. Physical groups: 1 = bonded face (on the bone, bo
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -235,6 +236,88 @@ def _vertex_values(vertices: np.ndarray, triangles: np.ndarray, values: np.ndarr
     return out
 
 
+def _inverted_prisms(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray,
+                     thickness: np.ndarray) -> np.ndarray:
+    """(n_tri,) bool: the triangles whose one-layer prism along the vertex normals has a
+    tetrahedron of non-positive volume (the extrusion turns inside out there)."""
+    nv = len(vertices)
+    points = np.vstack([vertices, vertices + thickness[:, None] * normals])
+    srt = np.sort(triangles, axis=1)
+    a, b, c = srt[:, 0], srt[:, 1], srt[:, 2]
+    ta, tb, tc = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    even = ((ta == a) & (tb == b)) | ((tb == a) & (tc == b)) | ((tc == a) & (ta == b))
+    bad = np.zeros(len(triangles), dtype=bool)
+    for t in (np.column_stack([a, b, c, c + nv]), np.column_stack([a, b, c + nv, b + nv]), np.column_stack([a, b + nv, c + nv, a + nv])):
+        t[~even] = t[~even][:, [1, 0, 2, 3]]
+        bad |= tet_volumes(points, t) <= 0
+    return bad
+
+
+def _rim_triangles(triangles: np.ndarray) -> np.ndarray:
+    """(n_tri,) bool: triangles with an edge no other triangle shares (the surface's rim)."""
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    once = counts[inverse.ravel()] == 1
+    return once.reshape(3, -1).any(axis=0)
+
+
+def _lean_deg(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(n_tri,) largest angle between a triangle's normal and the vertex normals at its corners."""
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    cos = np.min(np.einsum("ikj,ij->ik", normals[triangles], n), axis=1)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def _trim_inverting_rim(name: str, surface: TriangleSurface, mask: np.ndarray, thickness_of,
+                        max_rounds: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The submesh of ``mask`` with its vertex normals and thicknesses, without the rim
+    triangles whose prisms would turn inside out.
+
+    Real (segmented) surfaces end in sliver rim triangles whose vertex normals lean far from
+    their own (61 deg on an MRI knee): extruded along those normals their prisms invert. Such
+    rim triangles are dropped (warned, with their number and lean), repeatedly, since dropping
+    makes a new rim. An inverting prism inside the surface cannot be dropped without a hole:
+    ValueError naming those triangles (indices of ``surface``) and their lean.
+    ``thickness_of(vertices, triangles, triangle_index, normals)`` gives the per-vertex thickness.
+    Returns (vertices, triangles, triangle_index, normals, thickness).
+    """
+    dropped: list[np.ndarray] = []
+    worst = 0.0
+    keep = mask.copy()
+    for _ in range(max_rounds + 1):
+        verts, tris, tri_index = _submesh(surface, keep)
+        normals = vertex_normals(verts, tris)
+        thickness = thickness_of(verts, tris, tri_index, normals)
+        bad = _inverted_prisms(verts, tris, normals, thickness)
+        if not bad.any():
+            break
+        lean = _lean_deg(verts, tris, normals)
+        rim = bad & _rim_triangles(tris)  # dropped first: their neighbours' normals change with them
+        if not rim.any() or len(dropped) == max_rounds:
+            which = tri_index[bad]
+            raise ValueError(
+                f"{name}: the prisms over {which.size} triangles turn inside out when extruded along the vertex "
+                f"normals (triangles {', '.join(str(int(i)) for i in which[:12])}{', ...' if which.size > 12 else ''} "
+                f"of the mobile surface; their vertex normals lean up to {float(lean[bad].max()):.0f} deg "
+                "from their own): smooth or remesh the surface there, or use a thinner layer")
+        worst = max(worst, float(lean[rim].max()))
+        dropped.append(tri_index[rim])
+        keep[tri_index[rim]] = False
+        if not keep.any():
+            raise ValueError(f"{name}: every triangle's prism turns inside out along the vertex normals")
+    if dropped:
+        count = int(sum(d.size for d in dropped))
+        warnings.warn(
+            f"{name}: {count} rim triangles dropped from the FE solid (triangles "
+            f"{', '.join(str(int(i)) for i in np.concatenate(dropped)[:12])}{', ...' if count > 12 else ''}): their "
+            f"vertex normals lean up to {worst:.0f} deg from their own, so their prisms would turn inside out",
+            stacklevel=3,
+        )
+    return verts, tris, tri_index, normals, thickness
+
+
 def _extrude(name: str, bottom: np.ndarray, triangles: np.ndarray, normals: np.ndarray,
              thickness: np.ndarray, layers: int) -> FESolid:
     """Prisms from ``bottom + k/layers * thickness * normal``, 3 tetrahedra each."""
@@ -363,12 +446,13 @@ def slab_solid(
         mask = np.isfinite(h) & (h > 0) & (h <= max_spring_length_mm) & (mobile.areas_mm2 > 0)
     if not np.any(mask):
         raise ValueError("slab_solid: no candidate spring (no finite length <= h_max)")
-    verts, tris, tri_index = _submesh(mobile, mask)
-    normals = vertex_normals(verts, tris)
-    hv = _vertex_values(verts, tris, h[tri_index], normals)
-    # an extrapolated vertex value may undershoot near a touching point: keep it positive
-    floor = 0.25 * float(np.min(h[tri_index]))
-    hv = np.maximum(hv, floor)
+
+    def thickness_of(verts, tris, tri_index, normals):
+        hv = _vertex_values(verts, tris, h[tri_index], normals)
+        # an extrapolated vertex value may undershoot near a touching point: keep it positive
+        return np.maximum(hv, 0.25 * float(np.min(h[tri_index])))
+
+    verts, tris, tri_index, normals, hv = _trim_inverting_rim("slab", mobile, mask, thickness_of)
     size = mesh_size_mm if mesh_size_mm is not None else _mean_edge(verts, tris)
     levels = _levels_for(mesh_size_mm, verts, tris)
     verts, tris, (normals, hv) = _refine(verts, tris, [normals, hv], levels)
@@ -392,8 +476,7 @@ def layer_solid(
     if not (math.isfinite(t) and t > 0):
         raise ValueError("layer_solid: thickness_mm must be a positive number")
     mask = mobile.areas_mm2 > 0
-    verts, tris, _ = _submesh(mobile, mask)
-    normals = vertex_normals(verts, tris)
+    verts, tris, _, normals, _ = _trim_inverting_rim("layer", mobile, mask, lambda v, *_: np.full(len(v), t))
     size = mesh_size_mm if mesh_size_mm is not None else _mean_edge(verts, tris)
     levels = _levels_for(mesh_size_mm, verts, tris)
     verts, tris, (normals,) = _refine(verts, tris, [normals], levels)

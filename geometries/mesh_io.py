@@ -723,29 +723,22 @@ def _winding_numbers(surface: TriangleSurface, mask: np.ndarray, points: np.ndar
     return out
 
 
-def _sample_per_component(comp: np.ndarray, n_comp: int, n_max: int) -> np.ndarray:
-    """Indices of at most about ``n_max`` evenly spaced triangles of every component."""
-    order = np.argsort(comp, kind="stable")
-    size = np.bincount(comp, minlength=n_comp)
-    start = np.concatenate([[0], np.cumsum(size)[:-1]])
-    rank = np.arange(len(comp)) - start[comp[order]]
-    step = np.maximum(1, -(-size // max(int(n_max), 1)))
-    return order[rank % step[comp[order]] == 0]
-
-
 def orient_towards(
     surface: TriangleSurface, points_mm: np.ndarray, *, key: str | None = None,
-    n_score_samples: int = 4096, n_winding_samples: int = 15,
+    near_mm: float | None = None, n_winding_samples: int = 15,
 ) -> TriangleSurface:
     """Give every connected component the global sign that makes its normals face ``points_mm``.
 
     The surface is first oriented consistently (:func:`orient_consistently`). Then, per
     component:
-    - open patch: flipped as a whole if sum_t A_t n_t . (p_t - c_t) < 0, where c_t is the
-      triangle centroid and p_t the point of ``points_mm`` nearest to it (k-d tree), i.e. the
-      area-weighted mean of n . (towards the other body) is made positive; the sum runs over
-      every triangle of components up to ``n_score_samples`` triangles and over an evenly
-      spaced subset of that many for larger ones (a sign decision; keeps big meshes fast);
+    - open patch: flipped as a whole if sum_t A_t n_t . (p_t - c_t) < 0 over the triangles
+      *near* the points only, where c_t is the triangle centroid and p_t the point of
+      ``points_mm`` nearest to it (k-d tree). Near means within ``near_mm`` of the component's
+      closest approach d_min (the ray window h_max when the caller knows it), or, without
+      ``near_mm``, no further than the closest tenth of the component's triangles. Only the
+      near triangles carry evidence: a patch that wraps round a condyle has far triangles whose
+      nearest point of the other body lies behind them, and counting those flips the patch
+      inside out (a 180 deg wrap over a small plateau already does);
     - closed surface: outward (positive signed volume), unless the points lie inside it
       (median generalised winding number of up to ``n_winding_samples`` of them > 1/2: a
       fixed shell around the mobile body), then inward. The dot-product rule is not used for
@@ -761,12 +754,12 @@ def orient_towards(
     closed = _closed_components(surface, topo)
     turn = np.zeros(nc, dtype=bool)
     if (~closed).any():
-        sel = _sample_per_component(comp, nc, n_score_samples)
-        sel = sel[~closed[comp[sel]]]
+        sel = np.flatnonzero(~closed[comp])
         cent = surface.centroids_mm[sel]
-        _, idx = cKDTree(points).query(cent)
+        distance, idx = cKDTree(points).query(cent)
         score_t = np.einsum("ij,ij->i", surface.area_vectors_mm2[sel], points[idx] - cent)
-        score = np.bincount(comp[sel], weights=score_t, minlength=nc)
+        near = _near_triangles(comp[sel], distance, nc, near_mm)
+        score = np.bincount(comp[sel][near], weights=score_t[near], minlength=nc)
         turn |= (~closed) & (score < 0)
     if closed.any():
         sample = points[np.unique(np.linspace(0, len(points) - 1, n_winding_samples).astype(int))]
@@ -778,18 +771,41 @@ def orient_towards(
     return surface
 
 
+def _near_triangles(comp: np.ndarray, distance_mm: np.ndarray, n_comp: int, near_mm: float | None) -> np.ndarray:
+    """Mask of the triangles within the near band of their component's closest approach.
+
+    The band is ``near_mm`` beyond the component's smallest distance, or (``near_mm`` None)
+    up to the component's 10th-percentile distance, so at least a tenth of every component
+    votes.
+    """
+    d_min = np.full(n_comp, np.inf)
+    np.minimum.at(d_min, comp, distance_mm)
+    if near_mm is not None:
+        limit = d_min + float(near_mm)
+    else:
+        limit = np.full(n_comp, np.inf)
+        order = np.lexsort((distance_mm, comp))
+        size = np.bincount(comp, minlength=n_comp)
+        start = np.concatenate([[0], np.cumsum(size)[:-1]])
+        present = size > 0
+        tenth = start[present] + (size[present] - 1) // 10
+        limit[present] = distance_mm[order[tenth]]
+    return distance_mm <= limit[comp] * (1 + 1e-12) + 1e-12
+
+
 def orient_pair(
     mobile: TriangleSurface, fixed: TriangleSurface, *, mobile_key: str | None = None,
-    fixed_key: str | None = None,
+    fixed_key: str | None = None, near_mm: float | None = None,
 ) -> tuple[TriangleSurface, TriangleSurface]:
     """Orient M's normals towards F and F's normals towards M (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs), per component.
 
     Each body is oriented with :func:`orient_towards` against the other body's vertices: open
-    patches by the nearest other-body vertex of every triangle, closed surfaces outward (inward
-    if they enclose the other body). Returns ``(mobile, fixed)``.
+    patches by the nearest other-body vertex of their triangles near it (within ``near_mm`` of
+    the closest approach, see :func:`orient_towards`), closed surfaces outward (inward if they
+    enclose the other body). Returns ``(mobile, fixed)``.
     """
-    mobile_out = orient_towards(mobile, fixed.vertices_mm, key=mobile_key)
-    fixed_out = orient_towards(fixed, mobile.vertices_mm, key=fixed_key)
+    mobile_out = orient_towards(mobile, fixed.vertices_mm, key=mobile_key, near_mm=near_mm)
+    fixed_out = orient_towards(fixed, mobile.vertices_mm, key=fixed_key, near_mm=near_mm)
     return mobile_out, fixed_out
 
 
@@ -812,25 +828,32 @@ def clean_surface(
     return orient_consistently(s, key=key)
 
 
-def check_units(surface: TriangleSurface, units: str = "mm") -> float:
-    """Warn when the bounding-box diagonal (in mm) suggests the wrong length unit (docs/method.md#8-built-in-geometries).
+def check_units(surface: TriangleSurface, units: str = "mm", *, refuse: bool = False, key: str | None = None) -> float:
+    """Warn (or with ``refuse``, raise InputError) when the bounding-box diagonal (in mm)
+    suggests the wrong length unit (docs/method.md#8-built-in-geometries).
 
     Below 1 mm the mesh most likely is in metres (suggest ``units = "m"``); above 2000 mm it
-    is larger than any joint, most likely micrometres or another unit. Returns the diagonal.
+    is larger than any joint, most likely micrometres or another unit. A scene refuses such a
+    mesh: solved as given it yields absurd contact numbers. Returns the diagonal.
     """
     diag = _bbox_diagonal_mm(surface.vertices_mm)
     where = _where(surface)
+    problem = None
     if diag < SMALL_DIAGONAL_MM:
         if units == "m":
-            _warn(f"{where}: the mesh is only {diag:.4g} mm across even after converting "
-                  "from metres; check the units of the file")
+            problem = f"the mesh is only {diag:.4g} mm across even after converting from metres"
+            expected = "a joint-sized mesh (1 to 2000 mm across): check the units of the file"
         else:
-            _warn(f"{where}: the mesh is only {diag:.4g} mm across; it looks like it is in "
-                  'metres: set units = "m" in the [geometry] section')
+            problem = f"the mesh is only {diag:.4g} mm across; it looks like it is in metres"
+            expected = 'units = "m" in the [geometry] section'
     elif diag > LARGE_DIAGONAL_MM:
-        _warn(f"{where}: the mesh is {diag:.4g} mm across, larger than any joint; it looks "
-              "like micrometres or another unit (lengths are read in mm, or in m with "
-              'units = "m")')
+        problem = f"the mesh is {diag:.4g} mm across, larger than any joint; it looks like micrometres or another unit"
+        expected = 'lengths in mm, or in m with units = "m"'
+    if problem is None:
+        return diag
+    if refuse:
+        raise InputError(problem, file=surface.source or None, key=key, expected=expected)
+    _warn(f"{where}: {problem} (expected {expected})")
     return diag
 
 
@@ -879,7 +902,7 @@ def check_pair_distance(
 
 def prepare_surface(
     path: str | Path, *, units: str = "mm", key: str | None = None, name: str = "",
-    merge_rel_tol: float = 1e-9,
+    merge_rel_tol: float = 1e-9, refuse_units: bool = False,
 ) -> TriangleSurface:
     """Read a mesh file and clean it: the entry point for one scene mesh (docs/method.md#8-built-in-geometries).
 
@@ -888,7 +911,7 @@ def prepare_surface(
     signed normals: call :func:`orient_pair` (or use :func:`prepare_pair`).
     """
     s = read_surface(path, units=units, key=key, name=name)
-    check_units(s, units)
+    check_units(s, units, refuse=refuse_units, key=key)
     return clean_surface(s, key=key, merge_rel_tol=merge_rel_tol)
 
 
@@ -900,11 +923,12 @@ def prepare_pair(
     """Read, clean and orient the mobile and fixed surfaces of a scene (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#8-built-in-geometries).
 
     Returns ``(mobile, fixed)`` with M's normals towards F and F's towards M. With
-    ``max_spring_length_mm`` the bodies are also checked to be close enough for springs.
+    ``max_spring_length_mm`` the bodies are also checked to be close enough for springs. A mesh
+    whose size says its unit is wrong (under 1 mm or over 2000 mm across) is refused.
     """
-    mobile = prepare_surface(mobile_path, units=units, key=mobile_key, name="mobile")
-    fixed = prepare_surface(fixed_path, units=units, key=fixed_key, name="fixed")
-    mobile, fixed = orient_pair(mobile, fixed, mobile_key=mobile_key, fixed_key=fixed_key)
+    mobile = prepare_surface(mobile_path, units=units, key=mobile_key, name="mobile", refuse_units=True)
+    fixed = prepare_surface(fixed_path, units=units, key=fixed_key, name="fixed", refuse_units=True)
+    mobile, fixed = orient_pair(mobile, fixed, mobile_key=mobile_key, fixed_key=fixed_key, near_mm=max_spring_length_mm)
     if max_spring_length_mm is not None:
         check_pair_distance(mobile, fixed, max_spring_length_mm, key="geometry")
     return mobile, fixed

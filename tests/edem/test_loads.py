@@ -167,18 +167,74 @@ def test_csv_custom_columns_with_negation(scene):
 
 
 def test_sto_jointreaction_autodetected_and_moments_converted_nm_to_nmm(scene):
+    """On the mobile body (talus_r), in ground, axes kept: forces as given, moments N m -> N mm,
+    the joint centre (px, py, pz) m -> mm as the point the moment is about."""
     rows = jointreaction_rows()
     write_jointreaction_sto(scene.parent / "jr.sto", rows)
-    load = load_series_from_table({"file": "jr.sto"}, scene)
+    load = load_series_from_table({"file": "jr.sto", "axes": "same", "mobile_body": "talus_r"}, scene)
     np.testing.assert_allclose(load.time_s, rows[:, 0])
     np.testing.assert_allclose(load.force_n, rows[:, 1:4])
     np.testing.assert_allclose(load.moment_nmm, rows[:, 4:7] * 1000.0)
+    np.testing.assert_allclose(load.point_mm, rows[:, 7:10] * 1000.0)
+    assert load.frame == "global"
+
+
+def test_sto_jointreaction_axes_are_never_guessed(scene):
+    """OpenSim's x anterior, y up, z right taken as the scene's slid the talus 9 mm: now refused
+    until `axes` says how they map."""
+    write_jointreaction_sto(scene.parent / "jr.sto", jointreaction_rows())
+    with pytest.raises(InputError, match=r"x anterior, y up, z right.*not guessed.*axes = \"opensim\""):
+        load_series_from_table({"file": "jr.sto", "mobile_body": "talus_r"}, scene)
+    with pytest.raises(InputError, match=r"mobile_body = \"talus_r\""):
+        load_series_from_table({"file": "jr.sto", "axes": "opensim"}, scene)
+
+
+def test_opensim_axes_preset_maps_anterior_up_right_onto_scene_right_anterior_up(scene):
+    """axes = "opensim": scene (x right, y anterior, z up) = OpenSim (z, x, y) for force, moment
+    and the joint centre; a proper rotation, so moment = r x F keeps its form."""
+    rows = jointreaction_rows()
+    write_jointreaction_sto(scene.parent / "jr.sto", rows)
+    load = load_series_from_table({"file": "jr.sto", "axes": "opensim", "mobile_body": "talus_r"}, scene)
+    fx, fy, fz, mx, my, mz, px, py, pz = (rows[:, k] for k in range(1, 10))
+    np.testing.assert_allclose(load.force_n, np.column_stack([fz, fx, fy]))
+    np.testing.assert_allclose(load.moment_nmm, 1000.0 * np.column_stack([mz, mx, my]))
+    np.testing.assert_allclose(load.point_mm, 1000.0 * np.column_stack([pz, px, py]))
+    f, r = np.array([1.0, 2.0, 3.0]), np.array([-4.0, 0.5, 2.0])
+    from edem.joint_reaction import axes_matrix
+
+    a = axes_matrix("opensim")
+    np.testing.assert_allclose(np.cross(a @ r, a @ f), a @ np.cross(r, f), atol=1e-12)
+
+
+@pytest.mark.parametrize("axes", [["x", "y", "-z"], ["x", "x", "z"], ["x", "y", "w"], "zxy"])
+def test_axes_that_are_not_a_rotation_are_refused(scene, axes):
+    with pytest.raises(InputError) as info:
+        load_series_from_table({"force_n": [0, 0, 1], "axes": axes}, scene)
+    assert info.value.key == "load.axes" and "opensim" in info.value.expected
+
+
+def test_jointreaction_on_the_fixed_body_is_reversed_and_turns_with_it(scene):
+    """ankle_r_on_tibia_r_in_tibia_r: the load on the tibia (F), in the tibia's frame: M carries
+    its reaction (sign -1) and the components turn with F (frame "fixed")."""
+    rows = jointreaction_rows()
+    prefix = "ankle_r_on_tibia_r_in_tibia_r"
+    write_jointreaction_sto(scene.parent / "jr.sto", rows, prefixes=(prefix,))
+    table = {"file": "jr.sto", "axes": "same", "mobile_body": "talus_r", "fixed_body": "tibia_r"}
+    load = load_series_from_table(table, scene)
+    np.testing.assert_allclose(load.force_n, -rows[:, 1:4])
+    np.testing.assert_allclose(load.moment_nmm, -1000.0 * rows[:, 4:7])
+    np.testing.assert_allclose(load.point_mm, 1000.0 * rows[:, 7:10])
+    assert load.frame == "fixed"
+    with pytest.raises(InputError, match="expressed in the fixed frame"):
+        load_series_from_table({**table, "frame": "global"}, scene)
+    with pytest.raises(InputError, match="neither mobile_body"):
+        load_series_from_table({**table, "fixed_body": "femur_r"}, scene)
 
 
 def test_sto_moment_unit_nmm_keeps_values(scene):
     rows = jointreaction_rows()
     write_jointreaction_sto(scene.parent / "jr.sto", rows)
-    load = load_series_from_table({"file": "jr.sto", "moment_unit": "nmm"}, scene)
+    load = load_series_from_table({"file": "jr.sto", "moment_unit": "nmm", "axes": "same", "mobile_body": "talus_r"}, scene)
     np.testing.assert_allclose(load.moment_nmm, rows[:, 4:7])
 
 
@@ -358,7 +414,7 @@ def test_non_finite_value_in_file_is_an_error(scene, bad):
     text[-1] = "\t".join(fields)
     path.write_text("\n".join(text) + "\n")
     with pytest.raises(InputError) as info:
-        load_series_from_table({"file": "jr.sto"}, scene)
+        load_series_from_table({"file": "jr.sto", "axes": "same", "mobile_body": "talus_r"}, scene)
     assert info.value.file == str(path) and f"{JR}_fy" in str(info.value) and "finite" in info.value.expected
 
 

@@ -13,6 +13,7 @@ import pytest
 from edem.errors import InputError
 from geometries import builders as B
 from geometries import fe_solids as F
+from geometries.surface import TriangleSurface
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -479,3 +480,55 @@ def test_render_png_written_and_not_blank(tmp_path, ideal):
     img = np.asarray(Image.open(path), dtype=np.float64)
     assert img.shape[:2] == (300, 400)
     assert img.var() > 0
+
+
+def lip_patch(lip_deg: float, lip_mm: float = 1.0, n: int = 10, size_mm: float = 10.0) -> TriangleSurface:
+    """A flat 10 x 10 mm grid (z = 0, normals +z) whose x = 10 edge carries a 1 mm strip folded
+    down and back by ``lip_deg``: the rim of a segmented surface, where vertex normals lean."""
+    xs = np.linspace(0.0, size_mm, n + 1)
+    xx, yy = np.meshgrid(xs, xs, indexing="ij")
+    v = np.column_stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)])
+    idx = np.arange(xx.size).reshape(xx.shape)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    edge = idx[-1, :]
+    angle = np.radians(lip_deg)
+    lip = np.column_stack([np.full(n + 1, size_mm + lip_mm * np.cos(angle)), xs, np.full(n + 1, -lip_mm * np.sin(angle))])
+    li = len(v) + np.arange(n + 1)
+    tris = [np.column_stack([a, b, c]), np.column_stack([a, c, d]),
+            np.column_stack([edge[:-1], li[:-1], li[1:]]), np.column_stack([edge[:-1], li[1:], edge[1:]])]
+    return TriangleSurface(np.vstack([v, lip]), np.vstack(tris))
+
+
+@pytest.mark.parametrize("model", ["layer", "slab"])
+def test_fe_solid_drops_rim_triangles_whose_prisms_would_invert(model):
+    """A rim strip folded back 120 deg: extruded 2 mm along the vertex normals, a rim prism turned
+    inside out and the whole build failed ("surface too curved"). The rim triangle is dropped,
+    warned with its index and lean, and every tetrahedron of the solid is positive."""
+    surface = lip_patch(120.0)
+    with pytest.warns(UserWarning, match=r"1 rim triangles dropped .*triangles 90\).*lean up to \d+ deg"):
+        if model == "layer":
+            solid = F.layer_solid(surface, 2.0, layers_through_thickness=2)
+        else:
+            solid = F.slab_solid(surface, np.full(surface.n_triangles, 2.0), 3.5, layers_through_thickness=2)
+    assert np.all(solid.volumes_mm3 > 0)
+    # the flat part is all there: 200 triangles x 2 layers x 3 tetrahedra at least
+    assert len(solid.tets) >= 200 * 2 * 3
+
+
+def test_fe_solid_refuses_naming_the_triangles_it_cannot_extrude():
+    """Folded back 160 deg, dropping rim triangles does not stop the inversion: refused, naming the
+    triangles of the mobile surface and how far their vertex normals lean."""
+    with pytest.raises(ValueError, match=r"turn inside out .*triangles \d+.*of the mobile surface.*lean up to \d+ deg"):
+        F.layer_solid(lip_patch(160.0), 2.0, layers_through_thickness=2)
+
+
+def test_fe_models_report_dropped_rim_triangles_and_refuse_with_solver_error():
+    """The FE models pass the construction's warnings on to the run (summary.json) and turn a
+    solid that cannot be built into a SolverError (exit 2) naming the triangles."""
+    from fem_reference.models import _build_solid
+    from geometries.errors import SolverError
+
+    solid, notes = _build_solid("layer", lambda: F.layer_solid(lip_patch(120.0), 2.0, layers_through_thickness=2))
+    assert np.all(solid.volumes_mm3 > 0) and any("rim triangles dropped" in n for n in notes)
+    with pytest.raises(SolverError, match=r"building the FE layer failed: .*triangles \d+"):
+        _build_solid("layer", lambda: F.layer_solid(lip_patch(160.0), 2.0, layers_through_thickness=2))

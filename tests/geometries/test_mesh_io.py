@@ -597,6 +597,34 @@ def test_orient_pair_cylinder_patch_and_plane():
     np.testing.assert_array_equal(f2.triangles, f.triangles)
 
 
+@pytest.mark.parametrize("near_mm", [None, 3.5])
+@pytest.mark.parametrize("arc_deg", [180.0, 240.0, 330.0])
+def test_surface_wrapping_round_a_condyle_is_oriented_by_the_triangles_near_the_other_body(arc_deg, near_mm):
+    """Invariant (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs): an open surface wrapping round a condyle (a cylinder arc up to
+    330 deg) over a small plateau 0.5 mm away faces the plateau where they meet, whatever
+    sign it is given. The far triangles of the wrap see the plateau behind them; with every
+    triangle voting they outvoted the near ones and turned the surface inside out."""
+    radius = 20.0
+    theta = np.radians(np.linspace(-arc_deg / 2, arc_deg / 2, 61))
+    x = np.linspace(-10.0, 10.0, 11)
+    xx, tt = np.meshgrid(x, theta, indexing="ij")
+    v = np.column_stack([xx.ravel(), radius * np.sin(tt.ravel()), radius * np.cos(tt.ravel()) - radius])
+    idx = np.arange(xx.size).reshape(xx.shape)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    wrap = surf(v, np.vstack([np.column_stack([a, b, c]), np.column_stack([a, c, d])]))
+    plateau = grid_patch(nx=8, ny=8, step=1.0, z=0.5)
+    plateau = surf(plateau.vertices_mm - [4.0, 4.0, 0.0], plateau.triangles)
+    outward = wrap.centroids_mm - np.column_stack([wrap.centroids_mm[:, 0], np.zeros(wrap.n_triangles), np.full(wrap.n_triangles, -radius)])
+    for given in (wrap, surf(wrap.vertices_mm, wrap.triangles[:, ::-1])):
+        for fixed_is_wrap in (True, False):
+            pair = (plateau, given) if fixed_is_wrap else (given, plateau)
+            m, f = orient_pair(*pair, near_mm=near_mm)
+            w, p = (f, m) if fixed_is_wrap else (m, f)
+            # every triangle of the wrap outward (away from its axis), the plateau facing down
+            assert np.all(np.einsum("ij,ij->i", w.unit_normals, outward) > 0)
+            assert np.all(p.unit_normals[:, 2] < -0.99)
+
+
 def test_orient_towards_closed_shell_enclosing_other_body_points_inward():
     """Invariant: a closed fixed shell around the mobile body gets inward normals (towards M);
     the enclosed closed mobile body stays outward."""

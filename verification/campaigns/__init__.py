@@ -12,7 +12,8 @@ against Hertz line contact and confined compression on three meshes each, with o
 ``stance`` (EDEM vs DEM over the built-in stance scenes, the thesis's figures beside ours, DEM
 vs the FE slab at five instants), ``sensitivity`` (h_max x ligament modulus, 20 x 20 EDEM
 stances, the thesis's fig. 4.3.10), ``quick`` (a subset for CI), and EDEM/DEM against the FE
-reference: ``cylinder-plane``, ``subject``, ``error-vs-runtime``.
+reference: ``cylinder-plane``, ``subject``, ``error-vs-runtime``; ``thin-layer`` (the coupled
+thin-layer bed and the independent springs against the FE).
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from verification.campaigns import (
     stability,
     stance,
     subject,
+    thin_layer,
 )
 from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, HERTZ_SIZES_MM
 from verification.campaigns.sensitivity import SENSITIVITY_HMAX_MM, SENSITIVITY_MODULUS_MPA
@@ -55,7 +57,7 @@ from verification.campaigns.stance import (
 )
 
 #: the registered campaign modules, in the order `edem verify --list` shows them
-CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime)
+CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer)
 
 
 def campaigns() -> dict[str, Campaign]:

@@ -32,6 +32,19 @@ FE_COMPARE_TOL = {**{m: 10.0 for m in COMPARISON_METRICS}, "force_residual_rel":
 SANITY_BASIS = uniform_basis(SANITY, "1000 %: catches a broken run (a wrong load, a lost contact), not a model gap; the errors are reported, not judged")
 FE_COMPARE_BASIS = {**SANITY_BASIS, "force_residual_rel": Basis(INVARIANT, "equilibrium of the discrete side, 1e-6 of the load")}
 ERROR_PANELS = ("peak_pressure_rel_error", "contact_area_rel_error", "displacement_rel_error", "pressure_l2_rel_error")
+#: the table columns of DEM against the FE (values of both sides and the errors)
+FE_TABLE_COLUMNS = [
+    {"header": "DEM peak (MPa)", "metric": "a_at_b_peak_pressure_mpa"},
+    {"header": "FE peak (MPa)", "metric": "b_peak_pressure_mpa"},
+    {"header": "peak err", "metric": "peak_pressure_rel_error"},
+    {"header": "DEM area (mm^2)", "metric": "a_at_b_mean_contact_area_mm2"},
+    {"header": "FE area (mm^2)", "metric": "b_mean_contact_area_mm2"},
+    {"header": "area err", "metric": "contact_area_rel_error"},
+    {"header": "DEM |u| (mm)", "metric": "a_at_b_displacement_norm_mm"},
+    {"header": "FE |u| (mm)", "metric": "b_displacement_norm_mm"},
+    {"header": "disp err", "metric": "displacement_rel_error"},
+    {"header": "L2 err", "metric": "pressure_l2_rel_error"},
+]
 #: the two models of the ideal ankle: (prefix, scene, sides, what)
 CP_MODELS = (
     ("slab", "ideal-standing", ("dem", "fe-slab"), "ideal ankle (R 20 mm, 114 deg, plafond 1.5 mm above), threshold-law DEM vs the FE slab"),
@@ -98,20 +111,8 @@ def campaign() -> Campaign:
     cases = tuple(_cp_cases())
     sweeps = _cp_sweeps()
     figures = tuple(Figure(name, title, "sweep", names, x=x, y=ERROR_PANELS, logx=logx, logy=True) for name, title, x, names, logx in sweeps)
-    columns = [
-        {"header": "DEM peak (MPa)", "metric": "a_at_b_peak_pressure_mpa"},
-        {"header": "FE peak (MPa)", "metric": "b_peak_pressure_mpa"},
-        {"header": "peak err", "metric": "peak_pressure_rel_error"},
-        {"header": "DEM area (mm^2)", "metric": "a_at_b_mean_contact_area_mm2"},
-        {"header": "FE area (mm^2)", "metric": "b_mean_contact_area_mm2"},
-        {"header": "area err", "metric": "contact_area_rel_error"},
-        {"header": "DEM |u| (mm)", "metric": "a_at_b_displacement_norm_mm"},
-        {"header": "FE |u| (mm)", "metric": "b_displacement_norm_mm"},
-        {"header": "disp err", "metric": "displacement_rel_error"},
-        {"header": "L2 err", "metric": "pressure_l2_rel_error"},
-    ]
     analyses = tuple(
-        Analysis(f"{name}-table", f"{title}. Reported, no verdict", "table", names, {"columns": columns}) for name, title, _x, names, _l in sweeps
+        Analysis(f"{name}-table", f"{title}. Reported, no verdict", "table", names, {"columns": FE_TABLE_COLUMNS}) for name, title, _x, names, _l in sweeps
     )
     return Campaign(
         "cylinder-plane",

@@ -1,0 +1,50 @@
+"""Coupled thin-layer DEM vs independent-spring DEM (issue 10 goal: ratio <= 3 at 3k springs, <= 5 at 30k).
+
+The idealised ankle of ``bench_edem`` (tibia turned, load ramped to 4190 N), threshold law,
+nu 0.45, solved by DEM at 5 instants, with ``coupling = "none"`` and ``"thin-layer"``. The
+Embree scene is built once. Prints, per size, the medians of 5 runs of the whole DEM run and of
+its solve stage (assembly + unilateral solve, without the ray casting both share), and the ratios.
+
+    .venv/bin/python benchmarks/bench_thin_layer.py
+"""
+
+from __future__ import annotations
+
+import statistics
+from dataclasses import replace
+
+import numpy as np
+from bench_edem import stance_like_scene
+
+from edem.raycast import RayCaster
+from edem.solver import run
+
+
+def bench(mesh_size_mm: float, target_ratio: float, rounds: int = 5, n_steps: int = 5) -> None:
+    base = stance_like_scene(mesh_size_mm, n_steps)
+    caster = RayCaster(base.fixed.vertices_mm, base.fixed.triangles)
+    medians = {}
+    for coupling in ("none", "thin-layer"):
+        scene = replace(base, cartilage=replace(base.cartilage, poissons_ratio=0.45, coupling=coupling))
+        run(scene, "dem", caster=caster)  # warm-up
+        totals, solves = [], []
+        for _ in range(rounds):
+            result = run(scene, "dem", caster=caster)
+            totals.append(result.wall_time_s)
+            solves.append(result.seconds["solve"])
+        last = result.steps[-1]
+        medians[coupling] = (statistics.median(totals), statistics.median(solves))
+        print(
+            f"{result.n_springs:6d} springs, {coupling:10s}: run {1e3 * medians[coupling][0]:8.1f} ms, solve {1e3 * medians[coupling][1]:8.1f} ms "
+            f"(median of {rounds}, {n_steps} DEM instants); mean iterations {np.mean([s.iterations for s in result.steps]):.1f}, "
+            f"final peak {last.peak_pressure_mpa:.2f} MPa, area {last.contact_area_mm2:.0f} mm^2"
+        )
+    run_ratio = medians["thin-layer"][0] / medians["none"][0]
+    solve_ratio = medians["thin-layer"][1] / medians["none"][1]
+    print(f"  ratio coupled / independent: run {run_ratio:.2f}x, solve stage {solve_ratio:.2f}x (goal <= {target_ratio}x on the run: "
+          f"{'met' if run_ratio <= target_ratio else 'MISSED'})")
+
+
+if __name__ == "__main__":
+    bench(0.94, 3.0)
+    bench(0.3, 5.0)

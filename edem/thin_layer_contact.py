@@ -1,0 +1,353 @@
+"""Unilateral contact of a rigid body on the coupled thin layer (``[cartilage] coupling = "thin-layer"``).
+
+The springs of ``edem.mechanics`` are replaced by a layer whose surface deflection w (mm, per
+candidate spring) answers the spring forces f (N) through the symmetric positive definite
+compliance of ``edem.thin_layer``: w = C f. The rigid motion u (6 DOFs) approaches spring j by
+g_j . u, so the layer must be compressed by d_j(u) = d0_j + g_j . u (d0: the overlap before the
+increment: t - h for the gap law, C f_carried for the threshold law's EDEM push-back, 0 in DEM).
+Contact is the complementarity problem
+
+    f >= 0,   y = C f - d(u) >= 0,   f . y = 0,   sum_j f_j g_j + ligaments + shear = T,
+
+the KKT system of the convex quadratic programme min 1/2 f.C f - f.d0 over f >= 0, sum f g = T
+(u is the multiplier of the balance). It is solved by the primal-dual active set method
+(semismooth Newton on min(f, k y) = 0): for a set I of springs in contact, f_N = 0 and
+w_I = d_I(u), which with the auxiliary vertex field z = H^-1 Z f is the sparse system
+
+    f_I = Lam (d0_I + D_I u - sigma Z_I^T z),   (H + sigma Z_I Lam Z_I^T) z = Z_I Lam (d0_I + D_I u),
+
+Lam = diag(A / c_loc)_I. One sparse factorisation of the vertex matrix per iteration gives f_I and
+z as affine functions of u (seven right-hand sides), so balance is a 6 x 6 solve with the coupled
+contact stiffness D_I^T df_I/du; then I is updated: springs with f_j <= 0 leave, springs where the
+surface would penetrate (y_j < 0, including where the layer bulges outside the contact) enter.
+For C with non-positive off-diagonal entries (nu > 1/4: an M-matrix) this converges in a few
+iterations. Ligaments (tension-only) and the shear springs enter the 6 x 6 as in the spring bed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from edem.errors import SolverError
+from edem.laws import LinearElements
+from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, unrestrained_dofs
+from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance, operator_factors
+
+
+@dataclass
+class ThinLayerSolution(UnilateralSolution):
+    """The unilateral solution plus the layer's surface: deflection and gap (KKT figures)."""
+
+    deflection_mm: np.ndarray = None  # (n_c,) w = C f at the candidate springs
+    gap_mm: np.ndarray = None  # (n_c,) y = w - d(u): 0 in contact, >= 0 out of contact
+    max_penetration_mm: float = 0.0  # max(-y) over the springs out of contact (<= round-off)
+
+
+@dataclass(frozen=True)
+class ActiveSystem:
+    """Spring forces of the contact set I as affine functions of u: f_I = F0 + F1 u (module docstring)."""
+
+    active: np.ndarray  # (n_c,) bool
+    force0_n: np.ndarray  # (n_I,)
+    force_per_mm: np.ndarray  # (n_I, 6)
+    vertex0: np.ndarray  # (v,) z at u = 0
+    vertex_per_mm: np.ndarray  # (v, 6)
+
+    @staticmethod
+    def build(layer: LayerCompliance, directions: np.ndarray, overlap_mm: np.ndarray, active: np.ndarray) -> "ActiveSystem":
+        lam = 1.0 / layer.local_mm_per_n[active]
+        rhs = np.column_stack([overlap_mm[active], directions[active]])  # (n_I, 7)
+        if not layer.coupled:
+            forces = lam[:, None] * rhs
+            return ActiveSystem(active, forces[:, 0], forces[:, 1:], np.zeros(0), np.zeros((0, 6)))
+        z_i = layer.z[:, active]
+        matrix = (layer.h + layer.sigma * (z_i @ sp.diags(lam) @ z_i.T)).tocsc()
+        # SPD: symmetric ordering and diagonal pivots (about 1.5x faster than the default LU).
+        factor = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        vertex = factor.solve(np.asarray(z_i @ (lam[:, None] * rhs)))
+        forces = lam[:, None] * (rhs - layer.sigma * np.asarray(z_i.T @ vertex))
+        return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:])
+
+    def forces(self, u: np.ndarray) -> np.ndarray:
+        return self.force0_n + self.force_per_mm @ u
+
+    def deflection(self, layer: LayerCompliance, u: np.ndarray) -> np.ndarray:
+        """w = C f at every candidate for the forces of this set under u."""
+        f = np.zeros(self.active.shape[0])
+        f[self.active] = self.forces(u)
+        w = layer.local_mm_per_n * f
+        if layer.coupled:
+            w = w + layer.sigma * (layer.z.T @ (self.vertex0 + self.vertex_per_mm @ u))
+        return w
+
+    def stiffness(self, directions: np.ndarray) -> np.ndarray:
+        """Coupled contact stiffness D_I^T dF/du (6, 6), symmetrised against round-off."""
+        k = directions[self.active].T @ self.force_per_mm
+        return 0.5 * (k + k.T)
+
+    def pushback(self, directions: np.ndarray) -> np.ndarray:
+        return directions[self.active].T @ self.force0_n
+
+
+def _others(ligament_rows, ligament_law, ligament_active, shear, active):
+    """Stiffness (6, 6) and generalised force at u = 0 (6,) of the active ligaments and shear springs."""
+    c = ligament_law.stiffness_n_per_mm * ligament_active
+    k = ligament_rows.T @ (ligament_rows * c[:, None])
+    f0 = ligament_rows.T @ (ligament_law.offset_n * ligament_active)
+    if shear is not None:
+        k = k + shear.stiffness(active)
+        f0 = f0 + shear.generalised_force(np.zeros(6), active)
+    return k, f0
+
+
+def _solve_free(k: np.ndarray, rhs: np.ndarray, free: np.ndarray) -> np.ndarray:
+    u = np.zeros(6)
+    u[free] = np.linalg.solve(k[np.ix_(free, free)], rhs[free])
+    return u
+
+
+def solve_thin_layer(
+    directions: np.ndarray,
+    layer: LayerCompliance,
+    overlap_mm: np.ndarray,
+    load: np.ndarray,
+    *,
+    ligament_rows: np.ndarray | None = None,
+    ligament_law: LinearElements | None = None,
+    fixed_dofs: tuple[str, ...] = (),
+    shear: ShearTerms | None = None,
+    length_scale_mm: float = 1.0,
+    cycle_rtol: float = 1e-7,
+    max_iterations: int = 60,
+) -> ThinLayerSolution:
+    """Unilateral equilibrium of the rigid body on the coupled layer (module docstring).
+
+    ``directions`` (n, 6): rows g_j of the layer's springs; ``overlap_mm`` (n,): d0, -inf where no
+    opposing surface can be touched (the free layer around the contact);
+    ``ligament_rows`` (n_l, 6) and ``ligament_law``: tension-only ligaments as in
+    ``edem.mechanics.solve_unilateral``. Returns element forces for the springs then the
+    ligaments, with ``active`` the contact set; raises SolverError like ``solve_unilateral``.
+    """
+    n_c = directions.shape[0]
+    if ligament_rows is None:
+        ligament_rows, ligament_law = np.zeros((0, 6)), LinearElements(np.zeros(0), np.zeros(0))
+    free = np.ones(6, bool)
+    for name in fixed_dofs:
+        free[DOF_NAMES.index(name)] = False
+    load = np.where(free, np.asarray(load, float), 0.0)
+    to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)
+    spring_scale = 1.0 / layer.local_mm_per_n  # N/mm: weighs the gap against the force in the NCP
+    touchable = np.isfinite(overlap_mm)  # -inf: free layer with no opposing surface
+    active = touchable.copy()  # the first iterate takes every candidate, as DEM does
+    ligament_active = np.ones(ligament_rows.shape[0], bool)
+    everything: np.ndarray | None = None
+    seen: set[bytes] = set()
+    for iteration in range(1, max_iterations + 1):
+        system = ActiveSystem.build(layer, directions, overlap_mm, active)
+        k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
+        stiffness = system.stiffness(directions) + k_other
+        rhs = load - system.pushback(directions) - f_other
+        if unrestrained_dofs(stiffness, free, length_scale_mm):
+            if everything is None:
+                full = ActiveSystem.build(layer, directions, overlap_mm, touchable)
+                k_all, _ = _others(ligament_rows, ligament_law, np.ones_like(ligament_active), shear, touchable)
+                everything = full.stiffness(directions) + k_all
+                missing = unrestrained_dofs(everything, free, length_scale_mm)
+                if missing:
+                    raise SolverError(
+                        f"the stiffness matrix is singular: nothing resists motion along {', '.join(missing)}; "
+                        "fix these DOFs in [constraints] fixed_dofs, or give the cartilage shear stiffness "
+                        "(cartilage.shear_modulus_mpa) or ligaments"
+                    )
+            if not np.any(active) and not np.any(ligament_active):
+                raise SolverError("no equilibrium: no spring stays in compression under this load, so the load pulls the bodies apart")
+            stiffness = stiffness + 1e-8 * everything  # a transiently small contact set
+        u = _solve_free(stiffness, rhs, free)
+        f = np.zeros(n_c)
+        f[active] = system.forces(u)
+        w = system.deflection(layer, u)
+        gap = w - overlap_mm - directions @ u
+        tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
+        new_active = np.where(active, f > 0.0, gap < 0.0)
+        new_ligaments = tension > 0.0
+        if np.array_equal(new_active, active) and np.array_equal(new_ligaments, ligament_active):
+            break
+        if not np.any(new_active) and not np.any(new_ligaments) and not np.any(load):
+            active, ligament_active, u = new_active, new_ligaments, np.zeros(6)  # nothing to carry
+            f, gap, w = np.zeros(n_c), overlap_mm.copy(), np.zeros(n_c)
+            tension = ligament_law.offset_n.copy()
+            break
+        # Springs at zero force to round-off can flip for ever: accept a repeated set whose
+        # violations (negative forces, penetrations) are below cycle_rtol of the force scale.
+        signature = np.packbits(np.concatenate([new_active, new_ligaments])).tobytes()
+        scale = float(np.linalg.norm(load * to_newton)) + float(np.abs(f).sum()) + 1e-300
+        violation = max(float(np.abs(np.minimum(f, 0.0)).sum()), float(np.abs(np.minimum(gap, 0.0) * spring_scale)[~active].sum()))
+        if signature in seen and violation <= cycle_rtol * scale:
+            break
+        seen.add(signature)
+        if not np.any(new_active) and not np.any(new_ligaments):
+            raise SolverError("no equilibrium: no spring stays in compression under this load, so the load pulls the bodies apart")
+        active, ligament_active = new_active, new_ligaments
+    else:
+        raise SolverError(f"the thin-layer active-set iteration did not converge in {max_iterations} iterations")
+    f = np.where(active, f, 0.0)
+    ligament_force = np.where(ligament_active, tension, 0.0)
+    resultant = directions.T @ f + ligament_rows.T @ ligament_force
+    if shear is not None:
+        resultant = resultant + shear.generalised_force(u, active)
+    residual = np.where(free, resultant - load, 0.0)
+    scale = float(np.linalg.norm(load * to_newton)) + float(f.sum()) + 1e-9  # floor: a nanonewton, for a vanishing load
+    # The 6 x 6 solve balances to round-off; only an accepted cycle or a regularised transient set
+    # (1e-8 of the full stiffness) can leave more, and both stay far below 10 cycle_rtol.
+    if float(np.linalg.norm(residual * to_newton)) > 10.0 * cycle_rtol * scale:
+        raise SolverError(f"the thin-layer solve does not balance the load (residual {np.linalg.norm(residual):.3e} N)")
+    outside = ~active
+    return ThinLayerSolution(
+        displacement=u,
+        element_force_n=np.concatenate([f, tension]),
+        active=np.concatenate([active, ligament_active]),
+        iterations=iteration,
+        force_residual_n=float(np.linalg.norm(residual[:3])),
+        moment_residual_nmm=float(np.linalg.norm(residual[3:])),
+        deflection_mm=w,
+        gap_mm=np.where(active, 0.0, gap),
+        max_penetration_mm=float(np.max(-gap[outside], initial=0.0)),
+    )
+
+
+def thin_layer_viscoelastic_increment(
+    directions: np.ndarray,
+    layer: LayerCompliance,
+    overlap_mm: np.ndarray,
+    ligament_rows: np.ndarray,
+    ligament_law: LinearElements,
+    shear: ShearTerms | None,
+    elastic_active: np.ndarray,
+    carried_force_n: np.ndarray,
+    previous_load: np.ndarray,
+    load: np.ndarray,
+    weights: tuple[float, float],
+    fixed_dofs: tuple[str, ...],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Kelvin-Voigt increment on the coupled layer (``edem.viscoelastic``, eq. 6.18).
+
+    The contact set is frozen at the quasi-static set under T_k (``elastic_active``: springs then
+    ligaments) plus the springs that carried a force into the step (so they can creep back); u = K^-1 [phi (T_{k-1} - p) + psi (T_k - T_{k-1})]
+    with K the coupled contact stiffness and p the push-back of that set at u = 0. Returns u and the
+    elastic element forces (springs then ligaments) to commit.
+    """
+    phi, psi = weights
+    n_c = directions.shape[0]
+    active = elastic_active[:n_c] | (carried_force_n > 0.0)
+    ligament_active = elastic_active[n_c:] | (ligament_law.offset_n > 0.0)
+    free = np.array([d not in fixed_dofs for d in DOF_NAMES])
+    u = np.zeros(6)
+    f = np.zeros(n_c)
+    if np.any(active):
+        system = ActiveSystem.build(layer, directions, overlap_mm, active)
+        k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
+        if phi or psi:
+            k = system.stiffness(directions) + k_other
+            rhs = phi * (previous_load - system.pushback(directions) - f_other) + psi * (load - previous_load)
+            u[free] = np.linalg.lstsq(k[np.ix_(free, free)], rhs[free], rcond=None)[0]
+        f[active] = np.maximum(system.forces(u), 0.0)
+    tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
+    return u, np.concatenate([f, np.where(ligament_active, np.maximum(tension, 0.0), 0.0)])
+
+
+def coupled_layer_mesh(scene) -> SurfaceMesh:
+    """The intrinsic surface of the scene's springs (one per non-degenerate mobile triangle)."""
+    return SurfaceMesh.from_surface(scene.mobile.vertices_mm, scene.mobile.triangles[scene.spring_triangle])
+
+
+@dataclass(frozen=True)
+class CoupledStep:
+    """One time point of DEM/EDEM on the coupled layer: the layer, overlap and elements.
+
+    The layer covers the candidate springs and a band of the surface around them 3 sqrt(b) h
+    wide (three decay lengths of the bulge; there the layer is free: f = 0, no opposing surface),
+    so the layer can bulge outside the contact; beyond it the boundary is natural. Local
+    thickness: the length the law's shear springs use (t for the gap law, the current spring
+    length for the threshold law; on the band t or the candidates' median). The overlap d0 is t - h for an
+    "overlap" law (gap) or C f_carried for a "carried" law (threshold: the EDEM push-back of the
+    forces committed at the previous step, zero in DEM); -inf on the band.
+    """
+
+    layer: LayerCompliance
+    overlap_mm: np.ndarray  # (n_d,) over the layer's springs
+    directions: np.ndarray  # (n_d, 6)
+    candidate: np.ndarray  # (n_d,) bool: the layer's springs that are candidates, in candidate order
+    ligament_rows: np.ndarray
+    ligament_law: LinearElements
+
+    @staticmethod
+    def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law) -> "CoupledStep":
+        """``directions`` (n_c, 6) and ``carried_force_n`` (n_c,) are those of the candidates."""
+        cand = np.flatnonzero(geometry.candidate)
+        law = cartilage.spring_law
+        candidate_thickness = law.shear_length_mm(geometry.spring_length_mm[cand], cartilage.thickness_mm)  # the h of k_s = G / h
+        # The band: t, or for a law whose thickness is the spring length, the candidates' median.
+        band_thickness = float(cartilage.thickness_mm) if law.needs_thickness else float(np.median(candidate_thickness, axis=None)) if cand.size else 1.0
+        _, _, _, b = operator_factors(cartilage.poissons_ratio, 1.0, 1.0)
+        domain = np.flatnonzero(mesh.neighbourhood(cand, 3.0 * np.sqrt(b) * band_thickness)) if b > 0 else cand
+        is_candidate = geometry.candidate[domain]
+        length = geometry.spring_length_mm[domain]
+        thickness = np.full(domain.shape, band_thickness)
+        thickness[is_candidate] = candidate_thickness  # domain is sorted: candidates in their order
+        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio)
+        overlap = np.full(domain.shape, -np.inf)
+        if law.thin_layer == "carried":
+            carried = np.zeros(domain.shape)
+            carried[is_candidate] = carried_force_n
+            overlap[is_candidate] = layer.deflection(carried)[is_candidate] if np.any(carried) else 0.0
+        else:
+            overlap[is_candidate] = (thickness - length)[is_candidate]
+        rows = np.zeros((domain.shape[0], 6))
+        rows[is_candidate] = directions  # domain is sorted, so candidates keep their order
+        return CoupledStep(layer, overlap, rows, is_candidate, ligament_rows, ligament_law)
+
+    def _to_candidates(self, solution: ThinLayerSolution) -> ThinLayerSolution:
+        n_d, c = self.directions.shape[0], self.candidate
+        keep = np.concatenate([c, np.ones(solution.element_force_n.shape[0] - n_d, bool)])
+        solution.element_force_n = solution.element_force_n[keep]
+        solution.active = solution.active[keep]
+        solution.deflection_mm, solution.gap_mm = solution.deflection_mm[c], solution.gap_mm[c]
+        return solution
+
+    def solve(self, load, fixed_dofs, shear, length_scale_mm) -> ThinLayerSolution:
+        """The coupled solve; forces, contact set, deflection and gap of the candidates (then ligaments)."""
+        return self._to_candidates(
+            solve_thin_layer(
+                self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
+                fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
+            )
+        )
+
+    def _shear(self, shear: ShearTerms | None) -> ShearTerms | None:
+        """The candidates' shear springs spread over the layer's springs (zero on the band)."""
+        if shear is None:
+            return None
+        c = self.candidate
+
+        def spread(values):
+            out = np.zeros((c.shape[0],) + values.shape[1:])
+            out[c] = values
+            return out
+
+        return ShearTerms(spread(shear.arm_mm), spread(shear.normals), spread(shear.stiffness_n_per_mm), spread(shear.stored_force_n))
+
+    def viscoelastic_increment(self, elastic, carried_force_n, previous_load, load, weights, shear, fixed_dofs):
+        """Kelvin-Voigt increment (``thin_layer_viscoelastic_increment``) in candidate order."""
+        c = self.candidate
+        n_c = int(c.sum())
+        active, carried = np.zeros(c.shape[0], bool), np.zeros(c.shape[0])
+        active[c], carried[c] = elastic.active[:n_c], carried_force_n
+        u, force = thin_layer_viscoelastic_increment(
+            self.directions, self.layer, self.overlap_mm, self.ligament_rows, self.ligament_law, self._shear(shear),
+            np.concatenate([active, elastic.active[n_c:]]), carried, previous_load, load, weights, fixed_dofs,
+        )
+        return u, np.concatenate([force[: c.shape[0]][c], force[c.shape[0]:]])

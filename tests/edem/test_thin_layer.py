@@ -1,0 +1,196 @@
+"""The thin-layer compliance operator against the bonded-layer closed forms (edem.thin_layer)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.linalg import spsolve
+from support import grid_plate
+
+from edem.mechanics import confined_modulus_mpa
+from edem.thin_layer import (
+    SurfaceMesh,
+    exact_layer_compliance,
+    layer_compliance,
+    operator_factors,
+    pade_compliance,
+    pade_error_bound,
+    taylor_coefficients,
+)
+
+E = 10.35
+NUS = (0.0, 0.1, 0.3, 0.42, 0.45, 0.49, 0.499)
+
+
+def periodic_grid(n: int, spacing_mm: float) -> tuple[SurfaceMesh, np.ndarray]:
+    """Flat n x n square grid, two right triangles per square, periodic both ways (a flat torus).
+
+    Returns the mesh and the triangle centroids (unwrapped, mm). Square (i, j): L = (v00, v10, v11),
+    U = (v00, v11, v01); L triangles come first.
+    """
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    vid = lambda a, b: (a % n) * n + (b % n)  # noqa: E731
+    xy = lambda a, b: np.column_stack([a * spacing_mm, b * spacing_mm, np.zeros(a.shape)])  # noqa: E731
+    lower = (np.column_stack([vid(i, j), vid(i + 1, j), vid(i + 1, j + 1)]), np.stack([xy(i, j), xy(i + 1, j), xy(i + 1, j + 1)], axis=1))
+    upper = (np.column_stack([vid(i, j), vid(i + 1, j + 1), vid(i, j + 1)]), np.stack([xy(i, j), xy(i + 1, j + 1), xy(i, j + 1)], axis=1))
+    tri = np.vstack([lower[0], upper[0]])
+    corners = np.concatenate([lower[1], upper[1]])
+    return SurfaceMesh.from_corners(tri, corners), corners.mean(axis=1)
+
+
+def test_taylor_coefficients_are_the_exact_compliance_series():
+    # The series C G/h = c0 + c1 q^2 + c2 q^4 + O(q^6): at q = 0.02 the remainder of each
+    # successive difference quotient is O(q^2) of the next coefficient (< 1e-3 relative).
+    q = 0.02
+    for nu in NUS:
+        c0, c1, c2 = taylor_coefficients(nu)
+        exact = exact_layer_compliance(np.array([q, 2 * q]), nu)
+        assert c0 == pytest.approx(E / (2 * (1 + nu)) / confined_modulus_mpa(E, nu), rel=1e-12)  # G / E'
+        # Richardson on two points removes the q^4 term: c1 to O(q^4).
+        d1, d2 = (exact - c0) / np.array([q, 2 * q]) ** 2
+        assert (4 * d1 - d2) / 3 == pytest.approx(c1, abs=1e-6)
+        assert (d2 - d1) / (3 * q * q) == pytest.approx(c2, rel=1e-2, abs=1e-6)
+    # Incompressible thin-layer law: c1 = 1/3 at nu = 1/2; c1 = 0 at nu = 1/4.
+    assert taylor_coefficients(0.5)[1] == pytest.approx(1 / 3)
+    assert taylor_coefficients(0.25)[1] == 0.0
+    # Half-space limit at short waves: C G / h -> (1 - nu) / kh.
+    assert exact_layer_compliance(np.array([40.0]), 0.3)[0] == pytest.approx(0.7 / 40.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("nu", NUS)
+def test_pade_stays_within_its_stated_error_for_kh_up_to_1(nu):
+    # Bounds stated in the module docstring (3 % at nu = 0, 1.5 % above 0.1).
+    bound = 0.03 if nu < 0.1 else 0.015
+    assert pade_error_bound(nu) <= bound
+    # ... and it is a real improvement on the independent springs from nu = 0.42 on.
+    if nu >= 0.42:
+        kh = np.linspace(1e-3, 1.0, 500)
+        springs = np.abs(taylor_coefficients(nu)[0] / exact_layer_compliance(kh, nu) - 1).max()
+        assert pade_error_bound(nu) < 0.1 * springs
+
+
+@pytest.mark.parametrize("nu", (0.3, 0.42, 0.49, 0.499))
+def test_sinusoidal_pressure_reproduces_the_discrete_symbol_to_round_off(nu):
+    """p = cos(k.x) on a periodic right-triangle grid: w is the Bloch symbol exactly.
+
+    Symbol (module docstring): w_c = c_loc p_c + sigma s^2 Re[q_c l / eta e^{ik.x_c}] with the
+    vertex load l = (A/3) sum_{6 cells at a vertex} e^{ik.(x_c - x_v)}, the P1 five-point symbol
+    eta = mu + b h^2 (4 - 2 cos k_x s_g - 2 cos k_y s_g) with mu the symbol of M = Q^T A Q and q_c the
+    corner mean of the triangle.
+    """
+    n, spacing, h = 48, 0.25, 2.0
+    mesh, centroid = periodic_grid(n, spacing)
+    g = E / (2 * (1 + nu))
+    for mode in ((1, 0), (3, 2), (6, 0)):
+        k = 2 * np.pi * np.array(mode) / (n * spacing)
+        p = np.cos(centroid[:, :2] @ k)
+        layer = layer_compliance(mesh, np.arange(mesh.area_mm2.shape[0]), h, E, nu)
+        w = layer.deflection(p * mesh.area_mm2)
+        c_loc, s2, sigma, b = operator_factors(nu, g, h)
+        cell_offsets = np.array([[2, 1], [1, 2], [-1, 1], [-1, -2], [-2, -1], [1, -1]]) / 3 * spacing
+        load = np.exp(1j * cell_offsets @ k).sum() / 3 * spacing**2 / 2
+        corners_l = np.array([[-2, -1], [1, -1], [1, 2]]) / 3 * spacing
+        corners_u = np.array([[-1, -2], [2, 1], [-1, 1]]) / 3 * spacing
+        q_l, q_u = np.exp(1j * corners_l @ k).mean(), np.exp(1j * corners_u @ k).mean()
+        q_cell = np.repeat([q_l, q_u], n * n)
+        # M = Q^T A Q: the six cells at a vertex, L U L L U U in the order of cell_offsets.
+        q_around = np.array([q_l, q_u, q_l, q_l, q_u, q_u])
+        mass = (spacing**2 / 2 / 3 * q_around * np.exp(1j * cell_offsets @ k)).sum()
+        eta = mass + b * h * h * (4 - 2 * np.cos(k[0] * spacing) - 2 * np.cos(k[1] * spacing))
+        expected = c_loc * p + sigma * s2 * np.real(q_cell * load / eta * np.exp(1j * centroid[:, :2] @ k))
+        np.testing.assert_allclose(w, expected, atol=1e-12 * np.abs(expected).max())
+        # ... and it is the continuum Pade symbol to the discretisation error O((k s_g)^2) < 1 %
+        # (k s_g <= 0.2 here), so it is the exact layer within the Pade bound plus 1 %.
+        kh = float(np.linalg.norm(k)) * h
+        ratio = w[: n * n] @ p[: n * n] / (p[: n * n] @ p[: n * n]) * g / h
+        assert ratio == pytest.approx(pade_compliance(kh, nu), rel=0.01)
+        if kh <= 1.0:
+            assert ratio == pytest.approx(exact_layer_compliance(kh, nu), rel=pade_error_bound(nu) + 0.01)
+
+
+def test_small_poisson_ratio_and_long_waves_give_independent_springs():
+    n, spacing, h = 32, 0.5, 2.0
+    mesh, centroid = periodic_grid(n, spacing)
+    cells = np.arange(mesh.area_mm2.shape[0])
+    p = 1.0 + 0.5 * np.cos(centroid[:, 0] * 2 * np.pi / (n * spacing))
+    # nu = 0: c1 = 0, the layer is the bed of independent springs h / E' exactly.
+    w = layer_compliance(mesh, cells, h, E, 0.0).deflection(p * mesh.area_mm2)
+    np.testing.assert_allclose(w, h * p / confined_modulus_mpa(E, 0.0), rtol=1e-13)
+    # Long waves at nu = 0.45: the deviation from h p / E' is the first Taylor term,
+    # (c1 / c0) (kh)^2 on the cosine part (at its trough, where p = 0.5 and the cosine 0.5);
+    # 5 % above it for the O((kh)^4) and the mesh terms. At kh = 0.785 it is far larger.
+    c0, c1, _ = taylor_coefficients(0.45)
+    deviation = []
+    for scale in (1.0, 16.0):
+        big, cen = periodic_grid(n, spacing * scale)
+        kh = 2 * np.pi / (n * spacing * scale) * h
+        pk = 1.0 + 0.5 * np.cos(cen[:, 0] * kh / h)
+        w = layer_compliance(big, cells, h, E, 0.45).deflection(pk * big.area_mm2)
+        deviation.append(np.abs(w / (h * pk / confined_modulus_mpa(E, 0.45)) - 1).max())
+    assert deviation[1] <= 1.05 * c1 / c0 * kh**2
+    assert deviation[0] > 100 * deviation[1]
+
+
+def test_flat_plate_under_uniform_pressure_deflects_uniformly():
+    # A plate without free edges (periodic): K 1 = 0 and Q 1 = 1 make a uniform pressure's
+    # deflection h p / E' at every spring, to round-off, at any nu.
+    mesh, _ = periodic_grid(24, 0.7)
+    cells = np.arange(mesh.area_mm2.shape[0])
+    for nu in NUS:
+        w = layer_compliance(mesh, cells, 2.0, E, nu).deflection(1.5 * mesh.area_mm2)
+        np.testing.assert_allclose(w, 2.0 * 1.5 / confined_modulus_mpa(E, nu), rtol=1e-10)
+
+
+def test_uniform_pressure_on_a_layer_of_varying_thickness_deflects_each_spring_by_h_p_over_e_conf():
+    # S 1 = 1 for any h (module docstring): no lateral flow without a pressure gradient, so every
+    # spring deflects by its own h p / E', to round-off (periodic grid: no free edge).
+    mesh, centroid = periodic_grid(24, 0.7)
+    cells = np.arange(mesh.area_mm2.shape[0])
+    h = 1.5 + np.sin(centroid[:, 0] * 2 * np.pi / (24 * 0.7)) ** 2  # 1.5 .. 2.5 mm
+    for nu in (0.1, 0.42, 0.499):
+        w = layer_compliance(mesh, cells, h, E, nu).deflection(2.0 * mesh.area_mm2)
+        np.testing.assert_allclose(w, h * 2.0 / confined_modulus_mpa(E, nu), rtol=1e-9)
+
+
+def test_compliance_is_symmetric_positive_definite():
+    plate = grid_plate(10.0, 10.0, 8)
+    mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
+    cells = np.arange(plate.n_triangles)
+    thickness = 1.0 + 0.1 * np.arange(cells.size) / cells.size  # varying h keeps the symmetry
+    for nu in (0.1, 0.42, 0.499):
+        layer = layer_compliance(mesh, cells, thickness, E, nu)
+        c = np.column_stack([layer.deflection(col) for col in np.eye(cells.size)])
+        np.testing.assert_allclose(c, c.T, atol=1e-12 * np.abs(c).max())
+        assert np.linalg.eigvalsh(0.5 * (c + c.T)).min() > 0.0
+
+
+def test_incompressible_flat_punch_has_the_thin_layer_parabolic_pressure():
+    """Rigid flat circular punch (radius a = 10 h) pressed by delta into a layer at nu -> 1/2.
+
+    Thin-layer law: lap p = -3 G delta / h^3 under the punch, so p is the paraboloid
+    p0 - (3 G delta / 4 h^3) r^2. The Pade operator has the same interior curvature exactly (its
+    e -> 0 interior equation is a h^2 lap p = -G delta with a = 1/3); the edge changes p0 only.
+    Curvature from a least-squares paraboloid over r < a - 3h, within 3 % (mesh size h / 4 at
+    kh up to ~1, the operator's O((k s)^2) error plus the fit's).
+    """
+    h, a, delta, nu = 1.0, 10.0, 1e-3, 0.4999
+    plate = grid_plate(36.0, 36.0, 144)
+    mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
+    centroid = plate.centroids_mm
+    r = np.linalg.norm(centroid[:, :2], axis=1)
+    cells = np.arange(plate.n_triangles)
+    layer = layer_compliance(mesh, cells, h, E, nu)
+    inside = np.flatnonzero(r < a)
+    # Contact: w = delta on the punch, f = 0 outside. With z = H^-1 Z f:
+    # local f_I + sigma Z_I^T z = delta, H z - Z_I f_I = 0.
+    zi = layer.z[:, inside]
+    system = sp.bmat([[sp.diags(layer.local_mm_per_n[inside]), layer.sigma * zi.T], [-zi, layer.h]]).tocsc()
+    solution = spsolve(system, np.concatenate([np.full(inside.size, delta), np.zeros(layer.h.shape[0])]))
+    pressure = solution[: inside.size] / mesh.area_mm2[inside]
+    g = E / (2 * (1 + nu))
+    core = r[inside] < a - 3 * h
+    fit = np.linalg.lstsq(np.column_stack([np.ones(core.sum()), r[inside][core] ** 2]), pressure[core], rcond=None)[0]
+    assert -fit[1] == pytest.approx(3 * g * delta / (4 * h**3), rel=0.03)
+    assert np.all(pressure > 0)

@@ -1,0 +1,52 @@
+"""The ``thin-layer`` campaign: its definition as data (CI), and one coupled/springs pair against
+the FE layer (slow: two FE runs of ~20 s)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from verification.campaign_model import Campaign
+from verification.campaigns import describe_campaigns, get_campaign, validate_campaign
+from verification.campaigns.thin_layer import LOADS_N, NUS, THICKNESS_MM, case_name
+from verification.runner import run_campaign
+from verification.sides import fe_availability
+
+
+def test_thin_layer_campaign_pairs_every_point_with_both_models():
+    campaign = get_campaign("thin-layer")
+    validate_campaign(campaign)
+    assert "thin-layer (" in describe_campaigns()
+    by_name = {c.name: c for c in campaign.cases}
+    coupled = [c for c in campaign.cases if "-coupled-" in c.name]
+    assert len(coupled) * 2 == len(campaign.cases)
+    for case in coupled:
+        twin = by_name[case.name.replace("-coupled-", "-springs-")]
+        # the same scene, load, nu, thickness and FE; only the coupling differs
+        assert case.overrides["cartilage.coupling"] == "thin-layer" and "cartilage.coupling" not in twin.overrides
+        assert {k: v for k, v in case.overrides.items() if k != "cartilage.coupling"} == twin.overrides
+        assert (case.scene, case.sides, case.options) == (twin.scene, twin.sides, twin.options)
+    layer = [c for c in coupled if c.scene == "cylinder-layer"]
+    assert {(c.params["thickness_mm"], c.params["poissons_ratio"]) for c in layer if c.params["load_n"] == 333.0} == {(t, nu) for t in THICKNESS_MM for nu in NUS}
+    assert {c.params["load_n"] for c in layer} == set(LOADS_N)
+    for case in layer:
+        assert case.overrides["geometry.plafond_gap_mm"] == case.overrides["cartilage.thickness_mm"] == case.params["thickness_mm"]
+    assert all(c.overrides["ligaments"] == [] and c.sides == ("dem", "fe-slab") for c in coupled if c.scene == "ideal-standing")
+    assert [f.kind for f in campaign.figures].count("error-vs-time") == 1
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(fe_availability() is not None, reason="the FE reference (dolfinx) is not installed")
+def test_coupled_layer_beats_the_springs_against_the_fe_at_nu_049(tmp_path):
+    """Cylinder layer 2 mm, 333 N, nu 0.49: the coupled bed's displacement, peak and L2 errors
+    against the FE layer are each below the independent springs' (measured here: springs -66 %
+    displacement, +93 % peak)."""
+    full = get_campaign("thin-layer")
+    names = [case_name("layer", v, 333.0, 2.0, 0.49) for v in ("coupled", "springs")]
+    sub = Campaign("thin-layer-pair", full.description, tuple(full.case(n) for n in names))
+    run_campaign(sub, tmp_path, jobs=1, progress=False)
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    rows = {c["name"]: c["metrics"] for c in metrics["cases"]}
+    for metric in ("displacement_rel_error", "peak_pressure_rel_error", "pressure_l2_rel_error"):
+        assert rows[names[0]][metric] < rows[names[1]][metric]
