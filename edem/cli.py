@@ -9,6 +9,9 @@ from pathlib import Path
 
 from edem.errors import InputError, SolverError
 
+#: Default outputs go under ./results, whatever the scene's name (edem.atomic_dirs.default_out_dir).
+RESULTS_ROOT = Path("results")
+
 
 def _run(args: argparse.Namespace) -> int:
     from edem.results import write_results
@@ -20,7 +23,7 @@ def _run(args: argparse.Namespace) -> int:
     for warning in scene.warnings:  # said before the solve, so a refused run keeps them
         print(f"edem run: warning: {warning}", file=sys.stderr)
     method = args.method or scene.method
-    out = Path(args.out) if args.out else Path("results") / f"{scene.name}-{method}"
+    out = _out_dir(args, scene.name, method, overrides=overrides)
     n = len(scene.load.time_s)
     bar = None
     if n > 1 and sys.stderr.isatty():
@@ -32,7 +35,7 @@ def _run(args: argparse.Namespace) -> int:
     finally:
         if bar is not None:
             bar.close()
-    write_results(result, out)
+    write_results(result, out, overwrite=args.overwrite)
     from edem.resultdir import record_provenance
 
     record_provenance(out, args.scene, overrides, method=method)
@@ -45,9 +48,17 @@ def _run(args: argparse.Namespace) -> int:
         f"  peak pressure {max(s.peak_pressure_mpa for s in result.steps):.4g} MPa, "
         f"max contact area {max(s.contact_area_mm2 for s in result.steps):.4g} mm^2, "
         f"final displacement [{', '.join(f'{x:.4g}' for x in last.displacement_mm)}] mm\n"
-        f"  results: {out}/ (summary.json, timeseries.csv and .sto, pressure.pvd, fixed.pvd)"
+        f"  results: {out}/ (summary.json, timeseries.csv and .sto, pressure.pvd, fixed.pvd, manifest.json)"
     )
     return 0
+
+
+def _out_dir(args: argparse.Namespace, *name_parts: str, overrides: dict | None = None) -> Path:
+    """--out, or results/<scene>-<method>[-set-<hash of the overrides>], checked before any solve."""
+    from edem.atomic_dirs import check_out_dir, default_out_dir
+
+    out = Path(args.out) if args.out else default_out_dir(RESULTS_ROOT, *name_parts, overrides=overrides)
+    return check_out_dir(out, overwrite=args.overwrite)
 
 
 def _fe(args: argparse.Namespace) -> int:
@@ -66,14 +77,14 @@ def _fe(args: argparse.Namespace) -> int:
         scene = load_scene(args.scene, overrides)
         settings = resolve_settings(scene, model=args.model, mesh_size_mm=args.mesh_size, degree=args.degree, argument_keys=FE_FLAGS)
         steps = parse_steps(args.steps, len(scene.load.time_s))
-        out = Path(args.out) if args.out else Path("results") / f"{scene.name}-{settings.method}"
+        out = _out_dir(args, scene.name, settings.method, overrides=overrides)
         n_solves = len(scene.load.time_s) if steps is None else len(steps)
         if rank == 0 and n_solves > 1 and sys.stderr.isatty():
             from tqdm import tqdm
 
             bar = tqdm(total=n_solves, desc=f"{scene.name} ({settings.method})", unit="step", file=sys.stderr)
         result = run_scene(scene, model=settings.model, mesh_size_mm=args.mesh_size, degree=args.degree, steps=steps, out_dir=out,
-                           progress=None if bar is None else (lambda k: bar.update(1)))
+                           overwrite=args.overwrite, progress=None if bar is None else (lambda k: bar.update(1)))
     except (InputError, SolverError):
         if rank != 0:  # every rank fails alike: rank 0 alone reports it
             return 2
@@ -173,12 +184,13 @@ def _plot(args: argparse.Namespace) -> int:
 
 def _compare(args: argparse.Namespace) -> int:
     """The comparison metrics (docs/method.md#7-comparison-metrics) of result directory A against the reference B; writes metrics.json."""
+    from edem.atomic_dirs import check_out_dir, default_out_dir
     from verification.metrics import compare_result_dirs, format_metrics_table
     from verification.runner import write_json
 
+    out = Path(args.out) if args.out else default_out_dir(RESULTS_ROOT / "compare", Path(args.a_dir).name, "vs", Path(args.b_dir).name)
+    out = check_out_dir(out, reuse_if=("metrics.json",))
     comparison = compare_result_dirs(args.a_dir, args.b_dir)
-    out = Path(args.out) if args.out else Path("results") / "compare" / f"{Path(args.a_dir).name}-vs-{Path(args.b_dir).name}"
-    out.mkdir(parents=True, exist_ok=True)
     write_json(out / "metrics.json", comparison)
     print(format_metrics_table(comparison))
     if args.maps:
@@ -198,11 +210,12 @@ def _verify(args: argparse.Namespace) -> int:
         return 0
     if not args.campaign:
         raise InputError("no campaign given", key="CAMPAIGN", expected="a campaign name (edem verify --list)")
+    from edem.atomic_dirs import check_out_dir
     from reports.html import write_campaign_report
     from verification.runner import format_summary, run_campaign
 
     campaign = get_campaign(args.campaign)
-    out = Path(args.out) if args.out else Path("results") / "verify" / campaign.name
+    out = check_out_dir(Path(args.out) if args.out else RESULTS_ROOT / "verify" / campaign.name, reuse_if=("cases", ".lock"))
     summary = run_campaign(campaign, out, jobs=args.jobs, scheduler=args.scheduler, report=write_campaign_report)
     print(format_summary(summary))
     print(f"report: {summary['report']}")
@@ -236,7 +249,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="solve a scene with the discrete method")
     p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
     p.add_argument("--method", choices=("edem", "dem"), help="overrides [solver] method")
-    p.add_argument("--out", help="result directory (default results/<scene>-<method>)")
+    p.add_argument("--out", help="result directory (default results/<scene>-<method>, plus -set-<hash> with --set)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing result directory (never another kind of directory)")
     p.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene value, e.g. --set cartilage.poissons_ratio=0.3"
     )
@@ -244,7 +258,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("fe", help="solve the FE reference (dolfinx) of a scene")
     p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
     p.add_argument("--model", help="an FE model (fem_reference.models): slab (twin of the threshold law) or layer (of the gap laws); overrides [fe] model")
-    p.add_argument("--out", help="result directory (default results/<scene>-fe-<model>)")
+    p.add_argument("--out", help="result directory (default results/<scene>-fe-<model>, plus -set-<hash> with --set)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing result directory (never another kind of directory)")
     p.add_argument("--mesh-size", type=float, metavar="MM", help="element size in mm; overrides [fe] mesh_size_mm")
     p.add_argument("--degree", type=int, choices=(1, 2), help="element degree (2: P2, or Taylor-Hood at nu >= 0.49); overrides [fe] degree")
     p.add_argument("--steps", metavar="LIST", help="time points to solve, e.g. 0,5-9,10:65:8 (default: all)")
@@ -293,6 +308,12 @@ def main(argv: list[str] | None = None) -> int:
     except SolverError as exc:
         print(f"edem {args.command}: no solution: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # disk full or not writable where no finer message was given
+        print(f"edem {args.command}: cannot write: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt as exc:  # Ctrl-C: no traceback; campaigns say what they kept
+        print(f"edem {args.command}: {str(exc) or 'interrupted'}", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -48,6 +48,11 @@ Layout of ``OUT/``:
     every other column of timeseries.csv under the same name and units; tab separated, the
     header OpenSim's ``TimeSeriesTable`` reads (``version=1``, ``nRows``, ``nColumns``,
     ``inDegrees=no``, ``endheader``).
+``manifest.json``
+    Every other file (all of the above that were written) with its size and sha256, and the run
+    id (:mod:`edem.atomic_dirs`). The directory is written into a temporary sibling and renamed
+    into place when complete, so it is never partial; :func:`read_result_dir` refuses one whose
+    files do not match their manifest (missing, changed, or left by another run).
 
 To extend the format, change this module only: new summary keys go in the producer's summary
 dict, new time-series columns are extra keys of the rows given to :func:`write_result_dir`, new
@@ -73,6 +78,7 @@ from typing import Any
 
 import numpy as np
 
+from edem.atomic_dirs import atomic_result_dir, verify_manifest, write_manifest
 from geometries.errors import InputError, SolverError
 
 SUMMARY_FILE = "summary.json"
@@ -159,20 +165,23 @@ def write_result_dir(
     *,
     fixed_frames: Sequence[Frame] = (),
     opensim_sto: bool = False,
+    overwrite: bool = False,
 ) -> Path:
-    """Write a result directory (layout in the module docstring); returns its path.
+    """Write a result directory (layout in the module docstring) atomically; returns its path.
 
     ``timeseries``: one row per time point, {column: value} with at least
     :data:`TIMESERIES_COLUMNS` (:func:`timeseries_row`); extra keys of the first row become extra
     columns. ``frames``: the pressure maps listed in pressure.pvd. ``fixed``: the fixed body.
     ``fixed_frames``: the fixed body per time point (fixed.pvd). ``opensim_sto``: also write the
-    time series as timeseries.sto.
+    time series as timeseries.sto. ``overwrite``: replace an existing result directory
+    (otherwise InputError). Every file is written inside one :func:`edem.atomic_dirs.atomic_result_dir`
+    and so listed in manifest.json.
 
     Raises SolverError naming the file and key when a number is not finite (a result that
-    contradicts itself is never written as if it were one).
+    contradicts itself is never written as if it were one), InputError when the directory
+    cannot be written (disk full, read-only...; a previous result there is left unchanged).
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     check_finite_summary(summary, out / SUMMARY_FILE)
     columns = list(TIMESERIES_COLUMNS)
     if timeseries:
@@ -187,18 +196,19 @@ def write_result_dir(
             if not math.isfinite(float(value)):
                 raise SolverError(f"{out / TIMESERIES_FILE}: time point {row['step']}, column '{column}' is not finite ({value})")
         lines.append([_csv_number(row[c]) for c in columns])
-    (out / SUMMARY_FILE).write_text(json.dumps(dict(summary), indent=2) + "\n", encoding="utf-8")
-    with open(out / TIMESERIES_FILE, "w", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f)
-        writer.writerow(columns)
-        writer.writerows(lines)
-    _write_series(out, "pressure", frames, COLLECTION_FILE)
-    if fixed is not None:
-        write_surface_frame(out / FIXED_FILE, fixed.points_mm, fixed.triangles, fixed.point_data, fixed.cell_data)
-    if fixed_frames:
-        _write_series(out, "fixed", fixed_frames, FIXED_COLLECTION_FILE)
-    if opensim_sto:
-        write_sto(out / STO_FILE, columns, [[float(row[c]) for c in columns] for row in timeseries], name=str(summary.get("scene", "edem")))
+    with atomic_result_dir(out, overwrite=overwrite) as tmp:
+        (tmp / SUMMARY_FILE).write_text(json.dumps(dict(summary), indent=2) + "\n", encoding="utf-8")
+        with open(tmp / TIMESERIES_FILE, "w", newline="", encoding="utf-8") as f:
+            writer = csv.writer(f)
+            writer.writerow(columns)
+            writer.writerows(lines)
+        _write_series(tmp, "pressure", frames, COLLECTION_FILE)
+        if fixed is not None:
+            write_surface_frame(tmp / FIXED_FILE, fixed.points_mm, fixed.triangles, fixed.point_data, fixed.cell_data)
+        if fixed_frames:
+            _write_series(tmp, "fixed", fixed_frames, FIXED_COLLECTION_FILE)
+        if opensim_sto:
+            write_sto(tmp / STO_FILE, columns, [[float(row[c]) for c in columns] for row in timeseries], name=str(summary.get("scene", "edem")))
     return out
 
 
@@ -319,16 +329,19 @@ class ResultDir:
 def read_result_dir(path: str | Path) -> ResultDir:
     """Read summary.json, timeseries.csv and the pressure.pvd index of a result directory.
 
-    Raises InputError naming the file when something of the layout is missing or unreadable.
+    Raises InputError naming the file when something of the layout is missing or unreadable,
+    and when the directory does not verify against its manifest (a file missing, changed or
+    left by another run: :func:`edem.atomic_dirs.verify_manifest`).
     """
     root = Path(path)
     expected = "a result directory of edem run / edem fe (summary.json, timeseries.csv, pressure.pvd)"
     if not root.is_dir():
         raise InputError("not a directory", file=root, expected=expected)
+    if not (root / SUMMARY_FILE).is_file():
+        raise InputError("no summary.json here", file=root, expected=expected)
+    verify_manifest(root)
     try:
         summary = json.loads((root / SUMMARY_FILE).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError("no summary.json here", file=root, expected=expected) from None
     except ValueError as exc:
         raise InputError(f"summary.json is not valid JSON: {exc}", file=root / SUMMARY_FILE) from None
     series = read_timeseries_csv(root / TIMESERIES_FILE)
@@ -498,12 +511,17 @@ def resolved_scene(scene_ref: str | Path, overrides: dict[str, Any] | None = Non
 def record_provenance(out_dir: str | Path, scene_ref: str | Path, overrides: dict[str, Any] | None = None,
                       fe_settings: dict[str, Any] | None = None, method: str | None = None) -> None:
     """Write ``scene.toml`` into a result directory and the provenance keys into its summary.json
-    (arguments as :func:`resolved_scene`)."""
+    (arguments as :func:`resolved_scene`).
+
+    The directory must verify against its manifest first (InputError otherwise: only a complete
+    run is annotated); it is sealed again afterwards with the same run id, so readers still verify it.
+    """
     import tomli_w
 
     out = Path(out_dir)
+    run_id = verify_manifest(out)
     (out / SCENE_FILE).write_text(tomli_w.dumps(resolved_scene(scene_ref, overrides, fe_settings, method)), encoding="utf-8")
-    path = out / "summary.json"
+    path = out / SUMMARY_FILE
     summary = json.loads(path.read_text(encoding="utf-8"))
     summary.update(
         overrides=dict(overrides or {}),
@@ -512,3 +530,4 @@ def record_provenance(out_dir: str | Path, scene_ref: str | Path, overrides: dic
         source_revision=source_revision(),
     )
     path.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    write_manifest(out, run_id)

@@ -82,21 +82,26 @@ def pressure_frame(run: RunResult, s: StepResult) -> Frame:
     return Frame(s.step, s.time_s, SurfaceFrame(points, scene.mobile.triangles, {}, cells))
 
 
-def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int] | None = None, note: str | None = None) -> Path:
-    """Write the result directory of a DEM/EDEM run (layout: :mod:`edem.resultdir`).
+def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int] | None = None, note: str | None = None,
+                  overwrite: bool = False) -> Path:
+    """Write the result directory of a DEM/EDEM run (layout: :mod:`edem.resultdir`), atomically.
 
     Parameters
     ----------
     run : RunResult
         From :func:`edem.solver.solve`.
     out_dir : str or Path
-        The directory (created if needed): summary.json, timeseries.csv, pressure.pvd with
-        one pressure_NNNN.vtp per time point (the mobile surface at its pose, cell data
-        ``pressure_mpa`` in MPa, ``spring_length_mm``, ``in_contact``, ``ray_hit``), fixed.vtp.
+        The directory: summary.json, timeseries.csv, pressure.pvd with one pressure_NNNN.vtp
+        per time point (the mobile surface at its pose, cell data ``pressure_mpa`` in MPa,
+        ``spring_length_mm``, ``in_contact``, ``ray_hit``), fixed.vtp, fixed.pvd with one
+        fixed_NNNN.vtp per written time point, timeseries.sto and manifest.json listing them all.
+        Written into a hidden sibling and renamed into place when complete.
     frame_steps : list of int, optional
         Positions in ``run.steps`` whose pressure maps are written (default: all).
     note : str, optional
         Recorded as the summary's "frames" entry when only some maps are written.
+    overwrite : bool, optional
+        Replace an existing result directory (default: refuse).
 
     Returns
     -------
@@ -107,6 +112,9 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
     ------
     SolverError
         When a value to write is not finite (naming the file and key).
+    InputError
+        When ``out_dir`` holds a result already (without ``overwrite``) or is not a result
+        directory; ResultWriteError (an InputError) when the disk is full or not writable.
     """
     data = summary(run)
     if note is not None:
@@ -115,7 +123,8 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
     frames = [pressure_frame(run, run.steps[k]) for k in chosen]
     fixed = SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles)
     return write_result_dir(out_dir, data, timeseries_rows(run), frames, fixed,
-                            fixed_frames=[fixed_frame(run, run.steps[k]) for k in chosen], opensim_sto=True)
+                            fixed_frames=[fixed_frame(run, run.steps[k]) for k in chosen], opensim_sto=True,
+                            overwrite=overwrite)
 
 
 def fixed_frame(run: RunResult, s: StepResult) -> Frame:

@@ -315,7 +315,9 @@ def run(
         stored = np.zeros((n_springs, 3))
         stored[cand] = committed
         pose = Placement(rotation_matrix(u[3:]) @ pose.rotation, pose.translation_mm + u[:3], g0)
-        if method == "dem":
+        # The re-measure evaluates the independent springs' law at the solved pose: it says
+        # nothing about the coupled layer, whose forces are not a function of each spring's length.
+        if method == "dem" and layer_mesh is None:
             clock_remeasure = time.perf_counter()
             imbalance, scale = remeasured_imbalance(
                 pose=pose, fixed_pose=f_pose, initial=geometry, spring_centroid_mm=spring_centroid, spring_normal=spring_normal,
@@ -353,7 +355,7 @@ def run(
                 mobile_placement=pose,
                 fixed_placement=f_pose,
                 area_mm2=spring_area,
-                remeasured_imbalance=remeasured if method == "dem" else None,
+                remeasured_imbalance=remeasured if method == "dem" and layer_mesh is None else None,
                 contact_force_n=contact[:3],
                 contact_moment_nmm=contact[3:],
                 centre_of_pressure_mm=centre,

@@ -57,6 +57,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from edem.atomic_dirs import ResultWriteError
 from edem.mechanics import DOF_NAMES
 from edem.raycast import RayCaster
 from edem.resultdir import Frame, SurfaceFrame, timeseries_row, write_result_dir
@@ -334,14 +335,15 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
               degree: int | None = None, element: str | None = None,
               steps: Sequence[int] | None = None, out_dir: str | Path | None = None,
               layers_through_thickness: int | None = None, comm: Any = None,
-              progress: Callable[[int], None] | None = None) -> FERunResult:
+              progress: Callable[[int], None] | None = None, overwrite: bool = False) -> FERunResult:
     """Solve the FE reference of ``scene`` (an :class:`edem.scene.Scene`) at the selected time
     points and, with ``out_dir``, write the result directory (docs/result-format.md) (rank 0 only).
 
     Settings come from the arguments, then the scene's ``[fe]`` table (model, mesh_size_mm,
     degree, element, layers_through_thickness), then the defaults (:func:`resolve_settings`).
     ``steps``: None (all) or time point indices (negative ones count from the end).
-    ``progress(k)`` is called after each solved time point.
+    ``progress(k)`` is called after each solved time point. ``overwrite``: replace an existing
+    result directory at ``out_dir``.
 
     Raises InputError on bad settings and SolverError (FEConvergenceError for a Newton failure)
     naming the time point when one has no solution.
@@ -478,13 +480,19 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         failure = None
         if comm.rank == 0:  # rank 0 writes; every rank learns whether it worked (no hang)
             try:
-                write_fe_results(run, run.out_dir)
+                write_fe_results(run, run.out_dir, overwrite=overwrite)
+            except ResultWriteError as exc:  # disk full, not writable
+                failure = ("write", exc.problem)
+            except InputError as exc:  # a result there already
+                failure = ("input", exc.problem)
             except OSError as exc:
                 failure = ("input", f"cannot write the result directory: {exc}")
             except Exception as exc:
                 failure = ("solver", f"writing the result directory failed: {exc}")
         failure = comm.bcast(failure, root=0)
         if failure is not None:
+            if failure[0] == "write":
+                raise ResultWriteError(failure[1], file=str(out_dir), expected="free space and a writable directory (--out)")
             if failure[0] == "input":
                 raise InputError(failure[1], file=str(out_dir),
                                    expected="a writable directory (--out)")
@@ -672,16 +680,16 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
 # --------------------------------------------------------------------------------------------
 
 
-def write_fe_results(run: FERunResult, out_dir: str | Path) -> Path:
+def write_fe_results(run: FERunResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
     """The result directory (:mod:`edem.resultdir`): summary.json, timeseries.csv
     (``iterations`` = Newton iterations), pressure.pvd with one pressure_NNNN.vtp per solved time
     point (the FE contact surface in the reference configuration of that time point: point data
     pressure_mpa, spring_length_mm, in_contact, gap_mm, pressure_on_mobile_mpa, mobile_point_mm;
     cell data pressure_mpa, spring_length_mm, in_contact, pressure_on_mobile_mpa) and fixed.vtp
-    (see the module docstring)."""
+    (see the module docstring). Atomic and sealed; ``overwrite`` replaces an existing result."""
     rows = [timeseries_row(s.step, s.time_s, s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa, s.contact_area_mm2,
                            s.displacement_mm, s.rotation_rad, s.iterations, s.force_residual_n)
             for s in run.steps]
     frames = [Frame(s.step, s.time_s, SurfaceFrame(s.points_mm, s.triangles, s.point_data, s.cell_data)) for s in run.steps]
     fixed = SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles)
-    return write_result_dir(out_dir, run.summary(), rows, frames, fixed)
+    return write_result_dir(out_dir, run.summary(), rows, frames, fixed, overwrite=overwrite)

@@ -429,8 +429,9 @@ def write_vtp(
 
     VTK's own vtkXMLPolyDataWriter, binary: float64 points and int64 connectivity, so a
     round trip is exact (docs/method.md#8-built-in-geometries). Every result directory's pressure maps use it (docs/result-format.md: the
-    discrete runs write cell data, the FE runs nodal and facet data). Raises OSError if VTK
-    cannot write the file.
+    discrete runs write cell data, the FE runs nodal and facet data). VTK renders the file
+    in memory and Python writes it: VTK's own file output crashed (SIGSEGV) on a full disk,
+    Python raises OSError (ENOSPC) instead.
     """
     from vtkmodules.util.numpy_support import numpy_to_vtk
     from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
@@ -442,11 +443,13 @@ def write_vtp(
             array.SetName(name)
             target.AddArray(array)
     writer = vtkXMLPolyDataWriter()
-    writer.SetFileName(str(path))
+    writer.WriteToOutputStringOn()
     writer.SetInputData(poly)
-    writer.SetDataModeToBinary()
+    writer.SetDataModeToBinary()  # inline base64: the output string is plain ASCII
     if not writer.Write():
-        raise OSError(f"could not write {path}")
+        raise OSError(f"VTK could not render {path}")
+    with open(path, "w", encoding="ascii") as f:
+        f.write(writer.GetOutputString())
 
 
 def write_surface(

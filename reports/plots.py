@@ -7,15 +7,16 @@ from pathlib import Path
 import numpy as np
 
 from edem.errors import InputError
-from edem.resultdir import TIMESERIES_FILE, read_result_dir, read_timeseries_csv
+from edem.resultdir import read_result_dir
 
 DERIVED = {"disp_norm_mm": ("disp_x_mm", "disp_y_mm", "disp_z_mm")}
 
 
 def read_timeseries(result_dir: str | Path) -> dict[str, np.ndarray]:
     """Columns of a result directory's timeseries.csv as float arrays, plus the derived
-    :data:`DERIVED` columns (``disp_norm_mm``)."""
-    columns = read_timeseries_csv(Path(result_dir) / TIMESERIES_FILE)
+    :data:`DERIVED` columns (``disp_norm_mm``); the directory must verify against its manifest
+    (:func:`edem.resultdir.read_result_dir`)."""
+    columns = dict(read_result_dir(result_dir).timeseries)
     for name, parts in DERIVED.items():
         if all(p in columns for p in parts):
             columns[name] = np.sqrt(sum(columns[p] ** 2 for p in parts))

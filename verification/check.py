@@ -16,7 +16,13 @@ of the same quantities (its pressure sampled at EDEM's spring centroids and binn
 
 Exit 0 without drift (2 on bad input: a missing or unreadable reference file). ``edem check --refresh`` recomputes and rewrites the references (FE included
 when :func:`verification.sides.fe_availability` says it can run; FE rows say "FE reference not
-available" otherwise). ``--references DIR`` points at another directory (tests use a copy).
+available" otherwise). ``--refresh --no-fe`` keeps the stored FE values (and says so), or
+refuses when they are for other time points; an FE run that fails during a refresh says that it
+dropped them. ``--references DIR`` points at another directory (tests use a copy).
+
+A reference that is incomplete (a quantity missing, null or not one finite value per time
+point; ``"fe": null`` without a stored reason ``fe_unavailable``) is bad input (exit 2) naming
+the file and the key, never a pass that skipped the comparison.
 
 Coarse pressure field: each spring's pressure, weighted by its area, is binned into cubes of
 :data:`FIELD_VOXEL_MM` by the spring centroid at the mobile body's initial pose (mean pressure
@@ -30,6 +36,7 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import math
+import os
 import sys
 import tempfile
 import time
@@ -208,12 +215,42 @@ def refresh_reference(check: CheckScene, references: Path, *, with_fe: bool = Tr
             else:
                 data["fe_unavailable"] = f"FE reference not available: the FE {check.fe_model} {outcome.status}: {outcome.message.splitlines()[0] if outcome.message else ''}"
                 log(f"{check.name}: {data['fe_unavailable']}")
+        elif not with_fe and (kept := _stored_fe(check, references, edem)) is not None:
+            data["fe"], data["fe_kept_from"] = kept
+            log(f"{check.name}: kept the stored FE values of {kept[1]} (--no-fe)")
         else:
             data["fe_unavailable"] = why
             log(f"{check.name}: {why}")
+        if with_fe and data["fe"] is None and _stored_fe(check, references, None) is not None:
+            log(f"{check.name}: dropped the stored FE values: {data['fe_unavailable']}")
     references.mkdir(parents=True, exist_ok=True)
-    (references / f"{check.name}.json").write_text(json.dumps(json_safe(data), indent=1) + "\n", encoding="utf-8")
+    path = references / f"{check.name}.json"
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(json_safe(data), indent=1) + "\n", encoding="utf-8")
+    os.replace(tmp, path)  # an interrupted refresh leaves the previous reference whole
     return data
+
+
+def _stored_fe(check: CheckScene, references: Path, edem: dict[str, Any] | None) -> tuple[dict[str, Any], str] | None:
+    """The FE values (and when they were computed) of the stored reference, if it has valid ones.
+
+    With ``edem`` (the new baseline), InputError when they are for other time points: they
+    cannot be kept then, and dropping them silently is not an option.
+    """
+    path = references / f"{check.name}.json"
+    if not path.is_file():
+        return None
+    try:
+        data = read_reference(check, references)
+    except InputError:
+        return None  # nothing valid stored: nothing to keep
+    if data.get("fe") is None:
+        return None
+    stored = data["fe"]["time_s"]
+    if edem is not None and not (len(stored) == len(edem["time_s"]) and np.allclose(stored, edem["time_s"])):
+        raise InputError("the stored FE values are for other time points than the scene's now, so --no-fe cannot keep them",
+                         file=path, key="fe.time_s", expected=f"{edem['time_s']}: refresh with the FE reference (without --no-fe)")
+    return data["fe"], str(data.get("fe_kept_from") or data.get("refreshed_at", "an earlier refresh"))
 
 
 def read_reference(check: CheckScene, references: Path) -> dict[str, Any]:
@@ -226,7 +263,42 @@ def read_reference(check: CheckScene, references: Path) -> dict[str, Any]:
         raise InputError(f"not valid JSON: {exc}", file=path) from None
     if data.get("format") != FORMAT_VERSION or "edem" not in data:
         raise InputError("not a reference of this version", file=path, expected=f"format {FORMAT_VERSION} (edem check --refresh)")
+    _check_quantities(data["edem"], path, "edem")
+    if data.get("fe") is not None:
+        _check_quantities(data["fe"], path, "fe")
+    elif not str(data.get("fe_unavailable") or "").strip():
+        raise InputError('"fe" is null and the reference says nowhere why', file=path, key="fe",
+                         expected='the FE values (edem check --refresh with the FE reference) or "fe_unavailable" giving the reason')
     return data
+
+
+def _check_quantities(values: Any, path: Path, key: str) -> None:
+    """InputError naming ``key.<quantity>`` unless every stored quantity has one finite value per time point."""
+
+    def finite(x: Any) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+    expected = "one finite value per time point (edem check --refresh)"
+    if not isinstance(values, dict):
+        raise InputError("not a table of quantities", file=path, key=key, expected=expected)
+    times = values.get("time_s")
+    if not isinstance(times, list) or not times or not all(finite(t) for t in times):
+        raise InputError("missing, null or non-finite", file=path, key=f"{key}.time_s", expected=expected)
+    for quantity in QUANTITIES:
+        series = values.get(quantity)
+        if not isinstance(series, list) or len(series) != len(times):
+            raise InputError(f"missing, null or not {len(times)} value(s)", file=path, key=f"{key}.{quantity}", expected=expected)
+        for k, value in enumerate(series):
+            if quantity == "displacement_mm":
+                ok = isinstance(value, list) and len(value) == 3 and all(finite(x) for x in value)
+            elif quantity == "pressure_field":
+                ok = (isinstance(value, dict) and finite(value.get("voxel_mm")) and isinstance(value.get("cells"), list)
+                      and isinstance(value.get("pressure_mpa"), list) and len(value["cells"]) == len(value["pressure_mpa"])
+                      and all(finite(p) for p in value["pressure_mpa"]))
+            else:
+                ok = finite(value)
+            if not ok:
+                raise InputError(f"time point {k}: {value!r} is not a valid value", file=path, key=f"{key}.{quantity}", expected=expected)
 
 
 def check_scene(check: CheckScene, references: Path) -> list[dict[str, Any]]:

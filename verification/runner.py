@@ -3,13 +3,19 @@
 Each case runs in ``OUT/cases/<case>/``: one result directory (docs/result-format.md) per side (``a-<side>``,
 ``b-<side>``) and ``metrics.json`` (every metric, the tolerance verdicts, wall times, the result
 directories). The case is cached under a key hashing its definition, the scene file and every
-file it references, the package version and the source of the modules that compute it: those its
-sides name (:func:`verification.sides.side_modules`) and the metrics, with everything they
-import, plus the files of this runner and of the side runners. Re-running an unchanged case only
-re-reads its metrics.json; a change to code it uses invalidates it, a change elsewhere (another
-campaign, a report) does not. Verdicts are re-judged on every run,
-so changing a tolerance needs no re-run. ``OUT/metrics.json`` gathers the campaign; the HTML
-report is drawn by the caller (``edem verify`` passes :func:`reports.html.write_campaign_report`).
+file it references, the package version, the versions of the numerical libraries
+(:func:`library_versions`) and the source of the modules that compute it: those its sides name
+(:func:`verification.sides.side_modules`) and the metrics, with everything they import, plus the
+files of this runner and of the side runners. Re-running an unchanged case only re-reads its
+metrics.json; a change to code it uses or a library upgrade invalidates it, a change elsewhere
+(another campaign, a report) does not. A cached case is used only when its metrics.json (written
+last, atomically) is there and every side's result directory verifies against its manifest;
+anything missing, truncated or changed makes the case run again. Verdicts are re-judged on every
+run, so changing a tolerance needs no re-run.
+
+One campaign at a time writes a directory (a lock), workers die with the campaign, and Ctrl-C
+stops it keeping every finished case (:mod:`verification.campaign_safety`). ``OUT/metrics.json``
+gathers the campaign; the HTML report is drawn by the caller (``edem verify`` passes :func:`reports.html.write_campaign_report`).
 
 After the cases, the campaign's analyses (:mod:`verification.analyses`: observed orders, the
 thesis's figures beside ours, parameter sensitivities) are computed from their metrics; they are
@@ -42,17 +48,20 @@ import time
 import tomllib
 import traceback
 from collections.abc import Callable, Iterable
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from edem.atomic_dirs import manifest_problems
 from edem.errors import InputError
 from edem.resultdir import non_finite_count, read_result_dir, read_timeseries_csv
 from edem.scene import apply_overrides, resolve_scene_path
 from verification import sources
 from verification.analyses import format_analysis, run_analysis
 from verification.campaign_model import Campaign, Case, validate_campaign
+from verification.campaign_safety import CampaignInterrupted, campaign_lock, init_worker, sigint_blocked, stop_children
 from verification.fe_analytic import FE_PROBLEMS, half_width_errors
 from verification.metrics import SERIES_METRICS, COMPARISON_METRICS, compare_result_dirs, matching_time_points, series_metrics
 from verification.sides import run_side, side_modules
@@ -139,6 +148,7 @@ def case_key(case: Case) -> str:
     digest = hashlib.sha256()
     digest.update(json.dumps(json_safe(case.definition()), sort_keys=True).encode())
     digest.update(_package_version().encode())
+    digest.update(json.dumps(library_versions(), sort_keys=True).encode())
     roots = METRIC_MODULES + tuple(m for side in case.sides for m in side_modules(side))
     digest.update(sources.closure_digest(tuple(sorted(set(roots))), SOURCE_ROOT).encode())
     digest.update(_source_digest(CASE_GLUE_MODULES).encode())
@@ -320,8 +330,8 @@ def _cached_record(case_dir: Path, key: str) -> dict[str, Any] | None:
     statuses = [s["status"] for s in record.get("sides", [])]
     if not statuses or any(s in (UNAVAILABLE, ERROR) for s in statuses):
         return None  # availability may change and crashes get fixed: run those again
-    if any(s.get("result_dir") and not (case_dir / s["result_dir"]).is_dir() for s in record["sides"]):
-        return None
+    if any(s.get("result_dir") and manifest_problems(case_dir / s["result_dir"]) for s in record["sides"]):
+        return None  # a result file missing, changed or added since the case ran: run it again
     return record
 
 
@@ -329,10 +339,17 @@ def _cached_record(case_dir: Path, key: str) -> dict[str, Any] | None:
 # The campaign
 
 
+@lru_cache(maxsize=1)
+def library_versions() -> dict[str, str]:
+    """The versions in :func:`software_versions` that results depend on (not the host's platform
+    string): part of every case's cache key, so an upgrade of numpy, gmsh, dolfinx... re-runs."""
+    return {k: v for k, v in software_versions().items() if k != "platform"}
+
+
 def software_versions() -> dict[str, str]:
     """Versions of Python and the numerical stack (dolfinx only if installed), without importing them."""
     versions = {"python": platform.python_version(), "platform": platform.platform()}
-    for name in ("edem", "numpy", "scipy", "vtk", "pyvista", "matplotlib", "embreex", "gmsh"):
+    for name in ("edem", "numpy", "scipy", "vtk", "pyvista", "matplotlib", "embreex", "gmsh", "meshio"):
         try:
             versions[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
@@ -376,10 +393,20 @@ def _executor_results(
             yield case, execute_case(case, str(case_dir), key)
         return
     context = multiprocessing.get_context("spawn")
-    with concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, len(todo)), mp_context=context) as pool:
-        futures = {pool.submit(execute_case, case, str(case_dir), key): case for case, case_dir, key in todo}
+    before = {p.pid for p in multiprocessing.active_children()}
+    pool = concurrent.futures.ProcessPoolExecutor(
+        max_workers=min(jobs, len(todo)), mp_context=context, initializer=init_worker, initargs=(os.getpid(),)
+    )
+    try:
+        with sigint_blocked():  # the workers start (in submit) with SIGINT blocked until init_worker
+            futures = {pool.submit(execute_case, case, str(case_dir), key): case for case, case_dir, key in todo}
         for future in concurrent.futures.as_completed(futures):
             yield futures[future], future.result()
+    except BaseException:  # Ctrl-C, or the consumer stopped early: no worker goes on writing cases
+        pool.shutdown(wait=False, cancel_futures=True)
+        stop_children(before)
+        raise
+    pool.shutdown(wait=True)
 
 
 def run_campaign(
@@ -404,11 +431,24 @@ def run_campaign(
     """
     validate_campaign(campaign)
     out = Path(out_dir)
-    (out / "cases").mkdir(parents=True, exist_ok=True)
-    started = time.perf_counter()
     jobs = (os.cpu_count() or 1) if jobs is None else jobs
     if jobs < 1:
         raise InputError(f"--jobs {jobs}", key="--jobs", expected="a number of processes >= 1")
+    with campaign_lock(out):
+        return _run_campaign_locked(campaign, out, jobs, scheduler, progress, report, on_case)
+
+
+def _run_campaign_locked(
+    campaign: Campaign,
+    out: Path,
+    jobs: int,
+    scheduler: str | None,
+    progress: bool | None,
+    report: Callable[[dict[str, Any], Path], Path] | None,
+    on_case: Callable[[str, bool], None] | None,
+) -> dict[str, Any]:
+    (out / "cases").mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
     records: dict[str, dict[str, Any]] = {}
     cached: dict[str, bool] = {}
     todo = []
@@ -429,13 +469,24 @@ def run_campaign(
     for name in list(records):
         if on_case:
             on_case(name, True)
+    finished = _executor_results(todo, jobs, scheduler)
     try:
-        for case, record in _executor_results(todo, jobs, scheduler):
+        for case, record in finished:
             records[case.name], cached[case.name] = record, False
             if bar is not None:
                 bar.update(1)
             if on_case:
                 on_case(case.name, False)
+    except OSError as exc:  # the campaign directory cannot be written (disk full...)
+        finished.close()
+        raise InputError(f"cannot write the campaign's results ({exc.strerror or exc}); {len(records)} finished cases are kept",
+                         file=out, expected="free space and a writable directory") from None
+    except KeyboardInterrupt:
+        finished.close()  # stops the workers
+        raise CampaignInterrupted(
+            f"interrupted: {len(records)} of {len(campaign.cases)} cases done and kept in {out / 'cases'}; "
+            "the same command runs the rest"
+        ) from None
     finally:
         if bar is not None:
             bar.close()

@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from edem.atomic_dirs import ResultWriteError
 from edem.errors import InputError, SolverError
 from edem.results import write_results
 from edem.scene import apply_overrides, load_scene, resolve_scene_path
@@ -299,6 +300,8 @@ def run_side(side: str, scene_ref: str, overrides: dict[str, Any], out_dir: str 
             _run_closed_form(scene_ref, overrides, out, options or {}, side[len(CLOSED_FORM_PREFIX) :])
         else:
             SIDES[side](scene_ref, overrides, out, options or {})
+    except ResultWriteError as exc:  # disk full...: not the case's outcome, run it again
+        return SideOutcome(side, ERROR, None, str(exc), time.perf_counter() - start, type(exc).__name__)
     except (InputError, SolverError) as exc:
         return SideOutcome(side, REFUSED, None, str(exc), time.perf_counter() - start, type(exc).__name__)
     except UnavailableError as exc:

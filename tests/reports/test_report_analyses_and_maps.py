@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from edem.atomic_dirs import write_manifest
 from edem.results import write_pvd
 from reports.html import _wall_time_figure, write_campaign_report
 from verification.resultdirs import read_result_dir, write_surface_frame
@@ -82,6 +83,7 @@ def _frame_dir(root, times, values):
         write_surface_frame(root / f"pressure_{k:04d}.vtp", points, triangles, None, {"pressure_mpa": np.full(2, v), "in_contact": np.ones(2)})
         entries.append((t, f"pressure_{k:04d}.vtp"))
     write_pvd(root / "pressure.pvd", entries)
+    write_manifest(root)  # a result directory is sealed by its writer
     return root
 
 

@@ -115,3 +115,51 @@ def test_coarse_field_is_the_area_weighted_mean_per_cube():
     other = {**field, "pressure_mpa": [7.0, 0.0]}
     assert field_difference(other, field) == pytest.approx(1.0 / np.sqrt(49 + 1))
     assert field_difference(field, field) == 0.0
+
+
+def test_fe_null_without_a_reason_is_refused(references, capsys):
+    """A reference whose FE values were removed ("fe": null, no stated reason) is bad input
+    naming the file and the key, never a pass without the FE comparison."""
+
+    def null_fe(d):
+        d["fe"] = None
+        d.pop("fe_unavailable", None)
+
+    _edit(references / "flat-plates.json", null_fe)
+    assert main(["check", "--references", str(references)]) == 2
+    err = capsys.readouterr().err
+    assert "flat-plates.json" in err and "key 'fe'" in err
+
+
+@pytest.mark.parametrize("key,change", [
+    ("edem.peak_pressure_mpa", lambda d: d["edem"]["peak_pressure_mpa"].__setitem__(0, None)),
+    ("edem.displacement_mm", lambda d: d["edem"].pop("displacement_mm")),
+    ("fe.pressure_field", lambda d: d["fe"].__setitem__("pressure_field", [])),
+])
+def test_incomplete_stored_quantities_are_refused(references, capsys, key, change):
+    _edit(references / "flat-plates.json", change)
+    assert main(["check", "--references", str(references)]) == 2
+    err = capsys.readouterr().err
+    assert "flat-plates.json" in err and f"key '{key}'" in err and "Traceback" not in err
+
+
+def test_refresh_without_fe_keeps_the_stored_fe_values_and_says_so(references, capsys):
+    scenes = tuple(c for c in CHECK_SCENES if c.name == "flat-plates")
+    before = json.loads((references / "flat-plates.json").read_text())
+    assert before["fe"] is not None
+    assert run_check(refresh=True, references=references, scenes=scenes, with_fe=False) == 0
+    after = json.loads((references / "flat-plates.json").read_text())
+    assert after["fe"] == before["fe"] and after["fe_kept_from"] == before["refreshed_at"]
+    assert "kept the stored FE values" in capsys.readouterr().out
+    assert run_check(references=references, scenes=scenes) == 0
+
+
+def test_refresh_without_fe_refuses_fe_values_of_other_time_points(references):
+    from edem.errors import InputError
+
+    _edit(references / "flat-plates.json", lambda d: d["fe"].__setitem__("time_s", [0.5]))
+    before = (references / "flat-plates.json").read_text()
+    scenes = tuple(c for c in CHECK_SCENES if c.name == "flat-plates")
+    with pytest.raises(InputError, match="other time points"):
+        run_check(refresh=True, references=references, scenes=scenes, with_fe=False)
+    assert (references / "flat-plates.json").read_text() == before

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from edem.atomic_dirs import write_manifest
 from edem.results import TIMESERIES_COLUMNS, write_pvd
 from verification.metrics import (
     compare_result_dirs,
@@ -182,6 +183,7 @@ def write_result_dir(
         write_surface_frame(root / f"pressure_{k:04d}.vtp", points, triangles, point_data, cell_data)
         entries.append((rows[k]["time_s"], f"pressure_{k:04d}.vtp"))
     write_pvd(root / "pressure.pvd", entries)
+    write_manifest(root)  # a result directory is sealed by its writer
     return root
 
 

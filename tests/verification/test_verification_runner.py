@@ -13,6 +13,7 @@ import pytest
 
 import verification.runner as runner
 import verification.sides as sides
+from edem.atomic_dirs import write_manifest
 from edem.cli import main
 from verification.campaigns import SCENES_DIR, Campaign, Case, Expect, get_campaign
 from verification.metrics import COMPARISON_METRICS
@@ -163,6 +164,7 @@ def test_fe_side_calls_run_scene_and_compares_nodal_pressure(tmp_path, monkeypat
         p = np.full(len(points), 1.0)
         write_surface_frame(Path(out_dir) / "pressure_0000.vtp", points, scene.mobile.triangles, {"pressure_mpa": p}, {"pressure_mpa": np.full(scene.mobile.n_triangles, 5.0)})
         write_pvd(Path(out_dir) / "pressure.pvd", [(0.0, "pressure_0000.vtp")])
+        write_manifest(out_dir)  # a stand-in FE writer seals its directory like the real one
 
     from edem.results import write_results
     from edem.scene import load_scene

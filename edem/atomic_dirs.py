@@ -1,0 +1,331 @@
+"""Result directories that are never partial, stale or mixed.
+
+A result directory is written into a temporary sibling (``.<name>.tmp-<host>-<pid>-<random>``),
+sealed with ``manifest.json`` (every file with its size and sha256, and the run id), flushed to
+disk (fsync of every file and directory) and only then renamed into place. An existing result
+is replaced only when the caller says so (``overwrite``), and it stays untouched until the
+rename: a crash, a kill or a full disk before that point leaves the previous result as it was
+and at most a hidden temporary sibling, which the next write of that result removes. Readers verify the manifest (:func:`verify_manifest`): a
+missing, changed or extra file (two runs mixed in one directory) is refused.
+
+Output paths are checked before any solve (:func:`check_out_dir`): a path that is a file or
+lies under one, a name too long for the file system, a directory that cannot be written (read-
+only file system, permissions) and an existing result without ``overwrite`` are refused with
+:class:`edem.errors.InputError` (exit status 2). :func:`default_out_dir` keeps the default
+output under the results root whatever the scene's name, and gives runs with ``--set``
+overrides their own directory.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import errno
+import hashlib
+import json
+import os
+import re
+import secrets
+import shutil
+import socket
+import tempfile
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from edem.errors import InputError
+
+MANIFEST_NAME = "manifest.json"
+MANIFEST_FORMAT = 1
+#: Host tag of the temporary siblings: only this host's dead writers' siblings are removed.
+_HOST = hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
+#: Bytes the temporary sibling's name adds to the result's name (".", ".tmp-", host, pid, 16 hex).
+_SIBLING_EXTRA = 48
+_CHUNK = 1 << 20
+
+
+def _safe_name(text: str) -> str:
+    """A single path component made of [A-Za-z0-9_.-], never "", "." or ".." (no leading dot)."""
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "-", text).strip("-.")
+    return name or "scene"
+
+
+def default_out_dir(root: str | Path, *parts: str, overrides: dict[str, Any] | None = None) -> Path:
+    """``root/<part>-<part>...`` made of safe characters, plus ``-set-<hash>`` with overrides.
+
+    ``parts`` (e.g. the scene name and the method) become one path component each stripped of
+    separators and leading dots, so a scene named "../.." or "/etc" stays under ``root``. Runs
+    with ``overrides`` (the ``--set`` values) get a suffix from a hash of them, so they never
+    share a directory with the plain run or with other overrides.
+    """
+    name = "-".join(_safe_name(p) for p in parts)
+    if overrides:
+        digest = hashlib.sha256(json.dumps(overrides, sort_keys=True, default=str).encode()).hexdigest()
+        name += f"-set-{digest[:10]}"
+    return Path(root) / name
+
+
+def _name_max(directory: Path) -> int:
+    try:
+        return os.pathconf(directory, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        return 255
+
+
+def _existing_ancestor(path: Path) -> Path:
+    """The nearest ancestor of ``path`` (or itself) that exists; refuses one that is a file."""
+    probe = path
+    while not os.path.lexists(probe):
+        probe = probe.parent
+    if not probe.is_dir():
+        where = "is a file, not a directory" if probe == path else f"lies under {probe}, which is a file"
+        raise InputError(f"output {where}", file=path, key="--out", expected="a directory path")
+    return probe
+
+
+def is_result_dir(path: str | Path) -> bool:
+    return (Path(path) / MANIFEST_NAME).is_file()
+
+
+def check_out_dir(out: str | Path, *, overwrite: bool = False, reuse_if: tuple[str, ...] = ()) -> Path:
+    """Refuse, before any computing, an output directory the result could not be written to.
+
+    Creates the missing parent directories and a probe directory beside ``out`` (removed again)
+    so that read-only file systems and permissions are found now, not after the solve.
+    ``overwrite``: an existing result directory (one with a manifest) may be replaced; a non-
+    empty directory that is not a result is never replaced. ``reuse_if``: the directory is kept
+    and written into (a campaign's cache directory) when it is new, empty or holds one of these
+    entries (e.g. "cases"). Returns the absolute path.
+    """
+    reuse = bool(reuse_if)
+    out = Path(os.path.abspath(out))
+    ancestor = _existing_ancestor(out)
+    limit = _name_max(ancestor)
+    for part in out.relative_to(ancestor).parts:
+        if len(part.encode()) > limit:
+            raise InputError(f"the name '{part[:40]}...' has {len(part.encode())} bytes", file=out, key="--out",
+                             expected=f"names of at most {limit} bytes on this file system")
+    if len(out.name.encode()) + _SIBLING_EXTRA > limit:
+        raise InputError(f"the name has {len(out.name.encode())} bytes", file=out, key="--out",
+                         expected=f"at most {limit - _SIBLING_EXTRA} bytes (room for the temporary sibling written first)")
+    if out.is_dir() and reuse and any(out.iterdir()) and not any(os.path.lexists(out / name) for name in reuse_if):
+        raise InputError(f"the directory exists and holds no '{reuse_if[0]}' of an earlier run; it is never written into",
+                         file=out, key="--out", expected="a new or empty directory, or one this command wrote")
+    if out.is_dir() and not reuse and any(out.iterdir()):
+        if not is_result_dir(out):
+            raise InputError("the directory exists and is not a result directory (no manifest.json); it is never replaced",
+                             file=out, key="--out", expected="a new or empty directory")
+        if not overwrite:
+            raise InputError("a result exists here already", file=out, key="--out",
+                             expected="--overwrite to replace it, or another --out")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        probe = tempfile.mkdtemp(prefix=".probe-", dir=out.parent)
+        os.rmdir(probe)
+        if reuse:
+            out.mkdir(exist_ok=True)
+            probe = tempfile.mkdtemp(prefix=".probe-", dir=out)
+            os.rmdir(probe)
+    except OSError as exc:
+        raise InputError(f"cannot write here: {exc.strerror or exc}", file=out, key="--out",
+                         expected="a writable directory (not a read-only file system)") from None
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Manifest
+
+
+def _sha256(path: Path, *, sync: bool = False) -> str:
+    """sha256 of a file; with ``sync``, also flush it to disk (it is open anyway)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(_CHUNK):
+            digest.update(chunk)
+        if sync:
+            os.fsync(f.fileno())
+    return digest.hexdigest()
+
+
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _listed_files(root: Path) -> list[str]:
+    return sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file() and p.name != MANIFEST_NAME)
+
+
+def write_manifest(root: str | Path, run_id: str | None = None) -> dict[str, Any]:
+    """Seal ``root``: manifest.json lists every file (relative path, bytes, sha256) and the run id.
+
+    Every file and directory is fsynced on the way, so a sealed directory is on disk.
+    """
+    root = Path(root)
+    files = {}
+    for rel in _listed_files(root):
+        path = root / rel
+        files[rel] = {"bytes": path.stat().st_size, "sha256": _sha256(path, sync=True)}
+    manifest = {"format": MANIFEST_FORMAT, "run_id": run_id or uuid.uuid4().hex, "files": files}
+    tmp = root / (MANIFEST_NAME + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(json.dumps(manifest, indent=1) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, root / MANIFEST_NAME)
+    for directory in {root} | {(root / rel).parent for rel in files}:
+        _fsync_dir(directory)
+    return manifest
+
+
+def manifest_problems(root: str | Path) -> list[str]:
+    """What does not match the manifest of ``root`` (empty when it verifies)."""
+    root = Path(root)
+    try:
+        manifest = json.loads((root / MANIFEST_NAME).read_text(encoding="utf-8"))
+        files = manifest["files"]
+    except FileNotFoundError:
+        return ["no manifest.json (the write did not finish, or an old layout)"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        return [f"unreadable manifest.json ({exc})"]
+    problems = []
+    present = set(_listed_files(root))
+    for rel in sorted(present - set(files)):
+        problems.append(f"{rel} is not in the manifest (left by another run)")
+    for rel, entry in files.items():
+        path = root / rel
+        if rel not in present:
+            problems.append(f"{rel} is missing")
+        elif path.stat().st_size != entry.get("bytes"):
+            problems.append(f"{rel} has {path.stat().st_size} bytes, the manifest says {entry.get('bytes')}")
+        elif _sha256(path) != entry.get("sha256"):
+            problems.append(f"{rel} was changed after the run (sha256 differs)")
+    return problems
+
+
+def verify_manifest(root: str | Path) -> str:
+    """The run id of ``root``; InputError naming the directory and what differs otherwise."""
+    problems = manifest_problems(root)
+    if problems:
+        more = f" (and {len(problems) - 3} more)" if len(problems) > 3 else ""
+        raise InputError("incomplete, changed or mixed result directory: " + "; ".join(problems[:3]) + more,
+                         file=root, expected="a directory as one run wrote it (manifest.json verifies)")
+    return json.loads((Path(root) / MANIFEST_NAME).read_text(encoding="utf-8"))["run_id"]
+
+
+# ---------------------------------------------------------------------------------------------
+# Atomic write
+
+
+class ResultWriteError(InputError):
+    """Writing a result failed (disk full, I/O error...): exit status 2 like bad input, but a
+    campaign records it as a crash to run again, never as the case's refusal."""
+
+
+def _write_error(out: Path, exc: OSError) -> ResultWriteError:
+    full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
+    problem = "the disk is full" if full else f"cannot write the result ({exc.strerror or exc})"
+    return ResultWriteError(f"{problem}; nothing was written there and a previous result is unchanged", file=out,
+                            expected="free space and a writable directory" if full else "a writable directory")
+
+
+def _sibling(out: Path, kind: str) -> Path:
+    """``.<name>.<kind>-<host>-<pid>-<random>``: hidden, and traceable to the process writing it."""
+    return out.parent / f".{out.name}.{kind}-{_HOST}-{os.getpid()}-{secrets.token_hex(8)}"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_siblings(out: str | Path) -> list[str]:
+    """Remove the temporary siblings of ``out`` left by writers of this host that were killed
+    (their pid no longer exists); returns their names. Live writers' siblings are kept."""
+    out = Path(os.path.abspath(out))
+    pattern = re.compile(rf"^\.{re.escape(out.name)}\.(tmp|old)-{_HOST}-(\d+)-[0-9a-f]{{16}}$")
+    removed = []
+    with contextlib.suppress(OSError):
+        for entry in out.parent.iterdir():
+            match = pattern.match(entry.name)
+            if match and not _alive(int(match.group(2))):
+                shutil.rmtree(entry, ignore_errors=True)
+                removed.append(entry.name)
+    return removed
+
+
+@contextlib.contextmanager
+def atomic_result_dir(out: str | Path, *, overwrite: bool = False, run_id: str | None = None) -> Iterator[Path]:
+    """Yield a temporary sibling of ``out`` to write into; seal it and rename it to ``out`` on exit.
+
+    An existing ``out`` is replaced only with ``overwrite`` and only when it is a result
+    directory or empty; it stays whole until the rename (an atomic exchange where the file
+    system has one). An exception inside the block removes the temporary sibling and leaves
+    ``out`` as it was; OSError (disk full, read-only, ...) becomes ResultWriteError (an
+    InputError: exit status 2) with a message. Siblings of killed earlier writers are removed.
+    """
+    out = Path(os.path.abspath(out))
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_siblings(out)
+        tmp = _sibling(out, "tmp")
+        tmp.mkdir()  # not mkdtemp: the result gets the umask's permissions, not 0700
+    except OSError as exc:
+        raise _write_error(out, exc) from None
+    try:
+        yield tmp
+        write_manifest(tmp, run_id)
+        _replace(tmp, out, overwrite)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise _write_error(out, exc) from None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two directories in one atomic step (Linux renameat2 RENAME_EXCHANGE); False if unsupported."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    if renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP):
+        return False  # a file system without exchange: fall back to two renames
+    raise OSError(code, os.strerror(code), str(b))
+
+
+def _replace(tmp: Path, out: Path, overwrite: bool) -> None:
+    if os.path.lexists(out):
+        if out.is_dir() and not any(out.iterdir()):
+            out.rmdir()
+        elif not overwrite or not is_result_dir(out):
+            raise InputError("a result exists here already" if is_result_dir(out) else "exists and is not a result directory",
+                             file=out, expected="--overwrite to replace a result directory, or another --out")
+        elif _exchange(tmp, out):  # the old result is now at tmp: never a moment without a result
+            _fsync_dir(out.parent)
+            shutil.rmtree(tmp, ignore_errors=True)
+            return
+        else:
+            old = _sibling(out, "old")
+            os.rename(out, old)
+            os.rename(tmp, out)
+            _fsync_dir(out.parent)
+            shutil.rmtree(old, ignore_errors=True)
+            return
+    os.rename(tmp, out)
+    _fsync_dir(out.parent)

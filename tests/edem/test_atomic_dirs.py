@@ -1,0 +1,200 @@
+"""Atomic result directories: a result appears whole or not at all, sealed by a manifest that
+readers verify; a full disk or a write error ends in exit 2 and leaves the previous result."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import errno
+import json
+import os
+import subprocess
+import sys
+import uuid
+from pathlib import Path
+
+import pytest
+
+import edem.resultdir as resultdir
+import edem.results as results
+from edem.atomic_dirs import atomic_result_dir, manifest_problems, verify_manifest, write_manifest
+from edem.errors import InputError
+from edem.scene import load_scene
+from edem.solver import run
+from verification.campaigns import SCENES_DIR
+from verification.resultdirs import read_result_dir
+
+ROOT = Path(__file__).resolve().parents[2]
+PLATES = str(SCENES_DIR / "flat-plates.toml")
+
+
+@pytest.fixture(scope="module")
+def plates_run():
+    return run(load_scene(PLATES), "dem")
+
+
+def run_id(path: Path) -> str:
+    return json.loads((path / "manifest.json").read_text())["run_id"]
+
+
+def leftovers(parent: Path) -> list[str]:
+    return [p.name for p in parent.iterdir() if p.name.startswith(".")]
+
+
+def test_a_result_is_sealed_and_verifies(tmp_path, plates_run):
+    out = results.write_results(plates_run, tmp_path / "r")
+    manifest = json.loads((out / "manifest.json").read_text())
+    # Every file the writer produces (issue 11's fixed-body series and .sto included) is sealed.
+    assert set(manifest["files"]) == {"summary.json", "timeseries.csv", "timeseries.sto", "pressure.pvd", "pressure_0000.vtp",
+                                      "fixed.vtp", "fixed.pvd", "fixed_0000.vtp"}
+    assert set(manifest["files"]) == {p.name for p in out.iterdir()} - {"manifest.json"}
+    assert verify_manifest(out) == manifest["run_id"] and leftovers(tmp_path) == []
+    assert read_result_dir(out).summary["method"] == "dem"
+
+
+def test_missing_changed_and_extra_files_are_refused_by_readers(tmp_path, plates_run):
+    out = results.write_results(plates_run, tmp_path / "r")
+    (out / "pressure_0064.vtp").write_text("left by an earlier run")  # two runs mixed
+    with pytest.raises(InputError, match="pressure_0064.vtp is not in the manifest"):
+        read_result_dir(out)
+    (out / "pressure_0064.vtp").unlink()
+    with open(out / "timeseries.csv", "r+") as f:  # truncated, same name
+        f.truncate(20)
+    (out / "pressure_0000.vtp").unlink()
+    problems = manifest_problems(out)
+    assert any("pressure_0000.vtp is missing" in p for p in problems) and any("timeseries.csv has 20 bytes" in p for p in problems)
+    with pytest.raises(InputError, match="incomplete, changed or mixed"):
+        read_result_dir(out)
+
+
+def test_changed_sto_or_missing_fixed_frame_is_refused_by_readers(tmp_path, plates_run):
+    out = results.write_results(plates_run, tmp_path / "r")
+    (out / "fixed_0000.vtp").unlink()
+    with pytest.raises(InputError, match="incomplete, changed or mixed"):
+        read_result_dir(out)
+    out = results.write_results(plates_run, tmp_path / "s")
+    sto = out / "timeseries.sto"
+    sto.write_text(sto.read_text().replace("version=1", "version=2"))  # same size, other bytes
+    assert any("timeseries.sto" in p for p in manifest_problems(out))
+    with pytest.raises(InputError, match="incomplete, changed or mixed"):
+        read_result_dir(out)
+
+
+def test_overwrite_needs_the_flag_and_leaves_no_stale_file(tmp_path, plates_run):
+    three = dataclasses.replace(plates_run, steps=[dataclasses.replace(plates_run.steps[0], step=k) for k in range(3)])
+    out = results.write_results(three, tmp_path / "r")
+    first = run_id(out)
+    with pytest.raises(InputError, match="a result exists here already"):
+        results.write_results(plates_run, out)
+    assert run_id(out) == first and verify_manifest(out) == first
+    results.write_results(plates_run, out, overwrite=True)
+    assert sorted(p.name for p in out.glob("pressure_*.vtp")) == ["pressure_0000.vtp"]  # the 3-step maps are gone
+    assert run_id(out) != first and leftovers(tmp_path) == []
+
+
+def test_a_directory_that_is_not_a_result_is_never_replaced(tmp_path):
+    home = tmp_path / "home"
+    home.mkdir()
+    (home / "thesis.tex").write_text("precious")
+    with pytest.raises(InputError, match="not a result directory"):
+        with atomic_result_dir(home, overwrite=True) as tmp:
+            (tmp / "summary.json").write_text("{}")
+    assert (home / "thesis.tex").read_text() == "precious" and leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("code", [errno.ENOSPC, errno.EIO])
+def test_write_error_keeps_the_previous_result(tmp_path, plates_run, monkeypatch, code):
+    """A write error half-way (simulated in the .pvd writer, after the maps) ends in InputError
+    and leaves the previous result byte for byte, with no temporary sibling behind."""
+    out = results.write_results(plates_run, tmp_path / "r")
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def failing(path, entries):
+        raise OSError(code, os.strerror(code), str(path))
+
+    monkeypatch.setattr(resultdir, "write_pvd", failing)
+    with pytest.raises(InputError, match="disk is full" if code == errno.ENOSPC else "cannot write the result") as info:
+        results.write_results(plates_run, out, overwrite=True)
+    assert "previous result is unchanged" in str(info.value)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before and leftovers(tmp_path) == []
+
+
+@contextlib.contextmanager
+def tiny_tmpfs(where: Path, size: str):
+    where.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(where)], capture_output=True).returncode:
+        pytest.skip("mounting a tmpfs needs root")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", str(where)], check=True)
+
+
+def test_full_disk_is_exit_2_with_a_message_and_keeps_the_previous_result(tmp_path):
+    """A real 48 KiB file system: the first result (~28 KiB) fits, a second copy does not. The
+    second `edem run` ends in exit 2 naming the full disk (VTK used to crash with
+    SIGSEGV, or leave summary.json beside some of the maps) and the first result verifies."""
+    with tiny_tmpfs(tmp_path / "mnt", "48k") as mnt:
+        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        cmd = [sys.executable, "-m", "edem", "run", PLATES, "--out", str(mnt / "r")]
+        assert subprocess.run(cmd, env=env, capture_output=True, text=True).returncode == 0
+        first = run_id(mnt / "r")
+        done = subprocess.run(cmd[:-1] + [str(mnt / "r2")], env=env, capture_output=True, text=True)
+        assert done.returncode == 2, done.stderr
+        assert "disk is full" in done.stderr and "Traceback" not in done.stderr
+        assert verify_manifest(mnt / "r") == first and sorted(p.name for p in mnt.iterdir()) == ["r"]
+
+
+def test_exceptions_inside_the_block_leave_nothing(tmp_path):
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_result_dir(tmp_path / "r") as tmp:
+            (tmp / "summary.json").write_text("{}")
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_manifest_records_the_run_id(tmp_path):
+    (tmp_path / "a.txt").write_text("a")
+    rid = uuid.uuid4().hex
+    assert write_manifest(tmp_path, rid)["run_id"] == rid == verify_manifest(tmp_path)
+
+
+def test_siblings_of_killed_writers_are_removed_live_ones_kept(tmp_path, plates_run):
+    """A writer killed mid-write leaves a hidden temporary sibling; the next write of that result
+    removes it when its pid is gone (here: a child that has exited), never a live writer's."""
+    import edem.atomic_dirs as atomic_dirs
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(dead.stdout)
+    stale = tmp_path / f".r.tmp-{atomic_dirs._HOST}-{dead_pid}-{'0' * 16}"
+    live = tmp_path / f".r.tmp-{atomic_dirs._HOST}-{os.getpid()}-{'1' * 16}"
+    for d in (stale, live):
+        d.mkdir()
+        (d / "summary.json").write_text("{half")
+    results.write_results(plates_run, tmp_path / "r")
+    assert not stale.exists() and live.exists()
+
+
+def test_ctrl_c_during_edem_run_leaves_a_whole_result_or_none(tmp_path):
+    """SIGINT to `edem run ideal-stance` (65 steps, ~2-3 s) at several instants: each run either
+    finished (exit 0, the result verifies) or stopped (exit 130, a message, no traceback, no
+    directory and no temporary sibling left behind)."""
+    import signal
+    import time
+
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    stopped = 0
+    for k, delay_s in enumerate((0.8, 1.5, 2.2)):
+        out = tmp_path / f"r{k}"
+        run_ = subprocess.Popen([sys.executable, "-m", "edem", "run", "ideal-stance", "--out", str(out)], env=env,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        time.sleep(delay_s)
+        os.killpg(run_.pid, signal.SIGINT)
+        _, err = run_.communicate(timeout=120)
+        assert "Traceback" not in err, err
+        if run_.returncode == 0:
+            assert verify_manifest(out)
+        else:
+            assert run_.returncode == 130 and "interrupted" in err and not out.exists()
+            stopped += 1
+    assert stopped >= 1 and leftovers(tmp_path) == []
