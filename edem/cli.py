@@ -275,7 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("result_dirs", nargs="+", help="result directories of edem run")
     p.add_argument("--column", default="disp_norm_mm", help="a timeseries.csv column, or disp_norm_mm (default)")
     p.add_argument("--label", action="append", help="legend label per directory (repeat)")
-    p.add_argument("--out", help="PNG file to write (default: <first dir>/<column>.png, or <column>-vs-<other dirs>.png)")
+    p.add_argument("--out", help="PNG file to write (default: beside the first directory, <dir>-<column>.png or <dir>-vs-<other dirs>-<column>.png)")
     p.set_defaults(func=_plot)
     p = sub.add_parser("compare", help="comparison metrics between two result directories (B is the reference; docs/method.md#7-comparison-metrics)")
     p.add_argument("a_dir", metavar="A_DIR", help="result directory of the method under test (edem run)")

@@ -24,11 +24,11 @@ def read_timeseries(result_dir: str | Path) -> dict[str, np.ndarray]:
 
 
 def default_plot_path(result_dirs: list[str | Path], column: str) -> Path:
-    """Where `edem plot` writes without --out: beside the first result directory,
-    ``<dir>/<column>.png`` for one directory, ``<dir>/<column>-vs-<other dirs>.png`` for several."""
-    first = Path(result_dirs[0])
-    others = "-vs-".join(Path(d).name for d in result_dirs[1:])
-    return first / (f"{column}-vs-{others}.png" if others else f"{column}.png")
+    """Where `edem plot` writes without --out: beside (not inside: a result directory is sealed by
+    its manifest) the first result directory, ``<dir>-<column>.png`` for one directory,
+    ``<dir>-vs-<other dirs>-<column>.png`` for several."""
+    names = "-vs-".join(Path(d).resolve().name for d in result_dirs)
+    return Path(result_dirs[0]).resolve().parent / f"{names}-{column}.png"
 
 
 def plot_timeseries(result_dirs: list[str | Path], column: str, out_png: str | Path | None = None, labels: list[str] | None = None) -> Path:

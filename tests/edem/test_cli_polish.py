@@ -13,7 +13,7 @@ def test_plot_defaults_its_output_and_marks_a_single_time_point(tmp_path, capsys
     assert main(["run", "ideal-standing", "--out", str(tmp_path / "standing")]) == 0
     capsys.readouterr()
     assert main(["plot", str(tmp_path / "standing"), "--column", "peak_pressure_mpa"]) == 0
-    png = tmp_path / "standing" / "peak_pressure_mpa.png"
+    png = tmp_path / "standing-peak_pressure_mpa.png"  # beside the sealed result directory, not in it
     assert capsys.readouterr().out.strip() == str(png) and png.stat().st_size > 5_000
 
     import matplotlib
