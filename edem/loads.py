@@ -1,10 +1,10 @@
 """Time-dependent loads and joint angles read from a scene's `[load]` and `[kinematics]` tables.
 
-Pure data I/O (SPEC 9, scene file): the scene loader hands over already-parsed TOML tables and
+Pure data I/O (README.md#scene-files, scene file): the scene loader hands over already-parsed TOML tables and
 the scene file path (for messages and relative paths); this module returns validated float64
-arrays. The solver applies them per time point as in SPEC 3 step 1 (place the fixed body by the
+arrays. The solver applies them per time point as in docs/method.md#2-edem-the-time-dependent-incremental-method step 1 (place the fixed body by the
 joint angle, apply the load T_k). Every bad input raises `InputError` naming the file, the scene
-key and what was expected (SPEC 9).
+key and what was expected (README.md#scene-files).
 
 Units: time in s, force in N, moment in N·mm, lengths in mm, angles in degrees in files and
 scene tables, radians in `JointKinematics.angle_rad`. OpenSim writes moments in N·m: they are
@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import csv
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -29,7 +30,7 @@ import numpy as np
 
 from edem.errors import InputError
 from edem.joint_reaction import AXES_PRESETS, JointReactionColumns, axes_matrix
-from edem.tables import SceneTable, is_number
+from edem.tables import SceneTable, is_number, not_utf8
 
 NM_TO_NMM = 1000.0
 """N·m -> N·mm."""
@@ -60,7 +61,7 @@ def _readonly(values: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class LoadSeries:
-    """Applied load of the mobile body per time point (SPEC 3 step 4: T_k).
+    """Applied load of the mobile body per time point (docs/method.md#2-edem-the-time-dependent-incremental-method step 4: T_k).
 
     time_s (n,) strictly increasing, force_n (n, 3) in N, moment_nmm (n, 3) in N·mm about the
     reference point G; all finite float64, n >= 1. Arrays are read-only. ``frame`` says in which
@@ -104,7 +105,7 @@ class LoadSeries:
 
 @dataclass(frozen=True, eq=False)
 class JointKinematics:
-    """Joint rotation of the fixed body per time point (SPEC 3 step 1, SPEC 9 `[kinematics]`).
+    """Joint rotation of the fixed body per time point (docs/method.md#2-edem-the-time-dependent-incremental-method step 1, README.md#scene-files `[kinematics]`).
 
     axis_point_mm (3,) a point on the joint axis, axis_direction (3,) unit vector,
     angle_rad (n,) the joint angle at each load time point, in radians.
@@ -165,6 +166,7 @@ class _DataFile:
 
 def _parse_rows(path: Path, key: str, header: list[str], rows: list[tuple[int, list[str]]],
                 in_degrees: bool | None) -> _DataFile:
+    """Row-by-row parse: slow, but names the line and column of the first bad value."""
     values = np.empty((len(rows), len(header)))
     for r, (line, fields) in enumerate(rows):
         if len(fields) != len(header):
@@ -179,20 +181,48 @@ def _parse_rows(path: Path, key: str, header: list[str], rows: list[tuple[int, l
     return _DataFile(path, header, values, [line for line, _ in rows], in_degrees, key)
 
 
+def _read_text(path: Path, key: str) -> list[str]:
+    """The lines of a UTF-8 text file; unreadable or non-UTF-8 files are bad input."""
+    try:
+        return path.read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError as exc:
+        raise InputError(not_utf8(exc), file=path, key=key, expected="a UTF-8 (or ASCII) text file") from None
+    except OSError as exc:
+        raise InputError(f"cannot read the file: {exc.strerror}", file=path, key=key) from None
+
+
+def _parse_table(path: Path, key: str, header: list[str], lines: list[tuple[int, str]], delimiter: str | None,
+                 split, in_degrees: bool | None) -> _DataFile:
+    """Data rows as floats: numpy's C parser for the whole table (1e6 rows in about a second),
+    the row-by-row parser only when that fails, to say which line and column is wrong."""
+    numbers = [line for _, line in lines]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "empty input": handled by the shape check
+            values = np.loadtxt(numbers, delimiter=delimiter, ndmin=2, dtype=np.float64, comments=None)
+        if values.shape != (len(numbers), len(header)):
+            raise ValueError("column count")
+    except ValueError:
+        return _parse_rows(path, key, header, [(i, split(line)) for i, line in lines], in_degrees)
+    return _DataFile(path, header, values, [i for i, _ in lines], in_degrees, key)
+
+
 def _read_csv(path: Path, key: str) -> _DataFile:
     """CSV with one header row of column names; blank lines skipped."""
-    with path.open(newline="") as handle:
-        rows = [(i, [f.strip() for f in row]) for i, row in enumerate(csv.reader(handle), start=1)
-                if any(f.strip() for f in row)]
+    rows = [(i, line) for i, line in enumerate(_read_text(path, key), start=1) if line.strip(" \t,")]
     if not rows:
         raise InputError("empty file", file=path, key=key, expected="a header row of column names, then data rows")
-    return _parse_rows(path, key, rows[0][1], rows[1:], None)
+
+    def split(line: str) -> list[str]:
+        return [f.strip() for f in next(csv.reader([line]))]
+
+    return _parse_table(path, key, split(rows[0][1]), rows[1:], ",", split, None)
 
 
 def _read_opensim(path: Path, key: str) -> _DataFile:
     """OpenSim .sto/.mot: header lines up to `endheader` (`inDegrees=yes|no` read), then a
     whitespace-separated table whose first row names the columns (`time`, ...)."""
-    lines = path.read_text().splitlines()
+    lines = _read_text(path, key)
     in_degrees: bool | None = None
     end = None
     for i, line in enumerate(lines):
@@ -210,11 +240,11 @@ def _read_opensim(path: Path, key: str) -> _DataFile:
     if end is None:
         raise InputError("no 'endheader' line", file=path, key=key,
                          expected="an OpenSim storage file: header lines, 'endheader', then a column-name row")
-    rows = [(i, line.split()) for i, line in enumerate(lines[end + 1:], start=end + 2) if line.strip()]
+    rows = [(i, line) for i, line in enumerate(lines[end + 1:], start=end + 2) if line.strip()]
     if not rows:
         raise InputError("no column-name row after 'endheader'", file=path, key=key,
                          expected="a row of column names such as 'time\\t...'")
-    return _parse_rows(path, key, rows[0][1], rows[1:], in_degrees)
+    return _parse_table(path, key, rows[0][1].split(), rows[1:], None, str.split, in_degrees)
 
 
 def read_opensim_table(path: Path, key: str) -> _DataFile:
@@ -241,7 +271,7 @@ def _jointreaction_prefixes(columns: list[str]) -> list[str]:
 
 
 def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSeries:
-    """Build the applied load series from a scene's `[load]` table (SPEC 9).
+    """Build the applied load series from a scene's `[load]` table (README.md#scene-files).
 
     Exactly one of:
     - static: `force_n = [fx, fy, fz]`, optional `moment_nmm = [mx, my, mz]`; one point at t = 0;
@@ -299,6 +329,9 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
         rotation = _axes(tab)
         force_n, moment_nmm = force_n @ rotation.T, moment_nmm @ rotation.T
         point_mm = None if point_mm is None else point_mm @ rotation.T
+    if not np.all(np.isfinite(force_n)):  # finite values times force_scale can overflow
+        raise tab.error("force_scale", f"the scaled force overflows (largest |force| before scaling "
+                        f"{np.abs(force_n / tab.number('force_scale', 1.0)).max():.3g} N)", "a scale that keeps the force finite")
     return LoadSeries(time_s, force_n, moment_nmm, frame, point_mm, in_ground)
 
 
@@ -306,7 +339,7 @@ def _axes(tab: SceneTable) -> np.ndarray:
     value = tab.table["axes"]
     try:
         return axes_matrix(value)
-    except ValueError as exc:
+    except (ValueError, TypeError) as exc:  # TypeError: neither a preset name nor a list
         raise tab.error("axes", f"{value!r}: {exc}",
                         f"a preset ({', '.join(AXES_PRESETS)}; \"opensim\": file x anterior, y up, z right onto scene x right, "
                         "y anterior, z up) or three signed file axes per scene axis, e.g. [\"z\", \"x\", \"y\"]") from None
@@ -435,7 +468,7 @@ def _joint_reaction(tab: SceneTable, data: _DataFile, prefix: str) -> tuple[floa
 
 def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.ndarray) -> JointKinematics:
     """Build the joint rotation from a scene's `[kinematics]` table at the load times `time_s`
-    (SPEC 3 step 1, SPEC 9).
+    (docs/method.md#2-edem-the-time-dependent-incremental-method step 1, README.md#scene-files).
 
     `axis_point_mm = [x, y, z]`, `axis_direction = [x, y, z]` (normalised; must be non-zero), and
     either `angle_deg` (one value per load time point, or a single value for all) or
@@ -451,9 +484,12 @@ def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.
             raise tab.error(key, f"missing '{key}'", "3 finite numbers [x, y, z]")
     axis_point = tab.triple("axis_point_mm")
     axis = tab.triple("axis_direction")
-    norm = float(np.linalg.norm(axis))
-    if norm == 0.0:
+    # Scaled first: the norm of [1e300, 0, 0] overflows, and a subnormal one underflows to zero.
+    biggest = float(np.abs(axis).max())
+    if biggest == 0.0:
         raise tab.error("axis_direction", "zero vector", "a non-zero direction [x, y, z]")
+    axis = axis / biggest
+    norm = float(np.linalg.norm(axis))
 
     if tab.has("file") == tab.has("angle_deg"):
         raise tab.error("angle_deg", "give exactly one of 'angle_deg' or 'file'",
@@ -465,6 +501,9 @@ def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.
         angle_deg = _inline_angles(tab, time_s.size)
     else:
         angle_deg = _file_angles(tab, time_s)
+    if np.abs(angle_deg).max() > 360.0:  # more than a full turn is no joint angle (a unit or column mix-up)
+        key = "angle_deg" if tab.has("angle_deg") else "file"
+        raise tab.error(key, f"angle {angle_deg[np.argmax(np.abs(angle_deg))]:g} deg", "joint angles within +-360 deg")
     return JointKinematics(axis_point, axis / norm, np.deg2rad(angle_deg))
 
 
@@ -505,12 +544,12 @@ def _file_angles(tab: SceneTable, time_s: np.ndarray) -> np.ndarray:
     return np.interp(np.clip(time_s, file_time[0], file_time[-1]), file_time, angle)
 
 
-# --------------------------------------------------------------------------- stance (SPEC 7)
+# --------------------------------------------------------------------------- stance (docs/references.md#the-thesiss-figures)
 
 
 def resample_pchip(time_s: np.ndarray, values: np.ndarray, new_time_s: np.ndarray) -> np.ndarray:
     """Shape-preserving piecewise-cubic Hermite (PCHIP) interpolation of `values` (n,) or (n, k)
-    from strictly increasing `time_s` onto `new_time_s` (SPEC 7: the built-in stance is built
+    from strictly increasing `time_s` onto `new_time_s` (docs/references.md#the-thesiss-figures: the built-in stance is built
     through the 7 published points this way). Passes exactly through the given points and does
     not overshoot: monotone data stay monotone between points. No extrapolation: `new_time_s`
     must lie within [time_s[0], time_s[-1]].
@@ -531,7 +570,7 @@ def resample_pchip(time_s: np.ndarray, values: np.ndarray, new_time_s: np.ndarra
 
 
 class ThesisStanceTable(NamedTuple):
-    """Published stance data (SPEC 7; thesis section 4.3.4, table 4.3.4.1): ankle angle and
+    """Published stance data (docs/references.md#the-thesiss-figures; thesis section 4.3.4, table 4.3.4.1): ankle angle and
     force on the talus at 7 instants of stance. Only these numbers are published; the 0 % and
     100 % end values of the built-in scene are assumptions stated in its scene file."""
 
@@ -543,7 +582,7 @@ class ThesisStanceTable(NamedTuple):
 
 
 def thesis_stance_table() -> ThesisStanceTable:
-    """The 7 published stance points of SPEC 7 (table 4.3.4.1), as float64 arrays."""
+    """The 7 published stance points of docs/references.md#the-thesiss-figures (table 4.3.4.1), as float64 arrays."""
     rows = np.array([
         # % stance, angle deg, ML N, PA N, SI N
         [12.0, -0.57, 13.64, 21.7, 72.5],

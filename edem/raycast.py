@@ -1,4 +1,4 @@
-"""Spring lengths by ray casting against the fixed body F (SPEC 2; thesis section 4.2.1).
+"""Spring lengths by ray casting against the fixed body F (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs; thesis section 4.2.1).
 
 Every spring i of the mobile body M sits at the centroid c_i of one of M's triangles and points
 along that triangle's unit normal n_i, towards F. Its length is where the ray c_i + s n_i meets F
@@ -21,12 +21,15 @@ Two interchangeable backends sit behind :class:`RayCaster`:
     Intel Embree through ``embreex`` (a BVH built once per fixed surface, in F's own frame, with
     Embree's robust scene flag). Embree traverses in float32; every returned hit is re-measured in
     float64 with one vectorised Moller-Trumbore test on the returned triangle, so lengths are exact
-    to round-off wherever Embree picked the right triangle. The rare float32 failures are re-solved
-    exactly: a returned triangle the ray misses in float64 (by more than 1e-6 in barycentric
-    units), or a ray still crossing wrong-facing sheets after a few re-casts, goes to the exact
-    brute-force caster; a ray Embree lost on an edge or vertex is found again from the triangles
-    around a slightly shifted probe ray's hit; a skipped wrong-facing hit first has the triangles
-    around it checked (a fold ties a back-facing and a front-facing triangle at the same point).
+    to round-off wherever Embree picked the right triangle. The float32 failures are re-solved
+    exactly and locally: a ray that float64 puts on an edge or vertex of the returned triangle,
+    or just off it, is re-solved among the triangles sharing a vertex with it (float32 ties are
+    between neighbours; structured meshes whose edges line up with the rays meet this often);
+    a ray Embree lost on an edge or vertex (or whose returned triangle has no neighbour on the
+    ray) is found again from the triangles around a slightly shifted probe ray's hit; a skipped
+    wrong-facing hit first has the triangles around it checked (a fold ties a back-facing and a
+    front-facing triangle at the same point). Only a ray still crossing wrong-facing sheets after
+    a few re-casts goes to the exact brute-force caster.
     Limits: two sheets of F closer than ~2e-6 x (size of F) along a ray count as one; a hit Embree
     loses while it reports a farther one is not detected (never seen with the robust flag).
 ``"numpy"``
@@ -66,7 +69,7 @@ _UNIT_TOLERANCE = 1e-6
 
 @dataclass(frozen=True)
 class RayHits:
-    """Result of one :meth:`RayCaster.cast` (SPEC 2): one entry per ray."""
+    """Result of one :meth:`RayCaster.cast` (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs): one entry per ray."""
 
     # (n,) float64 signed length in (-h_max, h_max]; np.inf where no valid hit
     spring_length_mm: np.ndarray
@@ -137,7 +140,7 @@ def _nearest_per_ray(
 
 
 class RayCaster:
-    """Casts spring rays against one fixed triangulated surface F (SPEC 2; thesis 4.2.1).
+    """Casts spring rays against one fixed triangulated surface F (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs; thesis 4.2.1).
 
     Built once per fixed surface, in F's own frame: the Embree BVH is never rebuilt when F moves,
     the rays are moved into F's frame instead (see :meth:`cast`).
@@ -190,7 +193,11 @@ class RayCaster:
         # Embree sees coordinates relative to the box centre: float32 resolution is best near 0.
         self._centre_mm = 0.5 * (lo + hi)
         self._extent_mm = float(np.max(hi - lo)) if len(vertices) else 0.0
+        self._box_mm = hi - lo
         self._scene = None
+        # Float64 ray/triangle tests done so far (re-measures, local re-solves, brute force): the
+        # machine-independent cost of the exact work around Embree.
+        self.pairs_tested = 0
         if backend == "embree" and len(tri):
             self._build_embree()
 
@@ -233,19 +240,33 @@ class RayCaster:
         self._probe_shift_mm = max(1e-4 * median_edge, 4e-6 * scale)
         # Far enough to cross all of F from anywhere near it.
         self._reach_mm = 4.0 * scale
+        # Plane of every triangle (normal e1 x e2, unnormalised, and its offset n . v0) for the
+        # float64 re-measure of hits well inside their triangle.
+        self._normal = np.cross(self._edge1, self._edge2)
+        self._plane_offset = np.einsum("ij,ij->i", self._normal, self._v0)
+        # Barycentric distance from the edges that float32 round-off (Embree's coordinates are
+        # ~6e-8 x scale off) cannot cross, per triangle: 64 ulps of the scale over its smallest
+        # altitude (twice the area over the longest edge); beyond 1/3 nothing counts as interior.
+        longest = np.max(np.linalg.norm(np.stack([self._edge1, self._edge2, self._edge2 - self._edge1]), axis=2), axis=0)
+        twice_area = np.linalg.norm(self._normal, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            altitude = np.where(longest > 0, twice_area / longest, 0.0)
+            margin = 64 * float(np.finfo(np.float32).eps) * scale / altitude
+        self._interior_margin = np.where(np.isfinite(margin), np.minimum(margin, 1.0), 1.0)
 
     def _embree_run(
         self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray
-    ) -> np.ndarray:
-        """One Embree pass: hit triangle per ray (-1 = none), rays already in F's local frame."""
-        result = self._scene.run(
+    ) -> dict[str, np.ndarray]:
+        """One Embree pass, rays already in F's local frame: float32 ``primID`` (-1 = none),
+        ``tfar`` (distance along the ray) and barycentric ``u``, ``v`` of every ray's hit."""
+        return self._scene.run(
+            # Subtract in float64, round once: float32 resolution is best near the box centre.
             np.ascontiguousarray(origins - self._centre_mm, dtype=np.float32),
             np.ascontiguousarray(directions, dtype=np.float32),
             # embreex writes the hit distances into this array in place: always pass a fresh one.
             dists=np.ascontiguousarray(tfar, dtype=np.float32),
             output=1,
         )
-        return result["primID"].astype(np.int64)
 
     # -- public ----------------------------------------------------------------------------------
 
@@ -257,7 +278,7 @@ class RayCaster:
         rotation: np.ndarray | None = None,
         translation: np.ndarray | None = None,
     ) -> RayHits:
-        """Signed spring lengths: nearest front-facing hit on F along each ray (SPEC 2, 4.2.1).
+        """Signed spring lengths: nearest front-facing hit on F along each ray (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs; thesis 4.2.1).
 
         Parameters
         ----------
@@ -284,7 +305,11 @@ class RayCaster:
             raise ValueError(f"origins_mm must have shape (n, 3), got {origins.shape}")
         if dirs.shape != origins.shape:
             raise ValueError(f"directions must have shape {origins.shape}, got {dirs.shape}")
-        if not (np.all(np.isfinite(origins)) and np.all(np.isfinite(dirs))):
+        # One reduction instead of two full isfinite passes; a finite sum can only overflow for
+        # coordinates near 1e308, which then take the exact check.
+        if not np.isfinite(origins.sum() + dirs.sum()) and not (
+            np.all(np.isfinite(origins)) and np.all(np.isfinite(dirs))
+        ):
             raise ValueError("origins_mm and directions must be finite")
         h = float(max_length_mm)
         if not (np.isfinite(h) and h > 0):
@@ -308,16 +333,17 @@ class RayCaster:
             dirs = dirs @ rot
 
         n = len(origins)
+        cast = self._cast_bruteforce if self.backend == "numpy" else self._cast_embree
+        if not (len(self.triangles) and n):
+            return RayHits(spring_length_mm=np.full(n, np.inf), triangle=np.full(n, -1, dtype=np.int64))
+        if has_direction.all():  # the usual case: no gather, no scatter
+            length, hit = cast(origins, dirs, h)
+            return RayHits(spring_length_mm=length, triangle=hit)
         length = np.full(n, np.inf)
         hit = np.full(n, -1, dtype=np.int64)
         live = np.flatnonzero(has_direction)
-        if live.size and len(self.triangles):
-            if self.backend == "numpy":
-                sub_len, sub_hit = self._cast_bruteforce(origins[live], dirs[live], h)
-            else:
-                sub_len, sub_hit = self._cast_embree(origins[live], dirs[live], h)
-            length[live] = sub_len
-            hit[live] = sub_hit
+        if live.size:
+            length[live], hit[live] = cast(origins[live], dirs[live], h)
         return RayHits(spring_length_mm=length, triangle=hit)
 
     # -- backends --------------------------------------------------------------------------------
@@ -336,6 +362,7 @@ class RayCaster:
             t, u, v, det = _moller_trumbore(
                 origins[start:stop, None], dirs[start:stop, None], v0, e1, e2
             )
+            self.pairs_tested += t.size
             valid = (det > 0) & _inside(u, v, _REFERENCE_SLACK) & (t > -h) & (t <= h)
             t = np.where(valid, t, np.inf)
             best = np.argmin(t, axis=1)
@@ -370,24 +397,39 @@ class RayCaster:
                 o, d, s0 = origins[active], dirs[active], seg_start[active]
             # Traverse past the window end (up to the far side of F): a ray whose nearest hit
             # lies beyond the window is then a plain 'no spring', not a miss worth a repair probe.
-            prim = self._embree_run(o + s0[:, None] * d, d, (h + self._reach_mm) - s0)
+            ray = self._embree_run(o + s0[:, None] * d, d, (h + self._reach_mm) - s0)
+            prim = ray["primID"]
             none = prim < 0
             missed.append(active[none])
-            found = ~none
-            idx, k, o, d, s0 = active[found], prim[found], o[found], d[found], s0[found]
-            # Re-measure in float64 from the true origin (signed length directly, no subtraction).
-            t, u, v, det = _moller_trumbore(o, d, self._v0[k], self._edge1[k], self._edge2[k])
+            # A nearest float32 hit beyond the window (and its padding) ends the search: no spring.
+            found = ~none & (ray["tfar"] <= (h + step) - s0)
+            idx, k, o, d, s0 = active[found], prim[found].astype(np.int64), o[found], d[found], s0[found]
+            t, u, v, det = self._remeasure(o, d, k, ray["u"][found], ray["v"][found])
+            # Embree's float32 answer is only trusted where float64 puts the ray on its triangle;
+            # a ray that lands at (or, in float64, just past) an edge or vertex of it is re-solved
+            # exactly among the triangles around that triangle: a float32 tie is always between
+            # neighbours, so this stays local (never a pass over all of F).
+            near_edge = ~_inside(u, v, _REFERENCE_SLACK)
+            if near_edge.any():
+                fix = np.flatnonzero(near_edge)
+                far = np.full(fix.size, h + self._reach_mm)
+                t_fix, k_fix, det_fix = self._star_hits(o[fix], d[fix], k[fix], s0[fix], far, front_only=False)
+                found_fix = k_fix >= 0
+                t[fix], det[fix] = t_fix, det_fix
+                k[fix[found_fix]] = k_fix[found_fix]
+                # No neighbour meets the ray: Embree's triangle was not where the ray passes at
+                # all; it counts as a miss and goes to the probe repair below.
+                u[fix] = np.where(found_fix, 0.0, np.nan)
+                v[fix] = 0.0
             facing = det > 0
             on_triangle = _inside(u, v, _BARYCENTRIC_SLACK)  # False where det == 0 (nan)
             accept = facing & on_triangle & (t > -h) & (t <= h)
             # Wrong-facing, or in the padding before the window: skip it and continue past it.
             # (Any hit beyond the window ends the search: nothing nearer was found.)
             skip = on_triangle & (t <= h) & (~facing | (t <= -h))
-            # Embree's float32 triangle is not where float64 puts the ray: re-solve exactly.
-            wrong = ~on_triangle
             length[idx[accept]] = t[accept]
             hit[idx[accept]] = k[accept]
-            hard.append(idx[wrong])
+            missed.append(idx[~on_triangle])
             # Before resuming past a skipped hit, look at the triangles around it: where F folds
             # (a ridge between a front- and a back-facing triangle) Embree may have returned the
             # back-facing one of a tie, and the valid hit sits at the same point.
@@ -396,7 +438,8 @@ class RayCaster:
                 break
             sk, t_sk = idx[skip], t[skip]
             resume = np.maximum(t_sk, s0[skip]) + step
-            tie_t, tie_tri = self._star_hits(o[skip], d[skip], h, k[skip], t_sk - step, resume)
+            low, high = np.maximum(t_sk - step, np.nextafter(-h, h)), np.minimum(resume, h)
+            tie_t, tie_tri, _ = self._star_hits(o[skip], d[skip], k[skip], low, high)
             tie = np.isfinite(tie_t)
             length[sk[tie]] = tie_t[tie]
             hit[sk[tie]] = tie_tri[tie]
@@ -413,6 +456,32 @@ class RayCaster:
                 origins[hard_idx], dirs[hard_idx], h
             )
         return length, hit
+
+    def _remeasure(
+        self, o: np.ndarray, d: np.ndarray, k: np.ndarray, u32: np.ndarray, v32: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(t, u, v, det) in float64 of rays o + t d on Embree's triangles k (see _moller_trumbore).
+
+        Where Embree's float32 barycentrics put the hit well inside the triangle (further from every
+        edge than float32 round-off can move it) the triangle is certainly right and only the
+        plane distance is recomputed in float64 (signed length directly from the true origin);
+        Embree's u, v are returned for those rows. The other rows get a full Moller-Trumbore test.
+        """
+        normal = self._normal[k]
+        along = np.einsum("ij,ij->i", normal, d)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (self._plane_offset[k] - np.einsum("ij,ij->i", normal, o)) / along
+        det = -along
+        u, v = u32.astype(np.float64), v32.astype(np.float64)
+        margin = np.minimum(np.minimum(u, v), 1.0 - u - v)
+        edge = np.flatnonzero(~(margin > self._interior_margin[k]))
+        if edge.size:
+            ke = k[edge]
+            t[edge], u[edge], v[edge], det[edge] = _moller_trumbore(
+                o[edge], d[edge], self._v0[ke], self._edge1[ke], self._edge2[ke]
+            )
+        self.pairs_tested += k.size
+        return t, u, v, det
 
     def _repair_misses(
         self,
@@ -441,29 +510,51 @@ class RayCaster:
         side /= np.sqrt(np.einsum("ij,ij->i", side, side))[:, None]
         s0 = seg_start[missed]
         probe = o + s0[:, None] * d + self._probe_shift_mm * side
-        prim = self._embree_run(probe, d, (h + self._step_mm) - s0)
+        # Only probes whose window segment passes near F's bounding box can have lost a hit.
+        near_box = self._segment_meets_box(probe, d, (h + self._step_mm) - s0)
+        if not near_box.any():
+            return
+        o, d, s0, probe, missed = o[near_box], d[near_box], s0[near_box], probe[near_box], missed[near_box]
+        prim = self._embree_run(probe, d, (h + self._step_mm) - s0)["primID"].astype(np.int64)
         near = np.flatnonzero(prim >= 0)
         if not near.size:
             return
-        unbounded = np.full(near.size, np.inf)
-        best_t, best_tri = self._star_hits(o[near], d[near], h, prim[near], -unbounded, unbounded)
+        low, high = np.full(near.size, np.nextafter(-h, h)), np.full(near.size, h)
+        best_t, best_tri, _ = self._star_hits(o[near], d[near], prim[near], low, high)
         got = np.isfinite(best_t)
         length[missed[near[got]]] = best_t[got]
         hit[missed[near[got]]] = best_tri[got]
+
+    def _segment_meets_box(self, origins: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
+        """Whether each segment o + s d, 0 <= s <= length, meets F's bounding box padded by the
+        probe shift and a float32 margin (slab test)."""
+        pad = self._probe_shift_mm + self._step_mm
+        lo = self._centre_mm - 0.5 * self._box_mm - pad
+        hi = self._centre_mm + 0.5 * self._box_mm + pad
+        # A zero direction component becomes a tiny one: its slab then holds the whole segment
+        # (origin inside it) or none of it (outside), with no 0/0.
+        inverse = 1.0 / np.where(dirs == 0.0, 1e-300, dirs)
+        with np.errstate(over="ignore", invalid="ignore"):
+            a, b = (lo - origins) * inverse, (hi - origins) * inverse
+        near, far = np.minimum(a, b), np.maximum(a, b)
+        enter = np.maximum(near.max(axis=1), 0.0)
+        leave = np.minimum(far.min(axis=1), length)
+        return enter <= leave
 
     def _star_hits(
         self,
         origins: np.ndarray,
         dirs: np.ndarray,
-        h: float,
         triangle: np.ndarray,
         t_low: np.ndarray,
         t_high: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Exact nearest valid hit of ray i among the triangles sharing a vertex with triangle[i].
+        front_only: bool = True,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Exact nearest hit of ray i among the triangles sharing a vertex with triangle[i].
 
-        Valid: front-facing, on the triangle (edges and vertices included), inside the window
-        (-h, h] and inside [t_low[i], t_high[i]]. Returns (inf, -1) where there is none.
+        Counted: on the triangle (edges and vertices included), t in [t_low[i], t_high[i]], and
+        front-facing unless ``front_only`` is False. Returns (t, triangle, det) of the nearest
+        hit, (inf, -1, nan) where there is none; det > 0 marks a front-facing hit.
         """
         corner = self._welded_corners[triangle].ravel()
         counts = self._star_start[corner + 1] - self._star_start[corner]
@@ -474,6 +565,17 @@ class RayCaster:
         t, u, v, det = _moller_trumbore(
             origins[ray], dirs[ray], self._v0[cand], self._edge1[cand], self._edge2[cand]
         )
-        valid = (det > 0) & _inside(u, v, _REFERENCE_SLACK) & (t > -h) & (t <= h)
-        valid &= (t >= t_low[ray]) & (t <= t_high[ray])
-        return _nearest_per_ray(ray[valid], t[valid], cand[valid], len(triangle))
+        self.pairs_tested += cand.size
+        valid = (det != 0) & _inside(u, v, _REFERENCE_SLACK) & (t >= t_low[ray]) & (t <= t_high[ray])
+        if front_only:
+            valid &= det > 0
+        best_t, best_tri = _nearest_per_ray(ray[valid], t[valid], cand[valid], len(triangle))
+        best_det = np.full(len(triangle), np.nan)
+        found = best_tri >= 0
+        # det of the chosen pair: one more exact test on the winner (cheap, one per ray).
+        if found.any():
+            _, _, _, best_det[found] = _moller_trumbore(
+                origins[found], dirs[found], self._v0[best_tri[found]],
+                self._edge1[best_tri[found]], self._edge2[best_tri[found]],
+            )
+        return best_t, best_tri, best_det

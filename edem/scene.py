@@ -1,4 +1,4 @@
-"""Scene files (SPEC 9): TOML -> a validated, immutable Scene.
+"""Scene files (README.md#scene-files): TOML -> a validated, immutable Scene.
 
 Every section but geometry, cartilage and load is optional and its absence switches the feature
 off. Bad input raises InputError naming the file, the key and what was expected.
@@ -20,8 +20,9 @@ from edem.laws import LAWS
 from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, load_series_from_table
 from edem.mechanics import DOF_NAMES
 from edem.springs import Cartilage, Ligament
-from edem.tables import SceneTable
+from edem.tables import SceneTable, not_utf8
 from geometries.builders import build_geometry
+from geometries.mesh_io import MAX_COORDINATE_MM
 from geometries.surface import TriangleSurface
 
 
@@ -52,7 +53,7 @@ COUPLINGS = ("none", "thin-layer")
 
 @dataclass(frozen=True)
 class Viscoelastic:
-    """Kelvin-Voigt springs, damping = tau * stiffness (SPEC 4, eq. 6.13)."""
+    """Kelvin-Voigt springs, damping = tau * stiffness (docs/method.md#4-viscoelastic-edem-thesis-chapter-6, eq. 6.13)."""
 
     relaxation_time_s: float
     integrator: str = "exact"  # exact | rk2
@@ -228,10 +229,14 @@ def _parse_toml(path: Path) -> dict[str, Any]:
         raise InputError("scene file not found", file=path, expected="a TOML scene file or a built-in scene name (edem scenes)") from None
     except OSError as exc:
         raise InputError(f"cannot read the scene file: {exc.strerror}", file=path) from None
+    except UnicodeDecodeError as exc:
+        raise InputError(not_utf8(exc), file=path, expected="a UTF-8 text file (TOML is UTF-8 by definition)") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"malformed TOML: {exc}", file=path, expected="valid TOML (https://toml.io)") from None
+    except RecursionError:
+        raise InputError("arrays or tables nested too deeply to read", file=path, expected="valid TOML of ordinary depth") from None
 
 
 def builtin_scene_names() -> list[str]:
@@ -308,7 +313,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         data.setdefault("geometry", {})
     for section in ("geometry", "cartilage", "load"):
         if not isinstance(data.get(section), dict):
-            raise InputError(f"missing section [{section}]", file=file, key=section, expected=f"a [{section}] table (SPEC 9)")
+            raise InputError(f"missing section [{section}]", file=file, key=section, expected=f"a [{section}] table (README.md#scene-files)")
     notes: list[str] = []
 
     meta = SceneTable(data.get("scene", {}), file, "scene", SECTIONS["scene"])
@@ -321,7 +326,9 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
     thickness = cart.optional_number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
     if spring_law.needs_thickness and thickness is None:
         raise InputError(f"the '{law}' law needs the undeformed thickness", file=file, key="cartilage.thickness_mm", expected="a thickness in mm > 0")
-    window = cart.number("max_spring_length_mm", spring_law.default_window_mm(thickness), positive=True, what="h_max in mm (> 0)")
+    # Beyond a kilometre the ray window is no longer a length on a joint (and its float32 reach overflows).
+    window = cart.number("max_spring_length_mm", spring_law.default_window_mm(thickness), positive=True,
+                         high=MAX_COORDINATE_MM, what=f"h_max in mm (> 0 and < {MAX_COORDINATE_MM:g})")
     if spring_law.needs_thickness and window < thickness:
         raise InputError(
             f"the ray window h_max = {window:g} mm is shorter than the thickness {thickness:g} mm",
@@ -358,6 +365,12 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         if "kinematics" in data:
             kinematics = angle_series_from_table(data["kinematics"], path, load.time_s)
     description = description or geo_description
+    if not np.any(mobile.areas_mm2 > 0.0):
+        raise InputError(
+            f"the mobile surface has no triangle of non-zero area ({len(mobile.triangles)} triangles), so it carries no spring",
+            file=mobile.source or file, key="geometry.mobile" if mobile.source else "geometry",
+            expected="a surface mesh whose triangles have distinct corners",
+        )
 
     constraints = SceneTable(data.get("constraints", {}), file, "constraints", SECTIONS["constraints"])
     fixed_dofs = constraints.table.get("fixed_dofs", [])
@@ -471,7 +484,7 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
     if given is not None:
         reference_point = given
     if reference_point is None:
-        # Area-weighted centroid of the articular surface (SPEC 2 default for G).
+        # Area-weighted centroid of the articular surface (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs default for G).
         areas = mobile.areas_mm2
         reference_point = (mobile.centroids_mm * areas[:, None]).sum(axis=0) / areas.sum()
     return mobile, fixed, np.asarray(reference_point, float), attachments, description

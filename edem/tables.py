@@ -1,5 +1,5 @@
 """Typed access to one table of a scene file: every error names the file, the key and what was
-expected (SPEC 9: exit status 2 with a one-paragraph message, never a traceback)."""
+expected (README.md#scene-files: exit status 2 with a one-paragraph message, never a traceback)."""
 
 from __future__ import annotations
 
@@ -15,6 +15,21 @@ from edem.errors import InputError
 
 def is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def is_finite_number(value: Any) -> bool:
+    """A TOML int or float that is a finite float64 (an int such as 10**400 is not: it overflows)."""
+    if not is_number(value):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
+def not_utf8(exc: UnicodeDecodeError) -> str:
+    """The problem text for a file that is not UTF-8: which byte, where."""
+    return f"not UTF-8 text: byte 0x{exc.object[exc.start]:02x} at byte offset {exc.start} cannot be decoded"
 
 
 class SceneTable:
@@ -56,7 +71,7 @@ class SceneTable:
         if key not in self.table and default is None:
             raise self.error(key, f"[{self.section}] has no '{key}'", what)
         value = self.table.get(key, default)
-        if not is_number(value) or not math.isfinite(value):
+        if not is_finite_number(value):
             raise self.error(key, f"got {value!r}", what)
         value = float(value)
         out_of_range = (positive and value <= 0) or (nonnegative and value < 0)
@@ -71,7 +86,7 @@ class SceneTable:
         value = self.table[key]
         if (
             not isinstance(value, list)
-            or not all(is_number(v) and math.isfinite(v) for v in value)
+            or not all(is_finite_number(v) for v in value)
             or (length is not None and len(value) != length)
             or len(value) == 0
         ):
@@ -91,7 +106,7 @@ class SceneTable:
             got = f"{len(value)} entries" if isinstance(value, list) else repr(value)
             raise self.error(key, f"got {got}", what)
         for i, row in enumerate(value):
-            if not (isinstance(row, list) and len(row) == 3 and all(is_number(v) and math.isfinite(v) for v in row)):
+            if not (isinstance(row, list) and len(row) == 3 and all(is_finite_number(v) for v in row)):
                 raise self.error(key, f"entry {i} is {row!r}", what)
         return np.array(value, dtype=np.float64)
 
@@ -119,6 +134,10 @@ class SceneTable:
         path = Path(self.string(key))
         if not path.is_absolute():
             path = self.scene_file.parent / path
-        if not path.is_file():
+        try:
+            found = path.is_file()
+        except OSError as exc:  # e.g. a name longer than the file system allows
+            raise self.error(key, f"cannot open {path}: {exc.strerror}", f"{what}, relative to the scene file") from None
+        if not found:
             raise self.error(key, f"file not found: {path}", f"{what}, relative to the scene file")
         return path

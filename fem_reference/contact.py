@@ -363,6 +363,53 @@ class _Setup:
 # --------------------------------------------------------------------------------------------
 
 
+def _use_iterative(s: "_Setup") -> bool:
+    """Whether the inner solve is Krylov + AMG (see :class:`SolverOptions.linear_solver`)."""
+    from fem_reference.sizing import ITERATIVE_FROM_DOFS
+
+    choice = s.problem.solver.linear_solver
+    if choice not in ("auto", "direct", "iterative"):
+        raise ValueError(f"linear_solver must be 'auto', 'direct' or 'iterative', got {choice!r}")
+    if s.element == "TH":  # a saddle point: plain AMG does not apply, keep the LU
+        return False
+    return choice == "iterative" or (choice == "auto" and s.n_global > ITERATIVE_FROM_DOFS)
+
+
+def _rigid_body_modes(s: "_Setup", like: Any) -> list:
+    """The six rigid-body motions of the displacement space as PETSc vectors (owned dofs), the
+    near-nullspace GAMG builds its coarse spaces from (elasticity's kernel without supports)."""
+    nodes = s.V.dofmap.index_map.size_local
+    x = s.V.tabulate_dof_coordinates()[:nodes]
+    centred = x - x.mean(axis=0) if nodes else x
+    modes = []
+    for j in range(6):
+        field = np.zeros((nodes, 3))
+        if j < 3:
+            field[:, j] = 1.0
+        else:  # rotation about axis j - 3: e x (x - c)
+            field = np.cross(np.eye(3)[j - 3], centred)
+        vec = like.duplicate()
+        with vec as arr:
+            arr[:] = field.reshape(-1)
+        modes.append(vec)
+    return modes
+
+
+def _krylov_amg(ksp: Any, A: Any, s: "_Setup") -> None:
+    """CG (symmetric Nitsche, theta = 1) or GMRES with GAMG and the rigid-body near-nullspace.
+
+    The inner solve sits inside Newton: its relative tolerance is far below Newton's own so that
+    Newton keeps its quadratic rate."""
+    PETSc = s.m["PETSc"]
+    vec, _ = A.createVecs()
+    modes = _rigid_body_modes(s, vec)
+    basis = PETSc.NullSpace().create(vectors=modes, comm=s.comm)
+    A.setNearNullSpace(basis)
+    ksp.setType("cg" if s.problem.nitsche.theta == 1.0 else "gmres")
+    ksp.setTolerances(rtol=1e-12, atol=0.0, max_it=2000)
+    ksp.getPC().setType("gamg")
+
+
 class _BorderedSystem:
     """Residual, Jacobian (shell) and exact block preconditioner of the bordered Newton system."""
 
@@ -383,10 +430,14 @@ class _BorderedSystem:
         self.A.setOptionsPrefix(f"{prefix}A_")
         self.ksp = PETSc.KSP().create(s.comm)
         self.ksp.setOptionsPrefix(f"{prefix}inner_")
-        self.ksp.setType("preonly")
-        pc = self.ksp.getPC()
-        pc.setType("lu")
-        pc.setFactorSolverType("mumps")
+        self.iterative = _use_iterative(s)
+        if self.iterative:
+            _krylov_amg(self.ksp, self.A, s)
+        else:
+            self.ksp.setType("preonly")
+            pc = self.ksp.getPC()
+            pc.setType("lu")
+            pc.setFactorSolverType("mumps")
         self.ksp.setFromOptions()
         self.wu, self.zu = self.A.createVecs()
         self.K = [np.zeros(self.no) for _ in range(self.k)]
@@ -424,6 +475,11 @@ class _BorderedSystem:
     def solve_A(self, rhs: np.ndarray) -> np.ndarray:
         self._load(rhs)
         self.ksp.solve(self.wu, self.zu)
+        if self.iterative and self.ksp.getConvergedReason() <= 0:
+            raise FEConvergenceError(
+                f"the inner Krylov solve ({self.ksp.getType()} + GAMG) did not converge",
+                reason=str(self.ksp.getConvergedReason()), residual_norm=self.ksp.getResidualNorm(),
+                iterations=self.ksp.getIterationNumber())
         return np.array(self.zu.getArray(readonly=True))
 
     def set_state(self, X: Any) -> None:
@@ -691,6 +747,7 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
             f"theta={problem.nitsche.theta}, gamma0={problem.nitsche.gamma0})",
             reason=reason_name, residual_norm=last, iterations=iters)
     system.set_state(X)
+    iterative = system.iterative
     delta = np.array(system.delta)
     if system.limited_steps and opt.monitor and s.comm.rank == 0:
         print(f"[fem_reference] {system.limited_steps} Newton steps damped by the penetration "
@@ -768,6 +825,7 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
         force_residual_n=force_residual,
         constraint_force_n=constraint_force,
         n_dofs=int(s.n_global + k),
+        linear_solver="iterative" if iterative else "direct",
         newton_iterations=int(iters),
         converged_reason=reason_name,
         wall_time_s=wall,

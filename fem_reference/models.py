@@ -72,6 +72,11 @@ class FEModel:
         """(n,) bool: contact-surface vertices that face F and can reach it under load."""
         raise NotImplementedError
 
+    def sizing_surface(self, scene: Any, caster: RayCaster, f_pose: Placement) -> tuple[np.ndarray, float]:
+        """M's triangles the solid is built on (mask) and its largest thickness (mm), for
+        :mod:`fem_reference.sizing` before anything is meshed."""
+        raise NotImplementedError
+
     def thickness_mm(self, scene: Any, solid: Any, used: np.ndarray, points_mm: np.ndarray) -> np.ndarray:
         """(n,) undeformed thickness under each contact-surface point (``used``: solid indices)."""
         raise NotImplementedError
@@ -180,6 +185,13 @@ class SlabModel(FEModel):
     def reach(self, scene, gap_mm, facing):
         return facing & (gap_mm <= 1e-3 * float(scene.cartilage.max_spring_length_mm))
 
+    def sizing_surface(self, scene, caster, f_pose):
+        from fem_reference.sizing import candidate_surface
+
+        lengths = _spring_lengths(scene, caster, f_pose)
+        mask = candidate_surface(lengths, float(scene.cartilage.max_spring_length_mm), scene.mobile.areas_mm2)
+        return mask, float(lengths[mask].max()) if mask.any() else 0.0
+
     def thickness_mm(self, scene, solid, used, points_mm):
         return np.linalg.norm(points_mm - solid.points_mm[solid.bottom_vertex[used]], axis=1)
 
@@ -217,6 +229,9 @@ class LayerModel(FEModel):
 
     def thickness_mm(self, scene, solid, used, points_mm):
         return np.full(len(points_mm), float(scene.cartilage.thickness_mm))
+
+    def sizing_surface(self, scene, caster, f_pose):
+        return scene.mobile.areas_mm2 > 0, float(scene.cartilage.thickness_mm)
 
     def spring_length_mm(self, thickness_mm, gap_mm):
         return thickness_mm + gap_mm

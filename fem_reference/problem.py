@@ -1,4 +1,4 @@
-"""State of one static FE contact solve (SPEC 5), independent of scene files.
+"""State of one static FE contact solve (docs/method.md#6-the-fe-reference-and-its-discrete-twins), independent of scene files.
 
 Only numpy/scipy here: importing this module must not import dolfinx. Units mm, N, MPa.
 
@@ -297,6 +297,9 @@ class SolverOptions:
     force_balance_rtol: float = 1e-6  # a converged solve must balance the load to this
     petsc_options: tuple[tuple[str, str], ...] = ()  # extra SNES options (without prefix)
     monitor: bool = False  # print the Newton residuals and translations (rank 0)
+    # inner linear solve: "direct" (MUMPS LU), "iterative" (Krylov + GAMG with the rigid-body
+    # near-nullspace) or "auto" (iterative past fem_reference.sizing.ITERATIVE_FROM_DOFS, not for TH)
+    linear_solver: str = "auto"
 
 
 @dataclass
@@ -484,6 +487,7 @@ class FEContactResult:
     method: str  # "nitsche" or "vi"
     outer_iterations: int = 0  # VI path: secant steps on the translation
     warnings: list[str] = field(default_factory=list)
+    linear_solver: str = "direct"  # the inner solve used: "direct" (LU) or "iterative" (Krylov + GAMG)
     # free rotations (empty without them): small rotation vector of the bone about G, the moment
     # of the contact force about G and |P_rot (M_c - moment)|
     rotation_axes: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
@@ -497,7 +501,7 @@ class FEContactResult:
         return self.force_residual_n / float(np.linalg.norm(self.applied_force_n))
 
     def summary(self) -> dict[str, Any]:
-        """JSON-ready numbers (SPEC 9 summary keys where they apply)."""
+        """JSON-ready numbers (summary keys of docs/result-format.md where they apply)."""
         return {
             "method": f"fe-{self.method}",
             "element": self.element,

@@ -1,10 +1,10 @@
-"""The FE reference of a whole scene (SPEC 5 and 9): ``edem fe SCENE``.
+"""The FE reference of a whole scene (docs/method.md#6-the-fe-reference-and-its-discrete-twins, docs/result-format.md): ``edem fe SCENE``.
 
 :func:`run_scene` solves, for each selected time point of a scene, one static force-controlled
 frictionless FE contact problem (:func:`fem_reference.contact.solve_contact`) and writes the same
 result directory as ``edem run``.
 
-Models (SPEC 5): :data:`fem_reference.models.FE_MODELS` (``slab``, the twin of the ``threshold``
+Models (docs/method.md#6-the-fe-reference-and-its-discrete-twins): :data:`fem_reference.models.FE_MODELS` (``slab``, the twin of the ``threshold``
 law, and ``layer``, the twin of the ``gap`` laws), built with :mod:`geometries.fe_solids`.
 
 The obstacle is F's triangulation at the time point's pose (:class:`RigidSurface`); the load is
@@ -29,7 +29,7 @@ thickness, ceil(thickness / size). Measured on the ideal ankle standing (slab, 3
 displacement, contact area) of P2 at 0.7 mm (402 k DOFs, 8 min, 8 GB); P1 at 0.5 mm 71 k DOFs,
 about 23 s, within 2 %; P1 at 1.0 mm 10 k DOFs, 2-4 s, within 2.5 % (a quick look).
 
-Result directory (SPEC 9, the layout of ``edem run``, written by :mod:`edem.resultdir`): summary.json (``n_dofs`` for
+Result directory (docs/result-format.md, the layout of ``edem run``, written by :mod:`edem.resultdir`): summary.json (``n_dofs`` for
 ``n_springs``, plus element, mesh size, Newton iterations, strains, the contact-area
 definitions), timeseries.csv with exactly ``edem.resultdir.TIMESERIES_COLUMNS`` (``iterations`` =
 Newton iterations), pressure.pvd + pressure_NNNN.vtp per solved time point: the FE contact
@@ -145,7 +145,7 @@ class FERunResult:
         return max((s.n_dofs for s in self.steps), default=0)
 
     def summary(self) -> dict[str, Any]:
-        """summary.json (SPEC 9 keys, ``n_dofs`` for ``n_springs``, plus the FE details)."""
+        """summary.json (docs/result-format.md keys, ``n_dofs`` for ``n_springs``, plus the FE details)."""
         steps = self.steps
         last = steps[-1]
         s = self.settings
@@ -200,6 +200,23 @@ def _selected_steps(steps: Sequence[int] | None, n: int) -> list[int]:
     if not selected:
         raise InputError("the time point selection is empty", key="steps", expected=expected)
     return sorted(selected)
+
+
+def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: Sequence[int]):
+    """Size the first selected time point's solid before meshing; refuse (InputError) a run that
+    would not fit in memory (:mod:`fem_reference.sizing`). None when there is nothing to size."""
+    from fem_reference.sizing import check_fits, estimate, solid_size
+
+    if not selected:
+        return None
+    mask, thickness = FE_MODELS[settings.model].sizing_surface(scene, caster, fixed_placement(scene, selected[0]))
+    if not mask.any():
+        return None  # the model refuses this with its own message
+    edge = _mean_edge(scene.mobile.vertices_mm, scene.mobile.triangles[mask])
+    cells, vertices = solid_size(int(mask.sum()), edge, thickness, settings.mesh_size_mm, settings.layers_through_thickness)
+    size = estimate(cells, vertices, settings.element)
+    check_fits(size, settings.mesh_size_mm, file=scene.source, key="mesh_size_mm (--mesh-size, or [fe] in the scene)")
+    return size
 
 
 def _build_geometry(scene: Any, settings: FESettings, k: int, caster: RayCaster, solid_cache: dict) -> FEGeometry:
@@ -335,15 +352,18 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
               degree: int | None = None, element: str | None = None,
               steps: Sequence[int] | None = None, out_dir: str | Path | None = None,
               layers_through_thickness: int | None = None, comm: Any = None,
-              progress: Callable[[int], None] | None = None, overwrite: bool = False) -> FERunResult:
+              progress: Callable[[int], None] | None = None, overwrite: bool = False,
+              on_size: Callable[[Any], None] | None = None) -> FERunResult:
     """Solve the FE reference of ``scene`` (an :class:`edem.scene.Scene`) at the selected time
-    points and, with ``out_dir``, write the SPEC 9 result directory (rank 0 only).
+    points and, with ``out_dir``, write the result directory (docs/result-format.md) (rank 0 only).
 
     Settings come from the arguments, then the scene's ``[fe]`` table (model, mesh_size_mm,
     degree, element, layers_through_thickness), then the defaults (:func:`resolve_settings`).
     ``steps``: None (all) or time point indices (negative ones count from the end).
     ``progress(k)`` is called after each solved time point. ``overwrite``: replace an existing
     result directory at ``out_dir``.
+    ``on_size(size)`` is called once, with the :class:`fem_reference.sizing.FESize` estimate, after
+    the run was sized and found to fit.
 
     Raises InputError on bad settings and SolverError (FEConvergenceError for a Newton failure)
     naming the time point when one has no solution.
@@ -372,6 +392,9 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     if scene.cartilage.shear_modulus_mpa:
         warnings.append("cartilage.shear_modulus_mpa is ignored by the FE reference (the "
                         "continuum has its own shear stiffness; the contact is frictionless)")
+    size = _check_size(scene, settings, caster, selected)
+    if on_size is not None and size is not None:
+        on_size(size)
     step_log: list[tuple[str, str]] = []
     solid_cache: dict = {}
     mesh_cache: dict = {}
@@ -676,7 +699,7 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
 
 
 # --------------------------------------------------------------------------------------------
-# the result directory (SPEC 9)
+# the result directory (docs/result-format.md)
 # --------------------------------------------------------------------------------------------
 
 

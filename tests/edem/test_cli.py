@@ -1,4 +1,4 @@
-"""`edem run` end to end: the SPEC 9 result directory, the built-in scenes and bad input (exit 2)."""
+"""`edem run` end to end: the result directory (docs/result-format.md), the built-in scenes and bad input (exit 2)."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from support import grid_plate, plane
 
 from edem.cli import main
 from edem.results import TIMESERIES_COLUMNS
+from edem.scene import load_scene
 from edem.scene import builtin_scene_names, load_scene
 from geometries.mesh_io import write_surface
 
@@ -76,6 +77,12 @@ def test_run_writes_the_spec9_result_directory(tmp_path):
         rows = list(csv.reader(f))
     assert tuple(rows[0][: len(TIMESERIES_COLUMNS)]) == TIMESERIES_COLUMNS  # then the run's extra columns
     assert len(rows) == 3 and all(math.isfinite(float(x)) for row in rows[1:] for x in row)
+    # Uniform pressure on the plate: the centre of pressure is the plate's centroid (x, y); the
+    # plate only moves along z. 1e-9 mm: round-off of sums over 200 springs of ~10 mm values is ~1e-14.
+    plate = load_scene(scene)
+    centroid = (plate.spring_centroid_mm * plate.spring_area_mm2[:, None]).sum(axis=0) / plate.spring_area_mm2.sum()
+    cop = [float(rows[2][rows[0].index(f"cop_{x}_mm")]) for x in "xy"]
+    assert cop == pytest.approx(centroid[:2], abs=1e-9)
     assert float(rows[2][TIMESERIES_COLUMNS.index("mean_pressure_mpa")]) == pytest.approx(1.0, rel=1e-9)
 
     files = [d.get("file") for d in ET.parse(out / "pressure.pvd").getroot().iter("DataSet")]

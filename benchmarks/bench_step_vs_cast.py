@@ -1,0 +1,98 @@
+"""EDEM step vs a bare Embree cast of the same rays (issue 13: the step should cost <= 3x the cast).
+
+For each built-in stance scene (the idealised ankle and the subject-like ankle) at ~3k and ~30k
+springs, one run measures in the same process, median of several rounds:
+
+* the EDEM solver alone (``edem.solver.run`` with the Embree scene built beforehand, as a gait
+  study would), per time point;
+* one bare embreex traversal per time point of exactly the rays that step casts (M's springs at
+  the pose the step starts from, moved into F's frame, over the signed window), with no float64
+  re-measure, no repairs and no solve: the floor the step is compared with.
+
+Absolute times vary 2-3x between runs on a shared machine; the ratio is measured in one run.
+
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_step_vs_cast.py [--rounds 5] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from edem.raycast import RayCaster  # noqa: E402
+from edem.scene import load_scene  # noqa: E402
+from edem.solver import fixed_placement, run  # noqa: E402
+from edem.springs import Placement  # noqa: E402
+
+# (scene, mesh size giving ~3k springs, ~30k springs); sizes measured on the built-in builders.
+CASES = (("ideal-stance", 0.94, 0.3), ("subject-stance", None, 0.3))
+TARGET_RATIO = 3.0
+
+
+def bare_rays(scene, steps) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per time point: float32 origins (window start) and directions in F's frame, as Embree sees them."""
+    h = scene.cartilage.max_spring_length_mm
+    poses = [Placement.identity(scene.reference_point_mm)] + [s.mobile_placement for s in steps[:-1]]
+    rays = []
+    for k, pose in enumerate(poses):
+        rotation, translation = fixed_placement(scene, k).affine()
+        origins = (pose.points(scene.spring_centroid_mm) - translation) @ rotation
+        directions = pose.vectors(scene.spring_normal) @ rotation
+        rays.append((origins - h * directions, directions))
+    return rays
+
+
+def bench(name: str, mesh_size_mm: float | None, rounds: int) -> float:
+    overrides = {} if mesh_size_mm is None else {"geometry.mesh_size_mm": mesh_size_mm}
+    scene = load_scene(name, overrides)
+    caster = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles)
+    result = run(scene, "edem", caster=caster)  # warm-up
+    h = scene.cartilage.max_spring_length_mm
+    rays = [
+        (np.ascontiguousarray(o - caster._centre_mm, dtype=np.float32), np.ascontiguousarray(d, dtype=np.float32))
+        for o, d in bare_rays(scene, result.steps)
+    ]
+
+    def bare_pass() -> float:
+        start = time.perf_counter()
+        for o, d in rays:
+            caster._scene.run(o, d, dists=np.full(len(o), 2.0 * h, np.float32), output=1)
+        return time.perf_counter() - start
+
+    step_times, cast_times, geometry_times = [], [], []
+    for _ in range(rounds):  # interleaved, so both see the same machine load
+        result = run(scene, "edem", caster=caster)
+        step_times.append(result.wall_time_s)
+        geometry_times.append(result.seconds["geometry"])
+        cast_times.append(bare_pass())
+    n_steps = len(result.steps)
+    step, cast, geometry = (statistics.median(x) / n_steps for x in (step_times, cast_times, geometry_times))
+    ratio = step / cast
+    print(
+        f"{name:15s} {result.n_springs:7d} springs x {n_steps:3d} steps: EDEM {1e3 * step:7.3f} ms/step "
+        f"(geometry {1e3 * geometry:6.3f}), bare Embree {1e3 * cast:6.3f} ms/step, "
+        f"ratio {ratio:5.2f}x (target <= {TARGET_RATIO:g}x: {'met' if ratio <= TARGET_RATIO else 'MISSED'})"
+    )
+    return ratio
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--quick", action="store_true", help="only the ~3k-spring cases")
+    args = parser.parse_args()
+    print(f"median of {args.rounds} rounds, per time point")
+    for name, small, large in CASES:
+        for size in (small,) if args.quick else (small, large):
+            bench(name, size, args.rounds)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,135 @@
+"""Size of an FE reference run before it is meshed: cells, DOFs, memory, and whether it fits.
+
+The cartilage solids of :mod:`geometries.fe_solids` are M's candidate surface, midpoint-refined
+until its edges are about the mesh size, extruded through the thickness in layers and split into
+tetrahedra (3 per prism). Their cell and vertex counts follow from the surface alone, so a run
+can be sized, and refused, before gmsh or dolfinx allocate anything (``edem fe --mesh-size
+0.01`` once asked for 75 GiB).
+
+Memory: a fixed cost for the loaded libraries plus a per-DOF cost, calibrated on this project's
+ideal-ankle slab (P2) on the 2-core development machine (peak resident set, ``/usr/bin/time``):
+
+=============  ======  =================
+mesh size      DOFs    peak RSS
+=============  ======  =================
+1.0 mm         71,011  1.06 GB (direct)
+=============  ======  =================
+
+The direct solver's (MUMPS LU) factor grows like N^(4/3) for 3D meshes (nested dissection), the
+Krylov solver's (GAMG) memory like N; both are scaled from that point and the estimate is
+doubled as a safety margin before it is compared with the memory available.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from geometries.errors import InputError
+
+#: past this many DOFs the bordered Newton's inner solve is a Krylov method (CG or GMRES) with
+#: algebraic multigrid (GAMG) and the rigid-body near-nullspace instead of an LU factorisation
+ITERATIVE_FROM_DOFS = 300_000
+#: resident memory of Python with dolfinx, PETSc, gmsh and VTK loaded, bytes (measured ~0.45 GB)
+BASE_BYTES = 450e6
+#: calibration point (see the module docstring): DOFs and the memory above BASE_BYTES, bytes
+_CALIBRATION_DOFS = 71_011
+_CALIBRATION_BYTES = 1.06e9 - BASE_BYTES
+#: factor between the estimate and what must be available (the calibration is one machine, one mesh)
+SAFETY = 2.0
+
+
+@dataclass(frozen=True)
+class FESize:
+    """Estimated size of one FE solve."""
+
+    cells: int
+    vertices: int
+    dofs: int
+    solver: str  # "direct" | "iterative"
+    memory_bytes: float  # peak resident estimate, before the safety factor
+
+
+def solid_size(n_surface_triangles: int, surface_mean_edge_mm: float, max_thickness_mm: float,
+               mesh_size_mm: float, layers: int | None) -> tuple[int, int]:
+    """(cells, vertices) of the extruded solid of :mod:`geometries.fe_solids` (same refinement
+    and layering rules): levels = ceil(log2(edge / size)), layers = ceil(thickness / size)."""
+    levels = max(0, math.ceil(math.log2(surface_mean_edge_mm / mesh_size_mm) - 1e-9)) if surface_mean_edge_mm > mesh_size_mm else 0
+    n_layers = int(layers) if layers is not None else max(1, math.ceil(max_thickness_mm / mesh_size_mm - 1e-9))
+    triangles = n_surface_triangles * 4**levels
+    surface_vertices = triangles // 2 + 1  # a triangulated patch has about half as many vertices
+    return 3 * triangles * n_layers, surface_vertices * (n_layers + 1)
+
+
+def estimate(cells: int, vertices: int, element: str) -> FESize:
+    """DOFs of the element on a tetrahedral mesh and the peak memory of the solve.
+
+    Edges of a tetrahedral mesh: about vertices + cells (Euler's formula with two faces per
+    cell). P1: 3 per vertex; P2: 3 per vertex and edge; Taylor-Hood: P2 plus 1 per vertex.
+    """
+    edges = vertices + cells
+    dofs = 3 * vertices if element == "P1" else 3 * (vertices + edges) + (vertices if element == "TH" else 0)
+    iterative = dofs > ITERATIVE_FROM_DOFS and element != "TH"
+    ratio = dofs / _CALIBRATION_DOFS
+    growth = ratio if iterative else ratio ** (4.0 / 3.0)
+    return FESize(cells, vertices, dofs, "iterative" if iterative else "direct", BASE_BYTES + _CALIBRATION_BYTES * growth)
+
+
+def available_memory_bytes() -> float:
+    """Memory this process may still use: MemAvailable, or the cgroup's limit if lower."""
+    available = math.inf
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    available = float(line.split()[1]) * 1024.0
+    except OSError:
+        pass
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            with open(path, encoding="ascii") as f:
+                text = f.read().strip()
+            with open(path.replace("max", "current").replace("limit_in_bytes", "usage_in_bytes"), encoding="ascii") as f:
+                used = float(f.read().strip())
+        except (OSError, ValueError):
+            continue
+        if text.isdigit():
+            available = min(available, float(text) - used)
+    if not math.isfinite(available):
+        pages = os.sysconf("SC_AVPHYS_PAGES") if hasattr(os, "sysconf") else 0
+        available = float(pages) * os.sysconf("SC_PAGE_SIZE") if pages else math.inf
+    return available
+
+
+def check_fits(size: FESize, mesh_size_mm: float, *, file: str | None, key: str, available_bytes: float | None = None) -> None:
+    """Refuse (InputError, exit 2) a solve whose memory estimate times :data:`SAFETY` exceeds
+    what is available, naming the mesh size, the estimate and the available memory."""
+    available = available_memory_bytes() if available_bytes is None else available_bytes
+    need = SAFETY * size.memory_bytes
+    if need > available:
+        raise InputError(
+            f"mesh size {mesh_size_mm:g} mm gives about {size.cells:,} cells and {size.dofs:,} DOFs; the "
+            f"{size.solver} solve needs an estimated {size.memory_bytes / 1e9:.3g} GB ({need / 1e9:.3g} GB with "
+            f"a x{SAFETY:g} margin) but {available / 1e9:.3g} GB are available",
+            file=file,
+            key=key,
+            expected=f"a mesh size whose estimate fits (e.g. {suggest_size(size, mesh_size_mm, available):.3g} mm or larger)",
+        )
+
+
+def suggest_size(size: FESize, mesh_size_mm: float, available_bytes: float) -> float:
+    """A mesh size whose estimate would fit: DOFs scale like size^-3 (surface refinement and
+    layers both follow the size), memory like DOFs^(4/3) (direct) or DOFs (iterative)."""
+    room = max(available_bytes / SAFETY - BASE_BYTES, 1.0)
+    excess = max((size.memory_bytes - BASE_BYTES) / room, 1.0)
+    power = 1.0 if size.solver == "iterative" else 4.0 / 3.0
+    return float(mesh_size_mm * excess ** (1.0 / (3.0 * power)))
+
+
+def candidate_surface(lengths_mm: np.ndarray, h_max_mm: float, areas_mm2: np.ndarray) -> np.ndarray:
+    """Mask of M's triangles the slab is built on (the rule of :func:`geometries.fe_solids.slab_solid`)."""
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(lengths_mm) & (lengths_mm > 0) & (lengths_mm <= h_max_mm) & (areas_mm2 > 0)

@@ -1,0 +1,68 @@
+"""Sizing an FE run before it is meshed (issue 13): counts against the built solid, and refusal."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from edem.cli import main
+from edem.scene import load_scene
+from fem_reference.sizing import ITERATIVE_FROM_DOFS, SAFETY, FESize, check_fits, estimate, solid_size
+from geometries.errors import InputError
+from geometries.fe_solids import layer_solid
+
+
+@pytest.mark.parametrize("mesh_size_mm", [2.0, 0.9, 0.45])
+def test_solid_size_counts_the_cells_and_vertices_the_builder_makes(mesh_size_mm):
+    """The layer solid of the flat-plates scene (a 10 x 10 grid, 200 triangles, 2 mm thick):
+    cells exactly (3 tetrahedra per prism, 4^levels triangles, ceil(t / size) layers), vertices
+    to within the boundary-vertex term a 'half the triangles' count leaves out (a grid of n x n
+    cells has (n+1)^2 = n^2 + 2n + 1 vertices, the estimate n^2 + 1)."""
+    mobile = load_scene(_flat_plates()).mobile
+    solid = layer_solid(mobile, 2.0, mesh_size_mm)
+    edge = float(np.mean(np.linalg.norm(np.diff(mobile.vertices_mm[mobile.triangles][:, [0, 1, 2, 0]], axis=1), axis=2)))
+    cells, vertices = solid_size(mobile.n_triangles, edge, 2.0, mesh_size_mm, None)
+    assert cells == len(solid.tets)
+    n = math.isqrt(mobile.n_triangles // 2) * round(2 ** max(0, math.ceil(math.log2(edge / mesh_size_mm) - 1e-9)))
+    layers = len(solid.points_mm) // (n + 1) ** 2
+    assert abs(vertices - len(solid.points_mm)) <= (2 * n) * layers
+
+
+def _flat_plates():
+    from verification.campaign_model import SCENES_DIR
+
+    return SCENES_DIR / "flat-plates.toml"
+
+
+def test_dofs_per_element_and_the_iterative_switch():
+    """P1: 3 per vertex; P2: 3 per vertex and edge (edges ~ vertices + cells); TH adds a pressure
+    per vertex and keeps the direct solver (a saddle point); past the threshold P2 is iterative."""
+    small = estimate(1000, 300, "P1")
+    assert small.dofs == 900 and small.solver == "direct"
+    assert estimate(1000, 300, "P2").dofs == 3 * (300 + 1300)
+    assert estimate(1000, 300, "TH").dofs == 3 * (300 + 1300) + 300
+    big_cells = ITERATIVE_FROM_DOFS  # 3 (v + v + c) > threshold
+    assert estimate(big_cells, big_cells // 5, "P2").solver == "iterative"
+    assert estimate(big_cells, big_cells // 5, "TH").solver == "direct"
+    # memory grows faster than the DOFs for the direct solver (LU fill), linearly for Krylov
+    a, b = estimate(10_000, 2_000, "P1"), estimate(80_000, 16_000, "P1")
+    assert b.memory_bytes > a.memory_bytes
+
+
+def test_a_solve_that_does_not_fit_is_refused_naming_size_and_memory():
+    size = FESize(cells=10**9, vertices=2 * 10**8, dofs=3 * 10**9, solver="iterative", memory_bytes=4e11)
+    with pytest.raises(InputError) as err:
+        check_fits(size, 0.01, file="scene.toml", key="mesh_size_mm", available_bytes=8e9)
+    text = str(err.value)
+    assert "0.01 mm" in text and "400 GB" in text and "8 GB are available" in text and "scene.toml" in text
+    check_fits(size, 0.01, file=None, key="k", available_bytes=SAFETY * 4e11 + 1)  # fits: no error
+
+
+def test_edem_fe_with_a_tiny_mesh_size_exits_2_before_meshing(capsys):
+    pytest.importorskip("dolfinx_solver")
+    status = main(["fe", "ideal-standing", "--mesh-size", "0.01", "--out", "/nonexistent/never-written"])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert "mesh size 0.01 mm" in err and "GB are available" in err and "Traceback" not in err
