@@ -324,7 +324,7 @@ def run(
         centre = (spring_force @ centroids_c) / spring_force.sum() if spring_force.sum() > 0 else g_current
         where = f"time point {k} (t = {t:g} s)"
         check_contact_kept(loads[k, :3], geometry.normal, spring_area, int(solution.active[:n_c].sum()), free, u, where)
-        check_increment(u, centroids_c[solution.active[:n_c]], g_current, cartilage, where)
+        check_increment(u, centroids_c[np.flatnonzero(solution.active[:n_c])], g_current, cartilage, where)
         committed = elastic_force[:n_c, None] * normals
         if shear is not None:
             committed = committed + shear.force(u, solution.active[:n_c])
