@@ -253,6 +253,9 @@ class RayCaster:
             altitude = np.where(longest > 0, twice_area / longest, 0.0)
             margin = 64 * float(np.finfo(np.float32).eps) * scale / altitude
         self._interior_margin = np.where(np.isfinite(margin), np.minimum(margin, 1.0), 1.0)
+        # What the re-measure reads per hit, side by side: one row gather per hit instead of three
+        # scattered ones (random access into F's arrays dominates that gather).
+        self._plane_rows = np.column_stack([self._normal, self._plane_offset, self._interior_margin])
 
     def _embree_run(
         self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray
@@ -410,9 +413,11 @@ class RayCaster:
             if found.all():  # e.g. every spring facing F: no gather
                 idx, k, u32, v32 = active, prim.astype(np.int64), ray["u"], ray["v"]
             else:
-                # Integer row gathers: a boolean mask over (n, 3) rows is several times slower.
+                # Integer row gathers by np.take: a boolean mask (or []) over (n, 3) rows is
+                # several times slower.
                 rows = np.flatnonzero(found)
-                idx, k, o, d, s0 = active[rows], prim[rows].astype(np.int64), o[rows], d[rows], s0[rows]
+                idx, k, s0 = active[rows], prim[rows].astype(np.int64), s0[rows]
+                o, d = np.take(o, rows, axis=0), np.take(d, rows, axis=0)
                 u32, v32 = ray["u"][rows], ray["v"][rows]
             t, u, v, det = self._remeasure(o, d, k, u32, v32)
             # Embree's float32 answer is only trusted where float64 puts the ray on its triangle;
@@ -479,14 +484,15 @@ class RayCaster:
         plane distance is recomputed in float64 (signed length directly from the true origin);
         Embree's u, v are returned for those rows. The other rows get a full Moller-Trumbore test.
         """
-        normal = self._normal[k]
+        rows = np.take(self._plane_rows, k, axis=0)  # take: far cheaper than [] for row gathers
+        normal = rows[:, :3]
         along = np.einsum("ij,ij->i", normal, d)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = (self._plane_offset[k] - np.einsum("ij,ij->i", normal, o)) / along
+            t = (rows[:, 3] - np.einsum("ij,ij->i", normal, o)) / along
         det = -along
         u, v = u32.astype(np.float64), v32.astype(np.float64)
         margin = np.minimum(np.minimum(u, v), 1.0 - u - v)
-        edge = np.flatnonzero(~(margin > self._interior_margin[k]))
+        edge = np.flatnonzero(~(margin > rows[:, 4]))
         if edge.size:
             ke = k[edge]
             t[edge], u[edge], v[edge], det[edge] = _moller_trumbore(
@@ -512,7 +518,7 @@ class RayCaster:
         triangle sharing a vertex with it. Those few candidates are tested exactly in float64.
         Rays that genuinely miss stay missed (the probe misses too, or no candidate is valid).
         """
-        o, d = origins[missed], dirs[missed]
+        o, d = np.take(origins, missed, axis=0), np.take(dirs, missed, axis=0)
         # A sideways direction that never lines up with a mesh's axes or diagonals.
         oblique = np.array([0.5377, 0.8326, 0.1329])
         side = _cross(d, oblique)
@@ -526,7 +532,9 @@ class RayCaster:
         near_box = self._segment_meets_box(probe, d, (h + self._step_mm) - s0)
         if not near_box.any():
             return
-        o, d, s0, probe, missed = o[near_box], d[near_box], s0[near_box], probe[near_box], missed[near_box]
+        keep = np.flatnonzero(near_box)
+        o, d, probe = np.take(o, keep, axis=0), np.take(d, keep, axis=0), np.take(probe, keep, axis=0)
+        s0, missed = s0[keep], missed[keep]
         prim = self._embree_run(probe, d, (h + self._step_mm) - s0)["primID"].astype(np.int64)
         near = np.flatnonzero(prim >= 0)
         if not near.size:

@@ -258,10 +258,10 @@ def run(
         g_current = pose.points(g0[None])[0]
         # Gather the candidates once by index (cheaper than repeated boolean masks over all springs).
         cand_idx = np.flatnonzero(cand)
-        normals = geometry.normal[cand_idx]
-        centroids_c = geometry.centroid_mm[cand_idx]
+        normals = np.take(geometry.normal, cand_idx, axis=0)
+        centroids_c = np.take(geometry.centroid_mm, cand_idx, axis=0)
         area_c = spring_area[cand_idx]
-        stored_c = stored[cand_idx]
+        stored_c = np.take(stored, cand_idx, axis=0)
         stored_normal = np.einsum("ij,ij->i", stored_c, normals)
         shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals)
         lig_rows, lig_law, _ = ligament_elements(scene.ligaments, pose, f_pose, g_current)
@@ -324,7 +324,7 @@ def run(
         centre = (spring_force @ centroids_c) / spring_force.sum() if spring_force.sum() > 0 else g_current
         where = f"time point {k} (t = {t:g} s)"
         check_contact_kept(loads[k, :3], geometry.normal, spring_area, int(solution.active[:n_c].sum()), free, u, where)
-        check_increment(u, centroids_c[np.flatnonzero(solution.active[:n_c])], g_current, cartilage, where)
+        check_increment(u, np.take(centroids_c, np.flatnonzero(solution.active[:n_c]), axis=0), g_current, cartilage, where)
         committed = elastic_force[:n_c, None] * normals
         if shear is not None:
             committed = committed + shear.force(u, solution.active[:n_c])
