@@ -1,6 +1,6 @@
-"""Throughput of edem.raycast (SPEC 2, 6): rays/s of the signed-window spring-length cast.
+"""Throughput of edem.raycast (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#8-built-in-geometries): rays/s of the signed-window spring-length cast.
 
-Scene (SPEC 6, idealised ankle): mobile body M = cylinder patch, R = 20 mm, width 28 mm, arc
+Scene (docs/method.md#8-built-in-geometries, idealised ankle): mobile body M = cylinder patch, R = 20 mm, width 28 mm, arc
 114 degrees (axis along y, dome top at z = 20 mm); fixed body F = plane 1.5 mm above the dome top,
 facing down. One ray per triangle of M, from its centroid along its outward normal; window
 h_max = 3.5 mm (about 42 % of the rays hit, as in the thesis's standing case).

@@ -1,4 +1,4 @@
-"""Discrete element (DEM) and extended discrete element (EDEM) contact solver (SPEC 2-4).
+"""Discrete element (DEM) and extended discrete element (EDEM) contact solver (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#2-edem-the-time-dependent-incremental-method, docs/method.md#4-viscoelastic-edem-thesis-chapter-6).
 
 The Python face of the package::
 

@@ -1,9 +1,10 @@
-"""The `edem` command line (SPEC 9). Exit status 0 success, 1 failed check, 2 bad input."""
+"""The `edem` command line (README.md#command-line). Exit status 0 success, 1 failed check, 2 bad input."""
 
 from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 from pathlib import Path
 
 from edem.errors import InputError, SolverError
@@ -35,6 +36,9 @@ def _run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     write_results(result, out, overwrite=args.overwrite)
+    from edem.resultdir import record_provenance
+
+    record_provenance(out, args.scene, overrides, method=method)
     for warning in result.warnings:
         print(f"edem run: warning: {warning}", file=sys.stderr)
     last = result.steps[-1]
@@ -64,7 +68,7 @@ def _out_dir(args: argparse.Namespace, *name_parts: str, overrides: dict | None 
 
 
 def _fe(args: argparse.Namespace) -> int:
-    """The FE reference of a scene (SPEC 5, 9): fem_reference.run_scene into a result directory."""
+    """The FE reference of a scene (docs/method.md#6-the-fe-reference-and-its-discrete-twins, docs/result-format.md): fem_reference.run_scene into a result directory."""
     from edem.scene import load_scene, parse_override
 
     try:
@@ -97,6 +101,9 @@ def _fe(args: argparse.Namespace) -> int:
             bar.close()
     if rank != 0:
         return 0
+    from edem.resultdir import record_provenance
+
+    record_provenance(out, args.scene, overrides, {"model": settings.model, "mesh_size_mm": settings.mesh_size_mm, "degree": settings.degree})
     for warning in result.warnings:
         print(f"edem fe: warning: {warning}", file=sys.stderr)
     data = result.summary()
@@ -170,8 +177,8 @@ def _scenes(args: argparse.Namespace) -> int:
 
     for name in names:
         data = tomllib.loads(resolve_scene_path(name).read_text(encoding="utf-8"))
-        summary = data.get("scene", {}).get("description", "").strip().splitlines()
-        print(f"{name:28s} {summary[0] if summary else ''}")
+        description = " ".join(data.get("scene", {}).get("description", "").split())  # the whole description, rewrapped
+        print(textwrap.fill(f"{name:24s} {description}", width=110, subsequent_indent=" " * 25, break_on_hyphens=False, break_long_words=False) + "\n")
     return 0
 
 
@@ -183,7 +190,7 @@ def _plot(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    """SPEC 8 metrics of result directory A against the reference B; writes metrics.json."""
+    """The comparison metrics (docs/method.md#7-comparison-metrics) of result directory A against the reference B; writes metrics.json."""
     from edem.atomic_dirs import check_out_dir, default_out_dir
     from verification.metrics import compare_result_dirs, format_metrics_table
     from verification.runner import write_json
@@ -206,7 +213,7 @@ def _verify(args: argparse.Namespace) -> int:
     from verification.campaigns import describe_campaigns, get_campaign
 
     if args.list:
-        print(describe_campaigns(), end="")
+        print(describe_campaigns(args.campaign), end="")
         return 0
     if not args.campaign:
         raise InputError("no campaign given", key="CAMPAIGN", expected="a campaign name (edem verify --list)")
@@ -223,14 +230,28 @@ def _verify(args: argparse.Namespace) -> int:
 
 
 def _check(args: argparse.Namespace) -> int:
-    """`edem check`: the regression gate (SPEC 9)."""
+    """`edem check`: the regression gate (README.md#command-line)."""
     from verification.check import run_check
 
     return run_check(refresh=args.refresh, references=args.references, with_fe=not args.no_fe)
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: the package version and the git revision, computed only when asked (keeps --help fast)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings=option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from edem.resultdir import software_version, source_revision
+
+        print(f"edem {software_version()} (source {source_revision()})")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="edem", description="Discrete-element (DEM/EDEM) joint contact solver.")
+    parser.add_argument("--version", action=_VersionAction, help="print the version and the source revision, then exit")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="solve a scene with the discrete method")
     p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
@@ -261,9 +282,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("result_dirs", nargs="+", help="result directories of edem run")
     p.add_argument("--column", default="disp_norm_mm", help="a timeseries.csv column, or disp_norm_mm (default)")
     p.add_argument("--label", action="append", help="legend label per directory (repeat)")
-    p.add_argument("--out", required=True, help="PNG file to write")
+    p.add_argument("--out", help="PNG file to write (default: beside the first directory, <dir>-<column>.png or <dir>-vs-<other dirs>-<column>.png)")
     p.set_defaults(func=_plot)
-    p = sub.add_parser("compare", help="SPEC 8 metrics between two result directories (B is the reference)")
+    p = sub.add_parser("compare", help="comparison metrics between two result directories (B is the reference; docs/method.md#7-comparison-metrics)")
     p.add_argument("a_dir", metavar="A_DIR", help="result directory of the method under test (edem run)")
     p.add_argument("b_dir", metavar="B_DIR", help="result directory of the reference (edem fe, or another run)")
     p.add_argument("--out", help="where metrics.json goes (default results/compare/<A>-vs-<B>)")
@@ -271,7 +292,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_compare)
     p = sub.add_parser("verify", help="run a verification campaign, ending in an HTML report")
     p.add_argument("campaign", nargs="?", metavar="CAMPAIGN", help="a campaign name (see --list)")
-    p.add_argument("--list", action="store_true", help="list the campaigns and their cases")
+    p.add_argument("--list", action="store_true", help="list the campaigns (one line each, with case count and expected time); with CAMPAIGN, its cases")
     p.add_argument("--out", help="output directory (default results/verify/<campaign>); finished cases are cached there")
     p.add_argument("--jobs", type=int, help="worker processes (default: the CPU count; 1 runs in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on a Dask distributed cluster, e.g. tcp://host:8786")

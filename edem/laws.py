@@ -1,4 +1,4 @@
-"""Contact laws of the spring bed: one class per law, registered in :data:`LAWS` (SPEC 2-3).
+"""Contact laws of the spring bed: one class per law, registered in :data:`LAWS` (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#2-edem-the-time-dependent-incremental-method).
 
 A contact law says, for the springs of the mobile body (area A, ray length h, confined modulus
 E' of eq. 3.7, undeformed thickness t where the law has one):

@@ -1,10 +1,10 @@
 """Time-dependent loads and joint angles read from a scene's `[load]` and `[kinematics]` tables.
 
-Pure data I/O (SPEC 9, scene file): the scene loader hands over already-parsed TOML tables and
+Pure data I/O (README.md#scene-files, scene file): the scene loader hands over already-parsed TOML tables and
 the scene file path (for messages and relative paths); this module returns validated float64
-arrays. The solver applies them per time point as in SPEC 3 step 1 (place the fixed body by the
+arrays. The solver applies them per time point as in docs/method.md#2-edem-the-time-dependent-incremental-method step 1 (place the fixed body by the
 joint angle, apply the load T_k). Every bad input raises `InputError` naming the file, the scene
-key and what was expected (SPEC 9).
+key and what was expected (README.md#scene-files).
 
 Units: time in s, force in N, moment in N·mm, lengths in mm, angles in degrees in files and
 scene tables, radians in `JointKinematics.angle_rad`. OpenSim writes moments in N·m: they are
@@ -61,7 +61,7 @@ def _readonly(values: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class LoadSeries:
-    """Applied load of the mobile body per time point (SPEC 3 step 4: T_k).
+    """Applied load of the mobile body per time point (docs/method.md#2-edem-the-time-dependent-incremental-method step 4: T_k).
 
     time_s (n,) strictly increasing, force_n (n, 3) in N, moment_nmm (n, 3) in N·mm about the
     reference point G; all finite float64, n >= 1. Arrays are read-only. ``frame`` says in which
@@ -105,7 +105,7 @@ class LoadSeries:
 
 @dataclass(frozen=True, eq=False)
 class JointKinematics:
-    """Joint rotation of the fixed body per time point (SPEC 3 step 1, SPEC 9 `[kinematics]`).
+    """Joint rotation of the fixed body per time point (docs/method.md#2-edem-the-time-dependent-incremental-method step 1, README.md#scene-files `[kinematics]`).
 
     axis_point_mm (3,) a point on the joint axis, axis_direction (3,) unit vector,
     angle_rad (n,) the joint angle at each load time point, in radians.
@@ -271,7 +271,7 @@ def _jointreaction_prefixes(columns: list[str]) -> list[str]:
 
 
 def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSeries:
-    """Build the applied load series from a scene's `[load]` table (SPEC 9).
+    """Build the applied load series from a scene's `[load]` table (README.md#scene-files).
 
     Exactly one of:
     - static: `force_n = [fx, fy, fz]`, optional `moment_nmm = [mx, my, mz]`; one point at t = 0;
@@ -468,7 +468,7 @@ def _joint_reaction(tab: SceneTable, data: _DataFile, prefix: str) -> tuple[floa
 
 def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.ndarray) -> JointKinematics:
     """Build the joint rotation from a scene's `[kinematics]` table at the load times `time_s`
-    (SPEC 3 step 1, SPEC 9).
+    (docs/method.md#2-edem-the-time-dependent-incremental-method step 1, README.md#scene-files).
 
     `axis_point_mm = [x, y, z]`, `axis_direction = [x, y, z]` (normalised; must be non-zero), and
     either `angle_deg` (one value per load time point, or a single value for all) or
@@ -544,12 +544,12 @@ def _file_angles(tab: SceneTable, time_s: np.ndarray) -> np.ndarray:
     return np.interp(np.clip(time_s, file_time[0], file_time[-1]), file_time, angle)
 
 
-# --------------------------------------------------------------------------- stance (SPEC 7)
+# --------------------------------------------------------------------------- stance (docs/references.md#the-thesiss-figures)
 
 
 def resample_pchip(time_s: np.ndarray, values: np.ndarray, new_time_s: np.ndarray) -> np.ndarray:
     """Shape-preserving piecewise-cubic Hermite (PCHIP) interpolation of `values` (n,) or (n, k)
-    from strictly increasing `time_s` onto `new_time_s` (SPEC 7: the built-in stance is built
+    from strictly increasing `time_s` onto `new_time_s` (docs/references.md#the-thesiss-figures: the built-in stance is built
     through the 7 published points this way). Passes exactly through the given points and does
     not overshoot: monotone data stay monotone between points. No extrapolation: `new_time_s`
     must lie within [time_s[0], time_s[-1]].
@@ -570,7 +570,7 @@ def resample_pchip(time_s: np.ndarray, values: np.ndarray, new_time_s: np.ndarra
 
 
 class ThesisStanceTable(NamedTuple):
-    """Published stance data (SPEC 7; thesis section 4.3.4, table 4.3.4.1): ankle angle and
+    """Published stance data (docs/references.md#the-thesiss-figures; thesis section 4.3.4, table 4.3.4.1): ankle angle and
     force on the talus at 7 instants of stance. Only these numbers are published; the 0 % and
     100 % end values of the built-in scene are assumptions stated in its scene file."""
 
@@ -582,7 +582,7 @@ class ThesisStanceTable(NamedTuple):
 
 
 def thesis_stance_table() -> ThesisStanceTable:
-    """The 7 published stance points of SPEC 7 (table 4.3.4.1), as float64 arrays."""
+    """The 7 published stance points of docs/references.md#the-thesiss-figures (table 4.3.4.1), as float64 arrays."""
     rows = np.array([
         # % stance, angle deg, ML N, PA N, SI N
         [12.0, -0.57, 13.64, 21.7, 72.5],

@@ -1,6 +1,6 @@
 """Rigid-body mechanics of the spring bed: operators, stiffness and the unilateral solve.
 
-Notation of SPEC 2 and thesis chapter 3. The mobile body M has the generalised displacement
+Notation of docs/method.md#1-two-rigid-bones-and-a-bed-of-springs and thesis chapter 3. The mobile body M has the generalised displacement
 u = (u_G, q) in R^6 about its reference point G. A point c of M moves by B u = u_G + q x (c - G)
 (eq. 3.1-3.3). Every load-carrying element j (a contact spring or a ligament) is reduced to
 
@@ -15,7 +15,7 @@ Static equilibrium (eq. 3.13, 3.18 with the push-back folded into s_j and f_t0) 
 stationarity of the convex energy Pi(u) = sum_j phi_j(g_j . u) + shear - T . u with
 phi_j' = max(s_j, 0). ``solve_unilateral`` minimises it by a semismooth Newton method (a
 primal-dual active set that adds and removes elements), globalised by an Armijo line search,
-and ends with the KKT check of SPEC 2.
+and ends with the KKT check of docs/method.md#1-two-rigid-bones-and-a-bed-of-springs.
 """
 
 from __future__ import annotations
@@ -118,7 +118,7 @@ class ShearTerms:
 
 @dataclass
 class UnilateralSolution:
-    """Outcome of one static solve (SPEC 2): displacement, element forces and the KKT figures."""
+    """Outcome of one static solve (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs): displacement, element forces and the KKT figures."""
 
     displacement: np.ndarray  # (6,) u = (u_G mm, q rad)
     element_force_n: np.ndarray  # (m,) s_j(u); the element carries max(s_j, 0)
@@ -139,7 +139,7 @@ def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: 
     """Names of the free DOFs along which the 6x6 stiffness vanishes (the null space of K_free).
 
     Rotations are scaled by a characteristic length so that all blocks are in N/mm before the
-    eigenvalues are compared (SPEC 2: detect rank deficiency, say which DOFs are unrestrained).
+    eigenvalues are compared (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs: detect rank deficiency, say which DOFs are unrestrained).
     """
     scale = np.array([1.0, 1.0, 1.0, length_scale_mm, length_scale_mm, length_scale_mm])[free]
     k = stiffness[free][:, free] / np.outer(scale, scale)

@@ -1,4 +1,4 @@
-"""Spring lengths by ray casting against the fixed body F (SPEC 2; thesis section 4.2.1).
+"""Spring lengths by ray casting against the fixed body F (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs; thesis section 4.2.1).
 
 Every spring i of the mobile body M sits at the centroid c_i of one of M's triangles and points
 along that triangle's unit normal n_i, towards F. Its length is where the ray c_i + s n_i meets F
@@ -69,7 +69,7 @@ _UNIT_TOLERANCE = 1e-6
 
 @dataclass(frozen=True)
 class RayHits:
-    """Result of one :meth:`RayCaster.cast` (SPEC 2): one entry per ray."""
+    """Result of one :meth:`RayCaster.cast` (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs): one entry per ray."""
 
     # (n,) float64 signed length in (-h_max, h_max]; np.inf where no valid hit
     spring_length_mm: np.ndarray
@@ -140,7 +140,7 @@ def _nearest_per_ray(
 
 
 class RayCaster:
-    """Casts spring rays against one fixed triangulated surface F (SPEC 2; thesis 4.2.1).
+    """Casts spring rays against one fixed triangulated surface F (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs; thesis 4.2.1).
 
     Built once per fixed surface, in F's own frame: the Embree BVH is never rebuilt when F moves,
     the rays are moved into F's frame instead (see :meth:`cast`).
@@ -281,7 +281,7 @@ class RayCaster:
         rotation: np.ndarray | None = None,
         translation: np.ndarray | None = None,
     ) -> RayHits:
-        """Signed spring lengths: nearest front-facing hit on F along each ray (SPEC 2, 4.2.1).
+        """Signed spring lengths: nearest front-facing hit on F along each ray (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs; thesis 4.2.1).
 
         Parameters
         ----------

@@ -1,4 +1,4 @@
-"""The result directory: the one module that writes and reads it (SPEC 9).
+"""The result directory: the one module that writes and reads it (docs/result-format.md).
 
 Every producer writes the same layout through :func:`write_result_dir` (``edem run`` through
 :func:`edem.results.write_results`, ``edem fe`` through :mod:`fem_reference.scene_run`, the closed
@@ -33,6 +33,13 @@ Layout of ``OUT/``:
     :mod:`fem_reference.scene_run`).
 ``fixed.vtp``
     The fixed body as in the scene (optional).
+``scene.toml``
+    The resolved scene (:func:`record_provenance`: every producer of a scene's directory calls
+    it): the scene after every override, file paths absolute, its name pinned, the method in
+    ``[solver]`` and FE settings in ``[fe]``; ``edem run DIR/scene.toml`` (or ``edem fe``)
+    reproduces the run exactly. summary.json then also holds ``overrides`` (dotted keys and
+    values), ``scene_source`` (the scene argument as given), ``software_version`` and
+    ``source_revision`` (git commit, ``-dirty`` with uncommitted changes; "unknown" outside git).
 ``fixed.pvd`` + ``fixed_NNNN.vtp``
     The fixed body placed at each time point (optional; discrete runs): open it with
     pressure.pvd in ParaView to see the true relative pose when the fixed body moves.
@@ -56,18 +63,22 @@ from __future__ import annotations
 
 import csv
 import html
+import importlib.metadata
 import json
 import math
 import numbers
+import subprocess
+import tomllib
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from edem.atomic_dirs import atomic_result_dir, verify_manifest
+from edem.atomic_dirs import atomic_result_dir, verify_manifest, write_manifest
 from geometries.errors import InputError, SolverError
 
 SUMMARY_FILE = "summary.json"
@@ -357,7 +368,7 @@ def read_timeseries_csv(path: str | Path) -> dict[str, np.ndarray]:
         with open(path, newline="", encoding="utf-8") as f:
             rows = list(csv.reader(f))
     except FileNotFoundError:
-        raise InputError("no timeseries.csv here", file=path.parent, expected="a SPEC 9 result directory") from None
+        raise InputError("no timeseries.csv here", file=path.parent, expected="a result directory (docs/result-format.md)") from None
     if not rows:
         raise InputError("empty timeseries.csv", file=path, expected="a header and one row per time point")
     header = rows[0]
@@ -366,7 +377,7 @@ def read_timeseries_csv(path: str | Path) -> dict[str, np.ndarray]:
     except ValueError:
         raise InputError("timeseries.csv has non-numeric or ragged rows", file=path, expected="numbers, one per column") from None
     if "time_s" not in header:
-        raise InputError("timeseries.csv has no time_s column", file=path, expected="the SPEC 9 columns")
+        raise InputError("timeseries.csv has no time_s column", file=path, expected="the docs/result-format.md columns")
     return {name: data[:, i] for i, name in enumerate(header)}
 
 
@@ -412,7 +423,7 @@ def read_surface_frame(path: str | Path) -> SurfaceFrame:
 def non_finite_count(result_dir: str | Path) -> int:
     """Number of NaN/inf values in a result directory: summary numbers, time series, every array.
 
-    The stability campaign requires 0 (SPEC 2-4: no NaN in any output, whatever the input).
+    The stability campaign requires 0 (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#2-edem-the-time-dependent-incremental-method, docs/method.md#4-viscoelastic-edem-thesis-chapter-6: no NaN in any output, whatever the input).
     """
     result = read_result_dir(result_dir)
     count = 0
@@ -436,3 +447,87 @@ def non_finite_count(result_dir: str | Path) -> int:
         for data in (frame.point_data, frame.cell_data):
             count += sum(int(np.count_nonzero(~np.isfinite(v))) for v in data.values())
     return count
+
+
+# ---------------------------------------------------------------------------------------------
+# Provenance: what makes a scene's result directory reproducible
+
+SOURCE_ROOT = Path(__file__).resolve().parents[1]
+SCENE_FILE = "scene.toml"
+#: scene keys that name files, relative to the scene file: (section, key)
+FILE_KEYS = (("geometry", "mobile"), ("geometry", "fixed"), ("load", "file"), ("kinematics", "file"))
+
+
+def software_version() -> str:
+    """The installed ``edem`` package version ("unknown" when it is not installed)."""
+    try:
+        return importlib.metadata.version("edem")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+@lru_cache(maxsize=1)
+def source_revision() -> str:
+    """The git commit of the source tree (``-dirty`` when it has uncommitted changes), or "unknown"."""
+    def git(*args: str) -> str:
+        return subprocess.run(["git", "-C", str(SOURCE_ROOT), *args], capture_output=True, text=True, check=True, timeout=20).stdout.strip()
+
+    try:
+        commit = git("rev-parse", "HEAD")
+        dirty = git("status", "--porcelain", "--untracked-files=no", "--", "edem", "geometries", "fem_reference", "verification", "reports")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return commit + ("-dirty" if dirty else "") if commit else "unknown"
+
+
+def resolved_scene(scene_ref: str | Path, overrides: dict[str, Any] | None = None, fe_settings: dict[str, Any] | None = None,
+                   method: str | None = None) -> dict[str, Any]:
+    """The scene's TOML data after ``overrides``, file paths made absolute, its name pinned.
+
+    ``fe_settings`` (model, mesh_size_mm, degree) are written into ``[fe]``, ``method`` (a
+    ``--method`` given on the command line) into ``[solver]``. Overrides must
+    already be plain dotted keys (``verification.sides.expand_array_overrides`` expands the
+    ``array[*].key`` form).
+    """
+    from edem.scene import apply_overrides, resolve_scene_path
+
+    path = resolve_scene_path(scene_ref)
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    if overrides:
+        apply_overrides(data, dict(overrides))
+    meta = data.setdefault("scene", {})
+    meta.setdefault("name", path.stem)  # the resolved file is called scene.toml: keep the scene's own name
+    for section, key in FILE_KEYS:
+        value = data.get(section, {}).get(key) if isinstance(data.get(section), dict) else None
+        if isinstance(value, str):
+            data[section][key] = str((path.parent / value).resolve())
+    if method:
+        data.setdefault("solver", {})["method"] = method
+    if fe_settings:
+        data.setdefault("fe", {}).update({k: v for k, v in fe_settings.items() if v is not None})
+    return data
+
+
+def record_provenance(out_dir: str | Path, scene_ref: str | Path, overrides: dict[str, Any] | None = None,
+                      fe_settings: dict[str, Any] | None = None, method: str | None = None) -> None:
+    """Write ``scene.toml`` into a result directory and the provenance keys into its summary.json
+    (arguments as :func:`resolved_scene`).
+
+    The directory must verify against its manifest first (InputError otherwise: only a complete
+    run is annotated); it is sealed again afterwards with the same run id, so readers still verify it.
+    """
+    import tomli_w
+
+    out = Path(out_dir)
+    run_id = verify_manifest(out)
+    (out / SCENE_FILE).write_text(tomli_w.dumps(resolved_scene(scene_ref, overrides, fe_settings, method)), encoding="utf-8")
+    path = out / SUMMARY_FILE
+    summary = json.loads(path.read_text(encoding="utf-8"))
+    summary.update(
+        overrides=dict(overrides or {}),
+        scene_source=str(scene_ref),
+        software_version=software_version(),
+        source_revision=source_revision(),
+    )
+    path.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    write_manifest(out, run_id)

@@ -1,4 +1,4 @@
-"""Scene files (SPEC 9): TOML -> a validated, immutable Scene.
+"""Scene files (README.md#scene-files): TOML -> a validated, immutable Scene.
 
 Every section but geometry, cartilage and load is optional and its absence switches the feature
 off. Bad input raises InputError naming the file, the key and what was expected.
@@ -53,7 +53,7 @@ COUPLINGS = ("none", "thin-layer")
 
 @dataclass(frozen=True)
 class Viscoelastic:
-    """Kelvin-Voigt springs, damping = tau * stiffness (SPEC 4, eq. 6.13)."""
+    """Kelvin-Voigt springs, damping = tau * stiffness (docs/method.md#4-viscoelastic-edem-thesis-chapter-6, eq. 6.13)."""
 
     relaxation_time_s: float
     integrator: str = "exact"  # exact | rk2
@@ -313,7 +313,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         data.setdefault("geometry", {})
     for section in ("geometry", "cartilage", "load"):
         if not isinstance(data.get(section), dict):
-            raise InputError(f"missing section [{section}]", file=file, key=section, expected=f"a [{section}] table (SPEC 9)")
+            raise InputError(f"missing section [{section}]", file=file, key=section, expected=f"a [{section}] table (README.md#scene-files)")
     notes: list[str] = []
 
     meta = SceneTable(data.get("scene", {}), file, "scene", SECTIONS["scene"])
@@ -484,7 +484,7 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
     if given is not None:
         reference_point = given
     if reference_point is None:
-        # Area-weighted centroid of the articular surface (SPEC 2 default for G).
+        # Area-weighted centroid of the articular surface (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs default for G).
         areas = mobile.areas_mm2
         reference_point = (mobile.centroids_mm * areas[:, None]).sum(axis=0) / areas.sum()
     return mobile, fixed, np.asarray(reference_point, float), attachments, description

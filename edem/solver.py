@@ -1,4 +1,4 @@
-"""DEM and EDEM over a load history (SPEC 2-3): the time loop around the static solve."""
+"""DEM and EDEM over a load history (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#2-edem-the-time-dependent-incremental-method): the time loop around the static solve."""
 
 from __future__ import annotations
 
@@ -31,13 +31,13 @@ from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 from edem.viscoelastic import check_rk2_stability, integrator_weights
 
 
-#: the discrete methods: DEM (static, from M's initial pose at every time point) and EDEM (SPEC 3)
+#: the discrete methods: DEM (static, from M's initial pose at every time point) and EDEM (docs/method.md#2-edem-the-time-dependent-incremental-method)
 METHODS = ("edem", "dem")
 
 
 @dataclass
 class StepResult:
-    """One time point: the state every output file is written from (SPEC 9)."""
+    """One time point: the state every output file is written from (docs/result-format.md)."""
 
     step: int
     time_s: float
@@ -94,7 +94,7 @@ class RunResult:
 
 
 def fixed_placement(scene: Scene, step: int) -> Placement:
-    """Pose of F at a time point: the joint angle about the scene's axis (SPEC 3 step 1), or the
+    """Pose of F at a time point: the joint angle about the scene's axis (docs/method.md#2-edem-the-time-dependent-incremental-method step 1), or the
     pose an OpenSim model gives it at the motion's coordinates."""
     kin = scene.kinematics
     if kin is None:
@@ -114,7 +114,7 @@ def weak_dofs_warning(
     length_scale_mm: float,
     ratio: float = 1e-4,
 ) -> list[str]:
-    """Warn about free DOFs that are restrained only by round-off-like stiffness (SPEC 2).
+    """Warn about free DOFs that are restrained only by round-off-like stiffness (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs).
 
     A faceted cylinder's normals tilt slightly off radial, so sliding along its axis is not
     exactly singular but about 1e-5 as stiff as the rest: the solve succeeds and the body drifts.
@@ -200,7 +200,7 @@ def run(
 ) -> RunResult:
     """Solve every time point of the scene with DEM (static, from M's initial pose) or EDEM.
 
-    EDEM (SPEC 3): at each step the geometry is redone at M's accumulated pose and F's pose for
+    EDEM (docs/method.md#2-edem-the-time-dependent-incremental-method): at each step the geometry is redone at M's accumulated pose and F's pose for
     that time, the stored spring forces of the springs still in contact push back (eq. 3.17),
     the increment solves K u = T_k - p with the active set handled as in DEM (eq. 3.18-3.19),
     then the forces are committed and M is moved by u. Springs that left contact keep no force.
@@ -426,7 +426,7 @@ def viscoelastic_increment(
     viscous: Viscoelastic,
     fixed_dofs: tuple[str, ...],
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Kelvin-Voigt increment u = K^-1 [phi (T_{k-1} - p) + psi (T_k - T_{k-1})] (SPEC 4, eq. 6.18).
+    """Kelvin-Voigt increment u = K^-1 [phi (T_{k-1} - p) + psi (T_k - T_{k-1})] (docs/method.md#4-viscoelastic-edem-thesis-chapter-6, eq. 6.18).
 
     ``elastic`` is the quasi-static solve under T_k: its forces are the total (elastic + viscous)
     spring forces at the end of the step and its active set is the contact set. Springs that still

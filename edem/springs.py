@@ -1,4 +1,4 @@
-"""The geometry stage: springs and ligaments at one pose (SPEC 2-3).
+"""The geometry stage: springs and ligaments at one pose (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#2-edem-the-time-dependent-incremental-method).
 
 Pure functions on arrays. ``spring_geometry`` places the mobile springs at a pose, casts their
 rays against the fixed body and returns lengths and candidates; ``contact_law`` turns lengths,
@@ -43,7 +43,7 @@ class Placement:
 
 @dataclass(frozen=True)
 class Cartilage:
-    """Spring-bed material and law (SPEC 2-3, eq. 3.7-3.8)."""
+    """Spring-bed material and law (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#2-edem-the-time-dependent-incremental-method, eq. 3.7-3.8)."""
 
     youngs_modulus_mpa: float
     poissons_ratio: float
@@ -65,7 +65,7 @@ class Cartilage:
 
 @dataclass(frozen=True)
 class SpringGeometry:
-    """Springs of the mobile body at one pose: one per non-degenerate triangle (SPEC 2)."""
+    """Springs of the mobile body at one pose: one per non-degenerate triangle (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs)."""
 
     centroid_mm: np.ndarray  # (n, 3)
     normal: np.ndarray  # (n, 3) unit, out of M towards F
@@ -83,7 +83,7 @@ def spring_geometry(
     fixed: Placement,
     cartilage: Cartilage,
 ) -> SpringGeometry:
-    """Geometry stage (SPEC 2, thesis 4.2.1): place M's springs and measure them against F.
+    """Geometry stage (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, thesis 4.2.1): place M's springs and measure them against F.
 
     Rays are cast along the springs' normals in a signed window of +-h_max (so touching or
     interpenetrating bodies still see each other), in F's own frame. Candidates: the threshold
@@ -104,7 +104,7 @@ def contact_law(
     cartilage: Cartilage,
     stored_normal_force_n: np.ndarray,
 ) -> ElementLaw:
-    """Element law of the candidate springs under the cartilage's contact law (SPEC 3, eq. 3.7
+    """Element law of the candidate springs under the cartilage's contact law (docs/method.md#2-edem-the-time-dependent-incremental-method, eq. 3.7
     and 3.19). ``stored_normal_force_n`` is the EDEM push-back per candidate spring (zero for DEM).
     """
     sel = geometry.candidate
@@ -137,7 +137,7 @@ def shear_terms(
 
 @dataclass(frozen=True)
 class Ligament:
-    """A tension-only linear spring between a point of M and a point of F (SPEC 2)."""
+    """A tension-only linear spring between a point of M and a point of F (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs)."""
 
     name: str
     mobile_point_mm: np.ndarray

@@ -1,4 +1,4 @@
-"""The built-in stance: the thesis's 65 time points rebuilt from its 7 published ones (SPEC 7).
+"""The built-in stance: the thesis's 65 time points rebuilt from its 7 published ones (docs/references.md#the-thesiss-figures).
 
 Only table 4.3.4.1 is published (7 instants of ankle angle and joint force). The built-in stance
 scenes interpolate it with a shape-preserving PCHIP over 65 points 0.01 s apart (as the thesis

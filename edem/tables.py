@@ -1,5 +1,5 @@
 """Typed access to one table of a scene file: every error names the file, the key and what was
-expected (SPEC 9: exit status 2 with a one-paragraph message, never a traceback)."""
+expected (README.md#scene-files: exit status 2 with a one-paragraph message, never a traceback)."""
 
 from __future__ import annotations
 

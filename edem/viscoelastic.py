@@ -1,4 +1,4 @@
-"""Kelvin-Voigt springs in EDEM: H du/dt + K u = T - p with H = tau K (SPEC 4, thesis eq. 6.13-6.18).
+"""Kelvin-Voigt springs in EDEM: H du/dt + K u = T - p with H = tau K (docs/method.md#4-viscoelastic-edem-thesis-chapter-6, thesis eq. 6.13-6.18).
 
 Within one step (t_{k-1} -> t_k, geometry and active set frozen) the load is linear in time,
 T(s) = T_{k-1} + (T_k - T_{k-1}) s / dt, so with r(s) = K^-1 (T(s) - p) the increment obeys
@@ -12,7 +12,7 @@ with weights (phi, psi) that depend only on z = dt / tau:
 - rk2 (the thesis's Heun step): phi = z - z^2 / 2, psi = z / 2; its creep amplification
   1 - z + z^2 / 2 exceeds 1 in modulus for z > 2, i.e. dt > 2 tau.
 Since the dashpots carry T - (p + K u) at the end of the step, the total spring force (elastic +
-viscous) equals the quasi-static elastic solution under T_k: pressure follows the load (SPEC 4).
+viscous) equals the quasi-static elastic solution under T_k: pressure follows the load (docs/method.md#4-viscoelastic-edem-thesis-chapter-6).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def integrator_weights(dt_s: float, relaxation_time_s: float, integrator: str) -
 
 
 def check_rk2_stability(time_s, relaxation_time_s: float, allow_unstable: bool, file: str | None = None) -> list[str]:
-    """Refuse RK2 beyond dt > 2 tau (or warn when the scene insists), SPEC 4."""
+    """Refuse RK2 beyond dt > 2 tau (or warn when the scene insists), docs/method.md#4-viscoelastic-edem-thesis-chapter-6."""
     dt = float(np.max(np.diff(time_s), initial=0.0))
     if dt <= RK2_STABILITY_LIMIT * relaxation_time_s:
         return []

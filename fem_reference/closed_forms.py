@@ -1,4 +1,4 @@
-"""Closed-form solutions used to verify the FE contact model (SPEC 5). numpy only (no dolfinx). Units mm, N, MPa.
+"""Closed-form solutions used to verify the FE contact model (docs/method.md#6-the-fe-reference-and-its-discrete-twins). numpy only (no dolfinx). Units mm, N, MPa.
 
 * Hertz line contact (plane strain) of a rigid cylinder, radius R, pressed with a load P' per
   unit length on an elastic half-space (E, nu):

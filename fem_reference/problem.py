@@ -1,4 +1,4 @@
-"""State of one static FE contact solve (SPEC 5), independent of scene files.
+"""State of one static FE contact solve (docs/method.md#6-the-fe-reference-and-its-discrete-twins), independent of scene files.
 
 Only numpy/scipy here: importing this module must not import dolfinx. Units mm, N, MPa.
 
@@ -501,7 +501,7 @@ class FEContactResult:
         return self.force_residual_n / float(np.linalg.norm(self.applied_force_n))
 
     def summary(self) -> dict[str, Any]:
-        """JSON-ready numbers (SPEC 9 summary keys where they apply)."""
+        """JSON-ready numbers (summary keys of docs/result-format.md where they apply)."""
         return {
             "method": f"fe-{self.method}",
             "element": self.element,

@@ -1,10 +1,10 @@
-"""The FE reference of a whole scene (SPEC 5 and 9): ``edem fe SCENE``.
+"""The FE reference of a whole scene (docs/method.md#6-the-fe-reference-and-its-discrete-twins, docs/result-format.md): ``edem fe SCENE``.
 
 :func:`run_scene` solves, for each selected time point of a scene, one static force-controlled
 frictionless FE contact problem (:func:`fem_reference.contact.solve_contact`) and writes the same
 result directory as ``edem run``.
 
-Models (SPEC 5): :data:`fem_reference.models.FE_MODELS` (``slab``, the twin of the ``threshold``
+Models (docs/method.md#6-the-fe-reference-and-its-discrete-twins): :data:`fem_reference.models.FE_MODELS` (``slab``, the twin of the ``threshold``
 law, and ``layer``, the twin of the ``gap`` laws), built with :mod:`geometries.fe_solids`.
 
 The obstacle is F's triangulation at the time point's pose (:class:`RigidSurface`); the load is
@@ -29,7 +29,7 @@ thickness, ceil(thickness / size). Measured on the ideal ankle standing (slab, 3
 displacement, contact area) of P2 at 0.7 mm (402 k DOFs, 8 min, 8 GB); P1 at 0.5 mm 71 k DOFs,
 about 23 s, within 2 %; P1 at 1.0 mm 10 k DOFs, 2-4 s, within 2.5 % (a quick look).
 
-Result directory (SPEC 9, the layout of ``edem run``, written by :mod:`edem.resultdir`): summary.json (``n_dofs`` for
+Result directory (docs/result-format.md, the layout of ``edem run``, written by :mod:`edem.resultdir`): summary.json (``n_dofs`` for
 ``n_springs``, plus element, mesh size, Newton iterations, strains, the contact-area
 definitions), timeseries.csv with exactly ``edem.resultdir.TIMESERIES_COLUMNS`` (``iterations`` =
 Newton iterations), pressure.pvd + pressure_NNNN.vtp per solved time point: the FE contact
@@ -145,7 +145,7 @@ class FERunResult:
         return max((s.n_dofs for s in self.steps), default=0)
 
     def summary(self) -> dict[str, Any]:
-        """summary.json (SPEC 9 keys, ``n_dofs`` for ``n_springs``, plus the FE details)."""
+        """summary.json (docs/result-format.md keys, ``n_dofs`` for ``n_springs``, plus the FE details)."""
         steps = self.steps
         last = steps[-1]
         s = self.settings
@@ -355,7 +355,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
               progress: Callable[[int], None] | None = None, overwrite: bool = False,
               on_size: Callable[[Any], None] | None = None) -> FERunResult:
     """Solve the FE reference of ``scene`` (an :class:`edem.scene.Scene`) at the selected time
-    points and, with ``out_dir``, write the SPEC 9 result directory (rank 0 only).
+    points and, with ``out_dir``, write the result directory (docs/result-format.md) (rank 0 only).
 
     Settings come from the arguments, then the scene's ``[fe]`` table (model, mesh_size_mm,
     degree, element, layers_through_thickness), then the defaults (:func:`resolve_settings`).
@@ -699,7 +699,7 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
 
 
 # --------------------------------------------------------------------------------------------
-# the result directory (SPEC 9)
+# the result directory (docs/result-format.md)
 # --------------------------------------------------------------------------------------------
 
 

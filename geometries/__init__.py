@@ -1,1 +1,1 @@
-"""Geometry builders (gmsh) and mesh import (meshio) for the discrete and FE models (SPEC 6)."""
+"""Geometry builders (gmsh) and mesh import (meshio) for the discrete and FE models (docs/method.md#8-built-in-geometries)."""

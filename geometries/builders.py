@@ -1,4 +1,4 @@
-"""Built-in geometries of the ankle contact problem (SPEC 6; thesis sections 4.2.2 and 4.3.3).
+"""Built-in geometries of the ankle contact problem (docs/method.md#8-built-in-geometries; thesis sections 4.2.2 and 4.3.3).
 
 Every builder is a plain function with keyword parameters and documented defaults; it returns a
 :class:`BuiltGeometry` (the mobile surface M = talus, the fixed surface F = tibia, the ankle axis,
@@ -576,7 +576,7 @@ def ideal_ankle(
     assert n_f[0, 2] < 0 and (not p["malleolus"] or n_f[-1, 0] > 0)
 
     description = (
-        "Idealised ankle (thesis section 4.3.3, SPEC 6): talus = cylinder patch "
+        "Idealised ankle (thesis section 4.3.3, docs/method.md#8-built-in-geometries): talus = cylinder patch "
         f"R = {R:g} mm, width {W:g} mm, arc {p['arc_deg']:g} deg "
         f"({R * arc * W / 100.0:.2f} cm^2; thesis 11.15 cm^2, 2974 triangles), "
         f"{mobile.n_triangles} triangles (gmsh, size {size:.3g} mm); tibia = plafond plane "
@@ -712,7 +712,7 @@ def hemispheres(
         ankle_axis_direction=np.array([1.0, 0.0, 0.0]),
         ligaments=(),
         description=(
-            "Concentric hemispheres (thesis section 4.2.2, SPEC 6): reference radius "
+            "Concentric hemispheres (thesis section 4.2.2, docs/method.md#8-built-in-geometries): reference radius "
             f"{p['radius_mm']:g} ({p['reference_subdivisions']} icosahedron subdivisions, "
             f"{mobile.n_triangles} triangles), target radius {p['target_radius_mm']:g} "
             f"({p['subdivisions']} subdivisions, {fixed.n_triangles} triangles); exact spring "
@@ -893,7 +893,7 @@ def subject_ankle(
     mesh_size_mm: float | None = None,
     fixed_mesh_size_mm: float | None = None,
 ) -> BuiltGeometry:
-    """Subject-like talar dome and tibial plafond with seeded anatomical variation (SPEC 6).
+    """Subject-like talar dome and tibial plafond with seeded anatomical variation (docs/method.md#8-built-in-geometries).
 
     Parameters (documented ranges in :data:`SUBJECT_RANGES`, defaults in
     :data:`SUBJECT_DEFAULTS`): with ``seed=None`` every unset parameter takes its default; with
@@ -1033,7 +1033,7 @@ def subject_ankle(
                             source="subject_ankle")
 
     description = (
-        "Subject-like ankle (SPEC 6): parametric talar trochlea (radius "
+        "Subject-like ankle (docs/method.md#8-built-in-geometries): parametric talar trochlea (radius "
         f"{R:.2f} mm, width {W:.2f} mm, {widen:.2f} mm wider anteriorly, arc "
         f"{resolved['talar_arc_deg']:.1f} deg, central groove {dgroove:.2f} mm, rim roll-off "
         f"{rim:.2f} mm; {mobile.n_triangles} triangles) under an incongruent plafond (radius "

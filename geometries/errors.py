@@ -1,4 +1,4 @@
-"""Errors the user can act on (SPEC 9: exit status 2 on bad input, 1 on a failed check).
+"""Errors the user can act on (README.md#command-line: exit status 2 on bad input, 1 on a failed check).
 
 Defined in the lowest layer that raises them; :mod:`edem` re-exports them.
 """
@@ -9,7 +9,7 @@ from pathlib import Path
 
 
 class InputError(ValueError):
-    """Bad input: names the file, the key and what was expected (SPEC 9, exit status 2).
+    """Bad input: names the file, the key and what was expected (README.md#command-line, exit status 2).
 
     A ValueError, so code that guards against bad values catches it too.
     """

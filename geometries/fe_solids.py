@@ -1,4 +1,4 @@
-"""Tetrahedral cartilage solids for the FE reference (SPEC 5).
+"""Tetrahedral cartilage solids for the FE reference (docs/method.md#6-the-fe-reference-and-its-discrete-twins).
 
 Two solids are built on the mobile (talus) surface M, both by extruding triangles of M into
 prisms along vertex normals and splitting every prism into three tetrahedra (plain numpy; no
@@ -427,7 +427,7 @@ def slab_solid(
     mesh_size_mm: float | None = None,
     layers_through_thickness: int | None = None,
 ) -> FESolid:
-    """Conforming cartilage slab between M's candidate surface and the tibia (SPEC 5).
+    """Conforming cartilage slab between M's candidate surface and the tibia (docs/method.md#6-the-fe-reference-and-its-discrete-twins).
 
     Candidates are M's triangles with a finite spring length 0 < h <= ``max_spring_length_mm``
     (``spring_length_mm`` has one entry per triangle of ``mobile``; ``inf``/``nan`` = no hit).
@@ -466,7 +466,7 @@ def layer_solid(
     mesh_size_mm: float | None = None,
     layers_through_thickness: int | None = None,
 ) -> FESolid:
-    """Uniform cartilage layer of thickness t bonded to the whole mobile surface (SPEC 5).
+    """Uniform cartilage layer of thickness t bonded to the whole mobile surface (docs/method.md#6-the-fe-reference-and-its-discrete-twins).
 
     Every vertex of M is offset along its area-weighted vertex normal by ``thickness_mm``
     (exactly t at the vertices); layers default to ceil(t / mesh size); the surface is

@@ -1,7 +1,7 @@
-"""Import, cleaning and orientation of triangulated bone surfaces (SPEC 2 and 6).
+"""Import, cleaning and orientation of triangulated bone surfaces (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#8-built-in-geometries).
 
-SPEC 6: real meshes (STL/OBJ/PLY/VTK/VTU/VTP) load through meshio "with clear errors for
-non-manifold, unoriented, degenerate or unit-mismatched input". SPEC 2: every triangle of the
+docs/method.md#8-built-in-geometries: real meshes (STL/OBJ/PLY/VTK/VTU/VTP) load through meshio "with clear errors for
+non-manifold, unoriented, degenerate or unit-mismatched input". docs/method.md#1-two-rigid-bones-and-a-bed-of-springs: every triangle of the
 mobile surface M carries one spring along its unit normal, which must point out of M towards the
 fixed body F; normals are oriented "from mesh topology, not from the sign of a dot product with
 the position vector". This module turns a mesh file into a :class:`TriangleSurface` that meets
@@ -361,7 +361,7 @@ def _read_meshio(path: Path, key: str | None) -> tuple[np.ndarray, list[_Cells],
 def read_surface(
     path: str | Path, *, units: str = "mm", key: str | None = None, name: str = ""
 ) -> TriangleSurface:
-    """Read the triangles of a surface mesh file, in mm, without cleaning (SPEC 6).
+    """Read the triangles of a surface mesh file, in mm, without cleaning (docs/method.md#8-built-in-geometries).
 
     Formats: STL (ascii/binary), OBJ and PLY through meshio; legacy VTK (any dataset type, e.g.
     POLYDATA or UNSTRUCTURED_GRID), VTP and VTU through VTK's own readers. Triangles are kept,
@@ -448,7 +448,7 @@ def write_vtp(
     XML PolyData.
 
     VTK's own vtkXMLPolyDataWriter, binary: float64 points and int64 connectivity, so a
-    round trip is exact (SPEC 6). Every result directory's pressure maps use it (SPEC 9: the
+    round trip is exact (docs/method.md#8-built-in-geometries). Every result directory's pressure maps use it (docs/result-format.md: the
     discrete runs write cell data, the FE runs nodal and facet data). VTK renders the file
     in memory and Python writes it: VTK's own file output crashed (SIGSEGV) on a full disk,
     Python raises OSError (ENOSPC) instead.
@@ -475,7 +475,7 @@ def write_vtp(
 def write_surface(
     path: str | Path, surface: TriangleSurface, *, binary: bool | None = None
 ) -> None:
-    """Write the surface's triangles to ``path``; the format follows the extension (SPEC 6).
+    """Write the surface's triangles to ``path``; the format follows the extension (docs/method.md#8-built-in-geometries).
 
     VTP through :func:`write_vtp` (VTK, binary float64); STL, OBJ, PLY, VTK and VTU through
     ``meshio.write``. ``binary=None`` picks the lossless variant: ascii STL (binary STL stores
@@ -510,7 +510,7 @@ def merge_duplicate_vertices(surface: TriangleSurface, rel_tol: float = 1e-9) ->
     """Merge vertices closer than ``rel_tol`` x bounding-box diagonal; drop unused vertices.
 
     STL stores every triangle with its own three corners, so shared vertices (and with them any
-    topology: edges, components, orientation, SPEC 2) exist only after this merge. Clusters of
+    topology: edges, components, orientation, docs/method.md#1-two-rigid-bones-and-a-bed-of-springs) exist only after this merge. Clusters of
     near-coincident vertices (found with a k-d tree; chained pairs merge transitively, via
     connected components) collapse onto their lowest-index member, whose coordinates are kept
     unchanged. Vertex order is otherwise preserved.
@@ -539,7 +539,7 @@ def merge_duplicate_vertices(surface: TriangleSurface, rel_tol: float = 1e-9) ->
 def drop_degenerate_triangles(
     surface: TriangleSurface, rel_area_tol: float = 1e-12
 ) -> TriangleSurface:
-    """Drop triangles that cannot carry a spring (SPEC 2) and duplicated triangles.
+    """Drop triangles that cannot carry a spring (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs) and duplicated triangles.
 
     Dropped: repeated vertex indices, area <= ``rel_area_tol`` x mean triangle area (includes
     zero area), and second copies of a triangle over the same three vertices (either winding).
@@ -616,7 +616,7 @@ def component_labels(surface: TriangleSurface) -> np.ndarray:
 
 
 def check_manifold(surface: TriangleSurface, *, key: str | None = None) -> None:
-    """Raise InputError if an edge is shared by more than two triangles (SPEC 6).
+    """Raise InputError if an edge is shared by more than two triangles (docs/method.md#8-built-in-geometries).
 
     A spring bed needs a surface with one side towards the other body; non-manifold edges
     (T-junction sheets, internal walls) have no consistent sides. The message names how many
@@ -666,7 +666,7 @@ def signed_volume_mm3(surface: TriangleSurface) -> float:
 
 
 def orient_consistently(surface: TriangleSurface, *, key: str | None = None) -> TriangleSurface:
-    """Orient every connected component consistently from its topology (SPEC 2).
+    """Orient every connected component consistently from its topology (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs).
 
     Two triangles sharing an edge agree when they traverse it in opposite directions. The
     orientation problem is solved on the double cover of the triangle adjacency graph (node
@@ -766,7 +766,7 @@ def orient_towards(
       (median generalised winding number of up to ``n_winding_samples`` of them > 1/2: a
       fixed shell around the mobile body), then inward. The dot-product rule is not used for
       closed surfaces: it is negative for any outward closed surface seen from outside.
-    SPEC 2: the spring normals of M point towards F; F's normals point towards M.
+    docs/method.md#1-two-rigid-bones-and-a-bed-of-springs: the spring normals of M point towards F; F's normals point towards M.
     """
     points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
     surface = orient_consistently(surface, key=key)
@@ -820,7 +820,7 @@ def orient_pair(
     mobile: TriangleSurface, fixed: TriangleSurface, *, mobile_key: str | None = None,
     fixed_key: str | None = None, near_mm: float | None = None,
 ) -> tuple[TriangleSurface, TriangleSurface]:
-    """Orient M's normals towards F and F's normals towards M (SPEC 2), per component.
+    """Orient M's normals towards F and F's normals towards M (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs), per component.
 
     Each body is oriented with :func:`orient_towards` against the other body's vertices: open
     patches by the nearest other-body vertex of their triangles near it (within ``near_mm`` of
@@ -837,7 +837,7 @@ def clean_surface(
     degenerate_rel_area: float = 1e-12,
 ) -> TriangleSurface:
     """Merge duplicate vertices, drop degenerate/duplicate triangles, refuse non-manifold
-    edges, orient consistently (closed components outward). SPEC 2 and 6.
+    edges, orient consistently (closed components outward). docs/method.md#1-two-rigid-bones-and-a-bed-of-springs and 6.
 
     Raises InputError if nothing is left, for non-manifold edges and for non-orientable pieces.
     """
@@ -853,7 +853,7 @@ def clean_surface(
 
 def check_units(surface: TriangleSurface, units: str = "mm", *, refuse: bool = False, key: str | None = None) -> float:
     """Warn (or with ``refuse``, raise InputError) when the bounding-box diagonal (in mm)
-    suggests the wrong length unit (SPEC 6).
+    suggests the wrong length unit (docs/method.md#8-built-in-geometries).
 
     Below 1 mm the mesh most likely is in metres (suggest ``units = "m"``); above 2000 mm it
     is larger than any joint, most likely micrometres or another unit. A scene refuses such a
@@ -894,7 +894,7 @@ def check_pair_distance(
 ) -> float:
     """Smallest vertex-to-vertex distance between the bodies (mm), checked against h_max.
 
-    No spring can be a candidate (SPEC 2: ray length h <= h_max) when the bodies are further
+    No spring can be a candidate (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs: ray length h <= h_max) when the bodies are further
     apart than 10 h_max + the longest triangle edge of either body (the edge term covers the
     gap between vertex-to-vertex and surface-to-surface distance). Raises InputError then;
     the distance it quotes is then taken over evenly spaced subsets of the vertices (an upper
@@ -927,7 +927,7 @@ def prepare_surface(
     path: str | Path, *, units: str = "mm", key: str | None = None, name: str = "",
     merge_rel_tol: float = 1e-9, refuse_units: bool = False,
 ) -> TriangleSurface:
-    """Read a mesh file and clean it: the entry point for one scene mesh (SPEC 6).
+    """Read a mesh file and clean it: the entry point for one scene mesh (docs/method.md#8-built-in-geometries).
 
     read (:func:`read_surface`) -> unit check (:func:`check_units`) -> clean and orient
     (:func:`clean_surface`). Open patches come back with consistent but not yet globally
@@ -943,7 +943,7 @@ def prepare_pair(
     max_spring_length_mm: float | None = None, mobile_key: str | None = "geometry.mobile",
     fixed_key: str | None = "geometry.fixed",
 ) -> tuple[TriangleSurface, TriangleSurface]:
-    """Read, clean and orient the mobile and fixed surfaces of a scene (SPEC 2 and 6).
+    """Read, clean and orient the mobile and fixed surfaces of a scene (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#8-built-in-geometries).
 
     Returns ``(mobile, fixed)`` with M's normals towards F and F's towards M. With
     ``max_spring_length_mm`` the bodies are also checked to be close enough for springs. A mesh

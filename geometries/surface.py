@@ -1,4 +1,4 @@
-"""Triangulated bone surfaces: the shared geometry type of the discrete solver (SPEC 2)."""
+"""Triangulated bone surfaces: the shared geometry type of the discrete solver (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs)."""
 
 from __future__ import annotations
 

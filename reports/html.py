@@ -1,4 +1,4 @@
-"""One HTML page per campaign (SPEC 1, 9): cases, verdicts, figures, scenes, versions, run times.
+"""One HTML page per campaign (docs/campaigns.md, docs/result-format.md): cases, verdicts, figures, scenes, versions, run times.
 
 :func:`write_campaign_report` takes the campaign summary of :func:`verification.runner.run_campaign`
 (the content of the campaign's metrics.json) and writes ``report.html`` next to it, with its
@@ -24,9 +24,11 @@ from reports.plots import plot_timeseries
 from verification.analyses import grid_of
 from verification.campaigns import instant_indices
 from verification.status import Status
+from verification.verdicts import CASE_VERDICTS, VERDICT_MEANINGS, headline
 
-
-STATUS_COLOURS = {Status.PASSED: "#1b7f3a", Status.FAILED: "#b3261e", Status.ERROR: "#b3261e", Status.UNAVAILABLE: "#8a6d00"}
+#: case verdicts (verification.verdicts) and analysis statuses
+STATUS_COLOURS = {Status.VERIFIED: "#1b7f3a", Status.FLAGGED: "#c05600", Status.REFUSED_AS_DECLARED: "#1b5e9a", Status.RAN: "#555555",
+                  Status.REPORTED: "#555555", Status.FAILED: "#b3261e", Status.ERROR: "#b3261e", Status.UNAVAILABLE: "#8a6d00"}
 
 
 def _value(v: Any) -> float:
@@ -109,6 +111,28 @@ def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
             ax.plot(xr, y0 * (xr / x0) ** slope, ":", color="grey", label=f"slope {slope:g}")
         _finish_panel(ax, spec["logx"], log, spec["x"].replace("_", " "), metric)
     _save(plt, fig, spec["title"], path)
+
+
+def _lines_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
+    """kind "lines": every metric of ``y`` against the cases' ``params[x]`` on one small chart
+    (relative errors in %), with ``exact["band"]`` drawn as the declared band."""
+    plt = _matplotlib()
+    names = [n for n in spec["cases"] if n in rows and rows[n]["status"] not in ("unavailable", "error")]
+    xs = np.array([_value(rows[n]["params"].get(spec["x"])) for n in names])
+    fig, ax = plt.subplots(figsize=(6.0, 3.4), constrained_layout=True)
+    for metric, marker in zip(spec["y"], "osd^v"):
+        ys = np.array([_value(rows[n]["metrics"].get(metric)) for n in names]) * 100.0
+        ok = np.isfinite(xs) & np.isfinite(ys)
+        ax.plot(xs[ok], ys[ok], marker + "-", label=metric.replace("_rel_error", "").replace("_", " "))
+    band = (spec.get("exact") or {}).get("band")
+    if band is not None:
+        ax.axhline(100.0 * band, color="grey", ls="--", label=f"declared band {100 * band:.0f} % (peak, area)")
+    ax.set_xlabel(spec["x"].replace("_", " "))
+    ax.set_ylabel("relative error (%)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.savefig(path, dpi=110)  # small, with its title as the caption below it
+    plt.close(fig)
 
 
 def _error_time_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
@@ -282,8 +306,8 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
                 continue
             labels = [s["side"] for s in row["sides"][:2]]
             for k, (label, time_s, percent) in enumerate(instants):
-                title = f"{spec['title']}: {label}, t = {time_s:.3g} s ({percent:.0f} %)"
-                job = {"kind": "maps-at", "case": row["name"], "time_s": time_s, "labels": labels, "caption": f"{label}, {percent:.0f} %"}
+                title = f"{spec['title']}: {label}, {percent:.0f} % stance (t = {time_s:.3g} s)"
+                job = {"kind": "maps-at", "case": row["name"], "time_s": time_s, "labels": labels, "caption": f"{label}: {percent:.0f} % stance (t = {time_s:.3g} s)"}
                 jobs.append((f"{spec['name']}-{k}", title, job, involved))
             continue
         jobs.append((spec["name"], spec["title"], spec, involved))
@@ -295,7 +319,7 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
     figures = []
     for name, title, spec, inputs in jobs:
         if spec["kind"] == "note":  # nothing to draw: say why
-            figures.append({"file": "", "title": title, "error": spec["error"], "unavailable": spec["unavailable"]})
+            figures.append({"name": name, "file": "", "title": title, "error": spec["error"], "unavailable": spec["unavailable"]})
             continue
         file = f"{name}.png"
         path = fig_dir / file
@@ -307,6 +331,8 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
                     _sweep_figure(spec, rows, path)
                 elif spec["kind"] == "histogram":
                     _histogram_figure(spec, rows, path)
+                elif spec["kind"] == "lines":
+                    _lines_figure(spec, rows, path)
                 elif spec["kind"] == "timeseries":
                     _timeseries_figure(spec, rows, out_dir, path)
                 elif spec["kind"] == "error-vs-time":
@@ -331,7 +357,7 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
                 error = f"{type(exc).__name__}: {exc}"
                 index.pop(name, None)
                 path.unlink(missing_ok=True)
-        figures.append({"file": f"figures/{file}", "title": title, "error": error})
+        figures.append({"name": name, "file": f"figures/{file}", "title": title, "error": error})
     index_path.write_text(json.dumps(index, indent=1) + "\n", encoding="utf-8")
     return figures
 
@@ -351,25 +377,50 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; }
 code { font-size: 0.95em; } .small { font-size: 0.8em; color: #555; }
 td.metrics { min-width: 24em; font-size: 0.95em; } td.links { font-size: 0.9em; }
 tr.flag td { background: #fff3e0; } .analysis-status { font-weight: bold; }
+.flagged { color: #c05600; font-weight: bold; } .why { font-size: 0.85em; color: #555; }
+#trust-summary { background: #f7f9fc; border: 1px solid #d8e0ea; padding: 0.2em 1em 0.8em; }
+#trust-summary li { margin: 0.3em 0; } figure.small-figure img { max-width: 620px; }
+table.legend { margin: 0.5em 0; }
 """
 
 
 def _analyses_html(analyses: list[dict[str, Any]]) -> list[str]:
     """One table per campaign-level analysis (verification.analyses): headline numbers first."""
     h = html.escape
-    colours = STATUS_COLOURS
-    parts = ["<h2>Analyses</h2>"]
+    parts = ["<h2>Analyses</h2>"] if analyses else []
     for result in analyses:
-        colour = colours.get(result["status"], "#444")
+        colour = STATUS_COLOURS.get(result["status"], "#444")
         parts.append(f'<h3>{h(result["title"])} <span class="analysis-status" style="color:{colour}">[{h(result["status"])}]</span></h3>')
-        if result.get("columns"):
-            parts.append("<table><tr>" + "".join(f"<th>{h(str(c))}</th>" for c in result["columns"]) + "</tr>")
-            for row in result["rows"]:
-                cls = ' class="flag"' if row.get("flag") else ""
-                parts.append(f"<tr{cls}>" + "".join(f"<td>{h(str(c))}</td>" for c in row["cells"]) + "</tr>")
-            parts.append("</table>")
-        for note in result.get("notes", []):
-            parts.append(f'<p class="small">{h(str(note))}</p>')
+        parts += _analysis_table(result)
+    return parts
+
+
+def _analysis_table(result: dict[str, Any]) -> list[str]:
+    h = html.escape
+    parts = []
+    if result.get("columns"):
+        parts.append("<table><tr>" + "".join(f"<th>{h(str(c))}</th>" for c in result["columns"]) + "</tr>")
+        for row in result["rows"]:
+            cls = ' class="flag"' if row.get("flag") else ""
+            parts.append(f"<tr{cls}>" + "".join(f"<td>{h(str(c))}</td>" for c in row["cells"]) + "</tr>")
+        parts.append("</table>")
+    for note in result.get("notes", []):
+        parts.append(f'<p class="small">{h(str(note))}</p>')
+    return parts
+
+
+def _trust_html(result: dict[str, Any], figures: list[dict[str, Any]]) -> list[str]:
+    """The trust summary (analysis kind "trust"): sentences, the error-vs-nu chart, the table."""
+    h = html.escape
+    parts = [f'<section id="trust-summary"><h2>{h(result["title"])}</h2>']
+    sentences = result.get("values", {}).get("sentences", [])
+    if sentences:
+        parts.append("<ul>" + "".join(f"<li>{h(text)}</li>" for text in sentences) + "</ul>")
+    figure = next((f for f in figures if f.get("name") == result.get("values", {}).get("figure") and f.get("file") and not f.get("error")), None)
+    if figure is not None:
+        parts.append(f'<figure class="small-figure"><img src="{h(figure["file"])}" alt="{h(figure["title"])}"><figcaption>{h(figure["title"])}</figcaption></figure>')
+    parts += _analysis_table(result)
+    parts.append("</section>")
     return parts
 
 
@@ -379,19 +430,25 @@ def _status_cell(status: str) -> str:
 
 
 def _metrics_cell(row: dict[str, Any]) -> str:
-    parts = []
+    """Each metric; a judged one with its tolerance, and every tolerance's reason (its basis) below."""
+    h = html.escape
+    parts, reasons = [], {}
+    marks = {"met": ("pass", "&le;"), "fail": ("fail", "&gt;"), "outside band": ("flagged", "&gt; band")}
     for metric, value in row["metrics"].items():
         verdict = row["verdicts"].get(metric)
         if verdict is None:
-            parts.append(f'<span class="na">{html.escape(metric)} = {_fmt(value)}</span>')
-        else:
-            cls = {"pass": "pass", "fail": "fail"}.get(verdict["verdict"], "na")
-            mark = {"pass": "&le;", "fail": "&gt;"}.get(verdict["verdict"], "vs")
-            parts.append(f'<span class="{cls}">{html.escape(metric)} = {_fmt(value)} {mark} {_fmt(verdict["tolerance"])}</span>')
+            parts.append(f'<span class="na">{h(metric)} = {_fmt(value)}</span>')
+            continue
+        cls, mark = marks.get(verdict["verdict"], ("na", "vs"))
+        parts.append(f'<span class="{cls}">{h(metric)} = {_fmt(value)} {mark} {_fmt(verdict["tolerance"])}</span>')
     for metric, verdict in row["verdicts"].items():
         if metric not in row["metrics"]:
             cls = "na" if verdict["verdict"] == "n/a" else "fail"
-            parts.append(f'<span class="{cls}">{html.escape(metric)}: {html.escape(verdict["verdict"])} (tolerance {_fmt(verdict["tolerance"])})</span>')
+            parts.append(f'<span class="{cls}">{h(metric)}: {h(verdict["verdict"])} (tolerance {_fmt(verdict["tolerance"])})</span>')
+        if verdict.get("reason"):
+            reasons.setdefault((verdict.get("kind", ""), verdict["reason"]), []).append(metric)
+    for (kind, reason), metrics in reasons.items():
+        parts.append(f'<span class="why">why {h(", ".join(metrics))}: [{h(kind)}] {h(reason)}</span>')
     return '<td class="metrics">' + "<br>".join(parts) + "</td>"
 
 
@@ -411,29 +468,49 @@ def _links_cell(row: dict[str, Any]) -> str:
 
 
 def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
-    """Write ``out_dir/report.html`` (and its figures) for a campaign summary; returns its path."""
+    """Write ``out_dir/report.html`` (and its figures) for a campaign summary; returns its path.
+
+    Order: the trust summary when the campaign has one (analysis kind "trust"), the verdict
+    counts with what each verdict means, the other analyses, the cases (every tolerance with its
+    reason), figures, scenes, software.
+    """
     out = Path(out_dir)
     figures = _make_figures(summary, out)
     counts, outcomes = summary["counts"], summary["outcomes"]
     h = html.escape
+    analyses = summary.get("analyses") or []
+    trust = [a for a in analyses if a.get("kind") == "trust"]
+    others = [a for a in analyses if a.get("kind") != "trust"]
+    flagged_rows = sum(1 for a in others for r in a.get("rows", []) if r.get("flag"))
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
         f"<title>edem verify {h(summary['campaign'])}</title>",
         f"<style>{CSS}</style></head><body>",
         f"<h1>Campaign <code>{h(summary['campaign'])}</code></h1>",
+    ]
+    for result in trust:
+        parts += _trust_html(result, figures)
+    parts += [
         f"<p>{h(summary['description'])}</p>",
+        f'<p id="verdict-counts"><b>{len(summary["cases"])} cases: {h(headline(counts))}</b>'
+        + (f"; {flagged_rows} comparison row(s) flagged in the analyses below" if flagged_rows else "")
+        + f". Outcomes: {outcomes['converges']} converge, {outcomes['refused']} refused.</p>",
+        '<table class="legend"><tr><th>verdict</th><th>cases</th><th>meaning</th></tr>'
+        + "".join(
+            f'<tr><td style="color:{STATUS_COLOURS[v]}"><b>{h(v)}</b></td><td class="num verdict-count" data-verdict="{h(v)}">{counts.get(v, 0)}</td><td>{h(VERDICT_MEANINGS[v])}</td></tr>'
+            for v in CASE_VERDICTS
+        )
+        + "</table>",
         "<p>"
-        + f"{len(summary['cases'])} cases: <b>{counts['passed']} passed</b>, {counts['failed']} failed, {counts['error']} crashed, "
-        + f"{counts['unavailable']} unavailable; outcomes {outcomes['converges']} converge, {outcomes['refused']} refused. "
-        + f"Finished {h(summary['finished_at'])}, wall time {summary['wall_time_s']:.1f} s "
-        + f"({summary['computed']} cases run, {summary['cached']} from the cache; the cases' own wall times add up to {summary['cases_wall_time_s']:.1f} s); "
+        + f"Finished {h(summary['finished_at'])}; this run took {summary['wall_time_s']:.1f} s ({summary['computed']} cases computed, {summary['cached']} from the cache). "
+        + f"Case wall times are those of the run that computed each case (a cached case keeps its own): they add up to {summary['cases_wall_time_s']:.1f} s. "
         + (f"Dask scheduler {h(str(summary['scheduler']))}." if summary.get("scheduler") else f"{summary.get('jobs')} worker process(es).")
         + ' Campaign data: <a href="metrics.json">metrics.json</a>.</p>',
-        *(_analyses_html(summary["analyses"]) if summary.get("analyses") else []),
+        *_analyses_html(others),
         "<h2>Cases</h2>",
-        "<table><tr><th>case</th><th>sides (a vs reference b)</th><th>status</th><th>outcome (declared)</th>"
-        "<th>metrics (value vs tolerance)</th><th>wall time (s)</th><th>results</th></tr>",
+        "<table><tr><th>case</th><th>sides (a vs reference b)</th><th>verdict</th><th>outcome (declared)</th>"
+        "<th>metrics (value vs tolerance, and why)</th><th>wall time (s)</th><th>results</th></tr>",
     ]
     for row in summary["cases"]:
         declared = f" ({h(row['expected_outcome'])})" if row.get("expected_outcome") else ""
@@ -451,6 +528,8 @@ def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
         )
     parts.append("</table>")
 
+    shown_in_trust = {r.get("values", {}).get("figure") for r in trust}
+    figures = [f for f in figures if f.get("name") not in shown_in_trust]
     parts.append("<h2>Figures</h2>")
     for fig in figures:
         if fig.get("unavailable"):

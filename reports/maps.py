@@ -1,10 +1,15 @@
 """Pressure maps of two result directories side by side (pyvista off-screen, imported only here).
 
 Three panels: side a (EDEM/DEM), side b (the FE reference, or another run) and their difference
-a - b on a's surface (b at a's spring centroids, paired as in the SPEC 8 L2 metric). a and b
+a - b on a's surface (b at a's spring centroids, paired as in the L2 metric (docs/method.md#7-comparison-metrics)). a and b
 share one colour scale [0, p_max]; the difference uses the same span, [-p_max, p_max], on a
-diverging map, so colours compare across the three panels. The contact outline (edges between
-triangles in and out of contact) is drawn on each panel.
+diverging map whose middle is white, so colours compare across the three panels and exact
+agreement is white. Every panel is drawn unlit (flat colours), so a colour reads off its bar.
+The contact outline (edges between triangles in and out of contact) is drawn on each panel.
+
+Orientation: on the built-in ankles (docs/conventions.md: +x lateral, +y anterior, +z superior)
+the maps look down on the talus from above, anterior up the page and lateral to the right, and
+each panel is labelled anterior/posterior/medial/lateral; every panel carries an axes triad.
 """
 
 from __future__ import annotations
@@ -73,6 +78,45 @@ def _frame_at(result, time_s: float):
     return result.frame(j)
 
 
+ANKLE_BUILDERS = ("ideal_ankle", "subject_ankle")
+
+
+def is_anatomical(result_dir: str | Path) -> bool:
+    """True when a result directory's scene is one of the built-in ankles (anatomical axes).
+
+    Read from the resolved scene (``scene.toml``) the run wrote, else from the built-in scene of
+    summary.json's ``scene`` name; False when neither says.
+    """
+    import json
+    import tomllib
+
+    result_dir = Path(result_dir)
+    path = result_dir / "scene.toml"
+    if not path.is_file():
+        try:
+            from edem.scene import builtin_scene_names, resolve_scene_path
+
+            name = json.loads((result_dir / "summary.json").read_text(encoding="utf-8")).get("scene", "")
+            if name not in builtin_scene_names():
+                return False
+            path = resolve_scene_path(name)
+        except (OSError, ValueError):
+            return False
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8")).get("geometry", {}).get("builtin") in ANKLE_BUILDERS
+    except (OSError, tomllib.TOMLDecodeError):
+        return False
+
+
+def _label_directions(plotter) -> None:
+    """anterior/posterior/medial/lateral around the active panel (superior view, anterior up)."""
+    for text, position in (("anterior", (0.5, 0.9)), ("posterior", (0.5, 0.2)), ("medial", (0.03, 0.55)), ("lateral", (0.97, 0.55))):
+        actor = plotter.add_text(text, position=position, viewport=True, font_size=11, color="dimgray")
+        prop = actor.GetTextProperty()
+        prop.SetJustificationToCentered() if position[0] == 0.5 else (prop.SetJustificationToLeft() if position[0] < 0.5 else prop.SetJustificationToRight())
+        prop.SetItalic(True)
+
+
 def render_pressure_maps(
     a_dir: str | Path,
     b_dir: str | Path,
@@ -80,9 +124,10 @@ def render_pressure_maps(
     *,
     time_index: int = -1,
     labels: tuple[str, str] | None = None,
-    window_size: tuple[int, int] = (1500, 520),
+    window_size: tuple[int, int] = (1500, 600),
     time_s: float | None = None,
     title: str | None = None,
+    anatomical: bool | None = None,
 ) -> Path:
     """PNG of a's pressure, b's pressure and a - b at one time point (default: the last one).
 
@@ -90,8 +135,9 @@ def render_pressure_maps(
     otherwise each directory's last time point is drawn. ``time_s`` instead picks the pressure
     map at that time in each directory (both must have one there: e.g. an FE reference solved at
     selected instants of a series). b's nodal pressure (FE point data) is drawn interpolated, cell
-    pressure piecewise constant. The view looks at a's contact region along its mean normal.
-    ``title`` is written above the panels.
+    pressure piecewise constant. ``anatomical`` (default: :func:`is_anatomical` of a): the
+    superior view of an ankle with direction labels; otherwise the view looks at a's contact
+    region along its mean normal. ``title`` is written above the panels.
     """
     import pyvista as pv
 
@@ -130,19 +176,22 @@ def render_pressure_maps(
         frame_a.points_mm[frame_a.triangles[:, 1]] - frame_a.points_mm[frame_a.triangles[:, 0]],
         frame_a.points_mm[frame_a.triangles[:, 2]] - frame_a.points_mm[frame_a.triangles[:, 0]],
     )
-    region = contact_a if contact_a.any() else areas > 0
-    view = normals[region].sum(axis=0)
-    view = view / np.linalg.norm(view) if np.linalg.norm(view) > 0 else np.array([0.0, 0.0, 1.0])
-    up = np.eye(3)[int(np.argmin(np.abs(view)))]
-    up = up - (up @ view) * view
+    if anatomical is None:
+        anatomical = is_anatomical(a_dir)
+    if anatomical:  # from above: camera on +z (superior), anterior (+y) up, so lateral (+x) is right
+        view, up = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    else:
+        region = contact_a if contact_a.any() else areas > 0
+        view = normals[region].sum(axis=0)
+        view = view / np.linalg.norm(view) if np.linalg.norm(view) > 0 else np.array([0.0, 0.0, 1.0])
+        up = np.eye(3)[int(np.argmin(np.abs(view)))]
+        up = up - (up @ view) * view
 
-    from vtkmodules.vtkCommonCore import vtkLogger
+    from geometries.render import add_orientation_triad, colour_bar_args, place_bar_title, quiet_offscreen_vtk
 
-    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)  # not the "no X server" notice of off-screen VTK
-    pv.OFF_SCREEN = True
+    quiet_offscreen_vtk()
     plotter = pv.Plotter(shape=(1, 3), off_screen=True, window_size=list(window_size), border=False)
     plotter.set_background("white")
-    bar = {"color": "black", "vertical": False, "position_x": 0.15, "position_y": 0.04, "width": 0.7, "height": 0.08, "fmt": "%.3g"}
     panels = [
         (frame_a, {"pressure_mpa": p_a}, None, "pressure_mpa", (0.0, p_max), "viridis", f"{label_a}: pressure (MPa)", contact_a),
         (
@@ -155,17 +204,27 @@ def render_pressure_maps(
             f"{label_b}: pressure (MPa)",
             contact_b,
         ),
-        (frame_a, {"difference_mpa": p_a - p_b_at_a}, None, "difference_mpa", (-p_max, p_max), "RdBu_r", f"{label_a} - {label_b} (MPa)", contact_a),
+        (frame_a, {"difference_mpa": p_a - p_b_at_a}, None, "difference_mpa", (-p_max, p_max), "bwr", f"{label_a} - {label_b} (MPa)", contact_a),
     ]
     for column, (frame, cells, points, scalars, clim, cmap, title, contact) in enumerate(panels):
         plotter.subplot(0, column)
         mesh = _polydata(frame, cells, points)
-        plotter.add_mesh(mesh, scalars=scalars, clim=clim, cmap=cmap, preference="point" if points else "cell", scalar_bar_args={**bar, "title": title})
+        # unlit: a lit surface shades exact zero (white on "bwr") to grey and shifts every colour off its bar
+        plotter.add_mesh(mesh, scalars=scalars, clim=clim, cmap=cmap, preference="point" if points else "cell", lighting=False,
+                         scalar_bar_args=colour_bar_args(title))
+        place_bar_title(plotter, title)
         outline = _outline(frame, contact, view)
         if outline is not None:
             plotter.add_mesh(outline, color="black", line_width=2)
         plotter.view_vector(view, viewup=up)
         plotter.reset_camera()
+        plotter.camera.zoom(0.8)  # room for the direction labels and the colour bar
+        border = mesh.extract_feature_edges(boundary_edges=True, feature_edges=False, manifold_edges=False, non_manifold_edges=False)
+        if border.n_cells:  # the surface's rim, so a white difference panel still shows the talus
+            plotter.add_mesh(border, color="darkgray", line_width=1)
+        add_orientation_triad(plotter, anatomical, viewport=(0.0, 0.2, 0.2, 0.42))
+        if anatomical:
+            _label_directions(plotter)
     plotter.link_views()
     if heading:
         plotter.subplot(0, 0)

@@ -23,8 +23,18 @@ def read_timeseries(result_dir: str | Path) -> dict[str, np.ndarray]:
     return columns
 
 
-def plot_timeseries(result_dirs: list[str | Path], column: str, out_png: str | Path, labels: list[str] | None = None) -> Path:
-    """One curve of ``column`` against time per result directory, on one figure (PNG)."""
+def default_plot_path(result_dirs: list[str | Path], column: str) -> Path:
+    """Where `edem plot` writes without --out: beside (not inside: a result directory is sealed by
+    its manifest) the first result directory, ``<dir>-<column>.png`` for one directory,
+    ``<dir>-vs-<other dirs>-<column>.png`` for several."""
+    names = "-vs-".join(Path(d).resolve().name for d in result_dirs)
+    return Path(result_dirs[0]).resolve().parent / f"{names}-{column}.png"
+
+
+def plot_timeseries(result_dirs: list[str | Path], column: str, out_png: str | Path | None = None, labels: list[str] | None = None) -> Path:
+    """One curve of ``column`` against time per result directory, on one figure (PNG at ``out_png``,
+    default :func:`default_plot_path`). A directory with a single time point is drawn as a marked
+    point (a line through one point would be invisible)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -36,12 +46,13 @@ def plot_timeseries(result_dirs: list[str | Path], column: str, out_png: str | P
         if column not in series:
             raise InputError(f"no column '{column}'", file=Path(directory) / "timeseries.csv", key="--column", expected="one of " + ", ".join(series))
         label = labels[i] if labels and i < len(labels) else _default_label(Path(directory))
-        ax.plot(series["time_s"], series[column], label=label)
+        single = len(series["time_s"]) == 1
+        ax.plot(series["time_s"], series[column], "o" if single else "-", markersize=8, label=label + (" (one time point)" if single else ""))
     ax.set_xlabel("time (s)")
     ax.set_ylabel(column.replace("_", " "))
     ax.grid(alpha=0.3)
     ax.legend()
-    out = Path(out_png)
+    out = Path(out_png) if out_png else default_plot_path(result_dirs, column)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=150)
     plt.close(fig)

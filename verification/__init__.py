@@ -1,1 +1,1 @@
-"""Verification campaigns, metrics and regression checks (SPEC 7-8)."""
+"""Verification campaigns, metrics and regression checks (docs/references.md#the-thesiss-figures, docs/method.md#7-comparison-metrics)."""

@@ -5,9 +5,9 @@ Each kind is a function of the analysis and the campaign's case rows (name -> ro
 
     {"name", "title", "kind", "status", "columns", "rows", "notes", "values"}
 
-``status`` is "passed" / "failed" for judged analyses (observed orders with a minimum),
-"reported" for comparisons without a verdict (the thesis's figures) and "unavailable" when
-their cases could not run. ``values`` holds the numbers for programs (tests, other reports);
+``status`` is "verified" / "failed" for judged analyses (observed orders with a minimum),
+"reported" for comparisons without a verdict, "flagged" when such a comparison has rows beyond
+its declared band (the thesis's figures) and "unavailable" when their cases could not run. ``values`` holds the numbers for programs (tests, other reports);
 ``rows`` holds display strings. A row may carry ``"flag": true`` (a large difference to look at).
 
 * ``order``: observed convergence orders of a mesh sweep (:func:`verification.fe_analytic.observed_orders`):
@@ -20,6 +20,9 @@ their cases could not run. ``values`` holds the numbers for programs (tests, oth
   range (from its lowest to its highest value, at every value of the other parameter) beside the
   thesis's.
 * ``table``: one row per case, one column per metric; cases that did not run say why.
+* ``trust``: the main job's opening answer in plain sentences with figures: DEM against the FE
+  reference on the ideal ankle (where it agrees), over Poisson's ratio, cartilage thickness and a
+  low load (where it breaks), and on the subject-like ankle.
 """
 
 from __future__ import annotations
@@ -33,7 +36,8 @@ from typing import Any
 import numpy as np
 
 from verification.fe_analytic import observed_orders
-from verification.status import ERROR, FAILED, OK, PASSED, REFUSED, REPORTED, UNAVAILABLE
+from verification.status import ERROR, FAILED, FLAGGED, OK, REFUSED, REPORTED, UNAVAILABLE, VERIFIED
+
 
 
 def _fmt(value: Any, digits: int = 4) -> str:
@@ -75,7 +79,7 @@ def order_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     settings = analysis.settings
     roundoff = float(settings.get("roundoff", 0.0))
     out_rows, values, notes = [], [], []
-    status = PASSED
+    status = VERIFIED
     judged = False
     for check in settings["checks"]:
         case_rows = [rows[n] for n in check["cases"] if n in rows]
@@ -107,7 +111,7 @@ def order_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
                 ok = entry["mean_order"] >= float(check["min_order"])
                 if check.get("monotone"):
                     ok = ok and all(abs(b) < abs(a) for a, b in zip(errors, errors[1:]))
-                verdict = "pass" if ok else "fail"
+                verdict = "met" if ok else "fail"
                 if not ok:
                     status = FAILED
             elif check["mode"] == "vs-exact" and not all(abs(b) < abs(a) for a, b in zip(errors, errors[1:])):
@@ -128,7 +132,7 @@ def order_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
                 "flag": verdict == "fail",
             }
         )
-    if not judged and status == PASSED:
+    if not judged and status == VERIFIED:
         status = REPORTED
     if all(v["verdict"] == UNAVAILABLE for v in values):
         status = UNAVAILABLE
@@ -172,8 +176,8 @@ def thesis_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]
     return {
         "columns": ["scene", "quantity", "method", "ours", "thesis", "difference", "note"],
         "rows": out_rows,
-        "status": REPORTED if available else UNAVAILABLE,
-        "notes": [f"Reported, no verdict: the thesis's figures come from its own meshes and loads (SPEC 7); differences beyond {100 * flag_rel:.0f} % are flagged."],
+        "status": (FLAGGED if any(v["flag"] for v in values) else REPORTED) if available else UNAVAILABLE,
+        "notes": [f"Reported, no verdict: the thesis's figures come from its own meshes and loads (docs/references.md#the-thesiss-figures); differences beyond {100 * flag_rel:.0f} % are flagged."],
         "values": {"rows": values},
     }
 
@@ -241,7 +245,7 @@ def sensitivity_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str,
         "rows": out_rows,
         "status": REPORTED,
         "notes": [
-            "Reported, no verdict (SPEC 7: the thesis's fig. 4.3.10 from its own mesh and stance). A change is (value at the highest - value at the lowest) / value at the "
+            "Reported, no verdict (docs/references.md#the-thesiss-figures: the thesis's fig. 4.3.10 from its own mesh and stance). A change is (value at the highest - value at the lowest) / value at the "
             f"lowest, at each value of the other parameter; flagged when it differs from the thesis's by more than {100 * flag_rel:.0f} % of it (and {100 * floor:.0f} points)."
         ],
         "values": values,
@@ -329,12 +333,113 @@ def pareto_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]
     }
 
 
+# ---------------------------------------------------------------------------------------------
+# trust
+
+
+def _signed(row: dict[str, Any], quantity: str) -> tuple[float | None, float | None, float | None]:
+    """(discrete value, FE value, signed relative difference) of ``quantity`` (peak_pressure_mpa,
+    mean_contact_area_mm2, displacement_norm_mm) at the FE's time points."""
+    a, b = _metric(row, f"a_at_b_{quantity}"), _metric(row, f"b_{quantity}")
+    if a is None or b is None or b == 0:
+        return a, b, None
+    return a, b, (a - b) / b
+
+
+def _pct(x: float | None) -> str:
+    return "–" if x is None or not math.isfinite(x) else f"{100.0 * x:+.0f} %"
+
+
+def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Plain sentences with figures: can the spring bed be trusted for an ankle, and where not.
+
+    ``settings``: base (ideal ankle standing), nu_cases (the base over Poisson's ratio),
+    layer_cases (gap law over thickness), layer_base, low_load, subject, band (the declared
+    model band), figure (the error-vs-nu chart), fe_note.
+    """
+    s = analysis.settings
+    band = float(s["band"])
+    ok = {n: rows[n] for n in analysis.cases if n in rows and rows[n]["status"] not in ("unavailable", "error") and rows[n].get("metrics")}
+    base = ok.get(s["base"])
+    if base is None:
+        why = _unavailable_message(rows[s["base"]]) if s["base"] in rows else "case not run"
+        return {"columns": [], "rows": [], "status": UNAVAILABLE, "notes": [],
+                "values": {"sentences": [f"Not answered on this installation: the comparison with the FE reference did not run ({why}). Install the `fe` extra and rerun."]}}
+    sentences = []
+    pa, pb, dp = _signed(base, "peak_pressure_mpa")
+    aa, ab, da = _signed(base, "mean_contact_area_mm2")
+    ua, ub, du = _signed(base, "displacement_norm_mm")
+    l2 = _metric(base, "pressure_l2_rel_error")
+    inside = all(x is not None and abs(x) <= band for x in (dp, da))
+    sentences.append(
+        f"Where it agrees: on the ideal ankle standing (333 N, Poisson's ratio 0.42, no ligaments), DEM's peak pressure is {_fmt(pa, 3)} MPa against the FE's "
+        f"{_fmt(pb, 3)} MPa ({_pct(dp)}) and its contact area {_fmt(aa, 4)} mm² against {_fmt(ab, 4)} mm² ({_pct(da)}): "
+        + (f"within the declared ±{100 * band:.0f} % band." if inside else f"outside the declared ±{100 * band:.0f} % band.")
+    )
+    sentences.append(
+        f"Where it is weaker even there: the pressure field differs by {_fmt(100 * l2, 2) if l2 is not None else '–'} % (L2), because the springs keep their pressure up to the "
+        f"rim of the contact patch where the FE pressure falls to zero (red rim, blue centre on the difference map), and the talus moves {_fmt(ua, 3)} mm against "
+        f"the FE's {_fmt(ub, 3)} mm ({_pct(du)})."
+    )
+    nus = [(float(ok[n]["params"].get("poissons_ratio")), _metric(ok[n], "peak_pressure_rel_error"), _metric(ok[n], "displacement_rel_error"), ok[n]["status"])
+           for n in s["nu_cases"] if n in ok]
+    if nus:
+        flagged = [nu for nu, _e, _d, st in nus if st == "flagged"]
+        sentences.append(
+            "Poisson's ratio: the peak-pressure error is " + ", ".join(f"{100 * e:.0f} % at {nu:g}" for nu, e, _d, _st in nus if e is not None)
+            + " and the displacement error " + ", ".join(f"{100 * d:.0f} %" for _nu, _e, d, _st in nus if d is not None)
+            + (f"; outside the band (flagged) from nu = {min(flagged):g}" if flagged else "")
+            + ": independent springs cannot carry the lateral coupling of nearly incompressible cartilage (the chart below)."
+        )
+    layers = [(float(ok[n]["params"].get("thickness_mm")), _metric(ok[n], "peak_pressure_rel_error"), _metric(ok[n], "contact_area_rel_error")) for n in s["layer_cases"] if n in ok]
+    if layers:
+        sentences.append(
+            "Cartilage thickness (a cylinder with a bonded layer, gap law against the FE layer, 333 N): peak-pressure error "
+            + ", ".join(f"{100 * e:.0f} % at {t:g} mm" for t, e, _a in layers if e is not None)
+            + "; contact-area error " + ", ".join(f"{100 * a:.0f} %" for _t, _e, a in layers if a is not None)
+            + ": the thicker the layer, the more the continuum spreads the load sideways, which independent springs cannot do."
+        )
+    low, layer_base = ok.get(s["low_load"]), ok.get(s["layer_base"])
+    if low is not None and layer_base is not None:
+        sentences.append(
+            f"Low loads: at {_fmt(low['params'].get('load_n'))} N the layer's peak-pressure error is {_pct(_signed(low, 'peak_pressure_mpa')[2])} against "
+            f"{_pct(_signed(layer_base, 'peak_pressure_mpa')[2])} at 333 N: a small patch is mostly rim."
+        )
+    subject = ok.get(s["subject"])
+    if subject is not None:
+        sp = _signed(subject, "peak_pressure_mpa")
+        sa = _signed(subject, "mean_contact_area_mm2")
+        sentences.append(
+            f"Subject-like ankle standing (333 N, no ligaments): DEM peak {_fmt(sp[0], 3)} MPa against the FE's {_fmt(sp[1], 3)} MPa ({_pct(sp[2])}), "
+            f"contact area {_fmt(sa[0], 4)} against {_fmt(sa[1], 4)} mm² ({_pct(sa[2])}), pressure field {_fmt(100 * (_metric(subject, 'pressure_l2_rel_error') or math.nan), 2)} % (L2)."
+        )
+    elif s["subject"] in rows:
+        sentences.append(f"Subject-like ankle: not compared here ({_unavailable_message(rows[s['subject']])}).")
+    table = []
+    for name in analysis.cases:
+        row = rows.get(name)
+        if row is None:
+            continue
+        p, a, u = _signed(row, "peak_pressure_mpa"), _signed(row, "mean_contact_area_mm2"), _signed(row, "displacement_norm_mm")
+        l2_row = _metric(row, "pressure_l2_rel_error")
+        table.append({"cells": [name, row["status"], _fmt(p[0], 3), _fmt(p[1], 3), _pct(p[2]), _fmt(a[0], 4), _fmt(a[1], 4), _pct(a[2]), _pct(u[2]),
+                                "–" if l2_row is None else f"{100 * l2_row:.0f} %"], "flag": row["status"] == "flagged"})
+    return {
+        "columns": ["case", "verdict", "DEM peak (MPa)", "FE peak (MPa)", "peak diff", "DEM area (mm²)", "FE area (mm²)", "area diff", "displacement diff", "pressure L2"],
+        "rows": table,
+        "status": FLAGGED if any(r["flag"] for r in table) else REPORTED,
+        "notes": [s.get("fe_note", "")] if s.get("fe_note") else [],
+        "values": {"sentences": sentences, "figure": s.get("figure", "")},
+    }
+
+
 ANALYSES: dict[str, Callable[[Any, dict[str, dict[str, Any]]], dict[str, Any]]] = {
     "order": order_analysis,
     "thesis": thesis_analysis,
     "sensitivity": sensitivity_analysis,
     "table": table_analysis,
     "pareto": pareto_analysis,
+    "trust": trust_analysis,
 }
 
 

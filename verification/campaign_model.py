@@ -1,4 +1,4 @@
-"""The campaign data model (SPEC 1, 8): cases, figures, analyses, campaigns and their validation.
+"""The campaign data model (docs/campaigns.md, docs/method.md#7-comparison-metrics): cases, figures, analyses, campaigns and their validation.
 
 A :class:`Case` names a scene (a built-in scene or a TOML file of ``verification/scenes/``) with
 ``--set``-like overrides, the sides it runs (a subject and, optionally, the reference it is judged
@@ -24,18 +24,19 @@ from typing import Any
 
 from geometries.errors import InputError
 from verification.analyses import ANALYSES
-from verification.metrics import COP_METRICS, SERIES_METRICS, SPEC8_METRICS
+from verification.metrics import COMPARISON_METRICS, COP_METRICS, SERIES_METRICS
 from verification.sides import check_side
+from verification.verdicts import Basis, bases_for
 
 SCENES_DIR = Path(__file__).resolve().parent / "scenes"
 
 #: every metric a case may report, with what it measures
 METRICS: dict[str, str] = {
-    "peak_pressure_rel_error": "|peak_a - peak_b| / peak_b (max over compared time points), SPEC 8",
-    "mean_pressure_rel_error": "relative error of the mean pressure (contact force / contact area), SPEC 8",
-    "contact_area_rel_error": "relative error of the contact area, SPEC 8",
-    "displacement_rel_error": "|u_a - u_b| / |u_b| of the bone displacement, SPEC 8",
-    "pressure_l2_rel_error": "area-weighted L2 relative error of the pressure at a's spring centroids, SPEC 8",
+    "peak_pressure_rel_error": "|peak_a - peak_b| / peak_b (max over compared time points), docs/method.md#7-comparison-metrics",
+    "mean_pressure_rel_error": "relative error of the mean pressure (contact force / contact area), docs/method.md#7-comparison-metrics",
+    "contact_area_rel_error": "relative error of the contact area, docs/method.md#7-comparison-metrics",
+    "displacement_rel_error": "|u_a - u_b| / |u_b| of the bone displacement, docs/method.md#7-comparison-metrics",
+    "pressure_l2_rel_error": "area-weighted L2 relative error of the pressure at a's spring centroids, docs/method.md#7-comparison-metrics",
     "thickness_mean_mm": "mean ray-cast spring length of side a (springs with a hit)",
     "thickness_sd_mm": "standard deviation of those lengths",
     "thickness_mean_rel_error": "|mean length - exact thickness| / exact thickness",
@@ -102,6 +103,13 @@ class Case:
     options: dict[str, Any] = field(default_factory=dict)  # side options (FE: mesh_size_mm, degree)
     params: dict[str, float] = field(default_factory=dict)  # x values for the report's figures
     maps: bool = False  # render pressure maps of a against b in the report
+    #: why each tolerance has its value (verification.verdicts.Basis), beyond the standard ones
+    #: (verification.verdicts.STANDARD_BASES); validate_campaign refuses a tolerance without one
+    basis: dict[str, Basis] = field(default_factory=dict)
+
+    def bases(self) -> dict[str, Basis]:
+        """The basis of every tolerance (the case's own, then the standard ones)."""
+        return bases_for(self.tolerance, self.basis)
 
     def scene_ref(self) -> str:
         """The argument for edem.scene.load_scene: a built-in name or an absolute TOML path."""
@@ -173,6 +181,8 @@ class Campaign:
     cases: tuple[Case, ...]
     figures: tuple[Figure, ...] = ()
     analyses: tuple[Analysis, ...] = ()
+    #: wall time of a full run with 2 jobs on 2 cores, no cache (docs/campaigns.md says how measured)
+    expected_time_s: float | None = None
 
     def case(self, name: str) -> Case:
         for case in self.cases:
@@ -181,9 +191,15 @@ class Campaign:
         raise KeyError(name)
 
 
-def uniform_tolerance(value: float, names: tuple[str, ...] = SPEC8_METRICS) -> dict[str, float]:
+def uniform_tolerance(value: float, names: tuple[str, ...] = COMPARISON_METRICS) -> dict[str, float]:
     """The same largest admissible value for every metric of ``names``."""
     return {name: value for name in names}
+
+
+def uniform_basis(kind: str, reason: str, names: tuple[str, ...] = COMPARISON_METRICS) -> dict[str, Basis]:
+    """The same :class:`Basis` for every metric of ``names``."""
+    basis = Basis(kind, reason)
+    return {name: basis for name in names}
 
 
 def ramp_overrides(n_steps: int, force_n: float, duration_s: float = 1.0) -> dict[str, Any]:
@@ -211,6 +227,10 @@ def validate_campaign(campaign: Campaign) -> None:
         stray = [m for m in case.tolerance if m not in case.metrics]
         if stray:
             raise InputError(f"tolerance on unreported metric(s) {', '.join(stray)}", key=key, expected="tolerances on the case's own metrics")
+        try:
+            case.bases()
+        except KeyError as exc:
+            raise InputError(f"tolerance without a stated reason: {exc.args[0]}", key=key, expected="a verification.verdicts.Basis per tolerance (Case.basis)") from None
         if any(not isinstance(v, (int, float)) or math.isnan(v) for v in case.tolerance.values()):
             raise InputError("tolerances must be numbers", key=key, expected="metric -> max value")
     for figure in campaign.figures:

@@ -1,11 +1,11 @@
-"""Closed-form solutions of the discrete method, as functions of a scene (SPEC 2-3, 6, 8).
+"""Closed-form solutions of the discrete method, as functions of a scene (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#2-edem-the-time-dependent-incremental-method, docs/method.md#8-built-in-geometries, docs/method.md#7-comparison-metrics).
 
 Each closed form reads what it needs from the scene (material, law, load, constraints, the
 spring centroids) and from the parameters of its built-in geometry generator, checks that the
 scene is one it solves (else InputError naming the key), and returns a
-:class:`ClosedFormSolution`: per time point the displacement of the mobile body, the SPEC 8
+:class:`ClosedFormSolution`: per time point the displacement of the mobile body, the docs/method.md#7-comparison-metrics
 scalars and the pressure field at the spring centroids. :func:`write_closed_form_results`
-writes it as a SPEC 9 result directory, so a closed form is compared with a run exactly like an
+writes it as a result directory (docs/result-format.md), so a closed form is compared with a run exactly like an
 FE reference (:func:`verification.metrics.compare_result_dirs`).
 
 With E' = E (1 - nu) / ((1 + nu)(1 - 2 nu)) (eq. 3.7), a spring of length h under a rigid
@@ -19,7 +19,7 @@ approach d along its normal carries p = E' d / h (threshold law):
   p(phi) = E' d cos(phi) / h(phi), F = E' d W R int cos^2(phi) / h(phi) dphi (the discrete
   elastic foundation of the thesis, 3.7, on the exact cylinder);
 * log-law: EDEM under a slow monotonic ramp on flat plates, where each increment sees the
-  current length h0 - d: dF = E' A dd / (h0 - d), so d = h0 (1 - exp(-F / (E' A))) (SPEC 3);
+  current length h0 - d: dF = E' A dd / (h0 - d), so d = h0 (1 - exp(-F / (E' A))) (docs/method.md#2-edem-the-time-dependent-incremental-method);
 * hemisphere-thickness: concentric hemispheres (thesis 4.2.2): every spring length is
   R_t - R; rotations fixed, p(theta) = E' d cos(theta) / t with d = 3 F t / (2 pi R^2 E').
 """
@@ -44,7 +44,7 @@ from geometries.builders import builder_defaults, builder_names
 
 @dataclass(frozen=True)
 class ClosedFormSolution:
-    """What a closed form predicts at each time point of a scene (the quantities of SPEC 8)."""
+    """What a closed form predicts at each time point of a scene (the quantities of docs/method.md#7-comparison-metrics)."""
 
     name: str
     formula: str  # one line: the closed form used
@@ -161,7 +161,7 @@ def flat_plates(scene: Scene, geometry: dict[str, Any]) -> ClosedFormSolution:
 
 
 def log_law(scene: Scene, geometry: dict[str, Any]) -> ClosedFormSolution:
-    """EDEM on flat plates under monotonic loading: d = h0 (1 - exp(-F / (E' A))), p = F / A (SPEC 3)."""
+    """EDEM on flat plates under monotonic loading: d = h0 (1 - exp(-F / (E' A))), p = F / A (docs/method.md#2-edem-the-time-dependent-incremental-method)."""
     form = "log-law"
     _check_builtin(scene, geometry, ("flat_plates",), form)
     _check_threshold(scene, form)
@@ -358,7 +358,7 @@ def solve_closed_form(name: str, scene_ref: str | Path, overrides: dict[str, Any
 
 
 def write_closed_form_results(scene: Scene, solution: ClosedFormSolution, out_dir: str | Path, wall_time_s: float = 0.0) -> Path:
-    """The SPEC 9 result directory of a closed form (method "closed-form:<name>").
+    """The result directory (docs/result-format.md) of a closed form (method "closed-form:<name>").
 
     The pressure maps are the mobile surface translated by the closed-form displacement, with
     cell data pressure_mpa (the closed form at the spring centroids), spring_length_mm,

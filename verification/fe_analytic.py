@@ -1,8 +1,8 @@
-"""The FE reference against its closed forms (SPEC 5): problems that do not go through scenes.
+"""The FE reference against its closed forms (docs/method.md#6-the-fe-reference-and-its-discrete-twins): problems that do not go through scenes.
 
 Two FE problems of :mod:`fem_reference` (its core API: meshes, :class:`FEContactProblem`,
 :func:`solve_contact`), set up as the core's own tests set them up (tests/fem_reference), and
-their closed forms (:mod:`fem_reference.closed_forms`), each written as a SPEC 9 result
+their closed forms (:mod:`fem_reference.closed_forms`), each written as a docs/result-format.md result
 directory so that a campaign case compares them like any two sides
 (:func:`verification.metrics.compare_result_dirs`):
 
@@ -14,7 +14,7 @@ directory so that a campaign case compares them like any two sides
 * ``confined-compression``: a slab 10 x 8 x 2 mm bonded at z = 0, lateral faces on rollers,
   120 N on its bone against a rigid plane: p = F / A and d = p h / E' (p = E' d / h).
 
-Cartilage of SPEC 7 (E = 10.35 MPa, nu = 0.42). Options of a case: ``mesh_size_mm`` and
+Cartilage of docs/references.md#the-thesiss-figures (E = 10.35 MPa, nu = 0.42). Options of a case: ``mesh_size_mm`` and
 ``element`` (P1, P2, TH; default P2). dolfinx is imported only when an FE problem is solved.
 """
 
@@ -31,7 +31,7 @@ import numpy as np
 from edem.errors import InputError
 from edem.resultdir import write_static_result_dir
 
-MATERIAL = {"youngs_modulus_mpa": 10.35, "poissons_ratio": 0.42}  # SPEC 7 cartilage
+MATERIAL = {"youngs_modulus_mpa": 10.35, "poissons_ratio": 0.42}  # docs/references.md#the-thesiss-figures cartilage
 
 
 @dataclass(frozen=True)
@@ -145,7 +145,7 @@ def solve_fe_problem(name: str, options: dict[str, Any]):
 
 
 def run_fe_problem(name: str, out_dir: str | Path, options: dict[str, Any]) -> Path:
-    """Solve the named FE problem and write its SPEC 9 result directory (nodal pressure on the contact face)."""
+    """Solve the named FE problem and write its result directory (docs/result-format.md) (nodal pressure on the contact face)."""
     from fem_reference import closed_forms as cf
 
     start = time.perf_counter()
@@ -196,7 +196,7 @@ def run_fe_problem(name: str, out_dir: str | Path, options: dict[str, Any]) -> P
 
 
 def write_exact_result(name: str, out_dir: str | Path, options: dict[str, Any]) -> Path:
-    """The closed form of the named FE problem as a SPEC 9 result directory (numpy only).
+    """The closed form of the named FE problem as a result directory (docs/result-format.md) (numpy only).
 
     Its surface is the FE problem's contact face, finely gridded, with the exact pressure at the
     nodes (point data: the metrics interpolate it at the FE's points). Hertz gives no rigid

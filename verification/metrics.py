@@ -1,4 +1,4 @@
-"""Comparison metrics of SPEC 8 and the surface sampling they need (pure numpy/scipy on arrays).
+"""Comparison metrics of docs/method.md#7-comparison-metrics and the surface sampling they need (pure numpy/scipy on arrays).
 
 For one comparison of a side ``a`` (EDEM/DEM) against a reference ``b`` (FE or a closed form) at
 the same load: relative errors of peak pressure, mean pressure, contact area and bone
@@ -7,7 +7,7 @@ of the pressure field on common points: b's pressure is sampled at a's springs (
 ends when b is another surface such as an FE slab's contact face) by projecting each point onto
 b's triangulated surface (:func:`sample_onto` for nodal fields,
 exact for fields linear on the surface; :func:`sample_cells_onto` for piecewise-constant ones).
-:func:`compare_result_dirs` applies all of it to two SPEC 9 result directories.
+:func:`compare_result_dirs` applies all of it to two result directories (docs/result-format.md).
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from edem.errors import InputError
 from edem.resultdir import read_result_dir
 
 
-#: SPEC 8 metric names (each a relative error, 0 = identical) in the order they are printed.
-SPEC8_METRICS = (
+#: docs/method.md#7-comparison-metrics metric names (each a relative error, 0 = identical) in the order they are printed.
+COMPARISON_METRICS = (
     "peak_pressure_rel_error",
     "mean_pressure_rel_error",
     "contact_area_rel_error",
@@ -38,7 +38,7 @@ SPEC8_METRICS = (
 
 
 def relative_error(value: float | np.ndarray, reference: float | np.ndarray) -> float:
-    """|value - reference| / |reference| (Euclidean norms for vectors), SPEC 8.
+    """|value - reference| / |reference| (Euclidean norms for vectors), docs/method.md#7-comparison-metrics.
 
     A zero reference gives 0 when the value is zero too and +inf otherwise (never NaN).
     """
@@ -52,27 +52,27 @@ def relative_error(value: float | np.ndarray, reference: float | np.ndarray) -> 
 
 
 def peak_pressure_error(peak_mpa: float, reference_peak_mpa: float) -> float:
-    """Relative error of the peak contact pressure (SPEC 8)."""
+    """Relative error of the peak contact pressure (docs/method.md#7-comparison-metrics)."""
     return relative_error(peak_mpa, reference_peak_mpa)
 
 
 def mean_pressure_error(mean_mpa: float, reference_mean_mpa: float) -> float:
-    """Relative error of the mean contact pressure (contact force over contact area, SPEC 8)."""
+    """Relative error of the mean contact pressure (contact force over contact area, docs/method.md#7-comparison-metrics)."""
     return relative_error(mean_mpa, reference_mean_mpa)
 
 
 def contact_area_error(area_mm2: float, reference_area_mm2: float) -> float:
-    """Relative error of the contact area (SPEC 8)."""
+    """Relative error of the contact area (docs/method.md#7-comparison-metrics)."""
     return relative_error(area_mm2, reference_area_mm2)
 
 
 def displacement_error(displacement_mm: np.ndarray, reference_displacement_mm: np.ndarray) -> float:
-    """|u - u_ref| / |u_ref| of the bone displacement vectors (SPEC 8)."""
+    """|u - u_ref| / |u_ref| of the bone displacement vectors (docs/method.md#7-comparison-metrics)."""
     return relative_error(displacement_mm, reference_displacement_mm)
 
 
 def l2_relative_error(values: np.ndarray, reference: np.ndarray, weights: np.ndarray | None = None) -> float:
-    """sqrt(sum w (v - r)^2 / sum w r^2): the L2 relative error of a field on common points (SPEC 8).
+    """sqrt(sum w (v - r)^2 / sum w r^2): the L2 relative error of a field on common points (docs/method.md#7-comparison-metrics).
 
     ``weights`` are the quadrature weights of the points (e.g. the spring areas in mm^2); equal
     weights by default. A zero reference field gives 0 if the values vanish too, +inf otherwise.
@@ -244,6 +244,7 @@ def _scalars(series: dict[str, np.ndarray], k: int) -> dict[str, Any]:
         "mean": float(series["mean_pressure_mpa"][k]),
         "area": float(series["contact_area_mm2"][k]),
         "disp": np.array([series[f"disp_{x}_mm"][k] for x in "xyz"], dtype=np.float64),
+        "load": float(np.linalg.norm([series[f"force_{x}_n"][k] for x in "xyz"])),
     }
 
 
@@ -264,7 +265,7 @@ def same_mesh(frame_a, frame_b) -> bool:
 
 
 def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[str, float]:
-    """L2 relative error of a's pressure against b's at a's spring centroids (SPEC 8).
+    """L2 relative error of a's pressure against b's at a's spring centroids (docs/method.md#7-comparison-metrics).
 
     a's points are the centroids of its non-degenerate triangles (the EDEM springs), weighted by
     their areas. When b has nodal pressure (FE point data) it is interpolated at the projections
@@ -320,7 +321,7 @@ def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[
 
 
 def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm: float | None = None) -> dict[str, Any]:
-    """SPEC 8 metrics of result directory a against the reference b (both in the SPEC 9 layout).
+    """The comparison metrics (docs/method.md#7-comparison-metrics) of result directory a against the reference b (both in the docs/result-format.md layout).
 
     When both have the same time points every time point is compared and each metric is the
     largest over them (``per_time`` keeps them all); when b's time points are a subset of a's
@@ -346,6 +347,7 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
         entry: dict[str, Any] = {
             "time_a_s": float(ta[ka]),
             "time_b_s": float(tb[kb]),
+            "load_n": sb["load"],
             "peak_pressure_a_mpa": sa["peak"],
             "peak_pressure_b_mpa": sb["peak"],
             "mean_pressure_a_mpa": sa["mean"],
@@ -361,7 +363,7 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
         }
         entry.update(field_error(a.frame(frame_index(a, ka)), b.frame(frame_index(b, kb)), max_distance_mm))
         per_time.append(entry)
-    metrics = {name: max(float(e[name]) for e in per_time) for name in SPEC8_METRICS}
+    metrics = {name: max(float(e[name]) for e in per_time) for name in COMPARISON_METRICS}
     return {
         "a": str(a.path),
         "b": str(b.path),
@@ -376,7 +378,39 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
         "n_common_points": min(e["n_common_points"] for e in per_time),
         "max_projection_distance_mm": max(e["max_projection_distance_mm"] for e in per_time),
         "per_time": per_time,
+        "peak_load_index": int(np.argmax([e["load_n"] for e in per_time])),
+        "warnings": scene_differences(a_dir, b_dir),
     }
+
+
+def scene_differences(a_dir: str | Path, b_dir: str | Path) -> list[str]:
+    """What makes two runs not like for like: different ligaments or constraints in their resolved
+    scenes (scene.toml, edem.resultdir.record_provenance), or ligaments on one side of an FE
+    comparison (the FE models none). Empty when they match or a directory has no resolved scene."""
+    import tomllib
+
+    from edem.resultdir import SCENE_FILE, read_result_dir
+
+    scenes, methods = [], []
+    for directory in (a_dir, b_dir):
+        path = Path(directory) / SCENE_FILE
+        try:
+            scenes.append(tomllib.loads(path.read_text(encoding="utf-8")))
+        except (OSError, tomllib.TOMLDecodeError):
+            return []
+        methods.append(str(read_result_dir(directory).summary.get("method", "")))
+    ligaments = [sorted((str(l.get("name", "")), l.get("youngs_modulus_mpa"), l.get("area_mm2")) for l in s.get("ligaments", [])) for s in scenes]
+    fixed = [sorted(s.get("constraints", {}).get("fixed_dofs", [])) for s in scenes]
+    out = []
+    for k, (method, ligs) in enumerate(zip(methods, ligaments)):
+        if method.startswith("fe-") and ligaments[1 - k]:
+            out.append(f"{'ab'[k]} is the FE reference, which models no ligaments; {'ab'[1 - k]} has {len(ligaments[1 - k])} "
+                       f"({', '.join(n for n, *_ in ligaments[1 - k])}): not like for like (remove the [[ligaments]] tables of the scene)")
+    if not any(m.startswith("fe-") for m in methods) and ligaments[0] != ligaments[1]:
+        out.append(f"the ligaments differ: a has {[n for n, *_ in ligaments[0]] or 'none'}, b has {[n for n, *_ in ligaments[1]] or 'none'} (or their moduli or areas)")
+    if fixed[0] != fixed[1]:
+        out.append(f"the constraints differ: a fixes {fixed[0] or 'nothing'}, b fixes {fixed[1] or 'nothing'}")
+    return out
 
 
 def matching_time_points(time_a: np.ndarray, time_b: np.ndarray) -> list[int] | None:
@@ -458,7 +492,8 @@ def series_metrics(series: dict[str, np.ndarray], prefix: str = "") -> dict[str,
 
 def format_metrics_table(comparison: dict[str, Any]) -> str:
     """Plain-text table of a :func:`compare_result_dirs` result (what `edem compare` prints)."""
-    last = comparison["per_time"][-1]
+    per_time = comparison["per_time"]
+    last = per_time[comparison.get("peak_load_index", len(per_time) - 1)]  # the headline instant: the peak load
     rows = [
         ("peak pressure (MPa)", last["peak_pressure_a_mpa"], last["peak_pressure_b_mpa"], "peak_pressure_rel_error"),
         ("mean pressure (MPa)", last["mean_pressure_a_mpa"], last["mean_pressure_b_mpa"], "mean_pressure_rel_error"),
@@ -476,7 +511,7 @@ def format_metrics_table(comparison: dict[str, Any]) -> str:
     lines = [
         f"a: {comparison['a']} ({comparison['a_method']}, {comparison['wall_time_a_s']:.3g} s)",
         f"b: {comparison['b']} ({comparison['b_method']}, {comparison['wall_time_b_s']:.3g} s), the reference",
-        f"compared: {comparison['mode']} ({len(comparison['per_time'])}), values at t = {last['time_a_s']:g} s",
+        f"compared: {comparison['mode']} ({len(per_time)}); values at the peak-load instant t = {last['time_a_s']:g} s (|F| = {last.get('load_n', math.nan):.4g} N)",
         head,
         "-" * len(head),
     ]
@@ -492,4 +527,5 @@ def format_metrics_table(comparison: dict[str, Any]) -> str:
         f"(b's {comparison['per_time'][-1]['b_pressure_source']} values; largest distance between compared points "
         f"{comparison['max_projection_distance_mm']:.3g} mm)"
     )
+    lines += [f"warning: {w}" for w in comparison.get("warnings", [])]
     return "\n".join(lines)

@@ -1,6 +1,6 @@
 """Run a campaign: cases in parallel processes (or on a Dask cluster), cached by their inputs.
 
-Each case runs in ``OUT/cases/<case>/``: one SPEC 9 result directory per side (``a-<side>``,
+Each case runs in ``OUT/cases/<case>/``: one result directory (docs/result-format.md) per side (``a-<side>``,
 ``b-<side>``) and ``metrics.json`` (every metric, the tolerance verdicts, wall times, the result
 directories). The case is cached under a key hashing its definition, the scene file and every
 file it references, the package version, the versions of the numerical libraries
@@ -21,9 +21,11 @@ After the cases, the campaign's analyses (:mod:`verification.analyses`: observed
 thesis's figures beside ours, parameter sensitivities) are computed from their metrics; they are
 cheap and never cached.
 
-Exit status of a campaign (SPEC 9): 0 when every case passes its tolerance, 1 when one fails
-(or crashes) or a judged analysis fails (an observed order below its minimum); cases whose side
-is unavailable (FE reference not installed yet) are reported and do not fail the campaign.
+Each case ends in one verdict of :mod:`verification.verdicts` (verified, flagged, refused as
+declared, ran; failed, error, unavailable), from its tolerances and the basis of each. Exit
+status of a campaign (docs/campaigns.md#verdicts): 0 unless a case failed or crashed or a judged analysis failed (an
+observed order below its minimum); flagged cases (outside a declared model band) and cases whose
+side is unavailable (FE reference not installed) are reported and do not fail the campaign.
 """
 
 from __future__ import annotations
@@ -62,16 +64,17 @@ from verification.campaign_model import Campaign, Case, validate_campaign
 from verification.campaign_safety import CampaignInterrupted, campaign_lock, init_worker, sigint_blocked, stop_children
 from verification.fe_analytic import FE_PROBLEMS, half_width_errors
 from verification.metrics import (
+    COMPARISON_METRICS,
     COP_METRICS,
     SERIES_METRICS,
-    SPEC8_METRICS,
     compare_result_dirs,
     cop_metrics,
     matching_time_points,
     series_metrics,
 )
 from verification.sides import run_side, side_modules
-from verification.status import ERROR, FAILED, OK, PASSED, REFUSED, UNAVAILABLE
+from verification.status import ERROR, FAILED, FLAGGED, OK, REFUSED, UNAVAILABLE
+from verification.verdicts import case_verdict, count_verdicts, headline, tolerance_verdicts
 
 
 #: where the hashed sources are read (a test points it at a copy)
@@ -246,7 +249,7 @@ def compute_metrics(case: Case, sides: list[dict[str, Any]]) -> tuple[dict[str, 
     if wanted & {"outcome_mismatch", "non_finite_outputs", "force_residual_rel"}:
         metrics.update(_stability_metrics(case, a))
     both = a["status"] == OK and b is not None and b["status"] == OK
-    if both and wanted & set(SPEC8_METRICS):
+    if both and wanted & set(COMPARISON_METRICS):
         comparison = compare_result_dirs(a["result_dir"], b["result_dir"])
         metrics.update(comparison["metrics"])
     if a["status"] == OK and wanted & {"thickness_mean_mm", "thickness_sd_mm", "thickness_mean_rel_error", "thickness_faceting_ratio"}:
@@ -308,23 +311,16 @@ def execute_case(case: Case, case_dir: str, key: str) -> dict[str, Any]:
 
 
 def judge(case: Case, record: dict[str, Any]) -> tuple[str, dict[str, dict[str, Any]]]:
-    """Status (passed / failed / error / unavailable) and the verdict of every tolerance."""
-    sides = record["sides"]
-    if any(s["status"] == UNAVAILABLE for s in sides):
-        return UNAVAILABLE, {}
-    crashed = any(s["status"] == ERROR for s in sides)
+    """The case's verdict (one of verification.verdicts.CASE_VERDICTS) and, per tolerance, its
+    value, tolerance, basis (kind and reason) and "met" / "fail" / "outside band" / "missing" / "n/a"."""
+    statuses = [s["status"] for s in record["sides"]]
     refused_as_declared = case.expect is not None and case.expect.outcome == "refused" and record["metrics"].get("outcome_mismatch") == 0.0
-    verdicts: dict[str, dict[str, Any]] = {}
-    for metric, tol in case.tolerance.items():
-        if metric in record["metrics"]:
-            value = as_float(record["metrics"][metric])
-            verdicts[metric] = {"value": value, "tolerance": tol, "verdict": "pass" if value <= tol else "fail"}
-        else:
-            verdicts[metric] = {"value": None, "tolerance": tol, "verdict": "n/a" if refused_as_declared else "missing"}
-    if crashed:
-        return ERROR, verdicts
-    failed = any(v["verdict"] in ("fail", "missing") for v in verdicts.values())
-    return (FAILED if failed else PASSED), verdicts
+    if any(s == UNAVAILABLE for s in statuses):
+        return UNAVAILABLE, {}
+    metrics = {m: as_float(v) for m, v in record["metrics"].items() if m in case.tolerance}
+    verdicts = tolerance_verdicts(metrics, case.tolerance, case.bases(), not_applicable=refused_as_declared)
+    expected = None if case.expect is None else case.expect.outcome
+    return case_verdict(statuses, verdicts, expected, refused_as_declared), verdicts
 
 
 def outcome_of(record: dict[str, Any]) -> str:
@@ -534,7 +530,7 @@ def _run_campaign_locked(
                 "result_dirs": [f"cases/{case.name}/{s['result_dir']}" for s in record["sides"] if s.get("result_dir")],
             }
         )
-    counts = {s: sum(1 for r in case_rows if r["status"] == s) for s in (PASSED, FAILED, ERROR, UNAVAILABLE)}
+    counts = count_verdicts([r["status"] for r in case_rows])
     outcomes = {o: sum(1 for r in case_rows if r["outcome"] == o) for o in ("converges", "refused")}
 
     by_name = {r["name"]: r for r in case_rows}
@@ -570,8 +566,7 @@ def format_summary(summary: dict[str, Any]) -> str:
     """The text `edem verify` prints: counts, outcomes, then a table of what failed."""
     counts, outcomes = summary["counts"], summary["outcomes"]
     lines = [
-        f"{summary['campaign']}: {len(summary['cases'])} cases, {counts[PASSED]} passed, {counts[FAILED]} failed, "
-        f"{counts[ERROR]} crashed, {counts[UNAVAILABLE]} unavailable ({summary['computed']} run, {summary['cached']} from the cache) "
+        f"{summary['campaign']}: {len(summary['cases'])} cases: {headline(counts)} ({summary['computed']} run, {summary['cached']} from the cache) "
         f"in {summary['wall_time_s']:.1f} s",
         f"outcomes: {outcomes['converges']} converge, {outcomes['refused']} refused",
     ]
@@ -591,6 +586,14 @@ def format_summary(summary: dict[str, Any]) -> str:
                     message = next((s["message"] for s in row["sides"] if s["status"] != OK), "")
                     if message:
                         lines.append(f"{'':34s}   ({message.splitlines()[0]})")
+    flagged = [r for r in summary["cases"] if r["status"] == FLAGGED]
+    if flagged:
+        lines.append("")
+        lines.append("flagged (outside a declared model band; reported, not a failure):")
+        for row in flagged:
+            for metric, verdict in row["verdicts"].items():
+                if verdict["verdict"] == "outside band":
+                    lines.append(f"  {row['name']:32s} {metric:26s} {verdict['value']:12.4g} > band {verdict['tolerance']:.4g}")
     unavailable = [r for r in summary["cases"] if r["status"] == UNAVAILABLE]
     for row in unavailable:
         message = next(s["message"] for s in row["sides"] if s["status"] == UNAVAILABLE)

@@ -1,6 +1,6 @@
-"""The sides a campaign case compares: a small registry of callables (SPEC 8).
+"""The sides a campaign case compares: a small registry of callables (docs/method.md#7-comparison-metrics).
 
-A side turns (scene, overrides, options) into a SPEC 9 result directory:
+A side turns (scene, overrides, options) into a result directory (docs/result-format.md):
 
 * ``edem`` / ``dem``: the discrete solver (:func:`edem.solver.run`);
 * ``fe-slab`` / ``fe-layer``: the dolfinx reference (``fem_reference.run_scene``), reported as
@@ -68,7 +68,7 @@ class SideOutcome:
 
     side: str
     status: str  # ok | refused | unavailable | error
-    result_dir: str | None  # the SPEC 9 result directory when status is ok
+    result_dir: str | None  # the result directory (docs/result-format.md) when status is ok
     message: str  # the refusal / unavailability / error message ("" when ok)
     wall_time_s: float
     error_type: str | None = None  # InputError, SolverError, ... when not ok
@@ -141,9 +141,12 @@ def _run_discrete(method: str) -> SideRunner:
             raise InputError(f"frames = {frames!r}", key="options.frames", expected=" or ".join(f'"{f}"' for f in FRAMES))
         scene = load_scene(scene_ref, overrides)
         _write_discrete(run(scene, method), out_dir, frames)
+        from edem.resultdir import record_provenance
+
+        record_provenance(out_dir, scene_ref, overrides, method=method)
         return str(out_dir)
 
-    runner.__doc__ = f"{method.upper()} (edem.solver.run) into a SPEC 9 result directory."
+    runner.__doc__ = f"{method.upper()} (edem.solver.run) into a result directory (docs/result-format.md)."
     runner.modules = DISCRETE_MODULES
     return runner
 
@@ -183,9 +186,12 @@ def _run_fe(model: str) -> SideRunner:
                 raise UnavailableError("FE reference not available: fem_reference.run_scene takes no steps= selection")
             kwargs["steps"] = list(kwargs["steps"])
         fem_reference.run_scene(scene, model=model, out_dir=out_dir, **kwargs)
+        from edem.resultdir import record_provenance
+
+        record_provenance(out_dir, scene_ref, overrides, {"model": model, **{k: options[k] for k in ("mesh_size_mm", "degree") if k in options}})
         return str(out_dir)
 
-    runner.__doc__ = f"The FE reference, {model} model (fem_reference.run_scene), SPEC 5."
+    runner.__doc__ = f"The FE reference, {model} model (fem_reference.run_scene), docs/method.md#6-the-fe-reference-and-its-discrete-twins."
     runner.modules = FE_MODULES
     return runner
 
@@ -199,7 +205,7 @@ def _run_fe_problem(name: str) -> SideRunner:
         run_fe_problem(name, out_dir, options)
         return str(out_dir)
 
-    runner.__doc__ = f"The FE core on the closed-form problem {name} (verification.fe_analytic), SPEC 5."
+    runner.__doc__ = f"The FE core on the closed-form problem {name} (verification.fe_analytic), docs/method.md#6-the-fe-reference-and-its-discrete-twins."
     runner.modules = FE_PROBLEM_MODULES
     return runner
 

@@ -2,9 +2,12 @@
 
 A side ends ``ok``, ``refused`` (InputError / SolverError: a declared outcome can expect it),
 ``unavailable`` (cannot run on this installation, e.g. no dolfinx; never faked) or ``error``
-(a crash). A case is ``passed`` or ``failed`` against its tolerance (or ``unavailable`` /
-``error`` after its sides); an analysis is ``passed`` / ``failed`` when judged, ``reported`` when
-it only shows numbers, ``unavailable`` without values.
+(a crash). A case ends in one verdict (what each means, and how a tolerance's basis decides it:
+:mod:`verification.verdicts`, docs/campaigns.md#verdicts): ``verified``, ``flagged`` (outside a
+declared model band), ``refused as declared``, ``ran`` (no accuracy verdict), ``failed``, or
+``unavailable`` / ``error`` after its sides. An analysis is ``verified`` / ``failed`` when
+judged, ``reported`` when it only shows numbers, ``flagged`` when some of its rows fall outside
+their declared band, ``unavailable`` without values.
 """
 
 from __future__ import annotations
@@ -17,10 +20,14 @@ class Status(StrEnum):
     REFUSED = "refused"
     UNAVAILABLE = "unavailable"
     ERROR = "error"
-    PASSED = "passed"
+    VERIFIED = "verified"
+    FLAGGED = "flagged"
+    REFUSED_AS_DECLARED = "refused as declared"
+    RAN = "ran"
     FAILED = "failed"
     REPORTED = "reported"
 
 
 OK, REFUSED, UNAVAILABLE, ERROR = Status.OK, Status.REFUSED, Status.UNAVAILABLE, Status.ERROR
-PASSED, FAILED, REPORTED = Status.PASSED, Status.FAILED, Status.REPORTED
+VERIFIED, FLAGGED, REFUSED_AS_DECLARED, RAN = Status.VERIFIED, Status.FLAGGED, Status.REFUSED_AS_DECLARED, Status.RAN
+FAILED, REPORTED = Status.FAILED, Status.REPORTED

@@ -187,7 +187,8 @@ def test_ctrl_c_during_edem_run_leaves_a_whole_result_or_none(tmp_path):
     for k, delay_s in enumerate((0.8, 1.5, 2.2)):
         out = tmp_path / f"r{k}"
         run_ = subprocess.Popen([sys.executable, "-m", "edem", "run", "ideal-stance", "--out", str(out)], env=env,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # SIGINT may be ignored if the suite runs as a background job
         time.sleep(delay_s)
         os.killpg(run_.pid, signal.SIGINT)
         _, err = run_.communicate(timeout=120)

@@ -1,4 +1,4 @@
-"""`edem run` end to end: the SPEC 9 result directory, the built-in scenes and bad input (exit 2)."""
+"""`edem run` end to end: the result directory (docs/result-format.md), the built-in scenes and bad input (exit 2)."""
 
 from __future__ import annotations
 

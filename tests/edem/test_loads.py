@@ -1,4 +1,4 @@
-"""Tests of edem/loads.py: scene [load] / [kinematics] tables, data files, stance table (SPEC 3, 7, 9)."""
+"""Tests of edem/loads.py: scene [load] / [kinematics] tables, data files, stance table (docs/method.md#2-edem-the-time-dependent-incremental-method, docs/references.md#the-thesiss-figures, README.md#scene-files)."""
 
 from __future__ import annotations
 
@@ -336,7 +336,7 @@ def test_kinematics_unknown_key_is_an_error(scene):
                                 scene, np.zeros(1))
 
 
-# --------------------------------------------------------------------------- stance (SPEC 7)
+# --------------------------------------------------------------------------- stance (docs/references.md#the-thesiss-figures)
 
 
 def test_thesis_stance_table_is_the_published_numbers():

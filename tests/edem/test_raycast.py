@@ -1,4 +1,4 @@
-"""Tests of edem/raycast.py: signed-window spring lengths by ray casting (SPEC 2, 6; thesis 4.2).
+"""Tests of edem/raycast.py: signed-window spring lengths by ray casting (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#8-built-in-geometries; thesis 4.2).
 
 Every test checks a closed form: ray/plane distances, the brute-force float64 Moller-Trumbore
 reference, invariance under a rigid motion of F, and the concentric-hemisphere thickness study of
@@ -277,7 +277,7 @@ def test_casting_against_moved_f_equals_casting_against_moved_vertices(backend):
 
 
 def test_concentric_hemispheres_thickness_converges_to_half():
-    """Thesis 4.2.2 / SPEC 6: rays from the unit sphere along the radius against the upper half of
+    """Thesis 4.2.2 / docs/method.md#8-built-in-geometries: rays from the unit sphere along the radius against the upper half of
     an icosphere of radius 1.5 (k = 1..5 subdivisions, facets facing inward). Exact thickness on
     the true sphere is 0.5; on the facets every length is the exact ray/facet-plane distance and
     <= 0.5, and the mean error decreases monotonically with k, below 1e-3 at k = 5."""

@@ -1,4 +1,4 @@
-"""DEM/EDEM against closed forms and invariants (SPEC 2-3, thesis chapter 3)."""
+"""DEM/EDEM against closed forms and invariants (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#2-edem-the-time-dependent-incremental-method, thesis chapter 3)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ IN_PLANE = ("tx", "ty", "rz")  # a frictionless flat plate cannot resist these
 
 
 def assert_kkt(scene, step: StepResult, displacement: np.ndarray, rtol: float = 1e-9) -> None:
-    """KKT of the unilateral problem, recomputed from the outputs (SPEC 2).
+    """KKT of the unilateral problem, recomputed from the outputs (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs).
 
     Pressures are non-negative; an out-of-contact candidate would not be compressed by the
     solved motion; spring forces balance the applied force and moment about G.
@@ -140,7 +140,7 @@ def test_active_set_reactivates_springs_where_removal_only_fails():
 
 
 def test_singular_system_names_the_unrestrained_dofs():
-    """Frictionless cylinder (k_s = 0): nothing resists sliding along its axis, tx (SPEC 2)."""
+    """Frictionless cylinder (k_s = 0): nothing resists sliding along its axis, tx (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs)."""
     scene = make_scene(cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), [0, 0, 333.0], fixed_dofs=("rx", "ry", "rz"))
     with pytest.raises(SolverError, match=r"nothing resists motion along tx"):
         run(scene, "dem")
@@ -178,7 +178,7 @@ def ramp(peak_n: float, n_up: int, n_down: int = 0) -> np.ndarray:
 def test_edem_ramp_converges_to_log_law():
     """Flat plates, slow monotonic ramp: EDEM integrates dF = E' A dd / h, i.e. d = h0 (1 - exp(-F / (E' A))).
 
-    The explicit increment is first order in the step: halving it halves the error (SPEC 3).
+    The explicit increment is first order in the step: halving it halves the error (docs/method.md#2-edem-the-time-dependent-incremental-method).
     """
     h0, area = 2.0, 400.0
     peak = 0.5 * E_CONF * area  # F / (E' A) = 0.5: clearly non-linear
@@ -204,7 +204,7 @@ def test_edem_load_then_unload_returns_to_start():
 
 
 def test_dem_and_edem_agree_on_the_first_step():
-    """From rest, the first EDEM increment is the DEM solve (no push-back yet, SPEC 3)."""
+    """From rest, the first EDEM increment is the DEM solve (no push-back yet, docs/method.md#2-edem-the-time-dependent-incremental-method)."""
     scene = make_scene(cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), ramp(800.0, 3), fixed_dofs=("tx", "rx", "ry", "rz"))
     dem, edem = run(scene, "dem").steps[0], run(scene, "edem").steps[0]
     np.testing.assert_allclose(edem.pressure_mpa, dem.pressure_mpa, rtol=1e-12, atol=1e-14)
@@ -228,7 +228,7 @@ def ligament(mobile_point, fixed_point, stiffness_area=10.0) -> Ligament:
 
 
 def test_ligaments_pull_but_never_push():
-    """Tension-only ligaments (SPEC 2): stretched -> T = E A / L0 * dL along the ligament; shortened -> 0."""
+    """Tension-only ligaments (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs): stretched -> T = E A / L0 * dL along the ligament; shortened -> 0."""
     mobile, fixed = grid_plate(20, 20, 8), plane(lambda x, y: 2.0)
     # Below the plate, pulling down: the upward load stretches it.
     below = ligament([0, 0, 0.0], [0, 0, -20.0])
@@ -258,7 +258,7 @@ def test_kinematics_rotates_the_fixed_body():
 
 
 def test_gap_law_closes_the_gap_before_carrying_load():
-    """Linear gap law, plates 0.5 mm further apart than the thickness: d = g0 + F t / (A E') (SPEC 3)."""
+    """Linear gap law, plates 0.5 mm further apart than the thickness: d = g0 + F t / (A E') (docs/method.md#2-edem-the-time-dependent-incremental-method)."""
     t, g0, force = 2.0, 0.5, 400.0
     scene = make_scene(grid_plate(20, 20, 10), plane(lambda x, y: t + g0), [0, 0, force], law="gap", thickness_mm=t, max_spring_length_mm=2 * t + g0, fixed_dofs=IN_PLANE)
     step = run(scene, "dem").steps[0]
@@ -268,7 +268,7 @@ def test_gap_law_closes_the_gap_before_carrying_load():
 
 def test_gap_log_law_matches_blankevoort_and_edem_does_not_depend_on_steps():
     """gap-log: F = -A E' ln(1 - d/t), so d = t (1 - exp(-F / (A E'))); a total law, hence EDEM's
-    final state is the same for 1 or 20 increments (SPEC 3)."""
+    final state is the same for 1 or 20 increments (docs/method.md#2-edem-the-time-dependent-incremental-method)."""
     t, area = 2.0, 400.0
     force = 0.8 * E_CONF * area
     exact = t * (1.0 - np.exp(-force / (E_CONF * area)))
@@ -283,7 +283,7 @@ def test_gap_log_law_matches_blankevoort_and_edem_does_not_depend_on_steps():
 
 def test_gap_law_contact_area_grows_with_load_on_a_tilted_plane():
     """Gap law against a plane tilted by s: only the strip where h(x) - d < t is in contact, so the
-    contact edge sits at x_c = (t + d - h0) / s and moves out as the load grows (SPEC 3)."""
+    contact edge sits at x_c = (t + d - h0) / s and moves out as the load grows (docs/method.md#2-edem-the-time-dependent-incremental-method)."""
     t, h0, s = 2.0, 2.0, 0.05  # touching at x = 0, gap opening towards +x
     fixed_dofs = ("tx", "ty", "rx", "ry", "rz")
     mobile = grid_plate(20, 20, 80)

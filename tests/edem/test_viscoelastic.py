@@ -1,4 +1,4 @@
-"""Viscoelastic EDEM (SPEC 4, thesis chapter 6) against the 1D creep solution and invariants."""
+"""Viscoelastic EDEM (docs/method.md#4-viscoelastic-edem-thesis-chapter-6, thesis chapter 6) against the 1D creep solution and invariants."""
 
 from __future__ import annotations
 
@@ -103,7 +103,7 @@ def test_vanishing_relaxation_time_recovers_elastic_edem():
 
 
 def ramp_scene(tau_s: float, dt_s: float = 0.25):
-    """The thesis ramp (SPEC 4): 200 -> 1800 N in 5 s, hold 10 s, back to 200 N in 5 s."""
+    """The thesis ramp (docs/method.md#4-viscoelastic-edem-thesis-chapter-6): 200 -> 1800 N in 5 s, hold 10 s, back to 200 N in 5 s."""
     time = np.arange(0.0, 20.0 + dt_s / 2, dt_s)
     magnitude = np.interp(time, [0, 5, 15, 20], [200, 1800, 1800, 200])
     direction = np.array([0.0, 0.0, 1.0])  # a flat plafond cannot hold a tangential load: see the scene

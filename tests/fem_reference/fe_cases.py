@@ -15,7 +15,7 @@ from fem_reference import (
 )
 from fem_reference import closed_forms as cf
 
-MATERIAL = {"youngs_modulus_mpa": 10.35, "poissons_ratio": 0.42}  # SPEC 7 cartilage
+MATERIAL = {"youngs_modulus_mpa": 10.35, "poissons_ratio": 0.42}  # docs/references.md#the-thesiss-figures cartilage
 
 # Hertz set-up: rigid cylinder R = 20 mm on a block 20 a wide (half model) and 20 a thick,
 # bonded to a rigid base; load chosen for a half-width a = 1 mm (a / R = 0.05: small strain).

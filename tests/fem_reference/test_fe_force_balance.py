@@ -122,7 +122,7 @@ def test_large_strain_warning(comm):
 
 
 def test_summary_is_json_ready(comm):
-    """The result summary has the SPEC 9 keys that apply, as plain Python types."""
+    """The result summary has the docs/result-format.md keys that apply, as plain Python types."""
     import json
 
     msh = meshes.box_slab(comm, 4.0, 4.0, 1.0, (2, 2, 1))

@@ -1,6 +1,6 @@
-"""`edem fe SCENE`: the FE reference of a whole scene (fem_reference.run_scene), SPEC 5 and 9.
+"""`edem fe SCENE`: the FE reference of a whole scene (fem_reference.run_scene), docs/method.md#6-the-fe-reference-and-its-discrete-twins and 9.
 
-Closed forms on the flat plates (slab and layer models), the SPEC 9 result directory, the ideal
+Closed forms on the flat plates (slab and layer models), the result directory (docs/result-format.md), the ideal
 ankle on a coarse mesh, time point selection, free rotations and bad input. Coarse meshes: each
 case runs in a few seconds on 2 cores.
 """
@@ -119,7 +119,7 @@ def test_flat_plates_slab_confined_interior_and_result_directory(tmp_path):
     from them the pressure is uniform (within 1 %) and equals E' d / h (0.5 %). Honest
     tolerance against the plate averages: the edges carry less, so the interior pressure is
     about 6 % above F / A and d about 6 % above (F / A) h / E' (both checked within 8 %).
-    Invariants: force residual < 1e-6 relative; the SPEC 9 layout (summary keys, the exact
+    Invariants: force residual < 1e-6 relative; the docs/result-format.md layout (summary keys, the exact
     timeseries columns, pressure.pvd, one .vtp with point and cell arrays, fixed.vtp)."""
     out = tmp_path / "fe"
     s = edem_fe(out, PLATES, "--degree", "1", "--mesh-size", "0.5",
@@ -144,7 +144,7 @@ def test_flat_plates_slab_confined_interior_and_result_directory(tmp_path):
     assert s["max_force_residual_n"] < 1e-6 * load
     assert s["final_displacement_mm"][:2] == [0.0, 0.0]
 
-    # SPEC 9 result directory
+    # result directory (docs/result-format.md)
     assert SUMMARY_KEYS <= set(s)
     assert s["method"] == "fe-slab" and s["steps"] == 1 and s["element"] == "P1"
     assert s["mesh_size_mm"] == 0.5 and s["scene"] == "flat-plates"
@@ -318,7 +318,7 @@ def test_ideal_standing_coarse_runs_and_balances_the_load(tmp_path, model):
 
 
 def test_layer_without_thickness_exits_2(capsys):
-    """SPEC 9: the layer model needs cartilage.thickness_mm; the message names the key."""
+    """docs/result-format.md: the layer model needs cartilage.thickness_mm; the message names the key."""
     assert main(["fe", PLATES, "--model", "layer", "--out", "/nonexistent/never"]) == 2
     err = capsys.readouterr().err
     assert "cartilage.thickness_mm" in err and "Traceback" not in err
@@ -333,7 +333,7 @@ def test_layer_without_thickness_exits_2(capsys):
     (["--mesh-size", "-1"], "--mesh-size"),
 ])
 def test_bad_fe_input_exits_2(capsys, args, key):
-    """SPEC 9: bad FE settings exit 2 with a message naming the key; nothing is solved."""
+    """docs/result-format.md: bad FE settings exit 2 with a message naming the key; nothing is solved."""
     assert main(["fe", PLATES, "--out", "/nonexistent/never", *args]) == 2
     err = capsys.readouterr().err
     assert key in err and "Traceback" not in err

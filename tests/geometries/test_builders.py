@@ -1,4 +1,4 @@
-"""Geometry builders, FE solids and the render (SPEC 5, 6; thesis 4.2.2 and 4.3.3)."""
+"""Geometry builders, FE solids and the render (docs/method.md#6-the-fe-reference-and-its-discrete-twins, docs/method.md#8-built-in-geometries; thesis 4.2.2 and 4.3.3)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests of geometries/mesh_io.py: mesh import, cleaning and orientation (SPEC 2 and 6).
+"""Tests of geometries/mesh_io.py: mesh import, cleaning and orientation (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#8-built-in-geometries).
 
 Every test names the invariant it checks. Meshes are built here with numpy; coordinates are
 rounded to float32 so that every format (including binary STL, which stores float32) must
@@ -99,7 +99,7 @@ def icosahedron(radius=10.0, center=(0.0, 0.0, 0.0), subdivisions=1) -> Triangle
 
 
 def cylinder_patch(radius=20.0, width=28.0, arc_deg=114.0, n_arc=24, n_w=8) -> TriangleSurface:
-    """Talus-like cylinder patch (SPEC 6), axis along y, dome top at z = 0, normals outward."""
+    """Talus-like cylinder patch (docs/method.md#8-built-in-geometries), axis along y, dome top at z = 0, normals outward."""
     th = np.radians(np.linspace(-arc_deg / 2, arc_deg / 2, n_arc + 1))
     y = np.linspace(-width / 2, width / 2, n_w + 1)
     T, Y = np.meshgrid(th, y, indexing="ij")
@@ -581,7 +581,7 @@ def test_components_are_oriented_independently():
 
 
 def test_orient_pair_cylinder_patch_and_plane():
-    """Invariant (SPEC 2): M's normals point towards F (positive z at the dome top) and F's
+    """Invariant (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs): M's normals point towards F (positive z at the dome top) and F's
     normals towards M (down), whatever the input sign of both open patches."""
     mobile = cylinder_patch()
     mobile_wrong = surf(mobile.vertices_mm, mobile.triangles[:, [0, 2, 1]])  # into the bone
@@ -600,7 +600,7 @@ def test_orient_pair_cylinder_patch_and_plane():
 @pytest.mark.parametrize("near_mm", [None, 3.5])
 @pytest.mark.parametrize("arc_deg", [180.0, 240.0, 330.0])
 def test_surface_wrapping_round_a_condyle_is_oriented_by_the_triangles_near_the_other_body(arc_deg, near_mm):
-    """Invariant (SPEC 2): an open surface wrapping round a condyle (a cylinder arc up to
+    """Invariant (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs): an open surface wrapping round a condyle (a cylinder arc up to
     330 deg) over a small plateau 0.5 mm away faces the plateau where they meet, whatever
     sign it is given. The far triangles of the wrap see the plateau behind them; with every
     triangle voting they outvoted the near ones and turned the surface inside out."""

@@ -17,7 +17,7 @@ def _summary(**extra):
     base = {
         "campaign": "synthetic",
         "description": "synthetic",
-        "counts": {"passed": 1, "failed": 0, "error": 0, "unavailable": 1},
+        "counts": {"verified": 1, "failed": 0, "error": 0, "unavailable": 1},
         "outcomes": {"converges": 2, "refused": 0},
         "finished_at": "now",
         "wall_time_s": 1.0,
@@ -32,7 +32,7 @@ def _summary(**extra):
     return {**base, **extra}
 
 
-def _row(name, status="passed", sides=None, result_dirs=()):
+def _row(name, status="verified", sides=None, result_dirs=()):
     return {
         "name": name, "description": name, "scene": "s", "scene_description": "", "overrides": {}, "status": status, "outcome": "converges",
         "expected_outcome": None, "metrics": {}, "tolerance": {}, "verdicts": {}, "params": {}, "maps": False, "wall_time_s": 0.1, "cached": False,
@@ -57,7 +57,7 @@ def test_analysis_tables_come_first_with_flagged_rows(tmp_path):
 def test_wall_times_of_hundreds_of_cases_are_a_histogram(tmp_path):
     from matplotlib.image import imread
 
-    rows = [{"name": f"c{i}", "wall_time_s": 0.1 + 0.001 * i, "status": "passed"} for i in range(400)]
+    rows = [{"name": f"c{i}", "wall_time_s": 0.1 + 0.001 * i, "status": "verified"} for i in range(400)]
     _wall_time_figure(rows, tmp_path / "w.png")
     height, width = imread(tmp_path / "w.png").shape[:2]
     assert height < 600 and width < 1000  # not 400 bars

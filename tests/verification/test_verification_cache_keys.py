@@ -8,10 +8,10 @@ import pytest
 
 import verification.runner as runner
 from verification import sources
-from verification.campaign_model import SPEC8_METRICS, Case
+from verification.campaign_model import COMPARISON_METRICS, Case
 
-DEM_CASE = Case("plates", "DEM vs the closed form", "flat-plates.toml", ("dem", "closed-form:flat-plates"), SPEC8_METRICS)
-FE_CASE = Case("plates-fe", "DEM vs the FE slab", "flat-plates.toml", ("dem", "fe-slab"), SPEC8_METRICS)
+DEM_CASE = Case("plates", "DEM vs the closed form", "flat-plates.toml", ("dem", "closed-form:flat-plates"), COMPARISON_METRICS)
+FE_CASE = Case("plates-fe", "DEM vs the FE slab", "flat-plates.toml", ("dem", "fe-slab"), COMPARISON_METRICS)
 
 
 @pytest.fixture

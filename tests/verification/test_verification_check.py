@@ -1,6 +1,7 @@
-"""`edem check`, the regression gate (SPEC 9): EDEM rerun against the stored references of
-verification/references/ (EDEM baselines and FE values). Exit 0 when within the declared
-tolerances, 1 with a table of what drifted, 2 on bad input. Perturbations go to copies in tmp_path."""
+"""`edem check`, the regression gate (docs/result-format.md): EDEM rerun against the stored references of
+verification/references/ (EDEM baselines and FE values). Drift against the stored baseline is the
+gate (exit 1 with a table); the model error against the stored FE values is reported separately,
+flagged beyond the declared band, never a failure; 2 on bad input. Perturbations go to copies in tmp_path."""
 
 from __future__ import annotations
 
@@ -13,7 +14,6 @@ from edem.cli import main
 from verification.check import (
     CHECK_SCENES,
     EDEM_TOLERANCES,
-    FE_TOLERANCES,
     REFERENCES_DIR,
     coarse_field,
     field_difference,
@@ -46,7 +46,9 @@ def test_stored_references_cover_the_declared_scenes():
 def test_check_passes_on_the_stored_references(references, capsys):
     assert main(["check", "--references", str(references)]) == 0
     out = capsys.readouterr().out
-    assert "edem check: ok" in out and "EDEM baseline" in out
+    assert "edem check: ok: no drift" in out and "EDEM baseline" in out
+    drift, model = out.split("Model error:")
+    assert "Drift:" in drift and "FE slab" not in drift  # the two are reported apart
 
 
 def test_check_fails_with_a_table_when_an_edem_baseline_drifted(references, capsys):
@@ -54,8 +56,8 @@ def test_check_fails_with_a_table_when_an_edem_baseline_drifted(references, caps
     _edit(references / "ideal-standing.json", lambda d: d["edem"]["peak_pressure_mpa"].__setitem__(0, d["edem"]["peak_pressure_mpa"][0] * (1 + 10 * tol)))
     assert main(["check", "--references", str(references)]) == 1
     out = capsys.readouterr().out
-    drifted = out.split("\n\n")[0]
-    assert "1 of" in drifted and "ideal-standing" in drifted and "peak_pressure_mpa" in drifted and "DRIFT" in drifted
+    drifted = out.split("drifted from the stored baseline:")[1]
+    assert "1 of" in out and "ideal-standing" in drifted and "peak_pressure_mpa" in drifted and "DRIFT" in drifted
     assert "subject-standing" not in drifted
 
 
@@ -65,16 +67,18 @@ def test_check_tolerates_perturbations_within_the_tolerance(references):
     assert run_check(references=references) == 0
 
 
-def test_check_fails_when_edem_moves_away_from_the_stored_fe_values(references, capsys):
+def test_model_error_beyond_the_band_is_flagged_not_failed(references, capsys):
     with_fe = [c.name for c in CHECK_SCENES if json.loads((references / f"{c.name}.json").read_text())["fe"]]
     if not with_fe:
         pytest.skip("the stored references hold no FE values (refreshed without the FE reference)")
     name = with_fe[0]
-    tol = FE_TOLERANCES["contact_area_mm2"]
-    _edit(references / f"{name}.json", lambda d: d["fe"]["contact_area_mm2"].__setitem__(0, d["fe"]["contact_area_mm2"][0] * (1 + 3 * tol)))
-    assert run_check(references=references) == 1
+    # the FE area tripled: EDEM is far from it (a model error), but EDEM itself did not move
+    _edit(references / f"{name}.json", lambda d: d["fe"]["contact_area_mm2"].__setitem__(0, d["fe"]["contact_area_mm2"][0] * 3.0))
+    assert run_check(references=references) == 0
     out = capsys.readouterr().out
-    assert f"{name}" in out.split("\n\n")[0] and "FE slab" in out.split("\n\n")[0]
+    model = out.split("Model error:")[1]
+    row = next(line for line in model.splitlines() if line.startswith(name) and "contact_area_mm2" in line)
+    assert row.rstrip().endswith("flagged") and "model errors flagged beyond the band" in out
 
 
 def test_check_fails_when_the_field_drifted(references):

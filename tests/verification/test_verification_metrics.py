@@ -1,4 +1,4 @@
-"""SPEC 8 metrics: hand-computed relative errors, exact surface sampling, two result directories."""
+"""The comparison metrics (docs/method.md#7-comparison-metrics): hand-computed relative errors, exact surface sampling, two result directories."""
 
 from __future__ import annotations
 
@@ -170,7 +170,7 @@ def write_result_dir(
     frames: list[tuple[np.ndarray, np.ndarray, dict | None, dict | None]],
     method: str,
 ) -> Path:
-    """A SPEC 9 result directory with the given time-series rows and surfaces."""
+    """A result directory (docs/result-format.md) with the given time-series rows and surfaces."""
     root.mkdir(parents=True)
     (root / "summary.json").write_text(json.dumps({"scene": "synthetic", "method": method, "wall_time_s": 0.5}), encoding="utf-8")
     with open(root / "timeseries.csv", "w", newline="", encoding="utf-8") as f:

@@ -16,8 +16,12 @@ import verification.sides as sides
 from edem.atomic_dirs import write_manifest
 from edem.cli import main
 from verification.campaigns import SCENES_DIR, Campaign, Case, Expect, get_campaign
-from verification.metrics import SPEC8_METRICS
+from verification.metrics import COMPARISON_METRICS
 from verification.runner import case_key, run_campaign
+from verification.verdicts import CLOSED_FORM, MODEL_BAND, Basis
+
+EXACT = {m: Basis(CLOSED_FORM, "test: exact") for m in COMPARISON_METRICS}
+BAND = {m: Basis(MODEL_BAND, "test: a declared band") for m in COMPARISON_METRICS}
 
 
 def tiny_campaign(**changes) -> Campaign:
@@ -38,18 +42,18 @@ def test_campaign_end_to_end_then_cache_hit(tmp_path):
     out = tmp_path / "tiny"
     first = run_campaign(tiny_campaign(), out, jobs=2, report=False)
     assert first["computed"] == 2 and first["exit_status"] == 0
-    assert first["counts"]["passed"] == 2 and first["outcomes"] == {"converges": 1, "refused": 1}
+    assert first["counts"]["verified"] == 1 and first["counts"]["refused as declared"] == 1 and first["outcomes"] == {"converges": 1, "refused": 1}
 
     data = json.loads((out / "metrics.json").read_text())
     plates = next(r for r in data["cases"] if r["name"] == "flat-plates-dem")
-    assert set(plates["metrics"]) == set(SPEC8_METRICS)
-    assert all(v["verdict"] == "pass" and v["tolerance"] == 1e-9 for v in plates["verdicts"].values())
+    assert set(plates["metrics"]) == set(COMPARISON_METRICS)
+    assert all(v["verdict"] == "met" and v["tolerance"] == 1e-9 and v["kind"] == "closed-form" and v["reason"] for v in plates["verdicts"].values())
     assert plates["wall_time_s"] > 0 and [s["side"] for s in plates["sides"]] == ["dem", "closed-form:flat-plates"]
     for rel in plates["result_dirs"]:
         assert (out / rel / "pressure.pvd").is_file() and (out / rel / "summary.json").is_file()
     case_json = json.loads((out / "cases" / "flat-plates-dem" / "metrics.json").read_text())
     assert case_json["key"] == case_key(tiny_campaign().cases[0])
-    assert case_json["status"] == "passed" and case_json["verdicts"]["displacement_rel_error"]["verdict"] == "pass"
+    assert case_json["status"] == "verified" and case_json["verdicts"]["displacement_rel_error"]["verdict"] == "met"
     pull = next(r for r in data["cases"] if r["name"] == "pull-apart")
     assert pull["outcome"] == "refused" and "no equilibrium" in pull["sides"][0]["message"]
 
@@ -61,6 +65,9 @@ def test_campaign_end_to_end_then_cache_hit(tmp_path):
     assert second["computed"] == 0 and second["cached"] == 2 and seen == [True, True]
     assert file_mtimes(out / "cases") == before  # nothing rewritten
     assert [r["metrics"] for r in second["cases"]] == [r["metrics"] for r in first["cases"]]
+    # a cached case keeps the wall time of the run that computed it (not the re-read's)
+    assert [r["wall_time_s"] for r in second["cases"]] == [r["wall_time_s"] for r in first["cases"]]
+    assert second["cases_wall_time_s"] == first["cases_wall_time_s"] and all(r["cached"] for r in second["cases"])
 
 
 def test_cache_counts_executions_and_tolerance_changes_need_no_rerun(tmp_path, monkeypatch):
@@ -76,7 +83,7 @@ def test_cache_counts_executions_and_tolerance_changes_need_no_rerun(tmp_path, m
     run_campaign(tiny_campaign(), out, jobs=1, report=False)
     assert sorted(calls) == ["flat-plates-dem", "pull-apart"]
     calls.clear()
-    strict = tiny_campaign(tolerance={**{m: 1e-9 for m in SPEC8_METRICS}, "displacement_rel_error": 0.0, "pressure_l2_rel_error": -1.0})
+    strict = tiny_campaign(tolerance={**{m: 1e-9 for m in COMPARISON_METRICS}, "displacement_rel_error": 0.0, "pressure_l2_rel_error": -1.0})
     judged = run_campaign(strict, out, jobs=1, report=False)
     assert calls == []  # the tolerance is judged, not hashed
     row = next(r for r in judged["cases"] if r["name"] == "flat-plates-dem")
@@ -117,7 +124,7 @@ def test_source_digest_covers_the_solver_package():
 
 def test_fe_side_is_reported_unavailable_not_faked(tmp_path, monkeypatch):
     monkeypatch.setattr(sides, "fe_availability", lambda *entry_point: "FE reference not available: test")
-    fe_case = Case("vs-fe", "DEM against the FE slab", "flat-plates.toml", ("dem", "fe-slab"), SPEC8_METRICS, {m: 0.1 for m in SPEC8_METRICS})
+    fe_case = Case("vs-fe", "DEM against the FE slab", "flat-plates.toml", ("dem", "fe-slab"), COMPARISON_METRICS, {m: 0.1 for m in COMPARISON_METRICS}, basis=BAND)
     summary = run_campaign(Campaign("fe", "FE", (fe_case,)), tmp_path / "fe", jobs=1, report=False)
     row = summary["cases"][0]
     assert row["status"] == "unavailable" and summary["exit_status"] == 0
@@ -166,11 +173,11 @@ def test_fe_side_calls_run_scene_and_compares_nodal_pressure(tmp_path, monkeypat
     write_results(run(load_scene(SCENES_DIR / "flat-plates.toml"), "dem"), tmp_path / "dem-copy")
     monkeypatch.setattr(fem_reference, "run_scene", stand_in, raising=False)
     monkeypatch.setattr(sides, "fe_availability", lambda: None)
-    case = Case("vs-fe", "DEM against FE", "flat-plates.toml", ("dem", "fe-layer"), SPEC8_METRICS, {m: 1e-9 for m in SPEC8_METRICS}, options={"mesh_size_mm": 0.5, "degree": 2})
+    case = Case("vs-fe", "DEM against FE", "flat-plates.toml", ("dem", "fe-layer"), COMPARISON_METRICS, {m: 1e-9 for m in COMPARISON_METRICS}, options={"mesh_size_mm": 0.5, "degree": 2}, basis=EXACT)
     summary = run_campaign(Campaign("fe", "FE", (case,)), tmp_path / "fe", jobs=1, report=False)
     assert calls == {"model": "layer", "mesh_size_mm": 0.5, "degree": 2}
     row = summary["cases"][0]
-    assert row["status"] == "passed", row["verdicts"]
+    assert row["status"] == "verified", row["verdicts"]
     assert row["metrics"]["pressure_l2_rel_error"] < 1e-12  # point data (1 MPa) used, not the cells (5 MPa)
 
 
@@ -186,11 +193,11 @@ def test_a_crashing_side_is_an_error_with_exit_status_1(tmp_path, monkeypatch):
 
 
 def test_cli_verify_exit_status_follows_the_verdicts(tmp_path, monkeypatch, capsys):
-    tiny, failing = tiny_campaign(), tiny_campaign(tolerance={m: -1.0 for m in SPEC8_METRICS})
+    tiny, failing = tiny_campaign(), tiny_campaign(tolerance={m: -1.0 for m in COMPARISON_METRICS})
     monkeypatch.setattr("verification.campaigns.campaigns", lambda: {"tiny": tiny, "tiny-failing": failing})
     assert main(["verify", "tiny", "--out", str(tmp_path / "ok"), "--jobs", "1"]) == 0
     out = capsys.readouterr().out
-    assert "2 passed" in out and f"report: {tmp_path / 'ok' / 'report.html'}" in out
+    assert "1 verified, 1 refused as declared" in out and f"report: {tmp_path / 'ok' / 'report.html'}" in out
     assert main(["verify", "tiny-failing", "--out", str(tmp_path / "bad"), "--jobs", "1"]) == 1
     out = capsys.readouterr().out
     assert "flat-plates-dem" in out and "peak_pressure_rel_error" in out
@@ -210,7 +217,7 @@ def test_cli_compare_prints_the_table_and_writes_metrics_json(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "peak pressure (MPa)" in out and "pressure field (L2)" in out
     data = json.loads((tmp_path / "cmp" / "metrics.json").read_text())
-    assert set(data["metrics"]) == set(SPEC8_METRICS) and data["metrics"]["displacement_rel_error"] < 1e-3
+    assert set(data["metrics"]) == set(COMPARISON_METRICS) and data["metrics"]["displacement_rel_error"] < 1e-3
     assert main(["compare", str(tmp_path / "nothing"), str(b)]) == 2
 
 
@@ -248,5 +255,5 @@ def test_declared_outcomes_are_checked_not_assumed(tmp_path):
         "wrongly-refused": ("failed", 1.0),
         "wrong-message": ("failed", 1.0),
         "missing-warning": ("failed", 1.0),
-        "right": ("passed", 0.0),
+        "right": ("refused as declared", 0.0),
     }

@@ -17,7 +17,7 @@ from verification.sides import fe_availability
 def test_thin_layer_campaign_pairs_every_point_with_both_models():
     campaign = get_campaign("thin-layer")
     validate_campaign(campaign)
-    assert "thin-layer (" in describe_campaigns()
+    assert f"thin-layer ({len(campaign.cases)} cases, " in describe_campaigns("thin-layer")
     by_name = {c.name: c for c in campaign.cases}
     coupled = [c for c in campaign.cases if "-coupled-" in c.name]
     assert len(coupled) * 2 == len(campaign.cases)

@@ -1,4 +1,4 @@
-"""The campaign registry (SPEC 1, 8): one module per campaign, registered here by hand.
+"""The campaign registry (docs/campaigns.md, docs/method.md#7-comparison-metrics): one module per campaign, registered here by hand.
 
 Each module of this package defines ``campaign()``, returning its :class:`Campaign`. To add a
 campaign: write ``verification/campaigns/<name>.py`` with ``campaign()`` and add the module to
@@ -18,6 +18,8 @@ subject-like ankles over the stance, EDEM).
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 from geometries.errors import InputError
 from verification.campaign_model import (
@@ -61,8 +63,8 @@ CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, 
 
 
 def campaigns() -> dict[str, Campaign]:
-    """Every campaign by name."""
-    built = (module.campaign() for module in CAMPAIGN_MODULES)
+    """Every campaign by name, with the expected run time its module measured (``EXPECTED_TIME_S``)."""
+    built = (dataclasses.replace(module.campaign(), expected_time_s=getattr(module, "EXPECTED_TIME_S", None)) for module in CAMPAIGN_MODULES)
     return {campaign.name: campaign for campaign in built}
 
 
@@ -74,16 +76,31 @@ def get_campaign(name: str) -> Campaign:
     return known[name]
 
 
-def describe_campaigns() -> str:
-    """What `edem verify --list` prints: each campaign, then one line per case."""
-    lines = []
-    for campaign in campaigns().values():
-        lines.append(f"{campaign.name} ({len(campaign.cases)} cases): {campaign.description}")
-        for case in campaign.cases:
-            versus = " vs ".join(case.sides)
-            lines.append(f"  {case.name:32s} [{versus}] {case.description}")
-        lines.append("")
-    return "\n".join(lines).rstrip() + "\n"
+def expected_time_text(seconds: float | None) -> str:
+    """"~40 s", "~11 min", "~1.5 h" or "time not measured"."""
+    if seconds is None:
+        return "time not measured"
+    if seconds < 90:
+        return f"~{seconds:.0f} s"
+    if seconds < 5400:
+        return f"~{seconds / 60:.0f} min"
+    return f"~{seconds / 3600:.1f} h"
+
+
+def describe_campaigns(name: str | None = None) -> str:
+    """What `edem verify --list` prints: one line per campaign (cases, expected time on 2 cores,
+    what it is), or with ``name`` the cases of that campaign, one line each."""
+    if name is None:
+        known = campaigns().values()
+        width = max(len(c.name) for c in known)
+        lines = [f"{c.name:{width}s} {len(c.cases):4d} cases  {expected_time_text(c.expected_time_s):>18s}  {c.description}" for c in known]
+        lines.append("(expected wall time with 2 jobs on 2 cores, nothing cached; `edem verify --list CAMPAIGN` lists its cases)")
+        return "\n".join(lines) + "\n"
+    campaign = get_campaign(name)
+    lines = [f"{campaign.name} ({len(campaign.cases)} cases, {expected_time_text(campaign.expected_time_s)} on 2 cores): {campaign.description}"]
+    for case in campaign.cases:
+        lines.append(f"  {case.name:32s} [{' vs '.join(case.sides)}] {case.description}")
+    return "\n".join(lines) + "\n"
 
 
 __all__ = [

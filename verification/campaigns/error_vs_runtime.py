@@ -8,8 +8,11 @@ from __future__ import annotations
 
 from verification.campaign_model import Analysis, Campaign, Case, Figure
 from verification.campaign_model import ramp_overrides
-from verification.campaigns.cylinder_plane import CHECK_METRICS
+from verification.campaigns.cylinder_plane import CHECK_METRICS, FE_COMPARE_BASIS, SANITY_BASIS
 from verification.sides import TRUTH_STEPS
+
+#: wall time with 2 jobs on 2 cores, nothing cached (estimate: nine FE truth runs (P2 at 1.0 mm) and three P1 meshes)
+EXPECTED_TIME_S = 600.0
 
 
 ERT_SCENE = "ideal-standing"
@@ -38,6 +41,7 @@ def _ert_cases() -> list[Case]:
                 {**{m: 10.0 for m in ERT_METRICS}, "force_residual_rel": 1e-6, "non_finite_outputs": 0.0},
                 overrides={**base, "geometry.mesh_size_mm": size},
                 params={"mesh_size_mm": size},
+                basis=dict(FE_COMPARE_BASIS),
             )
         )
     for size in ERT_FE_P1_SIZES_MM:
@@ -52,6 +56,7 @@ def _ert_cases() -> list[Case]:
                 overrides=dict(base),
                 options={"mesh_size_mm": size, "degree": 1},
                 params={"mesh_size_mm": size},
+                basis=dict(SANITY_BASIS),
             )
         )
     for n in ERT_STEPS:
@@ -65,6 +70,7 @@ def _ert_cases() -> list[Case]:
                 {**{m: 10.0 for m in ERT_METRICS}, "force_residual_rel": 1e-6, "non_finite_outputs": 0.0},
                 overrides={**base, **ramp_overrides(n, ERT_LOAD_N)},
                 params={"steps": n},
+                basis=dict(FE_COMPARE_BASIS),
             )
         )
     return cases
