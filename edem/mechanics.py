@@ -142,7 +142,7 @@ def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: 
     eigenvalues are compared (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs: detect rank deficiency, say which DOFs are unrestrained).
     """
     scale = np.array([1.0, 1.0, 1.0, length_scale_mm, length_scale_mm, length_scale_mm])[free]
-    k = stiffness[np.ix_(free, free)] / np.outer(scale, scale)
+    k = stiffness[free][:, free] / np.outer(scale, scale)
     try:  # the common, regular case: Cholesky pivots all well above round-off, no eigensolve
         pivots = np.diagonal(np.linalg.cholesky(k)) ** 2
         if pivots.min() > 1e3 * rtol * np.abs(k).max():
@@ -236,6 +236,9 @@ def solve_unilateral(
     seen: set[bytes] = set()
     max_approach = law.max_approach_mm()  # fixed over the solve; all inf for linear elements
     bounded = bool(np.isfinite(max_approach).any())
+    # From the second iteration on, active == (s > 0) and this is the previous residual: reused.
+    grad = gradient(u, s, active)
+    load_norm = np.linalg.norm(load * to_newton)
     for iteration in range(1, max_iterations + 1):
         hessian = stiffness(k, active)
         if unrestrained_dofs(hessian, free, length_scale_mm):
@@ -255,13 +258,13 @@ def solve_unilateral(
             # A transiently small active set: regularise with a trace of every element's stiffness.
             hessian = hessian + 1e-8 * everything
         step = np.zeros(6)
-        step[free] = -np.linalg.solve(hessian[np.ix_(free, free)], gradient(u, s, active)[free])
+        step[free] = -np.linalg.solve(hessian[free][:, free], grad[free])
         alpha = 1.0
         if bounded:  # fraction to the boundary of the log elements' admissible approaches
             rate = directions @ step
             room = max_approach - directions @ u
             alpha = min(1.0, float(np.min(0.99 * room[rate > 0] / rate[rate > 0], initial=np.inf)))
-        slope = float(gradient(u, s, s > 0) @ step) if iteration > 1 else 0.0
+        slope = float(grad @ step) if iteration > 1 else 0.0
         if slope < 0.0:
             # Armijo on Pi. The first, all-active step (DEM's) is taken whole: with non-negative
             # offsets it descends anyway (Pi <= the all-active quadratic it minimises).
@@ -275,7 +278,7 @@ def solve_unilateral(
         new_active = s > 0
         residual = gradient(u, s, new_active)
         # Force scale of the problem: the load and every element force (incl. the stored ones).
-        reference = np.linalg.norm(load * to_newton) + float(np.abs(s).sum())
+        reference = load_norm + float(np.abs(s).sum())
         residual_norm = float(np.linalg.norm(residual * to_newton))
         if residual_norm <= rtol * max(reference, 1e-300):
             active = new_active
@@ -294,6 +297,7 @@ def solve_unilateral(
                 "the bodies apart"
             )
         active = new_active
+        grad = residual
     else:
         if not _balanceable(directions, load, free, to_newton):
             raise SolverError(

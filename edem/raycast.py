@@ -253,6 +253,9 @@ class RayCaster:
             altitude = np.where(longest > 0, twice_area / longest, 0.0)
             margin = 64 * float(np.finfo(np.float32).eps) * scale / altitude
         self._interior_margin = np.where(np.isfinite(margin), np.minimum(margin, 1.0), 1.0)
+        # What the re-measure reads per hit, side by side: one row gather per hit instead of three
+        # scattered ones (random access into F's arrays dominates that gather).
+        self._plane_rows = np.column_stack([self._normal, self._plane_offset, self._interior_margin])
 
     def _embree_run(
         self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray
@@ -391,25 +394,40 @@ class RayCaster:
         for _ in range(_MAX_ROUNDS):
             if not active.size:
                 break
-            if active.size == n:  # first round: every ray, no gather needed
-                o, d, s0 = origins, dirs, seg_start
-            else:
-                o, d, s0 = origins[active], dirs[active], seg_start[active]
             # Traverse past the window end (up to the far side of F): a ray whose nearest hit
             # lies beyond the window is then a plain 'no spring', not a miss worth a repair probe.
-            ray = self._embree_run(o + s0[:, None] * d, d, (h + self._reach_mm) - s0)
+            if active.size == n:  # first round: every ray, one common start (a scalar), no gather
+                o, d, s0 = origins, dirs, seg_start
+                start = -h - step
+                ray = self._embree_run(o + start * d, d, np.full(n, (h + self._reach_mm) - start))
+                window_end = (h + step) - start
+            else:
+                o, d, s0 = origins[active], dirs[active], seg_start[active]
+                ray = self._embree_run(o + s0[:, None] * d, d, (h + self._reach_mm) - s0)
+                window_end = (h + step) - s0
             prim = ray["primID"]
             none = prim < 0
             missed.append(active[none])
             # A nearest float32 hit beyond the window (and its padding) ends the search: no spring.
-            found = ~none & (ray["tfar"] <= (h + step) - s0)
-            idx, k, o, d, s0 = active[found], prim[found].astype(np.int64), o[found], d[found], s0[found]
-            t, u, v, det = self._remeasure(o, d, k, ray["u"][found], ray["v"][found])
+            found = ~none & (ray["tfar"] <= window_end)
+            if found.all():  # e.g. every spring facing F: no gather
+                idx, k, u32, v32 = active, prim.astype(np.int64), ray["u"], ray["v"]
+            else:
+                # Integer row gathers by np.take: a boolean mask (or []) over (n, 3) rows is
+                # several times slower.
+                rows = np.flatnonzero(found)
+                idx, k, s0 = active[rows], prim[rows].astype(np.int64), s0[rows]
+                o, d = np.take(o, rows, axis=0), np.take(d, rows, axis=0)
+                u32, v32 = ray["u"][rows], ray["v"][rows]
+            t, u, v, det = self._remeasure(o, d, k, u32, v32)
             # Embree's float32 answer is only trusted where float64 puts the ray on its triangle;
             # a ray that lands at (or, in float64, just past) an edge or vertex of it is re-solved
             # exactly among the triangles around that triangle: a float32 tie is always between
             # neighbours, so this stays local (never a pass over all of F).
+            # Every other row is on its triangle (inside to _REFERENCE_SLACK, so within the looser
+            # _BARYCENTRIC_SLACK too; nan barycentrics, det == 0, are near_edge).
             near_edge = ~_inside(u, v, _REFERENCE_SLACK)
+            on_triangle = np.ones(k.size, bool)
             if near_edge.any():
                 fix = np.flatnonzero(near_edge)
                 far = np.full(fix.size, h + self._reach_mm)
@@ -419,14 +437,13 @@ class RayCaster:
                 k[fix[found_fix]] = k_fix[found_fix]
                 # No neighbour meets the ray: Embree's triangle was not where the ray passes at
                 # all; it counts as a miss and goes to the probe repair below.
-                u[fix] = np.where(found_fix, 0.0, np.nan)
-                v[fix] = 0.0
+                on_triangle[fix[~found_fix]] = False
             facing = det > 0
-            on_triangle = _inside(u, v, _BARYCENTRIC_SLACK)  # False where det == 0 (nan)
-            accept = facing & on_triangle & (t > -h) & (t <= h)
+            in_window = t <= h
+            accept = facing & on_triangle & (t > -h) & in_window
             # Wrong-facing, or in the padding before the window: skip it and continue past it.
             # (Any hit beyond the window ends the search: nothing nearer was found.)
-            skip = on_triangle & (t <= h) & (~facing | (t <= -h))
+            skip = on_triangle & in_window & (~facing | (t <= -h))
             length[idx[accept]] = t[accept]
             hit[idx[accept]] = k[accept]
             missed.append(idx[~on_triangle])
@@ -467,14 +484,15 @@ class RayCaster:
         plane distance is recomputed in float64 (signed length directly from the true origin);
         Embree's u, v are returned for those rows. The other rows get a full Moller-Trumbore test.
         """
-        normal = self._normal[k]
+        rows = np.take(self._plane_rows, k, axis=0)  # take: far cheaper than [] for row gathers
+        normal = rows[:, :3]
         along = np.einsum("ij,ij->i", normal, d)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = (self._plane_offset[k] - np.einsum("ij,ij->i", normal, o)) / along
+            t = (rows[:, 3] - np.einsum("ij,ij->i", normal, o)) / along
         det = -along
         u, v = u32.astype(np.float64), v32.astype(np.float64)
         margin = np.minimum(np.minimum(u, v), 1.0 - u - v)
-        edge = np.flatnonzero(~(margin > self._interior_margin[k]))
+        edge = np.flatnonzero(~(margin > rows[:, 4]))
         if edge.size:
             ke = k[edge]
             t[edge], u[edge], v[edge], det[edge] = _moller_trumbore(
@@ -500,7 +518,7 @@ class RayCaster:
         triangle sharing a vertex with it. Those few candidates are tested exactly in float64.
         Rays that genuinely miss stay missed (the probe misses too, or no candidate is valid).
         """
-        o, d = origins[missed], dirs[missed]
+        o, d = np.take(origins, missed, axis=0), np.take(dirs, missed, axis=0)
         # A sideways direction that never lines up with a mesh's axes or diagonals.
         oblique = np.array([0.5377, 0.8326, 0.1329])
         side = _cross(d, oblique)
@@ -514,7 +532,9 @@ class RayCaster:
         near_box = self._segment_meets_box(probe, d, (h + self._step_mm) - s0)
         if not near_box.any():
             return
-        o, d, s0, probe, missed = o[near_box], d[near_box], s0[near_box], probe[near_box], missed[near_box]
+        keep = np.flatnonzero(near_box)
+        o, d, probe = np.take(o, keep, axis=0), np.take(d, keep, axis=0), np.take(probe, keep, axis=0)
+        s0, missed = s0[keep], missed[keep]
         prim = self._embree_run(probe, d, (h + self._step_mm) - s0)["primID"].astype(np.int64)
         near = np.flatnonzero(prim >= 0)
         if not near.size:

@@ -256,13 +256,17 @@ def run(
                 f"within h_max = {cartilage.max_spring_length_mm:g} mm of the mobile body along its normals"
             )
         g_current = pose.points(g0[None])[0]
-        normals = geometry.normal[cand]
-        stored_c = stored[cand]
+        # Gather the candidates once by index (cheaper than repeated boolean masks over all springs).
+        cand_idx = np.flatnonzero(cand)
+        normals = np.take(geometry.normal, cand_idx, axis=0)
+        centroids_c = np.take(geometry.centroid_mm, cand_idx, axis=0)
+        area_c = spring_area[cand_idx]
+        stored_c = np.take(stored, cand_idx, axis=0)
         stored_normal = np.einsum("ij,ij->i", stored_c, normals)
         shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals)
         lig_rows, lig_law, _ = ligament_elements(scene.ligaments, pose, f_pose, g_current)
         law = stack_elements(contact_law(geometry, cartilage, stored_normal), lig_law)
-        directions = generalised_directions(geometry.centroid_mm[cand], normals, g_current)
+        directions = generalised_directions(centroids_c, normals, g_current)
         if len(lig_rows):
             directions = np.vstack([directions, lig_rows])
         try:
@@ -317,15 +321,15 @@ def run(
         if shear is not None:
             contact = contact + shear.generalised_force(solution.displacement, solution.active[:n_c])
         spring_force = total_force[:n_c]
-        centre = (spring_force @ geometry.centroid_mm[cand]) / spring_force.sum() if spring_force.sum() > 0 else g_current
+        centre = (spring_force @ centroids_c) / spring_force.sum() if spring_force.sum() > 0 else g_current
         where = f"time point {k} (t = {t:g} s)"
         check_contact_kept(loads[k, :3], geometry.normal, spring_area, int(solution.active[:n_c].sum()), free, u, where)
-        check_increment(u, geometry.centroid_mm[cand][solution.active[:n_c]], g_current, cartilage, where)
+        check_increment(u, np.take(centroids_c, np.flatnonzero(solution.active[:n_c]), axis=0), g_current, cartilage, where)
         committed = elastic_force[:n_c, None] * normals
         if shear is not None:
             committed = committed + shear.force(u, solution.active[:n_c])
         stored = np.zeros((n_springs, 3))
-        stored[cand] = committed
+        stored[cand_idx] = committed
         pose = Placement(rotation_matrix(u[3:]) @ pose.rotation, pose.translation_mm + u[:3], g0)
         # The re-measure evaluates the independent springs' law at the solved pose: it says
         # nothing about the coupled layer, whose forces are not a function of each spring's length.
@@ -342,11 +346,11 @@ def run(
             if remeasured > DEM_IMBALANCE_FRACTION:
                 unbalanced.append((k, remeasured))
         pressure = np.zeros(n_springs)
-        pressure[cand] = total_force[:n_c] / spring_area[cand]
+        pressure[cand_idx] = total_force[:n_c] / area_c
         viscous_pressure = np.zeros(n_springs)
-        viscous_pressure[cand] = (total_force[:n_c] - elastic_force[:n_c]) / spring_area[cand]
+        viscous_pressure[cand_idx] = (total_force[:n_c] - elastic_force[:n_c]) / area_c
         in_contact = np.zeros(n_springs, bool)
-        in_contact[cand] = solution.active[:n_c]
+        in_contact[cand_idx] = solution.active[:n_c]
         seconds["solve"] += time.perf_counter() - clock
         steps.append(
             StepResult(
