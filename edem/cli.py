@@ -14,6 +14,7 @@ RESULTS_ROOT = Path("results")
 
 
 def _run(args: argparse.Namespace) -> int:
+    from edem.resultdir import provenance
     from edem.results import write_results
     from edem.scene import load_scene, parse_override
     from edem.solver import run
@@ -24,6 +25,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"edem run: warning: {warning}", file=sys.stderr)
     method = args.method or scene.method
     out = _out_dir(args, scene.name, method, overrides=overrides)
+    record = provenance(args.scene, overrides, method=method)
     n = len(scene.load.time_s)
     bar = None
     if n > 1 and sys.stderr.isatty():
@@ -35,10 +37,7 @@ def _run(args: argparse.Namespace) -> int:
     finally:
         if bar is not None:
             bar.close()
-    write_results(result, out, overwrite=args.overwrite)
-    from edem.resultdir import record_provenance
-
-    record_provenance(out, args.scene, overrides, method=method)
+    write_results(result, out, overwrite=args.overwrite, provenance=record)
     for warning in result.warnings:
         print(f"edem run: warning: {warning}", file=sys.stderr)
     last = result.steps[-1]
@@ -69,6 +68,7 @@ def _out_dir(args: argparse.Namespace, *name_parts: str, overrides: dict | None 
 
 def _fe(args: argparse.Namespace) -> int:
     """The FE reference of a scene (docs/method.md#6-the-fe-reference-and-its-discrete-twins, docs/result-format.md): fem_reference.run_scene into a result directory."""
+    from edem.resultdir import provenance
     from edem.scene import load_scene, parse_override
 
     try:
@@ -84,13 +84,14 @@ def _fe(args: argparse.Namespace) -> int:
         settings = resolve_settings(scene, model=args.model, mesh_size_mm=args.mesh_size, degree=args.degree, argument_keys=FE_FLAGS)
         steps = parse_steps(args.steps, len(scene.load.time_s))
         out = _out_dir(args, scene.name, settings.method, overrides=overrides)
+        record = provenance(args.scene, overrides, {"model": settings.model, "mesh_size_mm": settings.mesh_size_mm, "degree": settings.degree})
         n_solves = len(scene.load.time_s) if steps is None else len(steps)
         if rank == 0 and n_solves > 1 and sys.stderr.isatty():
             from tqdm import tqdm
 
             bar = tqdm(total=n_solves, desc=f"{scene.name} ({settings.method})", unit="step", file=sys.stderr)
         result = run_scene(scene, model=settings.model, mesh_size_mm=args.mesh_size, degree=args.degree, steps=steps, out_dir=out,
-                           overwrite=args.overwrite, progress=None if bar is None else (lambda k: bar.update(1)),
+                           overwrite=args.overwrite, provenance=record, progress=None if bar is None else (lambda k: bar.update(1)),
                            on_size=_print_fe_size if rank == 0 else None)
     except (InputError, SolverError):
         if rank != 0:  # every rank fails alike: rank 0 alone reports it
@@ -101,9 +102,6 @@ def _fe(args: argparse.Namespace) -> int:
             bar.close()
     if rank != 0:
         return 0
-    from edem.resultdir import record_provenance
-
-    record_provenance(out, args.scene, overrides, {"model": settings.model, "mesh_size_mm": settings.mesh_size_mm, "degree": settings.degree})
     for warning in result.warnings:
         print(f"edem fe: warning: {warning}", file=sys.stderr)
     data = result.summary()

@@ -166,6 +166,7 @@ def write_result_dir(
     fixed_frames: Sequence[Frame] = (),
     opensim_sto: bool = False,
     overwrite: bool = False,
+    provenance: Provenance | None = None,
 ) -> Path:
     """Write a result directory (layout in the module docstring) atomically; returns its path.
 
@@ -174,14 +175,18 @@ def write_result_dir(
     columns. ``frames``: the pressure maps listed in pressure.pvd. ``fixed``: the fixed body.
     ``fixed_frames``: the fixed body per time point (fixed.pvd). ``opensim_sto``: also write the
     time series as timeseries.sto. ``overwrite``: replace an existing result directory
-    (otherwise InputError). Every file is written inside one :func:`edem.atomic_dirs.atomic_result_dir`
-    and so listed in manifest.json.
+    (otherwise InputError). ``provenance``: the resolved scene (scene.toml) and the provenance
+    keys of the summary (:func:`provenance`), written with the rest so that an interrupted run
+    never leaves a result without them. Every file is written inside one
+    :func:`edem.atomic_dirs.atomic_result_dir` and so listed in manifest.json.
 
     Raises SolverError naming the file and key when a number is not finite (a result that
     contradicts itself is never written as if it were one), InputError when the directory
     cannot be written (disk full, read-only...; a previous result there is left unchanged).
     """
     out = Path(out_dir)
+    if provenance is not None:
+        summary = {**summary, **provenance.summary_keys}
     check_finite_summary(summary, out / SUMMARY_FILE)
     columns = list(TIMESERIES_COLUMNS)
     if timeseries:
@@ -198,6 +203,8 @@ def write_result_dir(
         lines.append([_csv_number(row[c]) for c in columns])
     with atomic_result_dir(out, overwrite=overwrite) as tmp:
         (tmp / SUMMARY_FILE).write_text(json.dumps(dict(summary), indent=2) + "\n", encoding="utf-8")
+        if provenance is not None:
+            (tmp / SCENE_FILE).write_text(provenance.scene_toml, encoding="utf-8")
         with open(tmp / TIMESERIES_FILE, "w", newline="", encoding="utf-8") as f:
             writer = csv.writer(f)
             writer.writerow(columns)
@@ -508,6 +515,27 @@ def resolved_scene(scene_ref: str | Path, overrides: dict[str, Any] | None = Non
     return data
 
 
+@dataclass(frozen=True)
+class Provenance:
+    """What reproduces a run: the resolved scene as TOML text and the summary keys that say where
+    it came from (overrides, scene_source, software_version, source_revision)."""
+
+    scene_toml: str
+    summary_keys: dict[str, Any]
+
+
+def provenance(scene_ref: str | Path, overrides: dict[str, Any] | None = None, fe_settings: dict[str, Any] | None = None,
+               method: str | None = None) -> Provenance:
+    """The :class:`Provenance` of a run of ``scene_ref`` (arguments as :func:`resolved_scene`)."""
+    import tomli_w
+
+    return Provenance(
+        tomli_w.dumps(resolved_scene(scene_ref, overrides, fe_settings, method)),
+        dict(overrides=dict(overrides or {}), scene_source=str(scene_ref), software_version=software_version(),
+             source_revision=source_revision()),
+    )
+
+
 def record_provenance(out_dir: str | Path, scene_ref: str | Path, overrides: dict[str, Any] | None = None,
                       fe_settings: dict[str, Any] | None = None, method: str | None = None) -> None:
     """Write ``scene.toml`` into a result directory and the provenance keys into its summary.json
@@ -516,18 +544,12 @@ def record_provenance(out_dir: str | Path, scene_ref: str | Path, overrides: dic
     The directory must verify against its manifest first (InputError otherwise: only a complete
     run is annotated); it is sealed again afterwards with the same run id, so readers still verify it.
     """
-    import tomli_w
-
     out = Path(out_dir)
     run_id = verify_manifest(out)
-    (out / SCENE_FILE).write_text(tomli_w.dumps(resolved_scene(scene_ref, overrides, fe_settings, method)), encoding="utf-8")
+    record = provenance(scene_ref, overrides, fe_settings, method)
+    (out / SCENE_FILE).write_text(record.scene_toml, encoding="utf-8")
     path = out / SUMMARY_FILE
     summary = json.loads(path.read_text(encoding="utf-8"))
-    summary.update(
-        overrides=dict(overrides or {}),
-        scene_source=str(scene_ref),
-        software_version=software_version(),
-        source_revision=source_revision(),
-    )
+    summary.update(record.summary_keys)
     path.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     write_manifest(out, run_id)

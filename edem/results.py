@@ -8,7 +8,7 @@ import numpy as np
 
 from edem.loads import JointKinematics
 from edem.opensim_model import BodyPoses
-from edem.resultdir import TIMESERIES_COLUMNS, Frame, SurfaceFrame, timeseries_row, write_pvd, write_result_dir
+from edem.resultdir import TIMESERIES_COLUMNS, Frame, Provenance, SurfaceFrame, timeseries_row, write_pvd, write_result_dir
 from edem.solver import RunResult, StepResult
 
 __all__ = ["TIMESERIES_COLUMNS", "summary", "timeseries_rows", "pressure_frame", "write_pvd", "write_results"]
@@ -83,7 +83,7 @@ def pressure_frame(run: RunResult, s: StepResult) -> Frame:
 
 
 def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int] | None = None, note: str | None = None,
-                  overwrite: bool = False) -> Path:
+                  overwrite: bool = False, provenance: Provenance | None = None) -> Path:
     """Write the result directory of a DEM/EDEM run (layout: :mod:`edem.resultdir`), atomically.
 
     Parameters
@@ -102,6 +102,9 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
         Recorded as the summary's "frames" entry when only some maps are written.
     overwrite : bool, optional
         Replace an existing result directory (default: refuse).
+    provenance : Provenance, optional
+        The resolved scene and the summary's provenance keys (:func:`edem.resultdir.provenance`),
+        written in the same atomic step as the rest.
 
     Returns
     -------
@@ -124,7 +127,7 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
     fixed = SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles)
     return write_result_dir(out_dir, data, timeseries_rows(run), frames, fixed,
                             fixed_frames=[fixed_frame(run, run.steps[k]) for k in chosen], opensim_sto=True,
-                            overwrite=overwrite)
+                            overwrite=overwrite, provenance=provenance)
 
 
 def fixed_frame(run: RunResult, s: StepResult) -> Frame:

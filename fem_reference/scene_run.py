@@ -60,7 +60,7 @@ from scipy.spatial import cKDTree
 from edem.atomic_dirs import ResultWriteError
 from edem.mechanics import DOF_NAMES
 from edem.raycast import RayCaster
-from edem.resultdir import Frame, SurfaceFrame, timeseries_row, write_result_dir
+from edem.resultdir import Frame, Provenance, SurfaceFrame, timeseries_row, write_result_dir
 from edem.solver import applied_loads, fixed_placement
 from fem_reference.contact import _fe_modules, solve_contact
 from fem_reference.models import FE_MODELS, FEGeometry, contact_surface
@@ -353,7 +353,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
               steps: Sequence[int] | None = None, out_dir: str | Path | None = None,
               layers_through_thickness: int | None = None, comm: Any = None,
               progress: Callable[[int], None] | None = None, overwrite: bool = False,
-              on_size: Callable[[Any], None] | None = None) -> FERunResult:
+              on_size: Callable[[Any], None] | None = None, provenance: Provenance | None = None) -> FERunResult:
     """Solve the FE reference of ``scene`` (an :class:`edem.scene.Scene`) at the selected time
     points and, with ``out_dir``, write the result directory (docs/result-format.md) (rank 0 only).
 
@@ -361,7 +361,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     degree, element, layers_through_thickness), then the defaults (:func:`resolve_settings`).
     ``steps``: None (all) or time point indices (negative ones count from the end).
     ``progress(k)`` is called after each solved time point. ``overwrite``: replace an existing
-    result directory at ``out_dir``.
+    result directory at ``out_dir``; ``provenance`` (:func:`edem.resultdir.provenance`) is written
+    with it.
     ``on_size(size)`` is called once, with the :class:`fem_reference.sizing.FESize` estimate, after
     the run was sized and found to fit.
 
@@ -503,7 +504,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         failure = None
         if comm.rank == 0:  # rank 0 writes; every rank learns whether it worked (no hang)
             try:
-                write_fe_results(run, run.out_dir, overwrite=overwrite)
+                write_fe_results(run, run.out_dir, overwrite=overwrite, provenance=provenance)
             except ResultWriteError as exc:  # disk full, not writable
                 failure = ("write", exc.problem)
             except InputError as exc:  # a result there already
@@ -703,7 +704,8 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
 # --------------------------------------------------------------------------------------------
 
 
-def write_fe_results(run: FERunResult, out_dir: str | Path, *, overwrite: bool = False) -> Path:
+def write_fe_results(run: FERunResult, out_dir: str | Path, *, overwrite: bool = False,
+                     provenance: Provenance | None = None) -> Path:
     """The result directory (:mod:`edem.resultdir`): summary.json, timeseries.csv
     (``iterations`` = Newton iterations), pressure.pvd with one pressure_NNNN.vtp per solved time
     point (the FE contact surface in the reference configuration of that time point: point data
@@ -715,4 +717,4 @@ def write_fe_results(run: FERunResult, out_dir: str | Path, *, overwrite: bool =
             for s in run.steps]
     frames = [Frame(s.step, s.time_s, SurfaceFrame(s.points_mm, s.triangles, s.point_data, s.cell_data)) for s in run.steps]
     fixed = SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles)
-    return write_result_dir(out_dir, run.summary(), rows, frames, fixed, overwrite=overwrite)
+    return write_result_dir(out_dir, run.summary(), rows, frames, fixed, overwrite=overwrite, provenance=provenance)
