@@ -135,6 +135,15 @@ def _free_mask(fixed_dofs: tuple[str, ...]) -> np.ndarray:
     return free
 
 
+def singular_stiffness_error(missing: list[str]) -> SolverError:
+    """The refusal for DOFs that no element resists, with the ways to restrain them."""
+    return SolverError(
+        f"the stiffness matrix is singular: nothing resists motion along {', '.join(missing)}; "
+        "fix these DOFs in [constraints] fixed_dofs, or give the cartilage shear stiffness "
+        "(cartilage.shear_modulus_mpa) or ligaments"
+    )
+
+
 def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: float, rtol: float = 1e-10) -> list[str]:
     """Names of the free DOFs along which the 6x6 stiffness vanishes (the null space of K_free).
 
@@ -245,11 +254,7 @@ def solve_unilateral(
             everything = stiffness(k, np.ones(m, bool))
             missing = unrestrained_dofs(everything, free, length_scale_mm)
             if missing:
-                raise SolverError(
-                    f"the stiffness matrix is singular: nothing resists motion along {', '.join(missing)}; "
-                    "fix these DOFs in [constraints] fixed_dofs, or give the cartilage shear stiffness "
-                    "(cartilage.shear_modulus_mpa) or ligaments"
-                )
+                raise singular_stiffness_error(missing)
             if not np.any(active):
                 raise SolverError(
                     "no equilibrium: no spring stays in compression under this load, so the load pulls "

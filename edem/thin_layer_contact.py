@@ -33,7 +33,7 @@ from scipy.sparse.linalg import splu
 
 from edem.errors import SolverError
 from edem.laws import LinearElements
-from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, unrestrained_dofs
+from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, singular_stiffness_error, unrestrained_dofs
 from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance, operator_factors
 
 
@@ -165,11 +165,7 @@ def solve_thin_layer(
                 everything = full.stiffness(directions) + k_all
                 missing = unrestrained_dofs(everything, free, length_scale_mm)
                 if missing:
-                    raise SolverError(
-                        f"the stiffness matrix is singular: nothing resists motion along {', '.join(missing)}; "
-                        "fix these DOFs in [constraints] fixed_dofs, or give the cartilage shear stiffness "
-                        "(cartilage.shear_modulus_mpa) or ligaments"
-                    )
+                    raise singular_stiffness_error(missing)
             if not np.any(active) and not np.any(ligament_active):
                 raise SolverError("no equilibrium: no spring stays in compression under this load, so the load pulls the bodies apart")
             stiffness = stiffness + 1e-8 * everything  # a transiently small contact set
