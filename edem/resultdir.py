@@ -34,8 +34,8 @@ Layout of ``OUT/``:
 ``fixed.vtp``
     The fixed body as in the scene (optional).
 ``scene.toml``
-    The resolved scene (:func:`record_provenance`: every producer of a scene's directory calls
-    it): the scene after every override, file paths absolute, its name pinned, the method in
+    The resolved scene (:func:`provenance`, passed by every producer of a scene's directory to
+    :func:`write_result_dir`): the scene after every override, file paths absolute, its name pinned, the method in
     ``[solver]`` and FE settings in ``[fe]``; ``edem run DIR/scene.toml`` (or ``edem fe``)
     reproduces the run exactly. summary.json then also holds ``overrides`` (dotted keys and
     values), ``scene_source`` (the scene argument as given), ``software_version`` and
@@ -78,7 +78,7 @@ from typing import Any
 
 import numpy as np
 
-from edem.atomic_dirs import atomic_result_dir, verify_manifest, write_manifest
+from edem.atomic_dirs import atomic_result_dir, verify_manifest
 from geometries.errors import InputError, SolverError
 
 SUMMARY_FILE = "summary.json"
@@ -534,22 +534,3 @@ def provenance(scene_ref: str | Path, overrides: dict[str, Any] | None = None, f
         dict(overrides=dict(overrides or {}), scene_source=str(scene_ref), software_version=software_version(),
              source_revision=source_revision()),
     )
-
-
-def record_provenance(out_dir: str | Path, scene_ref: str | Path, overrides: dict[str, Any] | None = None,
-                      fe_settings: dict[str, Any] | None = None, method: str | None = None) -> None:
-    """Write ``scene.toml`` into a result directory and the provenance keys into its summary.json
-    (arguments as :func:`resolved_scene`).
-
-    The directory must verify against its manifest first (InputError otherwise: only a complete
-    run is annotated); it is sealed again afterwards with the same run id, so readers still verify it.
-    """
-    out = Path(out_dir)
-    run_id = verify_manifest(out)
-    record = provenance(scene_ref, overrides, fe_settings, method)
-    (out / SCENE_FILE).write_text(record.scene_toml, encoding="utf-8")
-    path = out / SUMMARY_FILE
-    summary = json.loads(path.read_text(encoding="utf-8"))
-    summary.update(record.summary_keys)
-    path.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    write_manifest(out, run_id)

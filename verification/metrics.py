@@ -385,7 +385,7 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
 
 def scene_differences(a_dir: str | Path, b_dir: str | Path) -> list[str]:
     """What makes two runs not like for like: different ligaments or constraints in their resolved
-    scenes (scene.toml, edem.resultdir.record_provenance), or ligaments on one side of an FE
+    scenes (scene.toml, edem.resultdir.provenance), or ligaments on one side of an FE
     comparison (the FE models none). Empty when they match or a directory has no resolved scene."""
     import tomllib
 

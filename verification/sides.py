@@ -43,6 +43,7 @@ import numpy as np
 
 from edem.atomic_dirs import ResultWriteError
 from edem.errors import InputError, SolverError
+from edem.resultdir import Provenance, provenance
 from edem.results import write_results
 from edem.scene import apply_overrides, load_scene, resolve_scene_path
 from edem.solver import run
@@ -124,14 +125,14 @@ def expand_array_overrides(scene_ref: str, overrides: dict[str, Any]) -> dict[st
 FRAMES = ("all", "peak")
 
 
-def _write_discrete(result: Any, out_dir: Path, frames: str) -> None:
+def _write_discrete(result: Any, out_dir: Path, frames: str, record: Provenance) -> None:
     """write_results, or (frames "peak") the same summary and time series with one pressure map."""
     if frames == "all":
-        write_results(result, out_dir)
+        write_results(result, out_dir, provenance=record)
         return
     peak = max(range(len(result.steps)), key=lambda k: result.steps[k].peak_pressure_mpa)
     note = f"pressure map of the peak-pressure time point only (step {result.steps[peak].step})"
-    write_results(result, out_dir, frame_steps=[peak], note=note)
+    write_results(result, out_dir, frame_steps=[peak], note=note, provenance=record)
 
 
 def _run_discrete(method: str) -> SideRunner:
@@ -140,10 +141,8 @@ def _run_discrete(method: str) -> SideRunner:
         if frames not in FRAMES:
             raise InputError(f"frames = {frames!r}", key="options.frames", expected=" or ".join(f'"{f}"' for f in FRAMES))
         scene = load_scene(scene_ref, overrides)
-        _write_discrete(run(scene, method), out_dir, frames)
-        from edem.resultdir import record_provenance
-
-        record_provenance(out_dir, scene_ref, overrides, method=method)
+        # the provenance goes into the same atomic write: a full disk cannot leave a sealed result half annotated
+        _write_discrete(run(scene, method), out_dir, frames, provenance(scene_ref, overrides, method=method))
         return str(out_dir)
 
     runner.__doc__ = f"{method.upper()} (edem.solver.run) into a result directory (docs/result-format.md)."
@@ -185,10 +184,8 @@ def _run_fe(model: str) -> SideRunner:
             if params and "steps" not in params and not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
                 raise UnavailableError("FE reference not available: fem_reference.run_scene takes no steps= selection")
             kwargs["steps"] = list(kwargs["steps"])
-        fem_reference.run_scene(scene, model=model, out_dir=out_dir, **kwargs)
-        from edem.resultdir import record_provenance
-
-        record_provenance(out_dir, scene_ref, overrides, {"model": model, **{k: options[k] for k in ("mesh_size_mm", "degree") if k in options}})
+        record = provenance(scene_ref, overrides, {"model": model, **{k: options[k] for k in ("mesh_size_mm", "degree") if k in options}})
+        fem_reference.run_scene(scene, model=model, out_dir=out_dir, provenance=record, **kwargs)
         return str(out_dir)
 
     runner.__doc__ = f"The FE reference, {model} model (fem_reference.run_scene), docs/method.md#6-the-fe-reference-and-its-discrete-twins."

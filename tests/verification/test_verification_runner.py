@@ -156,7 +156,7 @@ def test_fe_side_calls_run_scene_and_compares_nodal_pressure(tmp_path, monkeypat
 
     calls = {}
 
-    def stand_in(scene, model, out_dir, mesh_size_mm=None, degree=None):
+    def stand_in(scene, model, out_dir, mesh_size_mm=None, degree=None, provenance=None):
         calls.update(model=model, mesh_size_mm=mesh_size_mm, degree=degree)
         src = Path(tmp_path / "dem-copy")
         shutil.copytree(src, out_dir)
