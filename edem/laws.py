@@ -21,6 +21,7 @@ To add a law: one subclass of :class:`ContactLaw` here, added to :data:`LAWS`, p
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -145,7 +146,7 @@ def stack_elements(*laws: ElementLaw) -> ElementLaw:
 # contact laws
 
 
-class ContactLaw:
+class ContactLaw(ABC):
     """A spring-bed contact law. Subclasses set the class attributes and the methods below.
 
     Arrays are per candidate spring: ``area_mm2`` A, ``spring_length_mm`` h (signed ray length),
@@ -165,27 +166,31 @@ class ContactLaw:
     #: C s0) or "overlap" (geometric: the layer must be compressed by t - h); None: cannot couple
     thin_layer: ClassVar[str | None] = None
 
+    @abstractmethod
     def default_window_mm(self, thickness_mm: float | None) -> float:
         """h_max when the scene gives none (mm)."""
-        raise NotImplementedError
+        ...
 
     def candidates(self, spring_length_mm: np.ndarray, window_mm: float) -> np.ndarray:
         """(n,) bool: which springs with a finite ray length take part (eq. 4.4 for the threshold law)."""
         return np.isfinite(spring_length_mm)
 
+    @abstractmethod
     def elements(self, area_mm2: np.ndarray, spring_length_mm: np.ndarray, confined_modulus_mpa: float,
                  thickness_mm: float | None, stored_normal_force_n: np.ndarray) -> ElementLaw:
         """The element law s(delta) of the candidates (N); ``stored_normal_force_n`` is the EDEM
         push-back per candidate (zero for DEM)."""
-        raise NotImplementedError
+        ...
 
+    @abstractmethod
     def shear_length_mm(self, spring_length_mm: np.ndarray, thickness_mm: float | None) -> np.ndarray:
         """Length of the shear springs k_s = G / length (eq. 3.8), mm."""
-        raise NotImplementedError
+        ...
 
+    @abstractmethod
     def strain(self, spring_length_mm: np.ndarray, approach_mm: np.ndarray, thickness_mm: float | None) -> np.ndarray:
         """Compression over undeformed length after an approach (dimensionless)."""
-        raise NotImplementedError
+        ...
 
 
 class ThresholdLaw(ContactLaw):

@@ -19,6 +19,7 @@ names it as its ``fe_twin``.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
@@ -50,7 +51,7 @@ def contact_surface(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return solid.points_mm[used], remap[faces], used
 
 
-class FEModel:
+class FEModel(ABC):
     """An FE model of the cartilage. Subclasses set the class attributes and the methods."""
 
     name: ClassVar[str]
@@ -63,27 +64,32 @@ class FEModel:
     #: whether the previous time point's bone translation, scaled with the load, is a good start
     warm_start_scales_with_load: ClassVar[bool] = True
 
+    @abstractmethod
     def build(self, scene: Any, mesh_size_mm: float, layers: int | None, caster: RayCaster, f_pose: Placement,
               obstacle: RigidSurface, pose_key: tuple, cache: dict) -> FEGeometry:
         """The solid of this time point (``cache`` keeps solids between time points)."""
-        raise NotImplementedError
+        ...
 
+    @abstractmethod
     def reach(self, scene: Any, gap_mm: np.ndarray, facing: np.ndarray) -> np.ndarray:
         """(n,) bool: contact-surface vertices that face F and can reach it under load."""
-        raise NotImplementedError
+        ...
 
+    @abstractmethod
     def sizing_surface(self, scene: Any, caster: RayCaster, f_pose: Placement) -> tuple[np.ndarray, float]:
         """M's triangles the solid is built on (mask) and its largest thickness (mm), for
         :mod:`fem_reference.sizing` before anything is meshed."""
-        raise NotImplementedError
+        ...
 
+    @abstractmethod
     def thickness_mm(self, scene: Any, solid: Any, used: np.ndarray, points_mm: np.ndarray) -> np.ndarray:
         """(n,) undeformed thickness under each contact-surface point (``used``: solid indices)."""
-        raise NotImplementedError
+        ...
 
+    @abstractmethod
     def spring_length_mm(self, thickness_mm: np.ndarray, gap_mm: np.ndarray) -> np.ndarray:
         """(n,) the spring length a contact-surface point stands for."""
-        raise NotImplementedError
+        ...
 
 
 def _spring_lengths(scene: Any, caster: RayCaster, f_pose: Placement) -> np.ndarray:
