@@ -153,6 +153,7 @@ def solve_thin_layer(
     ligament_active = np.ones(ligament_rows.shape[0], bool)
     everything: np.ndarray | None = None
     seen: set[bytes] = set()
+    force_scale = 1e-300
     for iteration in range(1, max_iterations + 1):
         system = ActiveSystem.build(layer, directions, overlap_mm, active)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
@@ -186,10 +187,12 @@ def solve_thin_layer(
             break
         # Springs at zero force to round-off can flip for ever: accept a repeated set whose
         # violations (negative forces, penetrations) are below cycle_rtol of the force scale.
+        # The scale is the largest met so far: unloading to zero, the last iterates carry forces
+        # of round-off size only, and a scale taken from them would make round-off look large.
         signature = np.packbits(np.concatenate([new_active, new_ligaments])).tobytes()
-        scale = float(np.linalg.norm(load * to_newton)) + float(np.abs(f).sum()) + 1e-300
+        force_scale = max(force_scale, float(np.linalg.norm(load * to_newton)) + float(np.abs(f).sum()))
         violation = max(float(np.abs(np.minimum(f, 0.0)).sum()), float(np.abs(np.minimum(gap, 0.0) * spring_scale)[~active].sum()))
-        if signature in seen and violation <= cycle_rtol * scale:
+        if signature in seen and violation <= cycle_rtol * force_scale:
             break
         seen.add(signature)
         if not np.any(new_active) and not np.any(new_ligaments):
