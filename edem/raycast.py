@@ -26,7 +26,9 @@ Two interchangeable backends sit behind :class:`RayCaster`:
     or just off it, is re-solved among the triangles sharing a vertex with it (float32 ties are
     between neighbours; structured meshes whose edges line up with the rays meet this often);
     a ray Embree lost on an edge or vertex (or whose returned triangle has no neighbour on the
-    ray) is found again from the triangles around a slightly shifted probe ray's hit; a skipped
+    ray) is found again from the triangles around a slightly shifted probe ray's hit (only rays
+    whose window passes near F get a probe: one look-up in a coarse grid of the cells within the
+    window's half-length of F, built once, sorts out the rays that point away from F); a skipped
     wrong-facing hit first has the triangles around it checked (a fold ties a back-facing and a
     front-facing triangle at the same point). Only a ray still crossing wrong-facing sheets after
     a few re-casts goes to the exact brute-force caster.
@@ -65,6 +67,15 @@ _MAX_ROUNDS = 8
 _CHUNK_PAIRS = 1 << 19
 # Directions must be unit vectors (a length is measured in units of |direction|).
 _UNIT_TOLERANCE = 1e-6
+# Cells of the grid of cells near F (RayCaster._near_cells) along the longest side of F's padded box, at most, and the most cells the
+# triangles' boxes may mark before the grid is given up (every missed ray is then probed).
+_GRID_CELLS = 96
+_GRID_MAX_MARKS = 1 << 23
+
+
+# The grid of cells near F (RayCaster._near_cells): flat marks, lower corner (mm), 1 / cell size
+# (1/mm), largest cell index per axis, flat-index strides.
+_Grid = tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -195,6 +206,8 @@ class RayCaster:
         self._extent_mm = float(np.max(hi - lo)) if len(vertices) else 0.0
         self._box_mm = hi - lo
         self._scene = None
+        # Grids of the cells near F, per reach (see _near_cells), built on first use.
+        self._grids: dict[float, _Grid | None] = {}
         # Float64 ray/triangle tests done so far (re-measures, local re-solves, brute force): the
         # machine-independent cost of the exact work around Embree.
         self.pairs_tested = 0
@@ -517,24 +530,25 @@ class RayCaster:
         triangle, the true ray passed within that shift of it, so its hit (if any) lies on a
         triangle sharing a vertex with it. Those few candidates are tested exactly in float64.
         Rays that genuinely miss stay missed (the probe misses too, or no candidate is valid).
+        Only rays whose window passes near F (:meth:`_may_meet_surface`) can have lost a hit: the
+        others are not probed.
         """
+        s0 = seg_start[missed]
+        near_f = self._may_meet_surface(origins, dirs, missed, s0, h + self._step_mm)
+        if not near_f.any():
+            return
+        keep = np.flatnonzero(near_f)
+        missed, s0 = missed[keep], s0[keep]
         o, d = np.take(origins, missed, axis=0), np.take(dirs, missed, axis=0)
         # A sideways direction that never lines up with a mesh's axes or diagonals.
-        oblique = np.array([0.5377, 0.8326, 0.1329])
-        side = _cross(d, oblique)
-        fallback = _cross(d, np.array([0.1329, -0.5377, 0.8326]))
-        small = np.einsum("ij,ij->i", side, side) < 0.09  # d nearly along `oblique`
-        side[small] = fallback[small]
-        side /= np.sqrt(np.einsum("ij,ij->i", side, side))[:, None]
-        s0 = seg_start[missed]
+        side = _cross(d, np.array([0.5377, 0.8326, 0.1329]))
+        size = np.einsum("ij,ij->i", side, side)
+        small = np.flatnonzero(size < 0.09)  # d nearly along that direction: another one
+        if small.size:
+            side[small] = _cross(d[small], np.array([0.1329, -0.5377, 0.8326]))
+            size[small] = np.einsum("ij,ij->i", side[small], side[small])
+        side /= np.sqrt(size)[:, None]
         probe = o + s0[:, None] * d + self._probe_shift_mm * side
-        # Only probes whose window segment passes near F's bounding box can have lost a hit.
-        near_box = self._segment_meets_box(probe, d, (h + self._step_mm) - s0)
-        if not near_box.any():
-            return
-        keep = np.flatnonzero(near_box)
-        o, d, probe = np.take(o, keep, axis=0), np.take(d, keep, axis=0), np.take(probe, keep, axis=0)
-        s0, missed = s0[keep], missed[keep]
         prim = self._embree_run(probe, d, (h + self._step_mm) - s0)["primID"].astype(np.int64)
         near = np.flatnonzero(prim >= 0)
         if not near.size:
@@ -545,21 +559,78 @@ class RayCaster:
         length[missed[near[got]]] = best_t[got]
         hit[missed[near[got]]] = best_tri[got]
 
-    def _segment_meets_box(self, origins: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
-        """Whether each segment o + s d, 0 <= s <= length, meets F's bounding box padded by the
-        probe shift and a float32 margin (slab test)."""
-        pad = self._probe_shift_mm + self._step_mm
-        lo = self._centre_mm - 0.5 * self._box_mm - pad
-        hi = self._centre_mm + 0.5 * self._box_mm + pad
-        # A zero direction component becomes a tiny one: its slab then holds the whole segment
-        # (origin inside it) or none of it (outside), with no 0/0.
-        inverse = 1.0 / np.where(dirs == 0.0, 1e-300, dirs)
-        with np.errstate(over="ignore", invalid="ignore"):
-            a, b = (lo - origins) * inverse, (hi - origins) * inverse
-        near, far = np.minimum(a, b), np.maximum(a, b)
-        enter = np.maximum(near.max(axis=1), 0.0)
-        leave = np.minimum(far.min(axis=1), length)
-        return enter <= leave
+    def _may_meet_surface(
+        self, origins: np.ndarray, dirs: np.ndarray, rows: np.ndarray, s_start: np.ndarray, s_end: float
+    ) -> np.ndarray:
+        """(len(rows),) bool: False only where the segment o + s d, s_start <= s <= s_end, of ray
+        ``rows[i]`` certainly stays away from F, so Embree cannot have lost a hit on it.
+
+        Every point of the segment lies within half its length (at most s_end - min(s_start),
+        halved) of its midpoint: one lookup of the midpoint in a grid whose marked cells cover
+        every point that close to F (:meth:`_near_cells`) replaces a probe ray. Most missed rays
+        point away from F from springs far from it.
+        """
+        reach = 0.5 * (s_end - float(s_start.min(initial=s_end))) + self._step_mm
+        grid = self._near_cells(reach)
+        if grid is None:  # F's triangles too large for a grid: every ray is probed
+            return np.ones(rows.size, bool)
+        marked, lower, inverse_cell, top, strides = grid
+        point = np.take(origins, rows, axis=0)
+        middle = 0.5 * (s_start + s_end)
+        if middle.any():  # (a first-round miss's window is centred on its origin)
+            point += middle[:, None] * np.take(dirs, rows, axis=0)
+        point -= lower
+        point *= inverse_cell
+        # Truncation and clipping send points outside the grid to its border cells, which are
+        # never marked: the grid reaches one cell beyond the marks on every side.
+        cell = point.astype(np.int64)
+        np.maximum(cell, 0, out=cell)
+        np.minimum(cell, top, out=cell)
+        return marked[cell @ strides]
+
+    def _near_cells(self, reach_mm: float) -> _Grid | None:
+        """A grid over F's box padded by ``reach_mm`` whose marked cells hold every point within
+        ``reach_mm`` of F (built once per reach, cached): (flat marks, lower corner, 1 / cell
+        size, largest cell index per axis, flat-index strides), or None if F's triangles would
+        mark too many cells.
+
+        Cells overlapping a triangle's bounding box are marked, then the marks are dilated by
+        ceil(reach / cell) cells along each axis (a box, which holds the ball of radius reach).
+        """
+        cached = self._grids.get(reach_mm)
+        if cached is not None or reach_mm in self._grids:
+            return cached
+        # Cells a fraction of the reach (a tight cover), at most _GRID_CELLS along the longest side.
+        cell = max(float(self._box_mm.max() + 2.0 * reach_mm) / _GRID_CELLS, reach_mm / 4.0)
+        width = int(np.ceil(reach_mm / cell))
+        # F's box, the marks' dilation and one unmarked border cell on every side.
+        box_lo = self._centre_mm - 0.5 * self._box_mm - (width + 1) * cell
+        shape = np.ceil(self._box_mm / cell).astype(np.int64) + 2 * width + 3
+        corners = self.vertices_mm[self.triangles]
+        first = np.floor((corners.min(axis=1) - box_lo) / cell).astype(np.int64)
+        count = np.floor((corners.max(axis=1) - box_lo) / cell).astype(np.int64) - first + 1
+        per_triangle = count.prod(axis=1)
+        total = int(per_triangle.sum())
+        grid = None
+        if total <= _GRID_MAX_MARKS:
+            # Every cell of every triangle's box, enumerated without a loop over triangles.
+            owner = np.repeat(np.arange(len(count)), per_triangle)
+            j = np.arange(total) - np.repeat(np.cumsum(per_triangle) - per_triangle, per_triangle)
+            nx, ny = count[owner, 0], count[owner, 1]
+            index = first[owner] + np.stack([j % nx, (j // nx) % ny, j // (nx * ny)], axis=1)
+            marked = np.zeros(tuple(shape), bool)
+            marked[index[:, 0], index[:, 1], index[:, 2]] = True
+            for axis in range(3):  # box dilation by `width` cells: a window sum of a cumsum
+                total_along = np.cumsum(marked, axis=axis, dtype=np.int32)
+                padded = np.concatenate([np.zeros_like(np.take(total_along, [0], axis=axis)), total_along], axis=axis)
+                n_axis = marked.shape[axis]
+                upper = np.take(padded, np.minimum(np.arange(n_axis) + width + 1, n_axis), axis=axis)
+                lower = np.take(padded, np.maximum(np.arange(n_axis) - width, 0), axis=axis)
+                marked = upper > lower
+            strides = np.array([shape[1] * shape[2], shape[2], 1])
+            grid = (marked.ravel(), box_lo, 1.0 / cell, shape - 1, strides)
+        self._grids[reach_mm] = grid
+        return grid
 
     def _star_hits(
         self,
