@@ -144,6 +144,21 @@ def singular_stiffness_error(missing: list[str]) -> SolverError:
     )
 
 
+def _regular(stiffness: np.ndarray, scale: np.ndarray, rtol: float = 1e-10) -> bool:
+    """Whether a stiffness (over some DOFs, ``scale`` their length units: 1 for translations, a
+    characteristic length for rotations) is positive definite with every Cholesky pivot well
+    above round-off (``1e3 rtol`` of its largest entry, all blocks in N/mm): then no DOF can be
+    unrestrained at ``rtol`` and :func:`unrestrained_dofs` needs no eigensolve."""
+    if not scale.size:  # nothing free, nothing to restrain
+        return True
+    k = stiffness / np.outer(scale, scale)
+    try:
+        pivots = np.diagonal(np.linalg.cholesky(k)) ** 2
+    except np.linalg.LinAlgError:
+        return False
+    return bool(pivots.min() > 1e3 * rtol * np.abs(k).max())
+
+
 def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: float, rtol: float = 1e-10) -> list[str]:
     """Names of the free DOFs along which the 6x6 stiffness vanishes (the null space of K_free).
 
@@ -151,13 +166,9 @@ def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: 
     eigenvalues are compared (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs: detect rank deficiency, say which DOFs are unrestrained).
     """
     scale = np.array([1.0, 1.0, 1.0, length_scale_mm, length_scale_mm, length_scale_mm])[free]
-    k = stiffness[free][:, free] / np.outer(scale, scale)
-    try:  # the common, regular case: Cholesky pivots all well above round-off, no eigensolve
-        pivots = np.diagonal(np.linalg.cholesky(k)) ** 2
-        if pivots.min() > 1e3 * rtol * np.abs(k).max():
-            return []
-    except np.linalg.LinAlgError:
-        pass
+    if _regular(stiffness[np.ix_(free, free)], scale, rtol):  # the common case: no eigensolve
+        return []
+    k = stiffness[np.ix_(free, free)] / np.outer(scale, scale)
     values, vectors = np.linalg.eigh(k)
     top = float(np.abs(values).max(initial=0.0))
     null = vectors[:, values <= rtol * top] if top > 0 else np.eye(k.shape[0])
@@ -217,41 +228,56 @@ def solve_unilateral(
     load = np.where(free, np.asarray(load, float), 0.0)
     to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)  # moments in N
     n_shear = 0 if shear is None else shear.normals.shape[0]
+    # The iteration runs on the free DOFs only (u is zero on the fixed ones): rows g_j restricted
+    # to them, p <= 6 columns, so every product over the elements is p / 6 of the full one.
+    dofs = np.flatnonzero(free)
+    rows = directions if dofs.size == 6 else np.ascontiguousarray(directions[:, dofs])
+    load_f, to_newton_f = load[dofs], to_newton[dofs]
+    dof_scale = np.array([1.0, 1.0, 1.0] + [length_scale_mm] * 3)[dofs]
 
-    def forces(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return law.force_and_stiffness(directions @ u)
+    def full(u_f: np.ndarray) -> np.ndarray:
+        u = np.zeros(6)
+        u[dofs] = u_f
+        return u
 
-    def gradient(u: np.ndarray, s: np.ndarray, active: np.ndarray) -> np.ndarray:
-        grad = directions.T @ np.where(active, s, 0.0) - load
+    def gradient(u_f: np.ndarray, s: np.ndarray, active: np.ndarray) -> np.ndarray:
+        grad = rows.T @ np.where(active, s, 0.0) - load_f
         if shear is not None:
-            grad = grad + shear.generalised_force(u, active[:n_shear])
-        return np.where(free, grad, 0.0)
+            grad = grad + shear.generalised_force(full(u_f), active[:n_shear])[dofs]
+        return grad
 
-    def energy(u: np.ndarray, active: np.ndarray) -> tuple[float, float]:
+    def energy(u_f: np.ndarray, approach: np.ndarray, active: np.ndarray) -> tuple[float, float]:
         """Pi(u) and the size of the terms it sums (its round-off scale)."""
-        stored = float(law.energy(directions @ u).sum())
+        stored = float(law.energy(approach).sum())
         if shear is not None:
-            f = shear.force(u, active[:n_shear])
+            f = shear.force(full(u_f), active[:n_shear])
             stored += 0.5 * float((np.einsum("ij,ij->i", f, f) / np.maximum(shear.stiffness_n_per_mm, 1e-300)).sum())
-        work = float(load @ u)
+        work = float(load_f @ u_f)
         return stored - work, stored + abs(work)
 
     def stiffness(k: np.ndarray, active: np.ndarray) -> np.ndarray:
-        return assemble_stiffness(directions, k, active, shear)
+        hessian = rows.T @ (rows * (k * active)[:, None])
+        if shear is not None:
+            hessian = hessian + shear.stiffness(active[:n_shear])[np.ix_(dofs, dofs)]
+        return hessian
 
-    u = np.zeros(6)
-    s, k = forces(u)
+    u_f = np.zeros(dofs.size)
+    approach = np.zeros(m)  # g_j . u, advanced with u (no product with all the rows per step)
+    s, k = law.force_and_stiffness(approach)
     active = np.ones(m, bool)
     seen: set[bytes] = set()
     max_approach = law.max_approach_mm()  # fixed over the solve; all inf for linear elements
     bounded = bool(np.isfinite(max_approach).any())
     # From the second iteration on, active == (s > 0) and this is the previous residual: reused.
-    grad = gradient(u, s, active)
-    load_norm = np.linalg.norm(load * to_newton)
+    grad = gradient(u_f, s, active)
+    load_norm = np.linalg.norm(load_f * to_newton_f)
+    # Pi at the current u when the last line search evaluated it there (no shear: Pi then does
+    # not depend on the active set the search used).
+    known_energy: tuple[float, float] | None = None
     for iteration in range(1, max_iterations + 1):
         hessian = stiffness(k, active)
-        if unrestrained_dofs(hessian, free, length_scale_mm):
-            everything = stiffness(k, np.ones(m, bool))
+        if not _regular(hessian, dof_scale):
+            everything = assemble_stiffness(directions, k, np.ones(m, bool), shear)
             missing = unrestrained_dofs(everything, free, length_scale_mm)
             if missing:
                 raise singular_stiffness_error(missing)
@@ -261,30 +287,36 @@ def solve_unilateral(
                     "the bodies apart (or pushes along a direction no spring resists)"
                 )
             # A transiently small active set: regularise with a trace of every element's stiffness.
-            hessian = hessian + 1e-8 * everything
-        step = np.zeros(6)
-        step[free] = -np.linalg.solve(hessian[free][:, free], grad[free])
+            hessian = hessian + 1e-8 * everything[np.ix_(dofs, dofs)]
+        step = -np.linalg.solve(hessian, grad)
+        rate = rows @ step  # d(approach)/d(alpha)
         alpha = 1.0
         if bounded:  # fraction to the boundary of the log elements' admissible approaches
-            rate = directions @ step
-            room = max_approach - directions @ u
+            room = max_approach - approach
             alpha = min(1.0, float(np.min(0.99 * room[rate > 0] / rate[rate > 0], initial=np.inf)))
         slope = float(grad @ step) if iteration > 1 else 0.0
+        known, known_energy = known_energy, None
         if slope < 0.0:
             # Armijo on Pi. The first, all-active step (DEM's) is taken whole: with non-negative
             # offsets it descends anyway (Pi <= the all-active quadratic it minimises).
-            e0, size = energy(u, s > 0)
+            compressed = s > 0
+            e0, size = known if known is not None else energy(u_f, approach, compressed)
             # Differences below the energy's round-off say nothing: the step is then taken.
             noise = 1e-12 * size
-            while alpha > 1e-12 and energy(u + alpha * step, s > 0)[0] > e0 + 1e-4 * alpha * slope + noise:
+            while alpha > 1e-12:
+                trial = energy(u_f + alpha * step, approach + alpha * rate, compressed)
+                if trial[0] <= e0 + 1e-4 * alpha * slope + noise:
+                    known_energy = trial if shear is None else None
+                    break
                 alpha *= 0.5
-        u = u + alpha * step
-        s, k = forces(u)
+        u_f = u_f + alpha * step
+        approach = approach + alpha * rate
+        s, k = law.force_and_stiffness(approach)
         new_active = s > 0
-        residual = gradient(u, s, new_active)
+        residual = gradient(u_f, s, new_active)
         # Force scale of the problem: the load and every element force (incl. the stored ones).
         reference = load_norm + float(np.abs(s).sum())
-        residual_norm = float(np.linalg.norm(residual * to_newton))
+        residual_norm = float(np.linalg.norm(residual * to_newton_f))
         if residual_norm <= rtol * max(reference, 1e-300):
             active = new_active
             break
@@ -313,6 +345,8 @@ def solve_unilateral(
             f"the active-set iteration did not converge in {max_iterations} iterations "
             f"(residual {residual_norm:.3e} N)"
         )
+    u = full(u_f)
+    residual = full(residual)
     return UnilateralSolution(
         displacement=u,
         element_force_n=s,
