@@ -20,6 +20,7 @@ and ends with the KKT check of docs/method.md#1-two-rigid-bones-and-a-bed-of-spr
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -144,6 +145,11 @@ def singular_stiffness_error(missing: list[str]) -> SolverError:
     )
 
 
+def _norm(v: np.ndarray) -> float:
+    """Euclidean norm of a short vector (np.linalg.norm's overhead dominates at this size)."""
+    return math.sqrt(float(v @ v))
+
+
 def _regular(stiffness: np.ndarray, scale: np.ndarray, rtol: float = 1e-10) -> bool:
     """Whether a stiffness (over some DOFs, ``scale`` their length units: 1 for translations, a
     characteristic length for rotations) is positive definite with every Cholesky pivot well
@@ -228,10 +234,11 @@ def solve_unilateral(
     load = np.where(free, np.asarray(load, float), 0.0)
     to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)  # moments in N
     n_shear = 0 if shear is None else shear.normals.shape[0]
-    # The iteration runs on the free DOFs only (u is zero on the fixed ones): rows g_j restricted
-    # to them, p <= 6 columns, so every product over the elements is p / 6 of the full one.
+    # The iteration runs on the free DOFs only (u is zero on the fixed ones): the rows g_j
+    # restricted to them, stored as p <= 6 contiguous columns (p, m), so every product over the
+    # elements is p / 6 of the full one and a matrix-vector product, not a tall-skinny one.
     dofs = np.flatnonzero(free)
-    rows = directions if dofs.size == 6 else np.ascontiguousarray(directions[:, dofs])
+    cols = np.ascontiguousarray(directions[:, dofs].T)
     load_f, to_newton_f = load[dofs], to_newton[dofs]
     dof_scale = np.array([1.0, 1.0, 1.0] + [length_scale_mm] * 3)[dofs]
 
@@ -241,7 +248,7 @@ def solve_unilateral(
         return u
 
     def gradient(u_f: np.ndarray, s: np.ndarray, active: np.ndarray) -> np.ndarray:
-        grad = rows.T @ np.where(active, s, 0.0) - load_f
+        grad = cols @ np.where(active, s, 0.0) - load_f
         if shear is not None:
             grad = grad + shear.generalised_force(full(u_f), active[:n_shear])[dofs]
         return grad
@@ -256,7 +263,7 @@ def solve_unilateral(
         return stored - work, stored + abs(work)
 
     def stiffness(k: np.ndarray, active: np.ndarray) -> np.ndarray:
-        hessian = rows.T @ (rows * (k * active)[:, None])
+        hessian = (cols * (k * active)) @ cols.T
         if shear is not None:
             hessian = hessian + shear.stiffness(active[:n_shear])[np.ix_(dofs, dofs)]
         return hessian
@@ -270,7 +277,7 @@ def solve_unilateral(
     bounded = bool(np.isfinite(max_approach).any())
     # From the second iteration on, active == (s > 0) and this is the previous residual: reused.
     grad = gradient(u_f, s, active)
-    load_norm = np.linalg.norm(load_f * to_newton_f)
+    load_norm = _norm(load_f * to_newton_f)
     # Pi at the current u when the last line search evaluated it there (no shear: Pi then does
     # not depend on the active set the search used).
     known_energy: tuple[float, float] | None = None
@@ -289,7 +296,7 @@ def solve_unilateral(
             # A transiently small active set: regularise with a trace of every element's stiffness.
             hessian = hessian + 1e-8 * everything[np.ix_(dofs, dofs)]
         step = -np.linalg.solve(hessian, grad)
-        rate = rows @ step  # d(approach)/d(alpha)
+        rate = step @ cols  # d(approach)/d(alpha)
         alpha = 1.0
         if bounded:  # fraction to the boundary of the log elements' admissible approaches
             room = max_approach - approach
@@ -316,7 +323,7 @@ def solve_unilateral(
         residual = gradient(u_f, s, new_active)
         # Force scale of the problem: the load and every element force (incl. the stored ones).
         reference = load_norm + float(np.abs(s).sum())
-        residual_norm = float(np.linalg.norm(residual * to_newton_f))
+        residual_norm = _norm(residual * to_newton_f)
         if residual_norm <= rtol * max(reference, 1e-300):
             active = new_active
             break
@@ -352,6 +359,6 @@ def solve_unilateral(
         element_force_n=s,
         active=active,
         iterations=iteration,
-        force_residual_n=float(np.linalg.norm(residual[:3])),
-        moment_residual_nmm=float(np.linalg.norm(residual[3:])),
+        force_residual_n=_norm(residual[:3]),
+        moment_residual_nmm=_norm(residual[3:]),
     )

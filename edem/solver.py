@@ -26,7 +26,7 @@ from edem.mechanics import (
 from edem.opensim_model import BodyPoses
 from edem.raycast import RayCaster
 from edem.scene import Scene, Viscoelastic
-from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, shear_terms, spring_geometry
+from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, ligament_table, shear_terms, spring_geometry
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 from edem.viscoelastic import check_rk2_stability, integrator_weights
 
@@ -216,7 +216,10 @@ def run(
     g0 = scene.reference_point_mm
     n_springs = scene.spring_area_mm2.shape[0]
     spring_centroid, spring_normal, spring_area = scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2
-    length_scale = float(np.sqrt(((spring_centroid - g0) ** 2).sum(axis=1).mean()))
+    arm_squared = ((spring_centroid - g0) ** 2).sum(axis=1)
+    length_scale = float(np.sqrt(arm_squared.mean()))
+    # Distance of the furthest spring from G: no rigid motion of M changes it (check_increment's bound).
+    arm_bound = float(np.sqrt(arm_squared.max(initial=0.0)))
     load = scene.load
     loads = applied_loads(scene)
     warnings: list[str] = constrained_moment_warning(loads, scene.fixed_dofs)
@@ -231,6 +234,7 @@ def run(
     steps: list[StepResult] = []
     unbalanced: list[tuple[int, float]] = []  # DEM time points whose re-measured springs miss the load
     free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
+    ligaments = ligament_table(scene.ligaments)
     seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
         clock = time.perf_counter()
@@ -264,7 +268,7 @@ def run(
         stored_c = np.take(stored, cand_idx, axis=0)
         stored_normal = np.einsum("ij,ij->i", stored_c, normals)
         shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals)
-        lig_rows, lig_law, _ = ligament_elements(scene.ligaments, pose, f_pose, g_current)
+        lig_rows, lig_law, _ = ligament_elements(ligaments, pose, f_pose, g_current)
         law = stack_elements(contact_law(geometry, cartilage, stored_normal), lig_law)
         directions = generalised_directions(centroids_c, normals, g_current)
         if len(lig_rows):
@@ -324,7 +328,7 @@ def run(
         centre = (spring_force @ centroids_c) / spring_force.sum() if spring_force.sum() > 0 else g_current
         where = f"time point {k} (t = {t:g} s)"
         check_contact_kept(loads[k, :3], geometry.normal, spring_area, int(solution.active[:n_c].sum()), free, u, where)
-        check_increment(u, np.take(centroids_c, np.flatnonzero(solution.active[:n_c]), axis=0), g_current, cartilage, where)
+        check_increment(u, centroids_c, g_current, cartilage, where, arm_bound_mm=arm_bound, in_contact=solution.active[:n_c])
         committed = elastic_force[:n_c, None] * normals
         if shear is not None:
             committed = committed + shear.force(u, solution.active[:n_c])

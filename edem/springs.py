@@ -151,21 +151,41 @@ class Ligament:
         return self.youngs_modulus_mpa * self.area_mm2 / self.rest_length_mm
 
 
+@dataclass(frozen=True)
+class LigamentTable:
+    """The ligaments' data as arrays, built once per run (:func:`ligament_table`)."""
+
+    mobile_point_mm: np.ndarray  # (l, 3)
+    fixed_point_mm: np.ndarray  # (l, 3)
+    stiffness_n_per_mm: np.ndarray  # (l,)
+    rest_length_mm: np.ndarray  # (l,)
+
+
+def ligament_table(ligaments: tuple[Ligament, ...]) -> LigamentTable:
+    """Stack the ligaments' points, stiffnesses and rest lengths into arrays."""
+    return LigamentTable(
+        np.array([lig.mobile_point_mm for lig in ligaments], float).reshape(-1, 3),
+        np.array([lig.fixed_point_mm for lig in ligaments], float).reshape(-1, 3),
+        np.array([lig.stiffness_n_per_mm for lig in ligaments], float),
+        np.array([lig.rest_length_mm for lig in ligaments], float),
+    )
+
+
 def ligament_elements(
-    ligaments: tuple[Ligament, ...], mobile: Placement, fixed: Placement, reference_point_mm: np.ndarray
+    ligaments: tuple[Ligament, ...] | LigamentTable, mobile: Placement, fixed: Placement, reference_point_mm: np.ndarray
 ) -> tuple[np.ndarray, LinearElements, np.ndarray]:
-    """Rows g = -B^T e, law s = k (L - L0) + k delta and current lengths (mm) of the ligaments.
+    """Rows g = -B^T e, law s = k (L - L0) + k delta and current lengths (mm) of the ligaments
+    (given as they are, or as a :func:`ligament_table` built once for many poses).
 
     e is the unit vector from the ligament's point on M to its point on F; moving M by w changes
     the length by -e . w, so the tension grows with the approach delta = -e . w.
     """
-    if not ligaments:
+    table = ligaments if isinstance(ligaments, LigamentTable) else ligament_table(ligaments)
+    if not table.rest_length_mm.size:
         return np.zeros((0, 6)), LinearElements(np.zeros(0), np.zeros(0)), np.zeros(0)
-    pm = mobile.points(np.array([lig.mobile_point_mm for lig in ligaments]))
-    pf = fixed.points(np.array([lig.fixed_point_mm for lig in ligaments]))
-    span = pf - pm
-    length = np.linalg.norm(span, axis=1)
+    pm = mobile.points(table.mobile_point_mm)
+    span = fixed.points(table.fixed_point_mm) - pm
+    length = np.sqrt(np.einsum("ij,ij->i", span, span))
     e = span / length[:, None]
-    k = np.array([lig.stiffness_n_per_mm for lig in ligaments])
-    rest = np.array([lig.rest_length_mm for lig in ligaments])
-    return generalised_directions(pm, -e, reference_point_mm), LinearElements(k * (length - rest), k), length
+    k = table.stiffness_n_per_mm
+    return generalised_directions(pm, -e, reference_point_mm), LinearElements(k * (length - table.rest_length_mm), k), length
