@@ -150,19 +150,36 @@ def _norm(v: np.ndarray) -> float:
     return math.sqrt(float(v @ v))
 
 
-def _regular(stiffness: np.ndarray, scale: np.ndarray, rtol: float = 1e-10) -> bool:
-    """Whether a stiffness (over some DOFs, ``scale`` their length units: 1 for translations, a
-    characteristic length for rotations) is positive definite with every Cholesky pivot well
-    above round-off (``1e3 rtol`` of its largest entry, all blocks in N/mm): then no DOF can be
-    unrestrained at ``rtol`` and :func:`unrestrained_dofs` needs no eigensolve."""
-    if not scale.size:  # nothing free, nothing to restrain
-        return True
-    k = stiffness / np.outer(scale, scale)
-    try:
-        pivots = np.diagonal(np.linalg.cholesky(k)) ** 2
-    except np.linalg.LinAlgError:
-        return False
-    return bool(pivots.min() > 1e3 * rtol * np.abs(k).max())
+def _regular_solve(stiffness: np.ndarray, scale: np.ndarray, rhs: np.ndarray, rtol: float = 1e-10) -> np.ndarray | None:
+    """x with stiffness @ x = rhs if the stiffness is regular, else None.
+
+    Regular: positive definite with every Cholesky pivot well above round-off (``1e3 rtol`` of
+    its largest entry once the DOFs are in the same units: ``scale`` is 1 for a translation, a
+    characteristic length for a rotation); then no DOF is unrestrained at ``rtol`` and
+    :func:`unrestrained_dofs` needs no eigensolve. The factor that decides it also gives x.
+    The matrix is at most 6 x 6: a Cholesky over its DOFs in plain floats costs less than one
+    call into numpy.linalg.
+    """
+    n = scale.size
+    if not n:  # nothing free, nothing to restrain
+        return np.zeros(0)
+    a = (stiffness / np.outer(scale, scale)).tolist()
+    tolerance = 1e3 * rtol * max(abs(x) for row in a for x in row)
+    factor = [[0.0] * n for _ in range(n)]  # lower triangle L, a = L L^T
+    for j in range(n):
+        pivot = a[j][j] - sum(factor[j][m] ** 2 for m in range(j))
+        if not pivot > tolerance:  # (also catches nan)
+            return None
+        factor[j][j] = diagonal = math.sqrt(pivot)
+        for i in range(j + 1, n):
+            factor[i][j] = (a[i][j] - sum(factor[i][m] * factor[j][m] for m in range(j))) / diagonal
+    y = [0.0] * n  # L y = rhs (scaled), then L^T z = y, x = z (unscaled)
+    b = (rhs / scale).tolist()
+    for i in range(n):
+        y[i] = (b[i] - sum(factor[i][m] * y[m] for m in range(i))) / factor[i][i]
+    for i in reversed(range(n)):
+        y[i] = (y[i] - sum(factor[m][i] * y[m] for m in range(i + 1, n))) / factor[i][i]
+    return np.array(y) / scale
 
 
 def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: float, rtol: float = 1e-10) -> list[str]:
@@ -172,8 +189,8 @@ def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: 
     eigenvalues are compared (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs: detect rank deficiency, say which DOFs are unrestrained).
     """
     scale = np.array([1.0, 1.0, 1.0, length_scale_mm, length_scale_mm, length_scale_mm])[free]
-    if _regular(stiffness[np.ix_(free, free)], scale, rtol):  # the common case: no eigensolve
-        return []
+    if _regular_solve(stiffness[np.ix_(free, free)], scale, np.zeros(scale.size), rtol) is not None:
+        return []  # the common case: no eigensolve
     k = stiffness[np.ix_(free, free)] / np.outer(scale, scale)
     values, vectors = np.linalg.eigh(k)
     top = float(np.abs(values).max(initial=0.0))
@@ -283,7 +300,8 @@ def solve_unilateral(
     known_energy: tuple[float, float] | None = None
     for iteration in range(1, max_iterations + 1):
         hessian = stiffness(k, active)
-        if not _regular(hessian, dof_scale):
+        step = _regular_solve(hessian, dof_scale, -grad)
+        if step is None:
             everything = assemble_stiffness(directions, k, np.ones(m, bool), shear)
             missing = unrestrained_dofs(everything, free, length_scale_mm)
             if missing:
@@ -295,7 +313,7 @@ def solve_unilateral(
                 )
             # A transiently small active set: regularise with a trace of every element's stiffness.
             hessian = hessian + 1e-8 * everything[np.ix_(dofs, dofs)]
-        step = -np.linalg.solve(hessian, grad)
+            step = -np.linalg.solve(hessian, grad)
         rate = step @ cols  # d(approach)/d(alpha)
         alpha = 1.0
         if bounded:  # fraction to the boundary of the log elements' admissible approaches
