@@ -330,9 +330,12 @@ class RayCaster:
         h = float(max_length_mm)
         if not (np.isfinite(h) and h > 0):
             raise ValueError(f"max_length_mm must be finite and > 0, got {max_length_mm}")
-        norms = np.sqrt(np.einsum("ij,ij->i", dirs, dirs))
-        has_direction = norms > 0
-        if np.any(np.abs(norms[has_direction] - 1.0) > _UNIT_TOLERANCE):
+        # |d| within _UNIT_TOLERANCE of 1, compared squared (no square root, no masked gather).
+        squared = np.einsum("ij,ij->i", dirs, dirs)
+        unit = (squared >= (1.0 - _UNIT_TOLERANCE) ** 2) & (squared <= (1.0 + _UNIT_TOLERANCE) ** 2)
+        all_unit = bool(unit.all())
+        has_direction = unit if all_unit else squared > 0
+        if not all_unit and np.any(has_direction & ~unit):
             raise ValueError("directions must be unit vectors (or zero rows for no spring)")
 
         if rotation is not None or translation is not None:
@@ -352,7 +355,7 @@ class RayCaster:
         cast = self._cast_bruteforce if self.backend == "numpy" else self._cast_embree
         if not (len(self.triangles) and n):
             return RayHits(spring_length_mm=np.full(n, np.inf), triangle=np.full(n, -1, dtype=np.int64))
-        if has_direction.all():  # the usual case: no gather, no scatter
+        if all_unit:  # the usual case: no gather, no scatter
             length, hit = cast(origins, dirs, h)
             return RayHits(spring_length_mm=length, triangle=hit)
         length = np.full(n, np.inf)

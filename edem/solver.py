@@ -137,7 +137,7 @@ def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> li
     if cartilage.thickness_mm is None:
         return []
     t = float(cartilage.thickness_mm)
-    h = geometry.spring_length_mm[geometry.candidate]
+    h = geometry.candidate_length_mm
     compressed = h < t * (1.0 - 1e-9)
     if not np.any(compressed):
         return []
@@ -150,7 +150,7 @@ def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> li
 
 def compression_ratio(geometry: SpringGeometry, cartilage: Cartilage, approach_mm: np.ndarray) -> np.ndarray:
     """Compression over undeformed length of the candidate springs after an approach (strain)."""
-    return cartilage.spring_law.strain(geometry.spring_length_mm[geometry.candidate], approach_mm, cartilage.thickness_mm)
+    return cartilage.spring_law.strain(geometry.candidate_length_mm, approach_mm, cartilage.thickness_mm)
 
 
 def applied_loads(scene: Scene) -> np.ndarray:
@@ -244,11 +244,10 @@ def run(
         geometry = spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, f_pose, cartilage)
         seconds["geometry"] += time.perf_counter() - clock
         clock = time.perf_counter()
-        cand = geometry.candidate
-        n_c = int(cand.sum())
-        if cartilage.spring_law.needs_positive_length and np.any(geometry.spring_length_mm[cand] <= 0.0):
+        n_c = int(geometry.candidate_index.size)
+        if cartilage.spring_law.needs_positive_length and np.any(geometry.candidate_length_mm <= 0.0):
             # k = E'/h (threshold) and p = -E' ln(h/t) (gap-log) have no meaning once h <= 0.
-            bad = int((geometry.spring_length_mm[cand] <= 0.0).sum())
+            bad = int((geometry.candidate_length_mm <= 0.0).sum())
             raise SolverError(
                 f"time point {k} (t = {t:g} s): {bad} springs are compressed past their length "
                 f"(h <= 0, the bodies interpenetrate); the {cartilage.law} law needs h > 0: "
@@ -261,7 +260,7 @@ def run(
             )
         g_current = pose.points(g0[None])[0]
         # Gather the candidates once by index (cheaper than repeated boolean masks over all springs).
-        cand_idx = np.flatnonzero(cand)
+        cand_idx = geometry.candidate_index
         normals = np.take(geometry.normal, cand_idx, axis=0)
         centroids_c = np.take(geometry.centroid_mm, cand_idx, axis=0)
         area_c = spring_area[cand_idx]
@@ -270,9 +269,7 @@ def run(
         shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals)
         lig_rows, lig_law, _ = ligament_elements(ligaments, pose, f_pose, g_current)
         law = stack_elements(contact_law(geometry, cartilage, stored_normal), lig_law)
-        directions = generalised_directions(centroids_c, normals, g_current)
-        if len(lig_rows):
-            directions = np.vstack([directions, lig_rows])
+        directions = generalised_directions(centroids_c, normals, g_current, extra_rows=lig_rows)
         try:
             if layer_mesh is None:
                 solution = solve_unilateral(

@@ -9,6 +9,7 @@ law (:mod:`edem.laws`); ``ligament_elements`` does the same for the tension-only
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -73,6 +74,18 @@ class SpringGeometry:
     spring_length_mm: np.ndarray  # (n,) signed ray length, +inf where no hit in the window
     candidate: np.ndarray  # (n,) bool
 
+    # Gathered once and shared by every stage of a step (a boolean mask over all springs costs
+    # several integer gathers).
+    @cached_property
+    def candidate_index(self) -> np.ndarray:
+        """(c,) indices of the candidate springs, ascending."""
+        return np.flatnonzero(self.candidate)
+
+    @cached_property
+    def candidate_length_mm(self) -> np.ndarray:
+        """(c,) signed ray lengths of the candidates."""
+        return np.take(self.spring_length_mm, self.candidate_index)
+
 
 def spring_geometry(
     centroid_mm: np.ndarray,
@@ -107,9 +120,9 @@ def contact_law(
     """Element law of the candidate springs under the cartilage's contact law (docs/method.md#2-edem-the-time-dependent-incremental-method, eq. 3.7
     and 3.19). ``stored_normal_force_n`` is the EDEM push-back per candidate spring (zero for DEM).
     """
-    sel = geometry.candidate
     return cartilage.spring_law.elements(
-        geometry.area_mm2[sel], geometry.spring_length_mm[sel], cartilage.confined_modulus_mpa, cartilage.thickness_mm, stored_normal_force_n
+        np.take(geometry.area_mm2, geometry.candidate_index), geometry.candidate_length_mm, cartilage.confined_modulus_mpa,
+        cartilage.thickness_mm, stored_normal_force_n,
     )
 
 
@@ -125,12 +138,12 @@ def shear_terms(
     """
     if cartilage.shear_modulus_mpa == 0.0:
         return None
-    sel = geometry.candidate
-    h = cartilage.spring_law.shear_length_mm(geometry.spring_length_mm[sel], cartilage.thickness_mm)
+    sel = geometry.candidate_index
+    h = cartilage.spring_law.shear_length_mm(geometry.candidate_length_mm, cartilage.thickness_mm)
     return ShearTerms(
-        arm_mm=geometry.centroid_mm[sel] - reference_point_mm,
-        normals=geometry.normal[sel],
-        stiffness_n_per_mm=geometry.area_mm2[sel] * cartilage.shear_modulus_mpa / h,
+        arm_mm=np.take(geometry.centroid_mm, sel, axis=0) - reference_point_mm,
+        normals=np.take(geometry.normal, sel, axis=0),
+        stiffness_n_per_mm=np.take(geometry.area_mm2, sel) * cartilage.shear_modulus_mpa / h,
         stored_force_n=stored_tangential_force_n,
     )
 
