@@ -50,6 +50,8 @@ from typing import Literal
 
 import numpy as np
 
+from edem.rowwise import row_dot
+
 Backend = Literal["embree", "numpy"]
 
 # A float64 Moller-Trumbore test that misses the triangle Embree returned by less than this (in
@@ -331,7 +333,7 @@ class RayCaster:
         if not (np.isfinite(h) and h > 0):
             raise ValueError(f"max_length_mm must be finite and > 0, got {max_length_mm}")
         # |d| within _UNIT_TOLERANCE of 1, compared squared (no square root, no masked gather).
-        squared = np.einsum("ij,ij->i", dirs, dirs)
+        squared = row_dot(dirs, dirs)
         unit = (squared >= (1.0 - _UNIT_TOLERANCE) ** 2) & (squared <= (1.0 + _UNIT_TOLERANCE) ** 2)
         all_unit = bool(unit.all())
         has_direction = unit if all_unit else squared > 0
@@ -502,9 +504,9 @@ class RayCaster:
         """
         rows = np.take(self._plane_rows, k, axis=0)  # take: far cheaper than [] for row gathers
         normal = rows[:, :3]
-        along = np.einsum("ij,ij->i", normal, d)
+        along = row_dot(normal, d)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = (rows[:, 3] - np.einsum("ij,ij->i", normal, o)) / along
+            t = (rows[:, 3] - row_dot(normal, o)) / along
         det = -along
         u, v = u32.astype(np.float64), v32.astype(np.float64)
         margin = np.minimum(np.minimum(u, v), 1.0 - u - v)

@@ -25,6 +25,7 @@ from edem.mechanics import (
 )
 from edem.opensim_model import BodyPoses
 from edem.raycast import RayCaster
+from edem.rowwise import row_dot
 from edem.scene import Scene, Viscoelastic
 from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, ligament_table, shear_terms, spring_geometry
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
@@ -265,8 +266,9 @@ def run(
         centroids_c = np.take(geometry.centroid_mm, cand_idx, axis=0)
         area_c = spring_area[cand_idx]
         stored_c = np.take(stored, cand_idx, axis=0)
-        stored_normal = np.einsum("ij,ij->i", stored_c, normals)
-        shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals)
+        stored_normal = row_dot(stored_c, normals)
+        # (the tangential part of the stored forces only matters, and is only formed, with shear)
+        shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals) if cartilage.shear_modulus_mpa else None
         lig_rows, lig_law, _ = ligament_elements(ligaments, pose, f_pose, g_current)
         law = stack_elements(contact_law(geometry, cartilage, stored_normal), lig_law)
         directions = generalised_directions(centroids_c, normals, g_current, extra_rows=lig_rows)
