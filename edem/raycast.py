@@ -195,16 +195,16 @@ class RayCaster:
         self.backend: Backend = backend
         self.vertices_mm = vertices
         self.triangles = tri
-        self._v0 = vertices[tri[:, 0]]
-        self._edge1 = vertices[tri[:, 1]] - self._v0
-        self._edge2 = vertices[tri[:, 2]] - self._v0
-
         if len(vertices):
             lo, hi = vertices.min(axis=0), vertices.max(axis=0)
         else:
             lo = hi = np.zeros(3)
-        # Embree sees coordinates relative to the box centre: float32 resolution is best near 0.
+        # Every ray and triangle is handled relative to the centre of F's box, by Embree (float32
+        # resolution is best near 0) and by the float64 tests alike: rays are moved there once.
         self._centre_mm = 0.5 * (lo + hi)
+        self._v0 = vertices[tri[:, 0]] - self._centre_mm
+        self._edge1 = vertices[tri[:, 1]] - vertices[tri[:, 0]]
+        self._edge2 = vertices[tri[:, 2]] - vertices[tri[:, 0]]
         self._extent_mm = float(np.max(hi - lo)) if len(vertices) else 0.0
         self._box_mm = hi - lo
         self._scene = None
@@ -275,11 +275,11 @@ class RayCaster:
     def _embree_run(
         self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray
     ) -> dict[str, np.ndarray]:
-        """One Embree pass, rays already in F's local frame: float32 ``primID`` (-1 = none),
+        """One Embree pass, rays already in F's local frame relative to its box centre: float32 ``primID`` (-1 = none),
         ``tfar`` (distance along the ray) and barycentric ``u``, ``v`` of every ray's hit."""
         return self._scene.run(
-            # Subtract in float64, round once: float32 resolution is best near the box centre.
-            np.ascontiguousarray(origins - self._centre_mm, dtype=np.float32),
+            # Already relative to the box centre (in float64), rounded once.
+            np.ascontiguousarray(origins, dtype=np.float32),
             np.ascontiguousarray(directions, dtype=np.float32),
             # embreex writes the hit distances into this array in place: always pass a fresh one.
             dists=np.ascontiguousarray(tfar, dtype=np.float32),
@@ -349,9 +349,11 @@ class RayCaster:
                 raise ValueError("rotation must be proper (det = +1), not a reflection")
             if shift.shape != (3,):
                 raise ValueError(f"translation must have shape (3,), got {shift.shape}")
-            # Row-vector form of x_local = R^T (x_world - t).
-            origins = (origins - shift) @ rot
+            # Row-vector form of x_local = R^T (x_world - t), then relative to F's box centre.
+            origins = origins @ rot - (shift @ rot + self._centre_mm)
             dirs = dirs @ rot
+        else:
+            origins = origins - self._centre_mm
 
         n = len(origins)
         cast = self._cast_bruteforce if self.backend == "numpy" else self._cast_embree
@@ -609,9 +611,9 @@ class RayCaster:
         cell = max(float(self._box_mm.max() + 2.0 * reach_mm) / _GRID_CELLS, reach_mm / 4.0)
         width = int(np.ceil(reach_mm / cell))
         # F's box, the marks' dilation and one unmarked border cell on every side.
-        box_lo = self._centre_mm - 0.5 * self._box_mm - (width + 1) * cell
+        box_lo = -0.5 * self._box_mm - (width + 1) * cell  # (rays are relative to the box centre)
         shape = np.ceil(self._box_mm / cell).astype(np.int64) + 2 * width + 3
-        corners = self.vertices_mm[self.triangles]
+        corners = self.vertices_mm[self.triangles] - self._centre_mm
         first = np.floor((corners.min(axis=1) - box_lo) / cell).astype(np.int64)
         count = np.floor((corners.max(axis=1) - box_lo) / cell).astype(np.int64) - first + 1
         per_triangle = count.prod(axis=1)

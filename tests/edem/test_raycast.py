@@ -408,10 +408,11 @@ def test_near_f_grid_marks_every_point_within_its_reach():
     corner = vertices[triangles[k]]
     on_f = corner[:, 0] + a[:, None] * (corner[:, 1] - corner[:, 0]) + b[:, None] * (corner[:, 2] - corner[:, 0])
     points = on_f + rng.uniform(0, reach, m)[:, None] * unit(rng.normal(size=(m, 3)))
-    cell = np.clip(((points - lower) * inverse_cell).astype(np.int64), 0, top)
+    # (the grid, like every ray inside the caster, is relative to the centre of F's box)
+    cell = np.clip(((points - caster._centre_mm - lower) * inverse_cell).astype(np.int64), 0, top)
     assert np.all(marked[cell @ strides])
     # and it does exclude something: the centre of the sphere, 7 mm from its surface
-    centre = np.clip(((np.array([1.0, -2.0, 0.5]) - lower) * inverse_cell).astype(np.int64), 0, top)
+    centre = np.clip(((np.array([1.0, -2.0, 0.5]) - caster._centre_mm - lower) * inverse_cell).astype(np.int64), 0, top)
     assert not marked[centre @ strides]
 
 
