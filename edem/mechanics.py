@@ -73,17 +73,23 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def generalised_directions(
-    points_mm: np.ndarray, directions: np.ndarray, reference_point_mm: np.ndarray, extra_rows: np.ndarray | None = None
-) -> np.ndarray:
-    """Rows B_i^T d_i = (d_i, (c_i - G) x d_i): the rigid motion seen along d_i at c_i (eq. 3.3),
-    followed by ``extra_rows`` (k, 6) if given (e.g. the ligaments'), in one array without a copy."""
-    n = points_mm.shape[0]
-    out = np.empty((n + (0 if extra_rows is None else extra_rows.shape[0]), 6))
-    out[:n, :3] = directions
-    out[:n, 3:] = cross_rows(points_mm - reference_point_mm, directions)
-    if extra_rows is not None:
-        out[n:] = extra_rows
+def generalised_directions(points_mm: np.ndarray, directions: np.ndarray, reference_point_mm: np.ndarray) -> np.ndarray:
+    """Rows B_i^T d_i = (d_i, (c_i - G) x d_i): the rigid motion seen along d_i at c_i (eq. 3.3)."""
+    out = np.empty((points_mm.shape[0], 6))
+    out[:, :3] = directions
+    out[:, 3:] = cross_rows(points_mm - reference_point_mm, directions)
+    return out
+
+
+def turn_rows(rows: np.ndarray, rotation: np.ndarray, extra: int = 0) -> np.ndarray:
+    """Rows (d, (c - G) x d) of a body's points and directions after the body turned by
+    ``rotation`` about G: both parts turn with it, (R d, R ((c - G) x d)), so rows measured once
+    at the reference pose give the rows at any pose by one (n, 6) x (6, 6) product. ``extra``
+    rows are left for the caller to fill (e.g. the ligaments', appended without a copy)."""
+    out = np.empty((rows.shape[0] + extra, 6))
+    turn = np.zeros((6, 6))
+    turn[:3, :3] = turn[3:, 3:] = rotation.T
+    np.matmul(rows, turn, out=out[: rows.shape[0]])
     return out
 
 

@@ -18,6 +18,7 @@ from edem.mechanics import (
     UnilateralSolution,
     assemble_stiffness,
     generalised_directions,
+    turn_rows,
     rotation_matrix,
     rotation_vector,
     solve_unilateral,
@@ -236,6 +237,7 @@ def run(
     unbalanced: list[tuple[int, float]] = []  # DEM time points whose re-measured springs miss the load
     free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
     ligaments = ligament_table(scene.ligaments)
+    reference_rows = generalised_directions(spring_centroid, spring_normal, g0)
     seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
         clock = time.perf_counter()
@@ -262,16 +264,19 @@ def run(
         g_current = pose.points(g0[None])[0]
         # Gather the candidates once by index (cheaper than repeated boolean masks over all springs).
         cand_idx = geometry.candidate_index
-        normals = np.take(geometry.normal, cand_idx, axis=0)
+        lig_rows, lig_law, _ = ligament_elements(ligaments, pose, f_pose, g_current)
+        # Rows g = (n, (c - G) x n) of the candidates: both parts turn with M, so they are the
+        # reference rows (built once) turned by M's rotation; one gather and one product.
+        directions = turn_rows(np.take(reference_rows, cand_idx, axis=0), pose.rotation, len(lig_rows))
+        directions[n_c:] = lig_rows
+        normals = directions[:n_c, :3]
         centroids_c = np.take(geometry.centroid_mm, cand_idx, axis=0)
         area_c = spring_area[cand_idx]
         stored_c = np.take(stored, cand_idx, axis=0)
         stored_normal = row_dot(stored_c, normals)
         # (the tangential part of the stored forces only matters, and is only formed, with shear)
         shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals) if cartilage.shear_modulus_mpa else None
-        lig_rows, lig_law, _ = ligament_elements(ligaments, pose, f_pose, g_current)
         law = stack_elements(contact_law(geometry, cartilage, stored_normal), lig_law)
-        directions = generalised_directions(centroids_c, normals, g_current, extra_rows=lig_rows)
         try:
             if layer_mesh is None:
                 solution = solve_unilateral(

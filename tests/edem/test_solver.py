@@ -168,6 +168,22 @@ def test_regular_solve_matches_lapack_and_refuses_what_unrestrained_dofs_would_d
     assert _regular_solve(np.zeros((0, 0)), np.zeros(0), np.zeros(0)).size == 0
 
 
+def test_turned_reference_rows_equal_the_rows_at_the_moved_pose():
+    """(n, (c - G) x n) measured at the reference pose and turned by R equal the rows of the
+    points and normals moved by the rigid placement (R about G, then a translation), to round-off."""
+    from edem.mechanics import rotation_matrix, turn_rows
+    from edem.springs import Placement
+
+    rng = np.random.default_rng(7)
+    points, normals, g0 = rng.normal(size=(50, 3)) * 20.0, rng.normal(size=(50, 3)), np.array([1.0, 2.0, 3.0])
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    pose = Placement(rotation_matrix(np.array([0.3, -0.2, 0.5])), np.array([4.0, -1.0, 2.0]), g0)
+    moved = generalised_directions(pose.points(points), pose.vectors(normals), pose.points(g0[None])[0])
+    turned = turn_rows(generalised_directions(points, normals, g0), pose.rotation, extra=2)
+    assert turned.shape == (52, 6)
+    np.testing.assert_allclose(turned[:50], moved, rtol=0, atol=1e-12 * 40.0)  # round-off on 40 mm arms
+
+
 def test_shear_stiffness_restrains_the_axis():
     """With k_s = G/h > 0 the same cylinder is determinate and a pure vertical load moves it vertically."""
     scene = make_scene(
