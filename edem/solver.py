@@ -270,7 +270,7 @@ def run(
         directions = turn_rows(np.take(reference_rows, cand_idx, axis=0), pose.rotation, len(lig_rows))
         directions[n_c:] = lig_rows
         normals = directions[:n_c, :3]
-        centroids_c = np.take(geometry.centroid_mm, cand_idx, axis=0)
+        centroids_c = geometry.candidate_centroid_mm
         area_c = spring_area[cand_idx]
         stored_c = np.take(stored, cand_idx, axis=0)
         stored_normal = row_dot(stored_c, normals)
@@ -331,7 +331,9 @@ def run(
         spring_force = total_force[:n_c]
         centre = (spring_force @ centroids_c) / spring_force.sum() if spring_force.sum() > 0 else g_current
         where = f"time point {k} (t = {t:g} s)"
-        check_contact_kept(loads[k, :3], geometry.normal, spring_area, int(solution.active[:n_c].sum()), free, u, where)
+        n_contact = int(solution.active[:n_c].sum())
+        if not n_contact:  # (M's normals at the pose are only formed for this check)
+            check_contact_kept(loads[k, :3], geometry.normal, spring_area, n_contact, free, u, where)
         check_increment(u, centroids_c, g_current, cartilage, where, arm_bound_mm=arm_bound, in_contact=solution.active[:n_c])
         committed = elastic_force[:n_c, None] * normals
         if shear is not None:

@@ -66,13 +66,28 @@ class Cartilage:
 
 @dataclass(frozen=True)
 class SpringGeometry:
-    """Springs of the mobile body at one pose: one per non-degenerate triangle (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs)."""
+    """Springs of the mobile body at one pose: one per non-degenerate triangle (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs).
 
-    centroid_mm: np.ndarray  # (n, 3)
-    normal: np.ndarray  # (n, 3) unit, out of M towards F
+    Positions and normals at the pose are formed from M's reference ones when first asked for
+    (the ray cast itself never needs them: it moves the reference rays straight into F's frame).
+    """
+
+    reference_centroid_mm: np.ndarray  # (n, 3) at M's reference pose
+    reference_normal: np.ndarray  # (n, 3) unit, out of M towards F, at M's reference pose
+    mobile: Placement  # M's pose
     area_mm2: np.ndarray  # (n,)
     spring_length_mm: np.ndarray  # (n,) signed ray length, +inf where no hit in the window
     candidate: np.ndarray  # (n,) bool
+
+    @cached_property
+    def centroid_mm(self) -> np.ndarray:
+        """(n, 3) spring origins at the pose."""
+        return self.mobile.points(self.reference_centroid_mm)
+
+    @cached_property
+    def normal(self) -> np.ndarray:
+        """(n, 3) unit spring directions at the pose."""
+        return self.mobile.vectors(self.reference_normal)
 
     # Gathered once and shared by every stage of a step (a boolean mask over all springs costs
     # several integer gathers).
@@ -86,6 +101,11 @@ class SpringGeometry:
         """(c,) signed ray lengths of the candidates."""
         return np.take(self.spring_length_mm, self.candidate_index)
 
+    @cached_property
+    def candidate_centroid_mm(self) -> np.ndarray:
+        """(c, 3) origins of the candidates at the pose (without placing every spring)."""
+        return self.mobile.points(np.take(self.reference_centroid_mm, self.candidate_index, axis=0))
+
 
 def spring_geometry(
     centroid_mm: np.ndarray,
@@ -98,18 +118,23 @@ def spring_geometry(
 ) -> SpringGeometry:
     """Geometry stage (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, thesis 4.2.1): place M's springs and measure them against F.
 
+    ``centroid_mm`` and ``normal`` are the springs at M's reference pose; ``mobile`` places M.
     Rays are cast along the springs' normals in a signed window of +-h_max (so touching or
     interpenetrating bodies still see each other), in F's own frame. Candidates: the threshold
     law takes every spring with a hit and h <= h_max (eq. 4.4); the gap laws take every spring
     with a hit in the window, and the law decides whether it is compressed.
     """
-    c = mobile.points(centroid_mm)
-    n = mobile.vectors(normal)
-    rotation, translation = fixed.affine()
-    hits = caster.cast(c, n, cartilage.max_spring_length_mm, rotation=rotation, translation=translation)
+    # F's frame seen from M's reference frame: x_F = R_f^T (R_m X + b_m - b_f) = R^T (X - t) with
+    # R = R_m^T R_f and t = R_m^T (b_f - b_m), so the reference rays go to F's frame in one step.
+    rotation_m, offset_m = mobile.affine()
+    rotation_f, offset_f = fixed.affine()
+    hits = caster.cast(
+        centroid_mm, normal, cartilage.max_spring_length_mm,
+        rotation=rotation_m.T @ rotation_f, translation=rotation_m.T @ (offset_f - offset_m),
+    )
     length = hits.spring_length_mm
     candidate = cartilage.spring_law.candidates(length, cartilage.max_spring_length_mm)
-    return SpringGeometry(c, n, area_mm2, length, candidate)
+    return SpringGeometry(centroid_mm, normal, mobile, area_mm2, length, candidate)
 
 
 def contact_law(
@@ -141,8 +166,8 @@ def shear_terms(
     sel = geometry.candidate_index
     h = cartilage.spring_law.shear_length_mm(geometry.candidate_length_mm, cartilage.thickness_mm)
     return ShearTerms(
-        arm_mm=np.take(geometry.centroid_mm, sel, axis=0) - reference_point_mm,
-        normals=np.take(geometry.normal, sel, axis=0),
+        arm_mm=geometry.candidate_centroid_mm - reference_point_mm,
+        normals=geometry.mobile.vectors(np.take(geometry.reference_normal, sel, axis=0)),
         stiffness_n_per_mm=np.take(geometry.area_mm2, sel) * cartilage.shear_modulus_mpa / h,
         stored_force_n=stored_tangential_force_n,
     )
