@@ -69,8 +69,9 @@ _MAX_ROUNDS = 8
 _CHUNK_PAIRS = 1 << 19
 # Directions must be unit vectors (a length is measured in units of |direction|).
 _UNIT_TOLERANCE = 1e-6
-# Cells of the grid of cells near F (RayCaster._near_cells) along the longest side of F's padded box, at most, and the most cells the
-# triangles' boxes may mark before the grid is given up (every missed ray is then probed).
+# The grid of cells near F (RayCaster._near_cells): at most this many cells along the longest
+# side of F's padded box, and at most this many cell marks from the triangles' boxes before the
+# grid is given up (every missed ray is then probed).
 _GRID_CELLS = 96
 _GRID_MAX_MARKS = 1 << 23
 
@@ -275,8 +276,9 @@ class RayCaster:
     def _embree_run(
         self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray
     ) -> dict[str, np.ndarray]:
-        """One Embree pass, rays already in F's local frame relative to its box centre: float32 ``primID`` (-1 = none),
-        ``tfar`` (distance along the ray) and barycentric ``u``, ``v`` of every ray's hit."""
+        """One Embree pass, rays already in F's frame relative to its box centre: float32
+        ``primID`` (-1 = none), ``tfar`` (distance along the ray) and barycentric ``u``, ``v`` of
+        every ray's hit."""
         return self._scene.run(
             # Already relative to the box centre (in float64), rounded once.
             np.ascontiguousarray(origins, dtype=np.float32),
