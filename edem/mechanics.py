@@ -27,6 +27,7 @@ import numpy as np
 
 from edem.errors import SolverError
 from edem.laws import ElementLaw
+from edem.rowwise import rows_times
 
 DOF_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
 
@@ -89,7 +90,7 @@ def turn_rows(rows: np.ndarray, rotation: np.ndarray, extra: int = 0) -> np.ndar
     out = np.empty((rows.shape[0] + extra, 6))
     turn = np.zeros((6, 6))
     turn[:3, :3] = turn[3:, 3:] = rotation.T
-    np.matmul(rows, turn, out=out[: rows.shape[0]])
+    rows_times(rows, turn, out=out[: rows.shape[0]])
     return out
 
 
@@ -292,7 +293,8 @@ def solve_unilateral(
         return stored - work, stored + abs(work)
 
     def stiffness(k: np.ndarray, active: np.ndarray) -> np.ndarray:
-        hessian = (cols * (k * active)) @ cols.T
+        # (einsum, not a BLAS product: OpenBLAS would thread it past ~7000 elements, see edem.rowwise)
+        hessian = np.einsum("ik,jk->ij", cols * (k * active), cols)
         if shear is not None:
             hessian = hessian + shear.stiffness(active[:n_shear])[np.ix_(dofs, dofs)]
         return hessian

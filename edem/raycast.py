@@ -50,7 +50,7 @@ from typing import Literal
 
 import numpy as np
 
-from edem.rowwise import row_dot
+from edem.rowwise import row_dot, rows_times
 
 Backend = Literal["embree", "numpy"]
 
@@ -352,8 +352,8 @@ class RayCaster:
             if shift.shape != (3,):
                 raise ValueError(f"translation must have shape (3,), got {shift.shape}")
             # Row-vector form of x_local = R^T (x_world - t), then relative to F's box centre.
-            origins = origins @ rot - (shift @ rot + self._centre_mm)
-            dirs = dirs @ rot
+            origins = rows_times(origins, rot) - (shift @ rot + self._centre_mm)
+            dirs = rows_times(dirs, rot)
         else:
             origins = origins - self._centre_mm
 

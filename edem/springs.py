@@ -16,6 +16,7 @@ import numpy as np
 from edem.laws import LAWS, ContactLaw, ElementLaw, LinearElements
 from edem.mechanics import ShearTerms, confined_modulus_mpa, generalised_directions
 from edem.raycast import RayCaster
+from edem.rowwise import rows_times
 
 
 @dataclass(frozen=True)
@@ -32,10 +33,10 @@ class Placement:
 
     def points(self, x_mm: np.ndarray) -> np.ndarray:
         rotation, offset = self.affine()
-        return x_mm @ rotation.T + offset
+        return rows_times(x_mm, rotation.T) + offset
 
     def vectors(self, v: np.ndarray) -> np.ndarray:
-        return v @ self.rotation.T
+        return rows_times(v, self.rotation.T)
 
     def affine(self) -> tuple[np.ndarray, np.ndarray]:
         """(R, b) with x = R X + b."""
