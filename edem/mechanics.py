@@ -266,7 +266,8 @@ def solve_unilateral(
     n_shear = 0 if shear is None else shear.normals.shape[0]
     # The iteration runs on the free DOFs only (u is zero on the fixed ones): the rows g_j
     # restricted to them, stored as p <= 6 contiguous columns (p, m), so every product over the
-    # elements is p / 6 of the full one and a matrix-vector product, not a tall-skinny one.
+    # elements is p / 6 of the full one and runs along contiguous columns. The products are
+    # einsums, not BLAS calls, which OpenBLAS would spread over threads (see edem.rowwise).
     dofs = np.flatnonzero(free)
     cols = np.ascontiguousarray(directions[:, dofs].T)
     load_f, to_newton_f = load[dofs], to_newton[dofs]
@@ -278,7 +279,7 @@ def solve_unilateral(
         return u
 
     def gradient(u_f: np.ndarray, s: np.ndarray, active: np.ndarray) -> np.ndarray:
-        grad = cols @ np.where(active, s, 0.0) - load_f
+        grad = np.einsum("ij,j->i", cols, np.where(active, s, 0.0)) - load_f
         if shear is not None:
             grad = grad + shear.generalised_force(full(u_f), active[:n_shear])[dofs]
         return grad
@@ -293,7 +294,6 @@ def solve_unilateral(
         return stored - work, stored + abs(work)
 
     def stiffness(k: np.ndarray, active: np.ndarray) -> np.ndarray:
-        # (einsum, not a BLAS product: OpenBLAS would thread it past ~7000 elements, see edem.rowwise)
         hessian = np.einsum("ik,jk->ij", cols * (k * active), cols)
         if shear is not None:
             hessian = hessian + shear.stiffness(active[:n_shear])[np.ix_(dofs, dofs)]
@@ -328,7 +328,7 @@ def solve_unilateral(
             # A transiently small active set: regularise with a trace of every element's stiffness.
             hessian = hessian + 1e-8 * everything[np.ix_(dofs, dofs)]
             step = -np.linalg.solve(hessian, grad)
-        rate = step @ cols  # d(approach)/d(alpha)
+        rate = np.einsum("i,ij->j", step, cols)  # d(approach)/d(alpha)
         alpha = 1.0
         if bounded:  # fraction to the boundary of the log elements' admissible approaches
             room = max_approach - approach

@@ -2,8 +2,9 @@
 directions throughout edem.
 
 * numpy's elementwise machinery pays per row when the last axis has only 3 entries
-  (``np.einsum("ij,ij->i")`` runs about 5x slower per element than a flat product followed by a
-  matrix-vector product), so row dot products go through :func:`row_dot`.
+  (``np.einsum("ij,ij->i")`` runs about 5x slower per element than products of the columns), so
+  row dot products go through :func:`row_dot`; it uses no BLAS matrix-vector product, which
+  OpenBLAS would also run on several threads (see below).
 * OpenBLAS runs a matrix product on several threads once it holds more than about 2.6e5
   multiply-adds (M N K > 65536 x 4). For a tall, narrow product such as (30000, 3) x (3, 3) or
   (17000, 6) x (6, 6) the threads cost more to start and join than the product itself, and on a
@@ -16,15 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
-_ONES3 = np.ones(3)
 # Multiply-adds per product that OpenBLAS keeps on one thread (its GEMM threshold, 65536 x 4).
 _SINGLE_THREAD_WORK = 65536 * 4
 
 
 def row_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(n,) dot products of matching rows of two (n, 3) arrays: a flat product, then a
-    matrix-vector product with (1, 1, 1)."""
-    return (a * b) @ _ONES3
+    """(n,) dot products of matching rows of two (n, 3) arrays, column by column."""
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
 
 
 def rows_times(rows: np.ndarray, matrix: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
