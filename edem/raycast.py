@@ -73,7 +73,9 @@ _UNIT_TOLERANCE = 1e-6
 # side of F's padded box, and at most this many cell marks from the triangles' boxes before the
 # grid is given up (every missed ray is then probed).
 _GRID_CELLS = 96
-_GRID_MAX_MARKS = 1 << 23
+_GRID_MAX_MARKS = 1 << 24
+# Cells marked per vectorised slice of triangles while the grid is built (~50 bytes each at once).
+_GRID_SLICE_MARKS = 1 << 19
 
 
 # The grid of cells near F (RayCaster._near_cells): flat marks, lower corner (mm), 1 / cell size
@@ -622,13 +624,18 @@ class RayCaster:
         total = int(per_triangle.sum())
         grid = None
         if total <= _GRID_MAX_MARKS:
-            # Every cell of every triangle's box, enumerated without a loop over triangles.
-            owner = np.repeat(np.arange(len(count)), per_triangle)
-            j = np.arange(total) - np.repeat(np.cumsum(per_triangle) - per_triangle, per_triangle)
-            nx, ny = count[owner, 0], count[owner, 1]
-            index = first[owner] + np.stack([j % nx, (j // nx) % ny, j // (nx * ny)], axis=1)
             marked = np.zeros(tuple(shape), bool)
-            marked[index[:, 0], index[:, 1], index[:, 2]] = True
+            # Every cell of every triangle's box, enumerated without a loop over triangles, in
+            # slices of triangles holding about _GRID_SLICE_MARKS cells (bounded memory).
+            ends = np.cumsum(per_triangle)
+            cuts = np.searchsorted(ends, np.arange(_GRID_SLICE_MARKS, total, _GRID_SLICE_MARKS), side="right")
+            for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(count)]):
+                per, cnt = per_triangle[lo:hi], count[lo:hi]
+                owner = np.repeat(np.arange(hi - lo), per)
+                j = np.arange(owner.size) - np.repeat(np.cumsum(per) - per, per)
+                nx, ny = cnt[owner, 0], cnt[owner, 1]
+                index = first[lo:hi][owner] + np.stack([j % nx, (j // nx) % ny, j // (nx * ny)], axis=1)
+                marked[index[:, 0], index[:, 1], index[:, 2]] = True
             for axis in range(3):  # box dilation by `width` cells: a window sum of a cumsum
                 total_along = np.cumsum(marked, axis=axis, dtype=np.int32)
                 padded = np.concatenate([np.zeros_like(np.take(total_along, [0], axis=axis)), total_along], axis=axis)

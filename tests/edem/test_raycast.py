@@ -391,10 +391,14 @@ def test_only_rays_whose_window_passes_near_f_are_probed_for_lost_hits():
     assert np.all(np.isinf(hits.spring_length_mm[n:]))
 
 
-def test_near_f_grid_marks_every_point_within_its_reach():
+def test_near_f_grid_marks_every_point_within_its_reach(monkeypatch):
     """The grid that spares probes must be conservative: points at any distance up to the reach
     from F's surface (random points on random triangles of a sphere, moved off them in random
-    directions) all fall in marked cells, down to the cell size of the grid."""
+    directions) all fall in marked cells, down to the cell size of the grid. Built in slices of
+    97 cell marks here, so the slicing of the construction is exercised too."""
+    import edem.raycast
+
+    monkeypatch.setattr(edem.raycast, "_GRID_SLICE_MARKS", 97)
     vertices, triangles = icosphere(3)
     vertices = 7.0 * vertices + np.array([1.0, -2.0, 0.5])
     caster = RayCaster(vertices, triangles)
