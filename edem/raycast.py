@@ -50,7 +50,7 @@ from typing import Literal
 
 import numpy as np
 
-from edem.rowwise import row_dot, rows_times
+from edem.rowwise import add_rows, row_dot, rows_times
 
 Backend = Literal["embree", "numpy"]
 
@@ -354,10 +354,10 @@ class RayCaster:
             if shift.shape != (3,):
                 raise ValueError(f"translation must have shape (3,), got {shift.shape}")
             # Row-vector form of x_local = R^T (x_world - t), then relative to F's box centre.
-            origins = rows_times(origins, rot) - (shift @ rot + self._centre_mm)
+            origins = add_rows(rows_times(origins, rot), -(shift @ rot + self._centre_mm))
             dirs = rows_times(dirs, rot)
         else:
-            origins = origins - self._centre_mm
+            origins = add_rows(origins, -self._centre_mm)
 
         n = len(origins)
         cast = self._cast_bruteforce if self.backend == "numpy" else self._cast_embree

@@ -16,7 +16,7 @@ import numpy as np
 from edem.laws import LAWS, ContactLaw, ElementLaw, LinearElements
 from edem.mechanics import ShearTerms, confined_modulus_mpa, generalised_directions
 from edem.raycast import RayCaster
-from edem.rowwise import rows_times
+from edem.rowwise import add_rows, rows_times
 
 
 @dataclass(frozen=True)
@@ -33,7 +33,7 @@ class Placement:
 
     def points(self, x_mm: np.ndarray) -> np.ndarray:
         rotation, offset = self.affine()
-        return rows_times(x_mm, rotation.T) + offset
+        return add_rows(rows_times(x_mm, rotation.T), offset)
 
     def vectors(self, v: np.ndarray) -> np.ndarray:
         return rows_times(v, self.rotation.T)

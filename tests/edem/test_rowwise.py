@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from edem.rowwise import row_dot, rows_times
+from edem.rowwise import add_rows, row_dot, rows_times
 
 
 def test_row_dot_is_the_rowwise_dot_product():
@@ -26,3 +26,13 @@ def test_rows_times_equals_the_product_across_its_slices():
         rows_times(rows, matrix.T, out=out[:n])  # a transposed view of the matrix, too
         np.testing.assert_allclose(out[:n], rows @ matrix.T, rtol=1e-15, atol=1e-15 * np.abs(expected).max())
         assert np.isnan(out[n:]).all()
+
+
+def test_add_rows_is_the_broadcast_sum_bit_for_bit():
+    """Row counts below, at and off a multiple of the block (256 rows); float64 and float32 rows."""
+    rng = np.random.default_rng(3)
+    vector = rng.normal(size=3)
+    for n in (0, 5, 256, 1000, 30001):
+        rows = rng.normal(size=(n, 3))
+        assert np.array_equal(add_rows(rows, vector), rows + vector)
+        assert np.array_equal(add_rows(rows.astype(np.float32), vector), rows.astype(np.float32) + vector)
