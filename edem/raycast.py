@@ -590,7 +590,7 @@ class RayCaster:
         middle = 0.5 * (s_start + s_end)
         if middle.any():  # (a first-round miss's window is centred on its origin)
             point += middle[:, None] * np.take(dirs, rows, axis=0)
-        point -= lower
+        point = add_rows(point, -lower)
         point *= inverse_cell
         # Truncation and clipping send points outside the grid to its border cells, which are
         # never marked: the grid reaches one cell beyond the marks on every side.
