@@ -21,6 +21,8 @@ balances the load only in the linear model, not in the geometry: such a result i
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from edem.errors import SolverError
@@ -58,21 +60,38 @@ def point_motion_mm(u: np.ndarray, points_mm: np.ndarray, reference_point_mm: np
     return np.linalg.norm(moved - arm, axis=1)
 
 
+def motion_bound_mm(u: np.ndarray, arm_bound_mm: float) -> float:
+    """Upper bound on the distance any point of M within ``arm_bound_mm`` of G moves under the
+    finite rigid motion u = (u_G, q): |u_G| + |R(q) - I| r = |u_G| + 2 sin(|q| / 2) r."""
+    return math.hypot(*u[:3]) + 2.0 * math.sin(0.5 * min(math.hypot(*u[3:]), math.pi)) * arm_bound_mm
+
+
 def check_increment(
     u: np.ndarray,
     spring_points_mm: np.ndarray,
     reference_point_mm: np.ndarray,
     cartilage: Cartilage,
     where: str,
+    arm_bound_mm: float = math.inf,
+    in_contact: np.ndarray | None = None,
 ) -> None:
     """Refuse a solve (a DEM pose, an EDEM increment) that moves a contact spring beyond ``WINDOW_FRACTION`` h_max.
 
-    ``spring_points_mm`` (n, 3): the centroids of the springs in contact during the increment.
+    ``spring_points_mm`` (n, 3): the centroids of the springs in contact during the increment, or
+    of more springs with ``in_contact`` (n,) bool saying which are (gathered only if needed).
+    ``arm_bound_mm``: an upper bound on their distance from G (for a rigid M, the largest over
+    all its springs at the reference pose, which no motion changes); a motion that cannot move
+    any point that close to G by the limit passes without measuring the springs one by one.
     """
-    if spring_points_mm.shape[0] == 0:
-        return
-    moved = float(point_motion_mm(u, spring_points_mm, reference_point_mm).max())
     limit = WINDOW_FRACTION * cartilage.max_spring_length_mm
+    # (1 + 1e-9): the per-spring measure below has round-off, the bound must stay above it.
+    if spring_points_mm.shape[0] == 0 or motion_bound_mm(u, arm_bound_mm) * (1.0 + 1e-9) <= limit:
+        return
+    if in_contact is not None:
+        spring_points_mm = np.take(spring_points_mm, np.flatnonzero(in_contact), axis=0)
+        if spring_points_mm.shape[0] == 0:
+            return
+    moved = float(point_motion_mm(u, spring_points_mm, reference_point_mm).max())
     if moved > limit:
         raise SolverError(
             f"{where}: the solve moves the mobile body by {describe_motion(u)} (a contact spring by "

@@ -137,9 +137,17 @@ ElementLaw = LinearElements | LogElements | StackedElements
 
 
 def stack_elements(*laws: ElementLaw) -> ElementLaw:
-    """One element law over the elements of ``laws``, in order (a single law is returned as is)."""
+    """One element law over the elements of ``laws``, in order (a single law is returned as is;
+    linear laws only, e.g. threshold springs and ligaments, are joined into one linear law, which
+    the solver then evaluates without splitting its approaches per part)."""
     kept = tuple(law for law in laws if len(law)) or laws[:1]
-    return kept[0] if len(kept) == 1 else StackedElements(kept)
+    if len(kept) == 1:
+        return kept[0]
+    if all(isinstance(law, LinearElements) for law in kept):
+        return LinearElements(
+            np.concatenate([law.offset_n for law in kept]), np.concatenate([law.stiffness_n_per_mm for law in kept])
+        )
+    return StackedElements(kept)
 
 
 # --------------------------------------------------------------------------------------------

@@ -20,12 +20,14 @@ and ends with the KKT check of docs/method.md#1-two-rigid-bones-and-a-bed-of-spr
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from edem.errors import SolverError
 from edem.laws import ElementLaw
+from edem.rowwise import rows_times
 
 DOF_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
 
@@ -77,6 +79,18 @@ def generalised_directions(points_mm: np.ndarray, directions: np.ndarray, refere
     out = np.empty((points_mm.shape[0], 6))
     out[:, :3] = directions
     out[:, 3:] = cross_rows(points_mm - reference_point_mm, directions)
+    return out
+
+
+def turn_rows(rows: np.ndarray, rotation: np.ndarray, extra: int = 0) -> np.ndarray:
+    """Rows (d, (c - G) x d) of a body's points and directions after the body turned by
+    ``rotation`` about G: both parts turn with it, (R d, R ((c - G) x d)), so rows measured once
+    at the reference pose give the rows at any pose by one (n, 6) x (6, 6) product. ``extra``
+    rows are left for the caller to fill (e.g. the ligaments', appended without a copy)."""
+    out = np.empty((rows.shape[0] + extra, 6))
+    turn = np.zeros((6, 6))
+    turn[:3, :3] = turn[3:, 3:] = rotation.T
+    rows_times(rows, turn, out=out[: rows.shape[0]])
     return out
 
 
@@ -144,6 +158,43 @@ def singular_stiffness_error(missing: list[str]) -> SolverError:
     )
 
 
+def _norm(v: np.ndarray) -> float:
+    """Euclidean norm of a short vector (np.linalg.norm's overhead dominates at this size)."""
+    return math.sqrt(float(v @ v))
+
+
+def _regular_solve(stiffness: np.ndarray, scale: np.ndarray, rhs: np.ndarray, rtol: float = 1e-10) -> np.ndarray | None:
+    """x with stiffness @ x = rhs if the stiffness is regular, else None.
+
+    Regular: positive definite with every Cholesky pivot well above round-off (``1e3 rtol`` of
+    its largest entry once the DOFs are in the same units: ``scale`` is 1 for a translation, a
+    characteristic length for a rotation); then no DOF is unrestrained at ``rtol`` and
+    :func:`unrestrained_dofs` needs no eigensolve. The factor that decides it also gives x.
+    The matrix is at most 6 x 6: a Cholesky over its DOFs in plain floats costs less than one
+    call into numpy.linalg.
+    """
+    n = scale.size
+    if not n:  # nothing free, nothing to restrain
+        return np.zeros(0)
+    a = (stiffness / np.outer(scale, scale)).tolist()
+    tolerance = 1e3 * rtol * max(abs(x) for row in a for x in row)
+    factor = [[0.0] * n for _ in range(n)]  # lower triangle L, a = L L^T
+    for j in range(n):
+        pivot = a[j][j] - sum(factor[j][m] ** 2 for m in range(j))
+        if not pivot > tolerance:  # (also catches nan)
+            return None
+        factor[j][j] = diagonal = math.sqrt(pivot)
+        for i in range(j + 1, n):
+            factor[i][j] = (a[i][j] - sum(factor[i][m] * factor[j][m] for m in range(j))) / diagonal
+    y = [0.0] * n  # L y = rhs (scaled), then L^T z = y, x = z (unscaled)
+    b = (rhs / scale).tolist()
+    for i in range(n):
+        y[i] = (b[i] - sum(factor[i][m] * y[m] for m in range(i))) / factor[i][i]
+    for i in reversed(range(n)):
+        y[i] = (y[i] - sum(factor[m][i] * y[m] for m in range(i + 1, n))) / factor[i][i]
+    return np.array(y) / scale
+
+
 def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: float, rtol: float = 1e-10) -> list[str]:
     """Names of the free DOFs along which the 6x6 stiffness vanishes (the null space of K_free).
 
@@ -151,13 +202,9 @@ def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: 
     eigenvalues are compared (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs: detect rank deficiency, say which DOFs are unrestrained).
     """
     scale = np.array([1.0, 1.0, 1.0, length_scale_mm, length_scale_mm, length_scale_mm])[free]
-    k = stiffness[free][:, free] / np.outer(scale, scale)
-    try:  # the common, regular case: Cholesky pivots all well above round-off, no eigensolve
-        pivots = np.diagonal(np.linalg.cholesky(k)) ** 2
-        if pivots.min() > 1e3 * rtol * np.abs(k).max():
-            return []
-    except np.linalg.LinAlgError:
-        pass
+    if _regular_solve(stiffness[np.ix_(free, free)], scale, np.zeros(scale.size), rtol) is not None:
+        return []  # the common case: no eigensolve
+    k = stiffness[np.ix_(free, free)] / np.outer(scale, scale)
     values, vectors = np.linalg.eigh(k)
     top = float(np.abs(values).max(initial=0.0))
     null = vectors[:, values <= rtol * top] if top > 0 else np.eye(k.shape[0])
@@ -217,41 +264,59 @@ def solve_unilateral(
     load = np.where(free, np.asarray(load, float), 0.0)
     to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)  # moments in N
     n_shear = 0 if shear is None else shear.normals.shape[0]
+    # The iteration runs on the free DOFs only (u is zero on the fixed ones): the rows g_j
+    # restricted to them, stored as p <= 6 contiguous columns (p, m), so every product over the
+    # elements is p / 6 of the full one and runs along contiguous columns. The products are
+    # einsums, not BLAS calls, which OpenBLAS would spread over threads (see edem.rowwise).
+    dofs = np.flatnonzero(free)
+    cols = np.ascontiguousarray(directions[:, dofs].T)
+    load_f, to_newton_f = load[dofs], to_newton[dofs]
+    dof_scale = np.array([1.0, 1.0, 1.0] + [length_scale_mm] * 3)[dofs]
 
-    def forces(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return law.force_and_stiffness(directions @ u)
+    def full(u_f: np.ndarray) -> np.ndarray:
+        u = np.zeros(6)
+        u[dofs] = u_f
+        return u
 
-    def gradient(u: np.ndarray, s: np.ndarray, active: np.ndarray) -> np.ndarray:
-        grad = directions.T @ np.where(active, s, 0.0) - load
+    def gradient(u_f: np.ndarray, s: np.ndarray, active: np.ndarray) -> np.ndarray:
+        grad = np.einsum("ij,j->i", cols, np.where(active, s, 0.0)) - load_f
         if shear is not None:
-            grad = grad + shear.generalised_force(u, active[:n_shear])
-        return np.where(free, grad, 0.0)
+            grad = grad + shear.generalised_force(full(u_f), active[:n_shear])[dofs]
+        return grad
 
-    def energy(u: np.ndarray, active: np.ndarray) -> tuple[float, float]:
+    def energy(u_f: np.ndarray, approach: np.ndarray, active: np.ndarray) -> tuple[float, float]:
         """Pi(u) and the size of the terms it sums (its round-off scale)."""
-        stored = float(law.energy(directions @ u).sum())
+        stored = float(law.energy(approach).sum())
         if shear is not None:
-            f = shear.force(u, active[:n_shear])
+            f = shear.force(full(u_f), active[:n_shear])
             stored += 0.5 * float((np.einsum("ij,ij->i", f, f) / np.maximum(shear.stiffness_n_per_mm, 1e-300)).sum())
-        work = float(load @ u)
+        work = float(load_f @ u_f)
         return stored - work, stored + abs(work)
 
     def stiffness(k: np.ndarray, active: np.ndarray) -> np.ndarray:
-        return assemble_stiffness(directions, k, active, shear)
+        hessian = np.einsum("ik,jk->ij", cols * (k * active), cols)
+        if shear is not None:
+            hessian = hessian + shear.stiffness(active[:n_shear])[np.ix_(dofs, dofs)]
+        return hessian
 
-    u = np.zeros(6)
-    s, k = forces(u)
+    u_f = np.zeros(dofs.size)
+    approach = np.zeros(m)  # g_j . u, advanced with u (no product with all the rows per step)
+    s, k = law.force_and_stiffness(approach)
     active = np.ones(m, bool)
     seen: set[bytes] = set()
     max_approach = law.max_approach_mm()  # fixed over the solve; all inf for linear elements
     bounded = bool(np.isfinite(max_approach).any())
     # From the second iteration on, active == (s > 0) and this is the previous residual: reused.
-    grad = gradient(u, s, active)
-    load_norm = np.linalg.norm(load * to_newton)
+    grad = gradient(u_f, s, active)
+    load_norm = _norm(load_f * to_newton_f)
+    # Pi at the current u when the last line search evaluated it there (no shear: Pi then does
+    # not depend on the active set the search used).
+    known_energy: tuple[float, float] | None = None
     for iteration in range(1, max_iterations + 1):
         hessian = stiffness(k, active)
-        if unrestrained_dofs(hessian, free, length_scale_mm):
-            everything = stiffness(k, np.ones(m, bool))
+        step = _regular_solve(hessian, dof_scale, -grad)
+        if step is None:
+            everything = assemble_stiffness(directions, k, np.ones(m, bool), shear)
             missing = unrestrained_dofs(everything, free, length_scale_mm)
             if missing:
                 raise singular_stiffness_error(missing)
@@ -261,30 +326,36 @@ def solve_unilateral(
                     "the bodies apart (or pushes along a direction no spring resists)"
                 )
             # A transiently small active set: regularise with a trace of every element's stiffness.
-            hessian = hessian + 1e-8 * everything
-        step = np.zeros(6)
-        step[free] = -np.linalg.solve(hessian[free][:, free], grad[free])
+            hessian = hessian + 1e-8 * everything[np.ix_(dofs, dofs)]
+            step = -np.linalg.solve(hessian, grad)
+        rate = np.einsum("i,ij->j", step, cols)  # d(approach)/d(alpha)
         alpha = 1.0
         if bounded:  # fraction to the boundary of the log elements' admissible approaches
-            rate = directions @ step
-            room = max_approach - directions @ u
+            room = max_approach - approach
             alpha = min(1.0, float(np.min(0.99 * room[rate > 0] / rate[rate > 0], initial=np.inf)))
         slope = float(grad @ step) if iteration > 1 else 0.0
+        known, known_energy = known_energy, None
         if slope < 0.0:
             # Armijo on Pi. The first, all-active step (DEM's) is taken whole: with non-negative
             # offsets it descends anyway (Pi <= the all-active quadratic it minimises).
-            e0, size = energy(u, s > 0)
+            compressed = s > 0
+            e0, size = known if known is not None else energy(u_f, approach, compressed)
             # Differences below the energy's round-off say nothing: the step is then taken.
             noise = 1e-12 * size
-            while alpha > 1e-12 and energy(u + alpha * step, s > 0)[0] > e0 + 1e-4 * alpha * slope + noise:
+            while alpha > 1e-12:
+                trial = energy(u_f + alpha * step, approach + alpha * rate, compressed)
+                if trial[0] <= e0 + 1e-4 * alpha * slope + noise:
+                    known_energy = trial if shear is None else None
+                    break
                 alpha *= 0.5
-        u = u + alpha * step
-        s, k = forces(u)
+        u_f = u_f + alpha * step
+        approach = approach + alpha * rate
+        s, k = law.force_and_stiffness(approach)
         new_active = s > 0
-        residual = gradient(u, s, new_active)
+        residual = gradient(u_f, s, new_active)
         # Force scale of the problem: the load and every element force (incl. the stored ones).
         reference = load_norm + float(np.abs(s).sum())
-        residual_norm = float(np.linalg.norm(residual * to_newton))
+        residual_norm = _norm(residual * to_newton_f)
         if residual_norm <= rtol * max(reference, 1e-300):
             active = new_active
             break
@@ -313,11 +384,13 @@ def solve_unilateral(
             f"the active-set iteration did not converge in {max_iterations} iterations "
             f"(residual {residual_norm:.3e} N)"
         )
+    u = full(u_f)
+    residual = full(residual)
     return UnilateralSolution(
         displacement=u,
         element_force_n=s,
         active=active,
         iterations=iteration,
-        force_residual_n=float(np.linalg.norm(residual[:3])),
-        moment_residual_nmm=float(np.linalg.norm(residual[3:])),
+        force_residual_n=_norm(residual[:3]),
+        moment_residual_nmm=_norm(residual[3:]),
     )

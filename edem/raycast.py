@@ -26,7 +26,9 @@ Two interchangeable backends sit behind :class:`RayCaster`:
     or just off it, is re-solved among the triangles sharing a vertex with it (float32 ties are
     between neighbours; structured meshes whose edges line up with the rays meet this often);
     a ray Embree lost on an edge or vertex (or whose returned triangle has no neighbour on the
-    ray) is found again from the triangles around a slightly shifted probe ray's hit; a skipped
+    ray) is found again from the triangles around a slightly shifted probe ray's hit (only rays
+    whose window passes near F get a probe: one look-up in a coarse grid of the cells within the
+    window's half-length of F, built once, sorts out the rays that point away from F); a skipped
     wrong-facing hit first has the triangles around it checked (a fold ties a back-facing and a
     front-facing triangle at the same point). Only a ray still crossing wrong-facing sheets after
     a few re-casts goes to the exact brute-force caster.
@@ -48,6 +50,8 @@ from typing import Literal
 
 import numpy as np
 
+from edem.rowwise import add_rows, row_dot, rows_times
+
 Backend = Literal["embree", "numpy"]
 
 # A float64 Moller-Trumbore test that misses the triangle Embree returned by less than this (in
@@ -65,6 +69,18 @@ _MAX_ROUNDS = 8
 _CHUNK_PAIRS = 1 << 19
 # Directions must be unit vectors (a length is measured in units of |direction|).
 _UNIT_TOLERANCE = 1e-6
+# The grid of cells near F (RayCaster._near_cells): at most this many cells along the longest
+# side of F's padded box, and at most this many cell marks from the triangles' boxes before the
+# grid is given up (every missed ray is then probed).
+_GRID_CELLS = 96
+_GRID_MAX_MARKS = 1 << 24
+# Cells marked per vectorised slice of triangles while the grid is built (~50 bytes each at once).
+_GRID_SLICE_MARKS = 1 << 19
+
+
+# The grid of cells near F (RayCaster._near_cells): flat marks, lower corner (mm), 1 / cell size
+# (1/mm), largest cell index per axis, flat-index strides.
+_Grid = tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -182,19 +198,21 @@ class RayCaster:
         self.backend: Backend = backend
         self.vertices_mm = vertices
         self.triangles = tri
-        self._v0 = vertices[tri[:, 0]]
-        self._edge1 = vertices[tri[:, 1]] - self._v0
-        self._edge2 = vertices[tri[:, 2]] - self._v0
-
         if len(vertices):
             lo, hi = vertices.min(axis=0), vertices.max(axis=0)
         else:
             lo = hi = np.zeros(3)
-        # Embree sees coordinates relative to the box centre: float32 resolution is best near 0.
+        # Every ray and triangle is handled relative to the centre of F's box, by Embree (float32
+        # resolution is best near 0) and by the float64 tests alike: rays are moved there once.
         self._centre_mm = 0.5 * (lo + hi)
+        self._v0 = vertices[tri[:, 0]] - self._centre_mm
+        self._edge1 = vertices[tri[:, 1]] - vertices[tri[:, 0]]
+        self._edge2 = vertices[tri[:, 2]] - vertices[tri[:, 0]]
         self._extent_mm = float(np.max(hi - lo)) if len(vertices) else 0.0
         self._box_mm = hi - lo
         self._scene = None
+        # Grids of the cells near F, per reach (see _near_cells), built on first use.
+        self._grids: dict[float, _Grid | None] = {}
         # Float64 ray/triangle tests done so far (re-measures, local re-solves, brute force): the
         # machine-independent cost of the exact work around Embree.
         self.pairs_tested = 0
@@ -260,11 +278,12 @@ class RayCaster:
     def _embree_run(
         self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray
     ) -> dict[str, np.ndarray]:
-        """One Embree pass, rays already in F's local frame: float32 ``primID`` (-1 = none),
-        ``tfar`` (distance along the ray) and barycentric ``u``, ``v`` of every ray's hit."""
+        """One Embree pass, rays already in F's frame relative to its box centre: float32
+        ``primID`` (-1 = none), ``tfar`` (distance along the ray) and barycentric ``u``, ``v`` of
+        every ray's hit."""
         return self._scene.run(
-            # Subtract in float64, round once: float32 resolution is best near the box centre.
-            np.ascontiguousarray(origins - self._centre_mm, dtype=np.float32),
+            # Already relative to the box centre (in float64), rounded once.
+            np.ascontiguousarray(origins, dtype=np.float32),
             np.ascontiguousarray(directions, dtype=np.float32),
             # embreex writes the hit distances into this array in place: always pass a fresh one.
             dists=np.ascontiguousarray(tfar, dtype=np.float32),
@@ -317,9 +336,12 @@ class RayCaster:
         h = float(max_length_mm)
         if not (np.isfinite(h) and h > 0):
             raise ValueError(f"max_length_mm must be finite and > 0, got {max_length_mm}")
-        norms = np.sqrt(np.einsum("ij,ij->i", dirs, dirs))
-        has_direction = norms > 0
-        if np.any(np.abs(norms[has_direction] - 1.0) > _UNIT_TOLERANCE):
+        # |d| within _UNIT_TOLERANCE of 1, compared squared (no square root, no masked gather).
+        squared = row_dot(dirs, dirs)
+        unit = (squared >= (1.0 - _UNIT_TOLERANCE) ** 2) & (squared <= (1.0 + _UNIT_TOLERANCE) ** 2)
+        all_unit = bool(unit.all())
+        has_direction = unit if all_unit else squared > 0
+        if not all_unit and np.any(has_direction & ~unit):
             raise ValueError("directions must be unit vectors (or zero rows for no spring)")
 
         if rotation is not None or translation is not None:
@@ -331,15 +353,17 @@ class RayCaster:
                 raise ValueError("rotation must be proper (det = +1), not a reflection")
             if shift.shape != (3,):
                 raise ValueError(f"translation must have shape (3,), got {shift.shape}")
-            # Row-vector form of x_local = R^T (x_world - t).
-            origins = (origins - shift) @ rot
-            dirs = dirs @ rot
+            # Row-vector form of x_local = R^T (x_world - t), then relative to F's box centre.
+            origins = add_rows(rows_times(origins, rot), -(shift @ rot + self._centre_mm))
+            dirs = rows_times(dirs, rot)
+        else:
+            origins = add_rows(origins, -self._centre_mm)
 
         n = len(origins)
         cast = self._cast_bruteforce if self.backend == "numpy" else self._cast_embree
         if not (len(self.triangles) and n):
             return RayHits(spring_length_mm=np.full(n, np.inf), triangle=np.full(n, -1, dtype=np.int64))
-        if has_direction.all():  # the usual case: no gather, no scatter
+        if all_unit:  # the usual case: no gather, no scatter
             length, hit = cast(origins, dirs, h)
             return RayHits(spring_length_mm=length, triangle=hit)
         length = np.full(n, np.inf)
@@ -486,9 +510,9 @@ class RayCaster:
         """
         rows = np.take(self._plane_rows, k, axis=0)  # take: far cheaper than [] for row gathers
         normal = rows[:, :3]
-        along = np.einsum("ij,ij->i", normal, d)
+        along = row_dot(normal, d)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = (rows[:, 3] - np.einsum("ij,ij->i", normal, o)) / along
+            t = (rows[:, 3] - row_dot(normal, o)) / along
         det = -along
         u, v = u32.astype(np.float64), v32.astype(np.float64)
         margin = np.minimum(np.minimum(u, v), 1.0 - u - v)
@@ -517,24 +541,25 @@ class RayCaster:
         triangle, the true ray passed within that shift of it, so its hit (if any) lies on a
         triangle sharing a vertex with it. Those few candidates are tested exactly in float64.
         Rays that genuinely miss stay missed (the probe misses too, or no candidate is valid).
+        Only rays whose window passes near F (:meth:`_may_meet_surface`) can have lost a hit: the
+        others are not probed.
         """
+        s0 = seg_start[missed]
+        near_f = self._may_meet_surface(origins, dirs, missed, s0, h + self._step_mm)
+        if not near_f.any():
+            return
+        keep = np.flatnonzero(near_f)
+        missed, s0 = missed[keep], s0[keep]
         o, d = np.take(origins, missed, axis=0), np.take(dirs, missed, axis=0)
         # A sideways direction that never lines up with a mesh's axes or diagonals.
-        oblique = np.array([0.5377, 0.8326, 0.1329])
-        side = _cross(d, oblique)
-        fallback = _cross(d, np.array([0.1329, -0.5377, 0.8326]))
-        small = np.einsum("ij,ij->i", side, side) < 0.09  # d nearly along `oblique`
-        side[small] = fallback[small]
-        side /= np.sqrt(np.einsum("ij,ij->i", side, side))[:, None]
-        s0 = seg_start[missed]
+        side = _cross(d, np.array([0.5377, 0.8326, 0.1329]))
+        size = np.einsum("ij,ij->i", side, side)
+        small = np.flatnonzero(size < 0.09)  # d nearly along that direction: another one
+        if small.size:
+            side[small] = _cross(d[small], np.array([0.1329, -0.5377, 0.8326]))
+            size[small] = np.einsum("ij,ij->i", side[small], side[small])
+        side /= np.sqrt(size)[:, None]
         probe = o + s0[:, None] * d + self._probe_shift_mm * side
-        # Only probes whose window segment passes near F's bounding box can have lost a hit.
-        near_box = self._segment_meets_box(probe, d, (h + self._step_mm) - s0)
-        if not near_box.any():
-            return
-        keep = np.flatnonzero(near_box)
-        o, d, probe = np.take(o, keep, axis=0), np.take(d, keep, axis=0), np.take(probe, keep, axis=0)
-        s0, missed = s0[keep], missed[keep]
         prim = self._embree_run(probe, d, (h + self._step_mm) - s0)["primID"].astype(np.int64)
         near = np.flatnonzero(prim >= 0)
         if not near.size:
@@ -545,21 +570,83 @@ class RayCaster:
         length[missed[near[got]]] = best_t[got]
         hit[missed[near[got]]] = best_tri[got]
 
-    def _segment_meets_box(self, origins: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
-        """Whether each segment o + s d, 0 <= s <= length, meets F's bounding box padded by the
-        probe shift and a float32 margin (slab test)."""
-        pad = self._probe_shift_mm + self._step_mm
-        lo = self._centre_mm - 0.5 * self._box_mm - pad
-        hi = self._centre_mm + 0.5 * self._box_mm + pad
-        # A zero direction component becomes a tiny one: its slab then holds the whole segment
-        # (origin inside it) or none of it (outside), with no 0/0.
-        inverse = 1.0 / np.where(dirs == 0.0, 1e-300, dirs)
-        with np.errstate(over="ignore", invalid="ignore"):
-            a, b = (lo - origins) * inverse, (hi - origins) * inverse
-        near, far = np.minimum(a, b), np.maximum(a, b)
-        enter = np.maximum(near.max(axis=1), 0.0)
-        leave = np.minimum(far.min(axis=1), length)
-        return enter <= leave
+    def _may_meet_surface(
+        self, origins: np.ndarray, dirs: np.ndarray, rows: np.ndarray, s_start: np.ndarray, s_end: float
+    ) -> np.ndarray:
+        """(len(rows),) bool: False only where the segment o + s d, s_start <= s <= s_end, of ray
+        ``rows[i]`` certainly stays away from F, so Embree cannot have lost a hit on it.
+
+        Every point of the segment lies within half its length (at most s_end - min(s_start),
+        halved) of its midpoint: one lookup of the midpoint in a grid whose marked cells cover
+        every point that close to F (:meth:`_near_cells`) replaces a probe ray. Most missed rays
+        point away from F from springs far from it.
+        """
+        reach = 0.5 * (s_end - float(s_start.min(initial=s_end))) + self._step_mm
+        grid = self._near_cells(reach)
+        if grid is None:  # F's triangles too large for a grid: every ray is probed
+            return np.ones(rows.size, bool)
+        marked, lower, inverse_cell, top, strides = grid
+        point = np.take(origins, rows, axis=0)
+        middle = 0.5 * (s_start + s_end)
+        if middle.any():  # (a first-round miss's window is centred on its origin)
+            point += middle[:, None] * np.take(dirs, rows, axis=0)
+        point = add_rows(point, -lower)
+        point *= inverse_cell
+        # Truncation and clipping send points outside the grid to its border cells, which are
+        # never marked: the grid reaches one cell beyond the marks on every side.
+        cell = point.astype(np.int64)
+        np.maximum(cell, 0, out=cell)
+        np.minimum(cell, top, out=cell)
+        return marked[cell @ strides]
+
+    def _near_cells(self, reach_mm: float) -> _Grid | None:
+        """A grid over F's box padded by ``reach_mm`` whose marked cells hold every point within
+        ``reach_mm`` of F (built once per reach, cached): (flat marks, lower corner, 1 / cell
+        size, largest cell index per axis, flat-index strides), or None if F's triangles would
+        mark too many cells.
+
+        Cells overlapping a triangle's bounding box are marked, then the marks are dilated by
+        ceil(reach / cell) cells along each axis (a box, which holds the ball of radius reach).
+        """
+        cached = self._grids.get(reach_mm)
+        if cached is not None or reach_mm in self._grids:
+            return cached
+        # Cells a fraction of the reach (a tight cover), at most _GRID_CELLS along the longest side.
+        cell = max(float(self._box_mm.max() + 2.0 * reach_mm) / _GRID_CELLS, reach_mm / 4.0)
+        width = int(np.ceil(reach_mm / cell))
+        # F's box, the marks' dilation and one unmarked border cell on every side.
+        box_lo = -0.5 * self._box_mm - (width + 1) * cell  # (rays are relative to the box centre)
+        shape = np.ceil(self._box_mm / cell).astype(np.int64) + 2 * width + 3
+        corners = self.vertices_mm[self.triangles] - self._centre_mm
+        first = np.floor((corners.min(axis=1) - box_lo) / cell).astype(np.int64)
+        count = np.floor((corners.max(axis=1) - box_lo) / cell).astype(np.int64) - first + 1
+        per_triangle = count.prod(axis=1)
+        total = int(per_triangle.sum())
+        grid = None
+        if total <= _GRID_MAX_MARKS:
+            marked = np.zeros(tuple(shape), bool)
+            # Every cell of every triangle's box, enumerated without a loop over triangles, in
+            # slices of triangles holding about _GRID_SLICE_MARKS cells (bounded memory).
+            ends = np.cumsum(per_triangle)
+            cuts = np.searchsorted(ends, np.arange(_GRID_SLICE_MARKS, total, _GRID_SLICE_MARKS), side="right")
+            for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(count)]):
+                per, cnt = per_triangle[lo:hi], count[lo:hi]
+                owner = np.repeat(np.arange(hi - lo), per)
+                j = np.arange(owner.size) - np.repeat(np.cumsum(per) - per, per)
+                nx, ny = cnt[owner, 0], cnt[owner, 1]
+                index = first[lo:hi][owner] + np.stack([j % nx, (j // nx) % ny, j // (nx * ny)], axis=1)
+                marked[index[:, 0], index[:, 1], index[:, 2]] = True
+            for axis in range(3):  # box dilation by `width` cells: a window sum of a cumsum
+                total_along = np.cumsum(marked, axis=axis, dtype=np.int32)
+                padded = np.concatenate([np.zeros_like(np.take(total_along, [0], axis=axis)), total_along], axis=axis)
+                n_axis = marked.shape[axis]
+                upper = np.take(padded, np.minimum(np.arange(n_axis) + width + 1, n_axis), axis=axis)
+                lower = np.take(padded, np.maximum(np.arange(n_axis) - width, 0), axis=axis)
+                marked = upper > lower
+            strides = np.array([shape[1] * shape[2], shape[2], 1])
+            grid = (marked.ravel(), box_lo, 1.0 / cell, shape - 1, strides)
+        self._grids[reach_mm] = grid
+        return grid
 
     def _star_hits(
         self,

@@ -18,6 +18,7 @@ from edem.mechanics import (
     UnilateralSolution,
     assemble_stiffness,
     generalised_directions,
+    turn_rows,
     rotation_matrix,
     rotation_vector,
     solve_unilateral,
@@ -25,8 +26,9 @@ from edem.mechanics import (
 )
 from edem.opensim_model import BodyPoses
 from edem.raycast import RayCaster
+from edem.rowwise import row_dot
 from edem.scene import Scene, Viscoelastic
-from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, shear_terms, spring_geometry
+from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, ligament_table, shear_terms, spring_geometry
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 from edem.viscoelastic import check_rk2_stability, integrator_weights
 
@@ -137,7 +139,7 @@ def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> li
     if cartilage.thickness_mm is None:
         return []
     t = float(cartilage.thickness_mm)
-    h = geometry.spring_length_mm[geometry.candidate]
+    h = geometry.candidate_length_mm
     compressed = h < t * (1.0 - 1e-9)
     if not np.any(compressed):
         return []
@@ -150,7 +152,7 @@ def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> li
 
 def compression_ratio(geometry: SpringGeometry, cartilage: Cartilage, approach_mm: np.ndarray) -> np.ndarray:
     """Compression over undeformed length of the candidate springs after an approach (strain)."""
-    return cartilage.spring_law.strain(geometry.spring_length_mm[geometry.candidate], approach_mm, cartilage.thickness_mm)
+    return cartilage.spring_law.strain(geometry.candidate_length_mm, approach_mm, cartilage.thickness_mm)
 
 
 def applied_loads(scene: Scene) -> np.ndarray:
@@ -216,7 +218,10 @@ def run(
     g0 = scene.reference_point_mm
     n_springs = scene.spring_area_mm2.shape[0]
     spring_centroid, spring_normal, spring_area = scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2
-    length_scale = float(np.sqrt(((spring_centroid - g0) ** 2).sum(axis=1).mean()))
+    arm_squared = ((spring_centroid - g0) ** 2).sum(axis=1)
+    length_scale = float(np.sqrt(arm_squared.mean()))
+    # Distance of the furthest spring from G: no rigid motion of M changes it (check_increment's bound).
+    arm_bound = float(np.sqrt(arm_squared.max(initial=0.0)))
     load = scene.load
     loads = applied_loads(scene)
     warnings: list[str] = constrained_moment_warning(loads, scene.fixed_dofs)
@@ -231,6 +236,8 @@ def run(
     steps: list[StepResult] = []
     unbalanced: list[tuple[int, float]] = []  # DEM time points whose re-measured springs miss the load
     free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
+    ligaments = ligament_table(scene.ligaments)
+    reference_rows = generalised_directions(spring_centroid, spring_normal, g0)
     seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
         clock = time.perf_counter()
@@ -240,11 +247,10 @@ def run(
         geometry = spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, f_pose, cartilage)
         seconds["geometry"] += time.perf_counter() - clock
         clock = time.perf_counter()
-        cand = geometry.candidate
-        n_c = int(cand.sum())
-        if cartilage.spring_law.needs_positive_length and np.any(geometry.spring_length_mm[cand] <= 0.0):
+        n_c = int(geometry.candidate_index.size)
+        if cartilage.spring_law.needs_positive_length and np.any(geometry.candidate_length_mm <= 0.0):
             # k = E'/h (threshold) and p = -E' ln(h/t) (gap-log) have no meaning once h <= 0.
-            bad = int((geometry.spring_length_mm[cand] <= 0.0).sum())
+            bad = int((geometry.candidate_length_mm <= 0.0).sum())
             raise SolverError(
                 f"time point {k} (t = {t:g} s): {bad} springs are compressed past their length "
                 f"(h <= 0, the bodies interpenetrate); the {cartilage.law} law needs h > 0: "
@@ -257,18 +263,20 @@ def run(
             )
         g_current = pose.points(g0[None])[0]
         # Gather the candidates once by index (cheaper than repeated boolean masks over all springs).
-        cand_idx = np.flatnonzero(cand)
-        normals = np.take(geometry.normal, cand_idx, axis=0)
-        centroids_c = np.take(geometry.centroid_mm, cand_idx, axis=0)
+        cand_idx = geometry.candidate_index
+        lig_rows, lig_law, _ = ligament_elements(ligaments, pose, f_pose, g_current)
+        # Rows g = (n, (c - G) x n) of the candidates: both parts turn with M, so they are the
+        # reference rows (built once) turned by M's rotation; one gather and one product.
+        directions = turn_rows(np.take(reference_rows, cand_idx, axis=0), pose.rotation, len(lig_rows))
+        directions[n_c:] = lig_rows
+        normals = directions[:n_c, :3]
+        centroids_c = geometry.candidate_centroid_mm
         area_c = spring_area[cand_idx]
         stored_c = np.take(stored, cand_idx, axis=0)
-        stored_normal = np.einsum("ij,ij->i", stored_c, normals)
-        shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals)
-        lig_rows, lig_law, _ = ligament_elements(scene.ligaments, pose, f_pose, g_current)
+        stored_normal = row_dot(stored_c, normals)
+        # (the tangential part of the stored forces only matters, and is only formed, with shear)
+        shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals) if cartilage.shear_modulus_mpa else None
         law = stack_elements(contact_law(geometry, cartilage, stored_normal), lig_law)
-        directions = generalised_directions(centroids_c, normals, g_current)
-        if len(lig_rows):
-            directions = np.vstack([directions, lig_rows])
         try:
             if layer_mesh is None:
                 solution = solve_unilateral(
@@ -323,8 +331,10 @@ def run(
         spring_force = total_force[:n_c]
         centre = (spring_force @ centroids_c) / spring_force.sum() if spring_force.sum() > 0 else g_current
         where = f"time point {k} (t = {t:g} s)"
-        check_contact_kept(loads[k, :3], geometry.normal, spring_area, int(solution.active[:n_c].sum()), free, u, where)
-        check_increment(u, np.take(centroids_c, np.flatnonzero(solution.active[:n_c]), axis=0), g_current, cartilage, where)
+        n_contact = int(solution.active[:n_c].sum())
+        if not n_contact:  # (M's normals at the pose are only formed for this check)
+            check_contact_kept(loads[k, :3], geometry.normal, spring_area, n_contact, free, u, where)
+        check_increment(u, centroids_c, g_current, cartilage, where, arm_bound_mm=arm_bound, in_contact=solution.active[:n_c])
         committed = elastic_force[:n_c, None] * normals
         if shear is not None:
             committed = committed + shear.force(u, solution.active[:n_c])

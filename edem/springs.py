@@ -9,12 +9,14 @@ law (:mod:`edem.laws`); ``ligament_elements`` does the same for the tension-only
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from edem.laws import LAWS, ContactLaw, ElementLaw, LinearElements
 from edem.mechanics import ShearTerms, confined_modulus_mpa, generalised_directions
 from edem.raycast import RayCaster
+from edem.rowwise import add_rows, rows_times
 
 
 @dataclass(frozen=True)
@@ -31,10 +33,10 @@ class Placement:
 
     def points(self, x_mm: np.ndarray) -> np.ndarray:
         rotation, offset = self.affine()
-        return x_mm @ rotation.T + offset
+        return add_rows(rows_times(x_mm, rotation.T), offset)
 
     def vectors(self, v: np.ndarray) -> np.ndarray:
-        return v @ self.rotation.T
+        return rows_times(v, self.rotation.T)
 
     def affine(self) -> tuple[np.ndarray, np.ndarray]:
         """(R, b) with x = R X + b."""
@@ -65,13 +67,45 @@ class Cartilage:
 
 @dataclass(frozen=True)
 class SpringGeometry:
-    """Springs of the mobile body at one pose: one per non-degenerate triangle (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs)."""
+    """Springs of the mobile body at one pose: one per non-degenerate triangle (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs).
 
-    centroid_mm: np.ndarray  # (n, 3)
-    normal: np.ndarray  # (n, 3) unit, out of M towards F
+    Positions and normals at the pose are formed from M's reference ones when first asked for
+    (the ray cast itself never needs them: it moves the reference rays straight into F's frame).
+    """
+
+    reference_centroid_mm: np.ndarray  # (n, 3) at M's reference pose
+    reference_normal: np.ndarray  # (n, 3) unit, out of M towards F, at M's reference pose
+    mobile: Placement  # M's pose
     area_mm2: np.ndarray  # (n,)
     spring_length_mm: np.ndarray  # (n,) signed ray length, +inf where no hit in the window
     candidate: np.ndarray  # (n,) bool
+
+    @cached_property
+    def centroid_mm(self) -> np.ndarray:
+        """(n, 3) spring origins at the pose."""
+        return self.mobile.points(self.reference_centroid_mm)
+
+    @cached_property
+    def normal(self) -> np.ndarray:
+        """(n, 3) unit spring directions at the pose."""
+        return self.mobile.vectors(self.reference_normal)
+
+    # Gathered once and shared by every stage of a step (a boolean mask over all springs costs
+    # several integer gathers).
+    @cached_property
+    def candidate_index(self) -> np.ndarray:
+        """(c,) indices of the candidate springs, ascending."""
+        return np.flatnonzero(self.candidate)
+
+    @cached_property
+    def candidate_length_mm(self) -> np.ndarray:
+        """(c,) signed ray lengths of the candidates."""
+        return np.take(self.spring_length_mm, self.candidate_index)
+
+    @cached_property
+    def candidate_centroid_mm(self) -> np.ndarray:
+        """(c, 3) origins of the candidates at the pose (without placing every spring)."""
+        return self.mobile.points(np.take(self.reference_centroid_mm, self.candidate_index, axis=0))
 
 
 def spring_geometry(
@@ -85,18 +119,23 @@ def spring_geometry(
 ) -> SpringGeometry:
     """Geometry stage (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, thesis 4.2.1): place M's springs and measure them against F.
 
+    ``centroid_mm`` and ``normal`` are the springs at M's reference pose; ``mobile`` places M.
     Rays are cast along the springs' normals in a signed window of +-h_max (so touching or
     interpenetrating bodies still see each other), in F's own frame. Candidates: the threshold
     law takes every spring with a hit and h <= h_max (eq. 4.4); the gap laws take every spring
     with a hit in the window, and the law decides whether it is compressed.
     """
-    c = mobile.points(centroid_mm)
-    n = mobile.vectors(normal)
-    rotation, translation = fixed.affine()
-    hits = caster.cast(c, n, cartilage.max_spring_length_mm, rotation=rotation, translation=translation)
+    # F's frame seen from M's reference frame: x_F = R_f^T (R_m X + b_m - b_f) = R^T (X - t) with
+    # R = R_m^T R_f and t = R_m^T (b_f - b_m), so the reference rays go to F's frame in one step.
+    rotation_m, offset_m = mobile.affine()
+    rotation_f, offset_f = fixed.affine()
+    hits = caster.cast(
+        centroid_mm, normal, cartilage.max_spring_length_mm,
+        rotation=rotation_m.T @ rotation_f, translation=rotation_m.T @ (offset_f - offset_m),
+    )
     length = hits.spring_length_mm
     candidate = cartilage.spring_law.candidates(length, cartilage.max_spring_length_mm)
-    return SpringGeometry(c, n, area_mm2, length, candidate)
+    return SpringGeometry(centroid_mm, normal, mobile, area_mm2, length, candidate)
 
 
 def contact_law(
@@ -107,9 +146,9 @@ def contact_law(
     """Element law of the candidate springs under the cartilage's contact law (docs/method.md#2-edem-the-time-dependent-incremental-method, eq. 3.7
     and 3.19). ``stored_normal_force_n`` is the EDEM push-back per candidate spring (zero for DEM).
     """
-    sel = geometry.candidate
     return cartilage.spring_law.elements(
-        geometry.area_mm2[sel], geometry.spring_length_mm[sel], cartilage.confined_modulus_mpa, cartilage.thickness_mm, stored_normal_force_n
+        np.take(geometry.area_mm2, geometry.candidate_index), geometry.candidate_length_mm, cartilage.confined_modulus_mpa,
+        cartilage.thickness_mm, stored_normal_force_n,
     )
 
 
@@ -125,12 +164,12 @@ def shear_terms(
     """
     if cartilage.shear_modulus_mpa == 0.0:
         return None
-    sel = geometry.candidate
-    h = cartilage.spring_law.shear_length_mm(geometry.spring_length_mm[sel], cartilage.thickness_mm)
+    sel = geometry.candidate_index
+    h = cartilage.spring_law.shear_length_mm(geometry.candidate_length_mm, cartilage.thickness_mm)
     return ShearTerms(
-        arm_mm=geometry.centroid_mm[sel] - reference_point_mm,
-        normals=geometry.normal[sel],
-        stiffness_n_per_mm=geometry.area_mm2[sel] * cartilage.shear_modulus_mpa / h,
+        arm_mm=geometry.candidate_centroid_mm - reference_point_mm,
+        normals=geometry.mobile.vectors(np.take(geometry.reference_normal, sel, axis=0)),
+        stiffness_n_per_mm=np.take(geometry.area_mm2, sel) * cartilage.shear_modulus_mpa / h,
         stored_force_n=stored_tangential_force_n,
     )
 
@@ -151,21 +190,41 @@ class Ligament:
         return self.youngs_modulus_mpa * self.area_mm2 / self.rest_length_mm
 
 
+@dataclass(frozen=True)
+class LigamentTable:
+    """The ligaments' data as arrays, built once per run (:func:`ligament_table`)."""
+
+    mobile_point_mm: np.ndarray  # (l, 3)
+    fixed_point_mm: np.ndarray  # (l, 3)
+    stiffness_n_per_mm: np.ndarray  # (l,)
+    rest_length_mm: np.ndarray  # (l,)
+
+
+def ligament_table(ligaments: tuple[Ligament, ...]) -> LigamentTable:
+    """Stack the ligaments' points, stiffnesses and rest lengths into arrays."""
+    return LigamentTable(
+        np.array([lig.mobile_point_mm for lig in ligaments], float).reshape(-1, 3),
+        np.array([lig.fixed_point_mm for lig in ligaments], float).reshape(-1, 3),
+        np.array([lig.stiffness_n_per_mm for lig in ligaments], float),
+        np.array([lig.rest_length_mm for lig in ligaments], float),
+    )
+
+
 def ligament_elements(
-    ligaments: tuple[Ligament, ...], mobile: Placement, fixed: Placement, reference_point_mm: np.ndarray
+    ligaments: tuple[Ligament, ...] | LigamentTable, mobile: Placement, fixed: Placement, reference_point_mm: np.ndarray
 ) -> tuple[np.ndarray, LinearElements, np.ndarray]:
-    """Rows g = -B^T e, law s = k (L - L0) + k delta and current lengths (mm) of the ligaments.
+    """Rows g = -B^T e, law s = k (L - L0) + k delta and current lengths (mm) of the ligaments
+    (given as they are, or as a :func:`ligament_table` built once for many poses).
 
     e is the unit vector from the ligament's point on M to its point on F; moving M by w changes
     the length by -e . w, so the tension grows with the approach delta = -e . w.
     """
-    if not ligaments:
+    table = ligaments if isinstance(ligaments, LigamentTable) else ligament_table(ligaments)
+    if not table.rest_length_mm.size:
         return np.zeros((0, 6)), LinearElements(np.zeros(0), np.zeros(0)), np.zeros(0)
-    pm = mobile.points(np.array([lig.mobile_point_mm for lig in ligaments]))
-    pf = fixed.points(np.array([lig.fixed_point_mm for lig in ligaments]))
-    span = pf - pm
-    length = np.linalg.norm(span, axis=1)
+    pm = mobile.points(table.mobile_point_mm)
+    span = fixed.points(table.fixed_point_mm) - pm
+    length = np.sqrt(np.einsum("ij,ij->i", span, span))
     e = span / length[:, None]
-    k = np.array([lig.stiffness_n_per_mm for lig in ligaments])
-    rest = np.array([lig.rest_length_mm for lig in ligaments])
-    return generalised_directions(pm, -e, reference_point_mm), LinearElements(k * (length - rest), k), length
+    k = table.stiffness_n_per_mm
+    return generalised_directions(pm, -e, reference_point_mm), LinearElements(k * (length - table.rest_length_mm), k), length

@@ -11,11 +11,11 @@ import pytest
 from support import grid_plate, make_scene, plane
 
 from edem.cli import main
-from edem.consistency import describe_motion, point_motion_mm
+from edem.consistency import check_increment, describe_motion, motion_bound_mm, point_motion_mm
 from edem.errors import SolverError
 from edem.loads import JointKinematics
 from edem.solver import run
-from edem.springs import Ligament
+from edem.springs import Cartilage, Ligament
 from geometries.builders import build_geometry
 from geometries.mesh_io import write_surface
 
@@ -46,6 +46,31 @@ def test_point_motion_of_a_finite_rotation_is_the_chord():
     """A quarter turn about G moves a point at 10 mm by the chord 10 sqrt(2) mm (not 10 pi / 2)."""
     moved = point_motion_mm(np.array([0, 0, 0, 0, 0, np.pi / 2]), np.array([[10.0, 0, 0]]), np.zeros(3))
     assert moved[0] == pytest.approx(10.0 * np.sqrt(2.0), rel=1e-12)
+
+
+def test_motion_bound_holds_every_point_and_is_reached():
+    """|u_G| + 2 sin(|q|/2) r bounds the motion of every point within r of G (random motions up
+    to half a turn), and is reached by a point at distance r perpendicular to the axis when u_G
+    lies along that point's chord; check_increment's answer does not depend on the bound."""
+    rng = np.random.default_rng(2)
+    points = rng.normal(size=(500, 3)) * 20.0
+    r = float(np.linalg.norm(points, axis=1).max())
+    for _ in range(200):
+        u = np.r_[rng.normal(size=3) * rng.uniform(0, 5), rng.normal(size=3) * rng.uniform(0, 1)]
+        assert point_motion_mm(u, points, np.zeros(3)).max() <= motion_bound_mm(u, r) * (1 + 1e-12)
+    # a quarter turn about z with u_G along the chord of (r, 0, 0): (-r, r, 0) / sqrt(2) direction
+    chord = np.array([-1.0, 1.0, 0.0]) / np.sqrt(2.0)
+    u = np.r_[2.0 * chord, 0.0, 0.0, np.pi / 2]
+    exact = point_motion_mm(u, np.array([[10.0, 0.0, 0.0]]), np.zeros(3))[0]
+    assert exact == pytest.approx(motion_bound_mm(u, 10.0), rel=1e-12)
+    # refused with and without the bound (the bound only decides whether to measure)
+    cartilage = Cartilage(1.0, 0.3, max_spring_length_mm=3.5)
+    big = np.r_[0.0, 0.0, 0.0, 0.0, 0.0, 0.5]  # moves (10, 0, 0) by 10 * 2 sin(0.25) = 4.9 mm > 3.5
+    for bound in (np.inf, 10.0):
+        with pytest.raises(SolverError, match="more than 1 x the ray window"):
+            check_increment(big, np.array([[10.0, 0.0, 0.0], [1.0, 0, 0]]), np.zeros(3), cartilage, "here", arm_bound_mm=bound)
+        check_increment(big, np.array([[10.0, 0.0, 0.0], [1.0, 0, 0]]), np.zeros(3), cartilage, "here", arm_bound_mm=bound,
+                        in_contact=np.array([False, True]))  # only the spring at 1 mm is in contact: 0.49 mm
 
 
 @pytest.mark.parametrize("method", ["dem", "edem"])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from edem.laws import LAWS, GapLaw, LinearElements, LogElements, stack_elements
+from edem.laws import LAWS, GapLaw, LinearElements, LogElements, StackedElements, stack_elements
 from edem.mechanics import confined_modulus_mpa
 from edem.solver import run
 from fem_reference.models import FE_MODELS
@@ -51,6 +51,14 @@ def test_stacked_elements_equal_their_parts_in_order():
     assert np.array_equal(both.force_and_stiffness(delta)[0], expected)
     assert len(both) == 2 * APPROACH_MM.size
     assert stack_elements(laws["log"], LinearElements(np.zeros(0), np.zeros(0))) is laws["log"]
+    # linear parts only (springs and ligaments) join into one linear law, bit for bit the same
+    ligaments = LinearElements(np.array([5.0, -1.0]), np.array([2.0, 3.0]))
+    joined = stack_elements(laws["linear"], ligaments)
+    assert isinstance(joined, LinearElements) and len(joined) == APPROACH_MM.size + 2
+    delta = np.concatenate([APPROACH_MM, [0.5, 1.0]])
+    for got, want in zip(joined.force_and_stiffness(delta), StackedElements((laws["linear"], ligaments)).force_and_stiffness(delta)):
+        assert np.array_equal(got, want)
+    assert np.array_equal(joined.energy(delta), StackedElements((laws["linear"], ligaments)).energy(delta))
 
 
 def test_every_law_names_an_fe_twin_that_exists():

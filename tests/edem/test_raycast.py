@@ -351,6 +351,75 @@ def test_embree_float32_failures_are_repaired_exactly(corruption):
     np.testing.assert_allclose(hits.spring_length_mm, expected, rtol=0, atol=1e-12)
 
 
+class _CountingScene:
+    """Wraps Embree's scene, loses every hit of its first answer and records how many rays each
+    call casts (the second call is the repair probes)."""
+
+    def __init__(self, scene) -> None:
+        self.scene, self.rays = scene, []
+
+    def run(self, origins, directions, dists=None, query="INTERSECT", output=None):
+        result = self.scene.run(origins, directions, dists=dists, query=query, output=output)
+        if not self.rays:
+            result["primID"] = np.full_like(result["primID"], -1)
+        self.rays.append(len(origins))
+        return result
+
+
+def test_only_rays_whose_window_passes_near_f_are_probed_for_lost_hits():
+    """A ray can only have lost a hit where its window meets F: rays crossing the plate (their
+    hits lost on purpose) are all probed and recovered exactly; rays whose window stays more
+    than a few cells of the near-F grid away from the plate (beside it, above it, pointing away)
+    cost no probe."""
+    vertices, triangles = grid_plane(20, 5.0, 1.7)
+    rng = np.random.default_rng(3)
+    n = 200
+    crossing_o = np.c_[rng.uniform(-4.5, 4.5, (n, 2)), rng.uniform(0.5, 2.5, n)]
+    crossing_d = unit(np.c_[rng.normal(scale=0.2, size=(n, 2)), np.ones(n)])
+    beside_o = np.c_[rng.uniform(20.0, 30.0, (n, 2)), rng.uniform(-5.0, 5.0, n)]  # > 15 mm off the plate's edge
+    above_o = np.c_[rng.uniform(-4.5, 4.5, (n, 2)), np.full(n, 12.0)]  # 10.3 mm above it, pointing up
+    far_d = unit(rng.normal(size=(n, 3)))
+    origins = np.r_[crossing_o, beside_o, above_o]
+    directions = np.r_[crossing_d, far_d, np.tile([0.0, 0.0, 1.0], (n, 1))]
+    caster = RayCaster(vertices, triangles)
+    caster._scene = _CountingScene(caster._scene)
+    h = 2.0  # windows of 4 mm: the grid marks everything within ~2 mm of F, in cells of <= 0.5 mm
+    hits = caster.cast(origins, directions, h)
+    assert caster._scene.rays == [3 * n, n]
+    expected = (1.7 - crossing_o[:, 2]) / crossing_d[:, 2]
+    np.testing.assert_allclose(hits.spring_length_mm[:n], expected, rtol=0, atol=1e-12)
+    assert np.all(np.isinf(hits.spring_length_mm[n:]))
+
+
+def test_near_f_grid_marks_every_point_within_its_reach(monkeypatch):
+    """The grid that spares probes must be conservative: points at any distance up to the reach
+    from F's surface (random points on random triangles of a sphere, moved off them in random
+    directions) all fall in marked cells, down to the cell size of the grid. Built in slices of
+    97 cell marks here, so the slicing of the construction is exercised too."""
+    import edem.raycast
+
+    monkeypatch.setattr(edem.raycast, "_GRID_SLICE_MARKS", 97)
+    vertices, triangles = icosphere(3)
+    vertices = 7.0 * vertices + np.array([1.0, -2.0, 0.5])
+    caster = RayCaster(vertices, triangles)
+    reach = 1.3
+    marked, lower, inverse_cell, top, strides = caster._near_cells(reach)
+    rng = np.random.default_rng(5)
+    m = 20000
+    k = rng.integers(len(triangles), size=m)
+    a, b = rng.uniform(size=(2, m))
+    a, b = np.where(a + b > 1, 1 - a, a), np.where(a + b > 1, 1 - b, b)
+    corner = vertices[triangles[k]]
+    on_f = corner[:, 0] + a[:, None] * (corner[:, 1] - corner[:, 0]) + b[:, None] * (corner[:, 2] - corner[:, 0])
+    points = on_f + rng.uniform(0, reach, m)[:, None] * unit(rng.normal(size=(m, 3)))
+    # (the grid, like every ray inside the caster, is relative to the centre of F's box)
+    cell = np.clip(((points - caster._centre_mm - lower) * inverse_cell).astype(np.int64), 0, top)
+    assert np.all(marked[cell @ strides])
+    # and it does exclude something: the centre of the sphere, 7 mm from its surface
+    centre = np.clip(((np.array([1.0, -2.0, 0.5]) - caster._centre_mm - lower) * inverse_cell).astype(np.int64), 0, top)
+    assert not marked[centre @ strides]
+
+
 def _sphere_cap_over_grid(cells: int, half_width: float, radius: float, shift_mm: float):
     """Lower cap of a sphere (radius, 1 mm above z = 0) as a height field on a cells x cells grid
     over [-w, w]^2 shifted by shift_mm along x, facets facing down (towards the plate)."""

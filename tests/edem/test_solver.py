@@ -146,6 +146,44 @@ def test_singular_system_names_the_unrestrained_dofs():
         run(scene, "dem")
 
 
+def test_regular_solve_matches_lapack_and_refuses_what_unrestrained_dofs_would_diagnose():
+    """The 6 x 6 Cholesky in plain floats: the solution of well-posed stiffnesses (random SPD, DOF
+    units mm and rad with a 20 mm length) equals LAPACK's to round-off (cond <= 1e6 here: 1e-9);
+    a stiffness with a null direction, or one only 1e-9 of the largest pivot, is refused."""
+    from edem.mechanics import _regular_solve, unrestrained_dofs
+
+    rng = np.random.default_rng(4)
+    scale = np.array([1.0, 1.0, 1.0, 20.0, 20.0, 20.0])
+    for _ in range(50):
+        q, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+        k = np.outer(scale, scale) * (q @ np.diag(10.0 ** rng.uniform(0, 6, 6)) @ q.T)
+        b = rng.normal(size=6)
+        np.testing.assert_allclose(_regular_solve(k, scale, b), np.linalg.solve(k, b), rtol=1e-9)
+        singular = k.copy()
+        singular[:, 3] = singular[3, :] = 0.0
+        assert _regular_solve(singular, scale, b) is None
+        assert unrestrained_dofs(singular, np.ones(6, bool), 20.0) == ["rx"]
+    weak = np.diag([1.0, 1.0, 1e-9])
+    assert _regular_solve(weak, np.ones(3), np.ones(3)) is None
+    assert _regular_solve(np.zeros((0, 0)), np.zeros(0), np.zeros(0)).size == 0
+
+
+def test_turned_reference_rows_equal_the_rows_at_the_moved_pose():
+    """(n, (c - G) x n) measured at the reference pose and turned by R equal the rows of the
+    points and normals moved by the rigid placement (R about G, then a translation), to round-off."""
+    from edem.mechanics import rotation_matrix, turn_rows
+    from edem.springs import Placement
+
+    rng = np.random.default_rng(7)
+    points, normals, g0 = rng.normal(size=(50, 3)) * 20.0, rng.normal(size=(50, 3)), np.array([1.0, 2.0, 3.0])
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    pose = Placement(rotation_matrix(np.array([0.3, -0.2, 0.5])), np.array([4.0, -1.0, 2.0]), g0)
+    moved = generalised_directions(pose.points(points), pose.vectors(normals), pose.points(g0[None])[0])
+    turned = turn_rows(generalised_directions(points, normals, g0), pose.rotation, extra=2)
+    assert turned.shape == (52, 6)
+    np.testing.assert_allclose(turned[:50], moved, rtol=0, atol=1e-12 * 40.0)  # round-off on 40 mm arms
+
+
 def test_shear_stiffness_restrains_the_axis():
     """With k_s = G/h > 0 the same cylinder is determinate and a pure vertical load moves it vertically."""
     scene = make_scene(
