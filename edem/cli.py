@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import textwrap
 from pathlib import Path
@@ -303,8 +304,25 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _CtrlC:
+    """SIGINT handler that remembers it fired. A Ctrl-C can surface as another exception: inside
+    an import, VTK's module loader turns the KeyboardInterrupt into an ImportError."""
+
+    fired = False
+
+    def __call__(self, signum, frame):
+        self.fired = True
+        raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run the command line (``argv=None``: sys.argv). Exit status as in the module docstring;
+    130 after Ctrl-C."""
     args = build_parser().parse_args(argv)
+    ctrl_c = _CtrlC()
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is signal.default_int_handler:  # not when SIGINT is ignored (a campaign worker)
+        signal.signal(signal.SIGINT, ctrl_c)
     try:
         return args.func(args)
     except InputError as exc:
@@ -313,12 +331,19 @@ def main(argv: list[str] | None = None) -> int:
     except SolverError as exc:
         print(f"edem {args.command}: no solution: {exc}", file=sys.stderr)
         return 2
-    except OSError as exc:  # disk full or not writable where no finer message was given
-        print(f"edem {args.command}: cannot write: {exc}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt as exc:  # Ctrl-C: no traceback; campaigns say what they kept
         print(f"edem {args.command}: {str(exc) or 'interrupted'}", file=sys.stderr)
         return 130
+    except Exception as exc:
+        if ctrl_c.fired:
+            print(f"edem {args.command}: interrupted", file=sys.stderr)
+            return 130
+        if isinstance(exc, OSError):  # disk full or not writable where no finer message was given
+            print(f"edem {args.command}: cannot write: {exc}", file=sys.stderr)
+            return 2
+        raise
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 if __name__ == "__main__":
