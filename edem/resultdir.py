@@ -390,6 +390,9 @@ def read_timeseries_csv(path: str | Path) -> dict[str, np.ndarray]:
 
 def read_surface_frame(path: str | Path) -> SurfaceFrame:
     """Points, triangles and the point/cell arrays of a .vtp (polygons fan-triangulated by VTK)."""
+    from geometries.mesh_io import load_vtk
+
+    load_vtk()
     from vtkmodules.util.numpy_support import vtk_to_numpy
     from vtkmodules.vtkFiltersCore import vtkTriangleFilter
     from vtkmodules.vtkIOXML import vtkXMLPolyDataReader

@@ -27,6 +27,11 @@ with ``warnings.warn`` (category :class:`MeshWarning`) so the caller can collect
 
 from __future__ import annotations
 
+import importlib
+import os
+import signal
+import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -157,8 +162,45 @@ def _block(cells: np.ndarray) -> _Cells:
     return np.full(len(cells), cells.shape[1], dtype=np.int64), cells.ravel()
 
 
+#: The VTK modules this project reads and writes through (mesh import, pressure maps).
+VTK_MODULES = (
+    "vtkmodules.util.numpy_support", "vtkmodules.util.vtkConstants", "vtkmodules.util.misc",
+    "vtkmodules.vtkCommonCore", "vtkmodules.vtkCommonDataModel", "vtkmodules.vtkFiltersCore",
+    "vtkmodules.vtkIOLegacy", "vtkmodules.vtkIOXML",
+)
+
+
+def load_vtk() -> None:
+    """Import :data:`VTK_MODULES` with Ctrl-C held back until they are loaded.
+
+    A KeyboardInterrupt inside the import of a VTK extension module leaves it half initialised:
+    VTK's loader reports an ImportError, or the process crashes (SIGSEGV) in VTK's module
+    registry. Blocking the signal is not enough (Python's handler runs for a signal any thread
+    receives), so the Python-level handler is swapped for one that only records the interrupt,
+    which is then handed to the previous handler once the modules are in.
+    """
+    if all(name in sys.modules for name in VTK_MODULES):
+        return
+    if threading.current_thread() is not threading.main_thread():  # handlers belong to the main thread
+        for name in VTK_MODULES:
+            importlib.import_module(name)
+        return
+    pending: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: pending.append(signum))
+    try:
+        for name in VTK_MODULES:
+            importlib.import_module(name)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if pending and callable(previous):
+        previous(signal.SIGINT, None)
+    elif pending and previous == signal.SIG_DFL:
+        os.kill(os.getpid(), signal.SIGINT)
+
+
 def _vtk_polydata(points: np.ndarray, polys: _Cells, strips: _Cells | None = None):
     """A vtkPolyData of float64 points, polygons and triangle strips (int64 vertex indices)."""
+    load_vtk()
     from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
     from vtkmodules.vtkCommonCore import vtkPoints
     from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
@@ -186,6 +228,7 @@ def _triangulate(points: np.ndarray, polys: list[_Cells], strips: list[_Cells]) 
     Triangles pass unchanged; larger polygons are triangulated keeping their winding (quads
     along the shorter diagonal); strips are unrolled with VTK's alternating-winding rule.
     """
+    load_vtk()
     from vtkmodules.util.numpy_support import vtk_to_numpy
     from vtkmodules.vtkFiltersCore import vtkTriangleFilter
 
@@ -216,6 +259,7 @@ def _read_vtk(path: Path, key: str | None):
     VTK readers do not raise: they report failures as error events, collected here from the
     reader and its executive and raised as InputError.
     """
+    load_vtk()
     from vtkmodules.util import vtkConstants as vtk_type
     from vtkmodules.util.misc import calldata_type
     from vtkmodules.vtkIOLegacy import (
@@ -280,6 +324,7 @@ def _vtk_cells(data, file: str) -> tuple[np.ndarray, list[_Cells], list[_Cells],
     order triangles and quads keep their corner nodes (warning); other 2D cells are dropped
     (warning).
     """
+    load_vtk()
     from vtkmodules.util.numpy_support import vtk_to_numpy
     from vtkmodules.vtkCommonDataModel import vtkCellTypes, vtkCellTypeUtilities
     from vtkmodules.vtkFiltersCore import vtkAppendFilter
@@ -453,6 +498,7 @@ def write_vtp(
     in memory and Python writes it: VTK's own file output crashed (SIGSEGV) on a full disk,
     Python raises OSError (ENOSPC) instead.
     """
+    load_vtk()
     from vtkmodules.util.numpy_support import numpy_to_vtk
     from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
 
