@@ -68,7 +68,6 @@ import json
 import math
 import numbers
 import subprocess
-import tomllib
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -496,10 +495,10 @@ def resolved_scene(scene_ref: str | Path, overrides: dict[str, Any] | None = Non
     already be plain dotted keys (``verification.sides.expand_array_overrides`` expands the
     ``array[*].key`` form).
     """
-    from edem.scene import apply_overrides, resolve_scene_path
+    from edem.scene import apply_overrides, read_scene_toml, resolve_scene_path
 
     path = resolve_scene_path(scene_ref)
-    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    data = read_scene_toml(path)
     if overrides:
         apply_overrides(data, dict(overrides))
     meta = data.setdefault("scene", {})

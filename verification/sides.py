@@ -32,7 +32,6 @@ import importlib.util
 import inspect
 import re
 import time
-import tomllib
 import traceback
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -45,7 +44,7 @@ from edem.atomic_dirs import ResultWriteError
 from edem.errors import InputError, SolverError
 from edem.resultdir import Provenance, provenance
 from edem.results import write_results
-from edem.scene import apply_overrides, load_scene, resolve_scene_path
+from edem.scene import apply_overrides, load_scene, read_scene_toml, resolve_scene_path
 from edem.solver import run
 from verification.closed_forms import CLOSED_FORMS, solve_closed_form, write_closed_form_results
 from verification.fe_analytic import FE_PROBLEMS, run_fe_problem, write_exact_result
@@ -95,7 +94,7 @@ def expand_array_overrides(scene_ref: str, overrides: dict[str, Any]) -> dict[st
         return dict(overrides)
 
     path = resolve_scene_path(scene_ref)
-    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    data = read_scene_toml(path)
     plain = {k: v for k, v in overrides.items() if not ARRAY_OVERRIDE.match(k)}
     apply_overrides(data, dict(plain))
     arrays: dict[str, list[dict[str, Any]]] = {}
