@@ -24,7 +24,9 @@ Layout of ``OUT/``:
     integers, floats as Python ``repr`` (exact round trip); every value finite.
 ``pressure.pvd``
     A ParaView collection: one ``<DataSet timestep=... file="pressure_NNNN.vtp"/>`` per written
-    time point (NNNN = the time point's index in the scene's load history).
+    time point (NNNN = the time point's index in the scene's load history). A run written
+    without pressure maps (a campaign of hundreds of runs that needs only the time series)
+    lists none, and its summary says ``"pressure_maps": 0``; only then may the list be empty.
 ``pressure_NNNN.vtp``
     VTK XML PolyData (:func:`geometries.mesh_io.write_vtp`): a triangulated surface in mm with
     cell and/or point arrays. Discrete runs and closed forms: the mobile surface at its pose,
@@ -86,6 +88,8 @@ COLLECTION_FILE = "pressure.pvd"
 FIXED_FILE = "fixed.vtp"
 FIXED_COLLECTION_FILE = "fixed.pvd"
 STO_FILE = "timeseries.sto"
+#: summary key of a result written without pressure maps (value 0)
+MAPS_KEY = "pressure_maps"
 
 TIMESERIES_COLUMNS = (
     "step",
@@ -171,7 +175,8 @@ def write_result_dir(
 
     ``timeseries``: one row per time point, {column: value} with at least
     :data:`TIMESERIES_COLUMNS` (:func:`timeseries_row`); extra keys of the first row become extra
-    columns. ``frames``: the pressure maps listed in pressure.pvd. ``fixed``: the fixed body.
+    columns. ``frames``: the pressure maps listed in pressure.pvd (none: the summary gets
+    ``"pressure_maps": 0``). ``fixed``: the fixed body.
     ``fixed_frames``: the fixed body per time point (fixed.pvd). ``opensim_sto``: also write the
     time series as timeseries.sto. ``overwrite``: replace an existing result directory
     (otherwise InputError). ``provenance``: the resolved scene (scene.toml) and the provenance
@@ -186,6 +191,8 @@ def write_result_dir(
     out = Path(out_dir)
     if provenance is not None:
         summary = {**summary, **provenance.summary_keys}
+    if not frames:
+        summary = {**summary, MAPS_KEY: 0}
     check_finite_summary(summary, out / SUMMARY_FILE)
     columns = list(TIMESERIES_COLUMNS)
     if timeseries:
@@ -329,6 +336,9 @@ class ResultDir:
         return self.timeseries["time_s"]
 
     def frame(self, index: int) -> SurfaceFrame:
+        if not self.frames:
+            raise InputError("the result was written without pressure maps", file=self.path / COLLECTION_FILE,
+                             expected="a run that writes them (campaign option frames = \"all\" or \"peak\")")
         return read_surface_frame(self.frames[index][1])
 
 
@@ -362,7 +372,7 @@ def read_result_dir(path: str | Path) -> ResultDir:
         (float(node.get("timestep", "0")), root / str(node.get("file")))
         for node in tree.getroot().iter("DataSet")
     )
-    if not frames:
+    if not frames and not (isinstance(summary, dict) and summary.get(MAPS_KEY) == 0):
         raise InputError("pressure.pvd lists no data set", file=pvd, expected="one <DataSet> per time point")
     return ResultDir(root, summary, series, frames)
 

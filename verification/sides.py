@@ -13,8 +13,9 @@ A side turns (scene, overrides, options) into a result directory (docs/result-fo
 
 Options of a case reach its sides: ``mesh_size_mm``, ``degree`` and ``steps`` (the time points
 to solve) for the FE reference of a scene; ``mesh_size_mm`` and ``element`` for an FE problem;
-``frames`` for EDEM/DEM ("all", the default, or "peak": only the pressure map of the time point
-of peak pressure, for campaigns of hundreds of runs that need the time series only).
+``frames`` for EDEM/DEM ("all", the default; "peak": only the pressure map of the time point
+of peak pressure; "none": no pressure map (docs/result-format.md), for campaigns of hundreds of
+runs that need the time series only).
 
 Overrides are dotted scene keys (``--set``), plus ``<array>[*].<key>`` / ``<array>[<i>].<key>``
 for arrays of tables (e.g. ``ligaments[*].youngs_modulus_mpa``), which
@@ -121,13 +122,17 @@ def expand_array_overrides(scene_ref: str, overrides: dict[str, Any]) -> dict[st
     return {**plain, **arrays}
 
 
-FRAMES = ("all", "peak")
+FRAMES = ("all", "peak", "none")
 
 
 def _write_discrete(result: Any, out_dir: Path, frames: str, record: Provenance) -> None:
-    """write_results, or (frames "peak") the same summary and time series with one pressure map."""
+    """write_results, or the same summary and time series with one pressure map (frames "peak")
+    or none (frames "none")."""
     if frames == "all":
         write_results(result, out_dir, provenance=record)
+        return
+    if frames == "none":
+        write_results(result, out_dir, frame_steps=[], note="no pressure maps (time series only)", provenance=record)
         return
     peak = max(range(len(result.steps)), key=lambda k: result.steps[k].peak_pressure_mpa)
     note = f"pressure map of the peak-pressure time point only (step {result.steps[peak].step})"
