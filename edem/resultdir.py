@@ -170,6 +170,7 @@ def write_result_dir(
     opensim_sto: bool = False,
     overwrite: bool = False,
     provenance: Provenance | None = None,
+    durable: bool = True,
 ) -> Path:
     """Write a result directory (layout in the module docstring) atomically; returns its path.
 
@@ -182,7 +183,8 @@ def write_result_dir(
     (otherwise InputError). ``provenance``: the resolved scene (scene.toml) and the provenance
     keys of the summary (:func:`provenance`), written with the rest so that an interrupted run
     never leaves a result without them. Every file is written inside one
-    :func:`edem.atomic_dirs.atomic_result_dir` and so listed in manifest.json.
+    :func:`edem.atomic_dirs.atomic_result_dir` and so listed in manifest.json; ``durable=False``
+    skips its fsyncs (a campaign's verified cache only).
 
     Raises SolverError naming the file and key when a number is not finite (a result that
     contradicts itself is never written as if it were one), InputError when the directory
@@ -207,7 +209,7 @@ def write_result_dir(
             if not math.isfinite(float(value)):
                 raise SolverError(f"{out / TIMESERIES_FILE}: time point {row['step']}, column '{column}' is not finite ({value})")
         lines.append([_csv_number(row[c]) for c in columns])
-    with atomic_result_dir(out, overwrite=overwrite) as tmp:
+    with atomic_result_dir(out, overwrite=overwrite, durable=durable) as tmp:
         (tmp / SUMMARY_FILE).write_text(json.dumps(dict(summary), indent=2) + "\n", encoding="utf-8")
         if provenance is not None:
             (tmp / SCENE_FILE).write_text(provenance.scene_toml, encoding="utf-8")

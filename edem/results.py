@@ -83,7 +83,7 @@ def pressure_frame(run: RunResult, s: StepResult) -> Frame:
 
 
 def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int] | None = None, note: str | None = None,
-                  overwrite: bool = False, provenance: Provenance | None = None) -> Path:
+                  overwrite: bool = False, provenance: Provenance | None = None, durable: bool = True) -> Path:
     """Write the result directory of a DEM/EDEM run (layout: :mod:`edem.resultdir`), atomically.
 
     Parameters
@@ -105,6 +105,9 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
     provenance : Provenance, optional
         The resolved scene and the summary's provenance keys (:func:`edem.resultdir.provenance`),
         written in the same atomic step as the rest.
+    durable : bool, optional
+        Flush every file to disk before the directory is renamed into place (default). False
+        for a campaign's case results, a cache verified before use (:mod:`edem.atomic_dirs`).
 
     Returns
     -------
@@ -127,7 +130,7 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
     fixed = SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles)
     return write_result_dir(out_dir, data, timeseries_rows(run), frames, fixed,
                             fixed_frames=[fixed_frame(run, run.steps[k]) for k in chosen], opensim_sto=True,
-                            overwrite=overwrite, provenance=provenance)
+                            overwrite=overwrite, provenance=provenance, durable=durable)
 
 
 def fixed_frame(run: RunResult, s: StepResult) -> Frame:

@@ -127,16 +127,17 @@ FRAMES = ("all", "peak", "none")
 
 def _write_discrete(result: Any, out_dir: Path, frames: str, record: Provenance) -> None:
     """write_results, or the same summary and time series with one pressure map (frames "peak")
-    or none (frames "none")."""
+    or none (frames "none"). Not flushed to disk (durable=False): a case's result directory is a
+    cache the runner verifies against its manifest before use and re-runs when it does not."""
     if frames == "all":
-        write_results(result, out_dir, provenance=record)
+        write_results(result, out_dir, provenance=record, durable=False)
         return
     if frames == "none":
-        write_results(result, out_dir, frame_steps=[], note="no pressure maps (time series only)", provenance=record)
+        write_results(result, out_dir, frame_steps=[], note="no pressure maps (time series only)", provenance=record, durable=False)
         return
     peak = max(range(len(result.steps)), key=lambda k: result.steps[k].peak_pressure_mpa)
     note = f"pressure map of the peak-pressure time point only (step {result.steps[peak].step})"
-    write_results(result, out_dir, frame_steps=[peak], note=note, provenance=record)
+    write_results(result, out_dir, frame_steps=[peak], note=note, provenance=record, durable=False)
 
 
 def _run_discrete(method: str) -> SideRunner:
