@@ -476,8 +476,10 @@ SCENE_FILE = "scene.toml"
 FILE_KEYS = (("geometry", "mobile"), ("geometry", "fixed"), ("load", "file"), ("kinematics", "file"))
 
 
+@lru_cache(maxsize=1)
 def software_version() -> str:
-    """The installed ``edem`` package version ("unknown" when it is not installed)."""
+    """The installed ``edem`` package version ("unknown" when it is not installed); read once per
+    process (a campaign worker writes hundreds of result directories)."""
     try:
         return importlib.metadata.version("edem")
     except importlib.metadata.PackageNotFoundError:

@@ -128,7 +128,10 @@ def _source_digest(modules: tuple[str, ...]) -> str:
     return sources.source_digest(modules, SOURCE_ROOT)
 
 
+@lru_cache(maxsize=1)
 def _package_version() -> str:
+    """The installed edem version (read once: importlib.metadata parses the package's metadata
+    file on every call, which was most of a case key's cost)."""
     try:
         return importlib.metadata.version("edem")
     except importlib.metadata.PackageNotFoundError:
