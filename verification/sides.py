@@ -14,8 +14,8 @@ A side turns (scene, overrides, options) into a result directory (docs/result-fo
 Options of a case reach its sides: ``mesh_size_mm``, ``degree`` and ``steps`` (the time points
 to solve) for the FE reference of a scene; ``mesh_size_mm`` and ``element`` for an FE problem;
 ``frames`` for EDEM/DEM ("all", the default; "peak": only the pressure map of the time point
-of peak pressure; "none": no pressure map (docs/result-format.md), for campaigns of hundreds of
-runs that need the time series only).
+of peak pressure; "none": no pressure map, fixed body or .sto file, the optional files of
+docs/result-format.md, for campaigns of hundreds of runs that need the time series only).
 
 Overrides are dotted scene keys (``--set``), plus ``<array>[*].<key>`` / ``<array>[<i>].<key>``
 for arrays of tables (e.g. ``ligaments[*].youngs_modulus_mpa``), which
@@ -133,7 +133,8 @@ def _write_discrete(result: Any, out_dir: Path, frames: str, record: Provenance)
         write_results(result, out_dir, provenance=record, durable=False)
         return
     if frames == "none":
-        write_results(result, out_dir, frame_steps=[], note="no pressure maps (time series only)", provenance=record, durable=False)
+        write_results(result, out_dir, note="no pressure maps (time series only)", provenance=record, durable=False,
+                      time_series_only=True)
         return
     peak = max(range(len(result.steps)), key=lambda k: result.steps[k].peak_pressure_mpa)
     note = f"pressure map of the peak-pressure time point only (step {result.steps[peak].step})"

@@ -50,8 +50,9 @@ def test_peak_frames_keep_the_whole_time_series_and_one_map(tmp_path):
 
 def test_no_frames_keep_the_whole_time_series_and_say_so(tmp_path):
     """frames "none": the same summary numbers and time series as a run with every map, a sealed
-    directory whose pressure.pvd lists nothing (summary pressure_maps = 0), and a reader that
-    refuses to draw a map it does not have (exit-2 message, not an IndexError)."""
+    directory without the optional surfaces and .sto whose pressure.pvd lists nothing (summary
+    pressure_maps = 0), and a reader that refuses to draw a map it does not have (exit-2
+    message, not an IndexError)."""
     full = read_result_dir(run_side("edem", "ideal-stance", {}, tmp_path / "all").result_dir)
     bare = read_result_dir(run_side("edem", "ideal-stance", {}, tmp_path / "none", {"frames": "none"}).result_dir)
     assert bare.frames == () and bare.summary["pressure_maps"] == 0 and "pressure_maps" not in full.summary
@@ -60,7 +61,7 @@ def test_no_frames_keep_the_whole_time_series_and_say_so(tmp_path):
         assert np.array_equal(values, bare.timeseries[column]), column
     for key in ("peak_pressure_mpa", "max_contact_area_mm2", "final_displacement_mm", "max_force_residual_n"):
         assert bare.summary[key] == full.summary[key]
-    assert not list(bare.path.glob("*_0*.vtp"))
+    assert {p.name for p in bare.path.iterdir()} == {"summary.json", "scene.toml", "timeseries.csv", "pressure.pvd", "manifest.json"}
     with pytest.raises(InputError, match="without pressure maps"):
         bare.frame(0)
 
