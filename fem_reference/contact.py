@@ -30,7 +30,6 @@ from typing import Any
 
 import numpy as np
 
-from .progress import SolveProgress
 from .problem import (
     AREA_DEFINITION_NITSCHE,
     AREA_DEFINITION_VI,
@@ -42,6 +41,7 @@ from .problem import (
     RigidPlane,
     RigidSurface,
 )
+from .progress import SolveProgress
 
 _counter = itertools.count()
 

@@ -366,9 +366,9 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     result directory at ``out_dir``; ``provenance`` (:func:`edem.resultdir.provenance`) is written
     with it.
     ``on_size(size)`` is called once, with the :class:`fem_reference.sizing.FESize` estimate, after
-    the run was sized and found to fit. ``solve_progress`` (rank 0's counts; other ranks may pass
-    None): progress lines from inside each solve (:mod:`fem_reference.progress`), labelled with
-    the time point.
+    the run was sized and found to fit. ``solve_progress``: progress lines from inside each solve
+    (:mod:`fem_reference.progress`), labelled with the time point; rank 0's argument decides for
+    every rank (the others may pass None).
 
     Raises InputError on bad settings and SolverError (FEConvergenceError for a Newton failure)
     naming the time point when one has no solution.
