@@ -1086,22 +1086,23 @@ def builder_defaults(name: str) -> dict[str, Any]:
     return {k: v.default for k, v in inspect.signature(func).parameters.items()}
 
 
-#: Built geometries kept per process, most recent last: (builder, parameters as JSON) ->
+#: Built geometries kept per process, most recent last: (builder function, parameters as JSON) ->
 #: (the geometry, the warnings its build emitted). A campaign worker builds the same geometry
 #: for hundreds of cases (the sensitivity grid varies the cartilage, not the bones); meshing is
 #: deterministic (module docstring), so a kept geometry is the one a new build would give.
-_BUILT: collections.OrderedDict[tuple[str, str], tuple[BuiltGeometry, tuple[warnings.WarningMessage, ...]]] = collections.OrderedDict()
+_BUILT: collections.OrderedDict[tuple[Callable[..., BuiltGeometry], str], tuple[BuiltGeometry, tuple[warnings.WarningMessage, ...]]] = collections.OrderedDict()
 #: geometries kept: a few (a population's subjects differ, so there the cache only misses)
 BUILT_CACHE_SIZE = 4
 
 
-def _cache_key(name: str, params: dict[str, Any]) -> tuple[str, str] | None:
+def _cache_key(func: Callable[..., BuiltGeometry], params: dict[str, Any]) -> tuple[Callable[..., BuiltGeometry], str] | None:
     """The cache key of a build, or None for parameters with no exact JSON text (never cached).
 
     JSON keeps every float exactly (repr) and tells 1 from 1.0 and true from 1, so two
-    parameter sets share a key only when the builder sees the same values."""
+    parameter sets share a key only when the builder sees the same values. The function, not
+    its registered name, is part of the key: a builder replaced under the same name is a miss."""
     try:
-        return name, json.dumps(params, sort_keys=True, allow_nan=False)
+        return func, json.dumps(params, sort_keys=True, allow_nan=False)
     except (TypeError, ValueError):
         return None
 
@@ -1133,7 +1134,7 @@ def build_geometry(name: str, params: dict, *, file: str | None = None) -> Built
     params = dict(params or {})
     try:
         _validate(name, specs, params)
-        key = _cache_key(name, params)
+        key = _cache_key(func, params)
         if key is None:
             return func(**params)
         if key in _BUILT:

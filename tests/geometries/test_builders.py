@@ -303,6 +303,9 @@ def test_a_repeated_build_is_a_private_copy_of_the_kept_one_with_its_warnings_ag
     with pytest.warns(UserWarning):
         B.build_geometry("counted_plates", {"gap_mm": 2.0})  # evicted by the four newer ones
     assert len(calls) == 7
+    # a builder replaced under the same name (a test's stand-in, say) is never served the old one's geometry
+    monkeypatch.setitem(B._BUILDERS, "counted_plates", (lambda **params: B.tilted_plane(**params), B.PLATE_PARAMS))
+    assert B.build_geometry("counted_plates", {"gap_mm": 2.0}).parameters == B.tilted_plane(gap_mm=2.0).parameters
     B.clear_geometry_cache()
 
 
