@@ -87,3 +87,21 @@ def test_vi_inner_solve_that_does_not_converge_is_refused_with_its_residual(comm
         solve_contact_vi(problem, comm)
     assert err.value.iterations == 1
     assert math.isfinite(err.value.residual_norm) and err.value.residual_norm > 0
+
+
+def test_krylov_lines_are_throttled_and_wait_for_quiet_s():
+    """With a fake clock: nothing before quiet_s, then at most one Krylov line per
+    krylov_every_s, labelled with the Newton step being solved (the one after the last line)."""
+    now = [0.0]
+    lines: list[str] = []
+    progress = SolveProgress(lines.append, label="t", quiet_s=1.0, krylov_every_s=2.0, clock=lambda: now[0])
+    for step in range(50):  # an inner solve of 50 iterations, 0.1 s each
+        now[0] = 0.1 * step
+        progress.krylov(step, 1.0 / (step + 1), "cg+gamg")
+    iterations = [int(m.group(2)) for m in map(KRYLOV.search, lines) if m]
+    assert iterations == [10, 30]  # at 1.0 s (quiet_s) and 3.0 s, not at 2.0 s (within 2 s of the last)
+    progress.newton(3, 0.5, 10, 1, 0)
+    assert lines[-1].startswith("fe: t: Newton 3: |F| = 5.000e-01 N, 10 contact nodes (+1 -0)")
+    now[0] = 10.0
+    progress.krylov(0, 1.0, "cg+gamg")
+    assert "Newton 4, inner cg+gamg: iteration 0" in lines[-1]
