@@ -2,7 +2,11 @@
 
 A result directory is written into a temporary sibling (``.<name>.tmp-<host>-<pid>-<random>``),
 sealed with ``manifest.json`` (every file with its size and sha256, and the run id), flushed to
-disk (fsync of every file and directory) and only then renamed into place. An existing result
+disk (fsync of every file and directory) and only then renamed into place. A campaign's case
+results, a cache that is verified before use and re-run when it does not verify, skip the flush
+(``durable=False``): under the I/O of other processes it cost more than the rest of the write,
+and a power cut can then leave a sealed directory whose files did not reach the disk, which its
+manifest refuses like any other damage. An existing result
 is replaced only when the caller says so (``overwrite``), and it stays untouched until the
 rename: a crash, a kill or a full disk before that point leaves the previous result as it was
 and at most a hidden temporary sibling, which the next write of that result removes. Readers verify the manifest (:func:`verify_manifest`): a
@@ -160,25 +164,27 @@ def _listed_files(root: Path) -> list[str]:
     return sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file() and p.name != MANIFEST_NAME)
 
 
-def write_manifest(root: str | Path, run_id: str | None = None) -> dict[str, Any]:
+def write_manifest(root: str | Path, run_id: str | None = None, *, durable: bool = True) -> dict[str, Any]:
     """Seal ``root``: manifest.json lists every file (relative path, bytes, sha256) and the run id.
 
-    Every file and directory is fsynced on the way, so a sealed directory is on disk.
+    ``durable``: every file and directory is fsynced on the way, so a sealed directory is on disk.
     """
     root = Path(root)
     files = {}
     for rel in _listed_files(root):
         path = root / rel
-        files[rel] = {"bytes": path.stat().st_size, "sha256": _sha256(path, sync=True)}
+        files[rel] = {"bytes": path.stat().st_size, "sha256": _sha256(path, sync=durable)}
     manifest = {"format": MANIFEST_FORMAT, "run_id": run_id or uuid.uuid4().hex, "files": files}
     tmp = root / (MANIFEST_NAME + ".tmp")
     with open(tmp, "w", encoding="utf-8") as f:
         f.write(json.dumps(manifest, indent=1) + "\n")
         f.flush()
-        os.fsync(f.fileno())
+        if durable:
+            os.fsync(f.fileno())
     os.replace(tmp, root / MANIFEST_NAME)
-    for directory in {root} | {(root / rel).parent for rel in files}:
-        _fsync_dir(directory)
+    if durable:
+        for directory in {root} | {(root / rel).parent for rel in files}:
+            _fsync_dir(directory)
     return manifest
 
 
@@ -264,8 +270,12 @@ def remove_stale_siblings(out: str | Path) -> list[str]:
 
 
 @contextlib.contextmanager
-def atomic_result_dir(out: str | Path, *, overwrite: bool = False, run_id: str | None = None) -> Iterator[Path]:
+def atomic_result_dir(out: str | Path, *, overwrite: bool = False, run_id: str | None = None,
+                      durable: bool = True) -> Iterator[Path]:
     """Yield a temporary sibling of ``out`` to write into; seal it and rename it to ``out`` on exit.
+
+    ``durable=False`` skips the fsyncs (module docstring: for verified caches only); the write
+    stays atomic and sealed.
 
     An existing ``out`` is replaced only with ``overwrite`` and only when it is a result
     directory or empty; it stays whole until the rename (an atomic exchange where the file
@@ -283,8 +293,8 @@ def atomic_result_dir(out: str | Path, *, overwrite: bool = False, run_id: str |
         raise _write_error(out, exc) from None
     try:
         yield tmp
-        write_manifest(tmp, run_id)
-        _replace(tmp, out, overwrite)
+        write_manifest(tmp, run_id, durable=durable)
+        _replace(tmp, out, overwrite, durable)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         raise _write_error(out, exc) from None
@@ -309,7 +319,7 @@ def _exchange(a: Path, b: Path) -> bool:
     raise OSError(code, os.strerror(code), str(b))
 
 
-def _replace(tmp: Path, out: Path, overwrite: bool) -> None:
+def _replace(tmp: Path, out: Path, overwrite: bool, durable: bool = True) -> None:
     if os.path.lexists(out):
         if out.is_dir() and not any(out.iterdir()):
             out.rmdir()
@@ -317,15 +327,18 @@ def _replace(tmp: Path, out: Path, overwrite: bool) -> None:
             raise InputError("a result exists here already" if is_result_dir(out) else "exists and is not a result directory",
                              file=out, expected="--overwrite to replace a result directory, or another --out")
         elif _exchange(tmp, out):  # the old result is now at tmp: never a moment without a result
-            _fsync_dir(out.parent)
+            if durable:
+                _fsync_dir(out.parent)
             shutil.rmtree(tmp, ignore_errors=True)
             return
         else:
             old = _sibling(out, "old")
             os.rename(out, old)
             os.rename(tmp, out)
-            _fsync_dir(out.parent)
+            if durable:
+                _fsync_dir(out.parent)
             shutil.rmtree(old, ignore_errors=True)
             return
     os.rename(tmp, out)
-    _fsync_dir(out.parent)
+    if durable:
+        _fsync_dir(out.parent)

@@ -59,6 +59,25 @@ def _print_fe_size(size) -> None:
           f"~{size.memory_bytes / 1e9:.2g} GB estimated", file=sys.stderr, flush=True)
 
 
+def _fe_solve_progress(requested: bool | None, bar):
+    """The progress lines from inside each FE solve (fem_reference.progress) on stderr: with
+    --progress from the first Newton iteration, by default on a terminal once a solve has run
+    a few seconds, never with --no-progress. Written above the step bar when there is one."""
+    from fem_reference.progress import TERMINAL_QUIET_S, SolveProgress
+
+    if requested is False or (requested is None and not sys.stderr.isatty()):
+        return None
+    if bar is not None:
+        from tqdm import tqdm
+
+        def write(line: str) -> None:
+            tqdm.write(line, file=sys.stderr)
+    else:
+        def write(line: str) -> None:
+            print(line, file=sys.stderr, flush=True)
+    return SolveProgress(write, quiet_s=0.0 if requested else TERMINAL_QUIET_S)
+
+
 def _out_dir(args: argparse.Namespace, *name_parts: str, overrides: dict | None = None) -> Path:
     """--out, or results/<scene>-<method>[-set-<hash of the overrides>], checked before any solve."""
     from edem.atomic_dirs import check_out_dir, default_out_dir
@@ -93,7 +112,8 @@ def _fe(args: argparse.Namespace) -> int:
             bar = tqdm(total=n_solves, desc=f"{scene.name} ({settings.method})", unit="step", file=sys.stderr)
         result = run_scene(scene, model=settings.model, mesh_size_mm=args.mesh_size, degree=args.degree, steps=steps, out_dir=out,
                            overwrite=args.overwrite, provenance=record, progress=None if bar is None else (lambda k: bar.update(1)),
-                           on_size=_print_fe_size if rank == 0 else None)
+                           on_size=_print_fe_size if rank == 0 else None,
+                           solve_progress=_fe_solve_progress(args.progress, bar) if rank == 0 else None)
     except (InputError, SolverError):
         if rank != 0:  # every rank fails alike: rank 0 alone reports it
             return 2
@@ -269,6 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mesh-size", type=float, metavar="MM", help="element size in mm; overrides [fe] mesh_size_mm")
     p.add_argument("--degree", type=int, choices=(1, 2), help="element degree (2: P2, or Taylor-Hood at nu >= 0.49); overrides [fe] degree")
     p.add_argument("--steps", metavar="LIST", help="time points to solve, e.g. 0,5-9,10:65:8 (default: all)")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="lines from inside each solve on stderr (Newton residual, contact nodes, Krylov iterations); "
+                        "default: on a terminal, once a solve has run a few seconds")
     p.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene value, e.g. --set cartilage.poissons_ratio=0.3"
     )

@@ -24,7 +24,9 @@ Layout of ``OUT/``:
     integers, floats as Python ``repr`` (exact round trip); every value finite.
 ``pressure.pvd``
     A ParaView collection: one ``<DataSet timestep=... file="pressure_NNNN.vtp"/>`` per written
-    time point (NNNN = the time point's index in the scene's load history).
+    time point (NNNN = the time point's index in the scene's load history). A run written
+    without pressure maps (a campaign of hundreds of runs that needs only the time series)
+    lists none, and its summary says ``"pressure_maps": 0``; only then may the list be empty.
 ``pressure_NNNN.vtp``
     VTK XML PolyData (:func:`geometries.mesh_io.write_vtp`): a triangulated surface in mm with
     cell and/or point arrays. Discrete runs and closed forms: the mobile surface at its pose,
@@ -68,7 +70,6 @@ import json
 import math
 import numbers
 import subprocess
-import tomllib
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -87,6 +88,8 @@ COLLECTION_FILE = "pressure.pvd"
 FIXED_FILE = "fixed.vtp"
 FIXED_COLLECTION_FILE = "fixed.pvd"
 STO_FILE = "timeseries.sto"
+#: summary key of a result written without pressure maps (value 0)
+MAPS_KEY = "pressure_maps"
 
 TIMESERIES_COLUMNS = (
     "step",
@@ -167,18 +170,21 @@ def write_result_dir(
     opensim_sto: bool = False,
     overwrite: bool = False,
     provenance: Provenance | None = None,
+    durable: bool = True,
 ) -> Path:
     """Write a result directory (layout in the module docstring) atomically; returns its path.
 
     ``timeseries``: one row per time point, {column: value} with at least
     :data:`TIMESERIES_COLUMNS` (:func:`timeseries_row`); extra keys of the first row become extra
-    columns. ``frames``: the pressure maps listed in pressure.pvd. ``fixed``: the fixed body.
+    columns. ``frames``: the pressure maps listed in pressure.pvd (none: the summary gets
+    ``"pressure_maps": 0``). ``fixed``: the fixed body.
     ``fixed_frames``: the fixed body per time point (fixed.pvd). ``opensim_sto``: also write the
     time series as timeseries.sto. ``overwrite``: replace an existing result directory
     (otherwise InputError). ``provenance``: the resolved scene (scene.toml) and the provenance
     keys of the summary (:func:`provenance`), written with the rest so that an interrupted run
     never leaves a result without them. Every file is written inside one
-    :func:`edem.atomic_dirs.atomic_result_dir` and so listed in manifest.json.
+    :func:`edem.atomic_dirs.atomic_result_dir` and so listed in manifest.json; ``durable=False``
+    skips its fsyncs (a campaign's verified cache only).
 
     Raises SolverError naming the file and key when a number is not finite (a result that
     contradicts itself is never written as if it were one), InputError when the directory
@@ -187,6 +193,8 @@ def write_result_dir(
     out = Path(out_dir)
     if provenance is not None:
         summary = {**summary, **provenance.summary_keys}
+    if not frames:
+        summary = {**summary, MAPS_KEY: 0}
     check_finite_summary(summary, out / SUMMARY_FILE)
     columns = list(TIMESERIES_COLUMNS)
     if timeseries:
@@ -201,7 +209,7 @@ def write_result_dir(
             if not math.isfinite(float(value)):
                 raise SolverError(f"{out / TIMESERIES_FILE}: time point {row['step']}, column '{column}' is not finite ({value})")
         lines.append([_csv_number(row[c]) for c in columns])
-    with atomic_result_dir(out, overwrite=overwrite) as tmp:
+    with atomic_result_dir(out, overwrite=overwrite, durable=durable) as tmp:
         (tmp / SUMMARY_FILE).write_text(json.dumps(dict(summary), indent=2) + "\n", encoding="utf-8")
         if provenance is not None:
             (tmp / SCENE_FILE).write_text(provenance.scene_toml, encoding="utf-8")
@@ -330,6 +338,9 @@ class ResultDir:
         return self.timeseries["time_s"]
 
     def frame(self, index: int) -> SurfaceFrame:
+        if not self.frames:
+            raise InputError("the result was written without pressure maps", file=self.path / COLLECTION_FILE,
+                             expected="a run that writes them (campaign option frames = \"all\" or \"peak\")")
         return read_surface_frame(self.frames[index][1])
 
 
@@ -363,7 +374,7 @@ def read_result_dir(path: str | Path) -> ResultDir:
         (float(node.get("timestep", "0")), root / str(node.get("file")))
         for node in tree.getroot().iter("DataSet")
     )
-    if not frames:
+    if not frames and not (isinstance(summary, dict) and summary.get(MAPS_KEY) == 0):
         raise InputError("pressure.pvd lists no data set", file=pvd, expected="one <DataSet> per time point")
     return ResultDir(root, summary, series, frames)
 
@@ -468,8 +479,10 @@ SCENE_FILE = "scene.toml"
 FILE_KEYS = (("geometry", "mobile"), ("geometry", "fixed"), ("load", "file"), ("kinematics", "file"))
 
 
+@lru_cache(maxsize=1)
 def software_version() -> str:
-    """The installed ``edem`` package version ("unknown" when it is not installed)."""
+    """The installed ``edem`` package version ("unknown" when it is not installed); read once per
+    process (a campaign worker writes hundreds of result directories)."""
     try:
         return importlib.metadata.version("edem")
     except importlib.metadata.PackageNotFoundError:
@@ -499,10 +512,10 @@ def resolved_scene(scene_ref: str | Path, overrides: dict[str, Any] | None = Non
     already be plain dotted keys (``verification.sides.expand_array_overrides`` expands the
     ``array[*].key`` form).
     """
-    from edem.scene import apply_overrides, resolve_scene_path
+    from edem.scene import apply_overrides, read_scene_toml, resolve_scene_path
 
     path = resolve_scene_path(scene_ref)
-    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    data = read_scene_toml(path)
     if overrides:
         apply_overrides(data, dict(overrides))
     meta = data.setdefault("scene", {})

@@ -83,7 +83,8 @@ def pressure_frame(run: RunResult, s: StepResult) -> Frame:
 
 
 def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int] | None = None, note: str | None = None,
-                  overwrite: bool = False, provenance: Provenance | None = None) -> Path:
+                  overwrite: bool = False, provenance: Provenance | None = None, durable: bool = True,
+                  time_series_only: bool = False) -> Path:
     """Write the result directory of a DEM/EDEM run (layout: :mod:`edem.resultdir`), atomically.
 
     Parameters
@@ -105,6 +106,13 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
     provenance : Provenance, optional
         The resolved scene and the summary's provenance keys (:func:`edem.resultdir.provenance`),
         written in the same atomic step as the rest.
+    durable : bool, optional
+        Flush every file to disk before the directory is renamed into place (default). False
+        for a campaign's case results, a cache verified before use (:mod:`edem.atomic_dirs`).
+    time_series_only : bool, optional
+        Write no surface (no pressure map, no fixed body) and no timeseries.sto, all optional in
+        the format: summary.json, scene.toml, timeseries.csv and an empty pressure.pvd, for
+        campaigns of hundreds of runs whose metrics read the time series only.
 
     Returns
     -------
@@ -122,12 +130,12 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
     data = summary(run)
     if note is not None:
         data["frames"] = note
-    chosen = range(len(run.steps)) if frame_steps is None else frame_steps
+    chosen = [] if time_series_only else range(len(run.steps)) if frame_steps is None else frame_steps
     frames = [pressure_frame(run, run.steps[k]) for k in chosen]
-    fixed = SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles)
+    fixed = None if time_series_only else SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles)
     return write_result_dir(out_dir, data, timeseries_rows(run), frames, fixed,
-                            fixed_frames=[fixed_frame(run, run.steps[k]) for k in chosen], opensim_sto=True,
-                            overwrite=overwrite, provenance=provenance)
+                            fixed_frames=[fixed_frame(run, run.steps[k]) for k in chosen], opensim_sto=not time_series_only,
+                            overwrite=overwrite, provenance=provenance, durable=durable)
 
 
 def fixed_frame(run: RunResult, s: StepResult) -> Frame:

@@ -6,9 +6,11 @@ off. Bad input raises InputError naming the file, the key and what was expected.
 
 from __future__ import annotations
 
+import pickle
 import tomllib
 import warnings
 from dataclasses import dataclass
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -222,7 +224,20 @@ class Scene:
         )
 
 
-def _parse_toml(path: Path) -> dict[str, Any]:
+@lru_cache(maxsize=8)
+def _parsed(text: str) -> bytes:
+    """The parsed TOML of ``text``, pickled: a campaign reads one scene file several times per
+    case (scene, array overrides, provenance, description) and hundreds of cases in a row."""
+    return pickle.dumps(tomllib.loads(text), protocol=pickle.HIGHEST_PROTOCOL)
+
+
+def read_scene_toml(path: str | Path) -> dict[str, Any]:
+    """The parsed TOML of a scene file, a fresh dict each call (the caller may change it).
+
+    InputError naming the file when it is missing, unreadable, not UTF-8 or not valid TOML.
+    The file is read every time; only the parse of identical text is shared.
+    """
+    path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -232,7 +247,7 @@ def _parse_toml(path: Path) -> dict[str, Any]:
     except UnicodeDecodeError as exc:
         raise InputError(not_utf8(exc), file=path, expected="a UTF-8 text file (TOML is UTF-8 by definition)") from None
     try:
-        return tomllib.loads(text)
+        return pickle.loads(_parsed(text))
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"malformed TOML: {exc}", file=path, expected="valid TOML (https://toml.io)") from None
     except RecursionError:
@@ -301,7 +316,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         Naming the file, the key and what was expected.
     """
     path = resolve_scene_path(scene)
-    data = _parse_toml(path)
+    data = read_scene_toml(path)
     file = str(path)
     if overrides:
         apply_overrides(data, overrides)

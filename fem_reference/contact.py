@@ -41,6 +41,7 @@ from .problem import (
     RigidPlane,
     RigidSurface,
 )
+from .progress import SolveProgress
 
 _counter = itertools.count()
 
@@ -608,8 +609,11 @@ class _ShellContext:
 
 
 def solve_contact(problem: FEContactProblem, comm: Any = None, *,
-                  keep_fields: bool = True) -> FEContactResult:
+                  keep_fields: bool = True, progress: SolveProgress | None = None) -> FEContactResult:
     """Solve ``problem`` by Nitsche contact with force control (bordered semi-smooth Newton).
+
+    ``progress``: progress lines from inside the solve (:mod:`fem_reference.progress`); in
+    parallel give one on every rank (rank 0 writes).
 
     Raises :class:`FEConvergenceError` when SNES does not converge or the converged solution
     does not balance the load to ``problem.solver.force_balance_rtol``.
@@ -728,6 +732,8 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
                       f"{system.delta}", flush=True)
 
         snes.setMonitor(_print)
+    if progress is not None:
+        _monitor_progress(snes, system, s, pressure, progress)
     try:
         snes.solve(None, X)
     except Exception:
@@ -841,6 +847,35 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     )
 
 
+def _monitor_progress(snes: Any, system: _BorderedSystem, s: _Setup, pressure: Any, progress: SolveProgress) -> None:
+    """Newton and (iterative path) Krylov monitors writing ``progress`` lines (rank 0).
+
+    The contact nodes are the P1 nodes of the contact surface whose lumped pressure is positive
+    at the iterate; counting them is one facet assembly per Newton iteration, on every rank."""
+    fem, ufl, MPI = s.m["fem"], s.m["ufl"], s.m["MPI"]
+    pdofs, _, Q = s.contact_points(1)
+    owned = np.sort(pdofs[pdofs < Q.dofmap.index_map.size_local])
+    touching = fem.form(ufl.conditional(ufl.gt(pressure, 0.0), 1.0, 0.0) * ufl.TestFunction(Q) * s.ds_c)
+    previous: list[np.ndarray] = []
+
+    def newton(snes_: Any, it: int, fnorm: float) -> None:
+        system.set_state(snes_.getSolution())  # the iterate (set_state only copies it into the fields)
+        active = s.vector_owned(touching)[owned] > 0.0
+        entered = left = 0
+        if previous:
+            entered = int(np.count_nonzero(active & ~previous[0]))
+            left = int(np.count_nonzero(previous[0] & ~active))
+        counts = s.comm.allreduce(np.array([np.count_nonzero(active), entered, left]), op=MPI.SUM)
+        previous[:] = [active]
+        if s.comm.rank == 0:
+            progress.newton(int(it), float(fnorm), int(counts[0]), int(counts[1]), int(counts[2]))
+
+    snes.setMonitor(newton)
+    if system.iterative and s.comm.rank == 0:
+        method = f"{system.ksp.getType()}+gamg"
+        system.ksp.setMonitor(lambda _ksp, it, rnorm: progress.krylov(int(it), float(rnorm), method))
+
+
 def _destroy(*objs: Any) -> None:
     for o in objs:
         if isinstance(o, _BorderedSystem):
@@ -866,6 +901,7 @@ def solve_contact_vi(problem: FEContactProblem, comm: Any = None, *, max_outer: 
     translation t is found by a safeguarded secant iteration on the bone reaction
     ``R(t) = e . (reaction of the bonded face)`` until ``R(t) = e . force_n`` (relative 1e-9).
     Contact pressure: nodal contact reaction divided by the lumped nodal area.
+    ``problem.solver.petsc_options`` are added to the inner SNES options.
     """
     t_start = time.perf_counter()
     m = _fe_modules()
@@ -896,6 +932,7 @@ def solve_contact_vi(problem: FEContactProblem, comm: Any = None, *, max_outer: 
             "ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps",
             "snes_rtol": 1e-12, "snes_atol": 1e-13 * load_norm, "snes_stol": 0.0,
             "snes_max_it": 50, "snes_divergence_tolerance": -1}
+    opts.update(dict(problem.solver.petsc_options))  # the caller's extra SNES options, as for solve_contact
     nlp = m["fem_petsc"].NonlinearProblem(F, uh, bcs=bcs, petsc_options_prefix=prefix,
                                           petsc_options=opts)
     lb = nlp.x.duplicate()
@@ -978,7 +1015,6 @@ def solve_contact_vi(problem: FEContactProblem, comm: Any = None, *, max_outer: 
         warnings.append(f"max nominal strain {strain:.3f} exceeds {problem.strain_warning:.2f}")
     wall = time.perf_counter() - t_start
     fields = {"mesh": s.mesh, "solution": uh, "setup": s} if keep_fields else None
-    del nlp
     return FEContactResult(
         bone_displacement_mm=tb * e,
         free_directions=s.dirs.copy(),

@@ -71,6 +71,7 @@ from fem_reference.problem import (
     FEMesh,
     RigidSurface,
 )
+from fem_reference.progress import SolveProgress
 from fem_reference.settings import FESettings, resolve_settings
 from geometries.errors import InputError, SolverError
 
@@ -353,7 +354,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
               steps: Sequence[int] | None = None, out_dir: str | Path | None = None,
               layers_through_thickness: int | None = None, comm: Any = None,
               progress: Callable[[int], None] | None = None, overwrite: bool = False,
-              on_size: Callable[[Any], None] | None = None, provenance: Provenance | None = None) -> FERunResult:
+              on_size: Callable[[Any], None] | None = None, provenance: Provenance | None = None,
+              solve_progress: SolveProgress | None = None) -> FERunResult:
     """Solve the FE reference of ``scene`` (an :class:`edem.scene.Scene`) at the selected time
     points and, with ``out_dir``, write the result directory (docs/result-format.md) (rank 0 only).
 
@@ -364,7 +366,9 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     result directory at ``out_dir``; ``provenance`` (:func:`edem.resultdir.provenance`) is written
     with it.
     ``on_size(size)`` is called once, with the :class:`fem_reference.sizing.FESize` estimate, after
-    the run was sized and found to fit.
+    the run was sized and found to fit. ``solve_progress``: progress lines from inside each solve
+    (:mod:`fem_reference.progress`), labelled with the time point; rank 0's argument decides for
+    every rank (the others may pass None).
 
     Raises InputError on bad settings and SolverError (FEConvergenceError for a Newton failure)
     naming the time point when one has no solution.
@@ -396,6 +400,10 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     size = _check_size(scene, settings, caster, selected)
     if on_size is not None and size is not None:
         on_size(size)
+    if not comm.bcast(solve_progress is not None, root=0):
+        solve_progress = None  # rank 0 decides: the monitors assemble on every rank or on none
+    elif solve_progress is None:
+        solve_progress = SolveProgress(lambda line: None)
     step_log: list[tuple[str, str]] = []
     solid_cache: dict = {}
     mesh_cache: dict = {}
@@ -464,16 +472,18 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             strain_warning=STRAIN_WARNING,
         )
 
+        inside = None if solve_progress is None else solve_progress.for_solve(where)
         try:
             try:
-                res = solve_contact(problem, comm, keep_fields=True)
+                res = solve_contact(problem, comm, keep_fields=True, progress=inside)
             except FEConvergenceError:
                 if not warm:
                     raise
                 # the previous time point's motion was a bad start: start afresh
                 problem.initial_translation_mm = problem.initial_rotation_rad = None
                 problem.initial_field = None
-                res = solve_contact(problem, comm, keep_fields=True)
+                inside = None if solve_progress is None else solve_progress.for_solve(f"{where}, restarted cold")
+                res = solve_contact(problem, comm, keep_fields=True, progress=inside)
         except FEConvergenceError as exc:
             exc.args = (f"{where}: {exc}",)
             raise

@@ -25,10 +25,14 @@ needed for them).
 
 from __future__ import annotations
 
+import collections
 import contextlib
+import copy
 import inspect
 import itertools
+import json
 import math
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -1082,8 +1086,39 @@ def builder_defaults(name: str) -> dict[str, Any]:
     return {k: v.default for k, v in inspect.signature(func).parameters.items()}
 
 
+#: Built geometries kept per process, most recent last: (builder function, parameters as JSON) ->
+#: (the geometry, the warnings its build emitted). A campaign worker builds the same geometry
+#: for hundreds of cases (the sensitivity grid varies the cartilage, not the bones); meshing is
+#: deterministic (module docstring), so a kept geometry is the one a new build would give.
+_BUILT: collections.OrderedDict[tuple[Callable[..., BuiltGeometry], str], tuple[BuiltGeometry, tuple[warnings.WarningMessage, ...]]] = collections.OrderedDict()
+#: geometries kept: a few (a population's subjects differ, so there the cache only misses)
+BUILT_CACHE_SIZE = 4
+
+
+def _cache_key(func: Callable[..., BuiltGeometry], params: dict[str, Any]) -> tuple[Callable[..., BuiltGeometry], str] | None:
+    """The cache key of a build, or None for parameters with no exact JSON text (never cached).
+
+    JSON keeps every float exactly (repr) and tells 1 from 1.0 and true from 1, so two
+    parameter sets share a key only when the builder sees the same values. The function, not
+    its registered name, is part of the key: a builder replaced under the same name is a miss."""
+    try:
+        return func, json.dumps(params, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError):
+        return None
+
+
+def clear_geometry_cache() -> None:
+    """Forget the built geometries kept by :func:`build_geometry`."""
+    _BUILT.clear()
+
+
 def build_geometry(name: str, params: dict, *, file: str | None = None) -> BuiltGeometry:
     """Build the named geometry with ``params`` (a scene file's ``[geometry]`` parameters).
+
+    The last :data:`BUILT_CACHE_SIZE` geometries are kept per process: a repeated build returns
+    a copy of the kept one (the caller may change it freely) and emits again the warnings the
+    first build emitted, so each caller sees the same geometry and the same warnings as from a
+    fresh build, without meshing again.
 
     Raises :class:`InputError` (with ``file`` and key ``geometry.<param>``) for an unknown
     builder, unknown parameters, wrong types or out-of-range values.
@@ -1099,7 +1134,24 @@ def build_geometry(name: str, params: dict, *, file: str | None = None) -> Built
     params = dict(params or {})
     try:
         _validate(name, specs, params)
-        return func(**params)
+        key = _cache_key(func, params)
+        if key is None:
+            return func(**params)
+        if key in _BUILT:
+            _BUILT.move_to_end(key)
+            kept, caught = _BUILT[key]
+            built = copy.deepcopy(kept)
+        else:
+            with warnings.catch_warnings(record=True) as record:
+                warnings.simplefilter("always")  # every warning kept, to be re-emitted on each build
+                built = func(**params)
+            caught = tuple(record)
+            _BUILT[key] = (copy.deepcopy(built), caught)
+            while len(_BUILT) > BUILT_CACHE_SIZE:
+                _BUILT.popitem(last=False)
+        for w in caught:  # where the builder emitted it and never deduplicated: each build reports its own
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+        return built
     except InputError as err:
         if file is not None and err.file is None:
             raise InputError(err.problem, file=file, key=err.key, expected=err.expected) from None

@@ -13,8 +13,9 @@ A side turns (scene, overrides, options) into a result directory (docs/result-fo
 
 Options of a case reach its sides: ``mesh_size_mm``, ``degree`` and ``steps`` (the time points
 to solve) for the FE reference of a scene; ``mesh_size_mm`` and ``element`` for an FE problem;
-``frames`` for EDEM/DEM ("all", the default, or "peak": only the pressure map of the time point
-of peak pressure, for campaigns of hundreds of runs that need the time series only).
+``frames`` for EDEM/DEM ("all", the default; "peak": only the pressure map of the time point
+of peak pressure; "none": no pressure map, fixed body or .sto file, the optional files of
+docs/result-format.md, for campaigns of hundreds of runs that need the time series only).
 
 Overrides are dotted scene keys (``--set``), plus ``<array>[*].<key>`` / ``<array>[<i>].<key>``
 for arrays of tables (e.g. ``ligaments[*].youngs_modulus_mpa``), which
@@ -32,7 +33,6 @@ import importlib.util
 import inspect
 import re
 import time
-import tomllib
 import traceback
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -45,7 +45,7 @@ from edem.atomic_dirs import ResultWriteError
 from edem.errors import InputError, SolverError
 from edem.resultdir import Provenance, provenance
 from edem.results import write_results
-from edem.scene import apply_overrides, load_scene, resolve_scene_path
+from edem.scene import apply_overrides, load_scene, read_scene_toml, resolve_scene_path
 from edem.solver import run
 from verification.closed_forms import CLOSED_FORMS, solve_closed_form, write_closed_form_results
 from verification.fe_analytic import FE_PROBLEMS, run_fe_problem, write_exact_result
@@ -95,7 +95,7 @@ def expand_array_overrides(scene_ref: str, overrides: dict[str, Any]) -> dict[st
         return dict(overrides)
 
     path = resolve_scene_path(scene_ref)
-    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    data = read_scene_toml(path)
     plain = {k: v for k, v in overrides.items() if not ARRAY_OVERRIDE.match(k)}
     apply_overrides(data, dict(plain))
     arrays: dict[str, list[dict[str, Any]]] = {}
@@ -122,17 +122,23 @@ def expand_array_overrides(scene_ref: str, overrides: dict[str, Any]) -> dict[st
     return {**plain, **arrays}
 
 
-FRAMES = ("all", "peak")
+FRAMES = ("all", "peak", "none")
 
 
 def _write_discrete(result: Any, out_dir: Path, frames: str, record: Provenance) -> None:
-    """write_results, or (frames "peak") the same summary and time series with one pressure map."""
+    """write_results, or the same summary and time series with one pressure map (frames "peak")
+    or none (frames "none"). Not flushed to disk (durable=False): a case's result directory is a
+    cache the runner verifies against its manifest before use and re-runs when it does not."""
     if frames == "all":
-        write_results(result, out_dir, provenance=record)
+        write_results(result, out_dir, provenance=record, durable=False)
+        return
+    if frames == "none":
+        write_results(result, out_dir, note="no pressure maps (time series only)", provenance=record, durable=False,
+                      time_series_only=True)
         return
     peak = max(range(len(result.steps)), key=lambda k: result.steps[k].peak_pressure_mpa)
     note = f"pressure map of the peak-pressure time point only (step {result.steps[peak].step})"
-    write_results(result, out_dir, frame_steps=[peak], note=note, provenance=record)
+    write_results(result, out_dir, frame_steps=[peak], note=note, provenance=record, durable=False)
 
 
 def _run_discrete(method: str) -> SideRunner:

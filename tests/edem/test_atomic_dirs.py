@@ -52,6 +52,24 @@ def test_a_result_is_sealed_and_verifies(tmp_path, plates_run):
     assert read_result_dir(out).summary["method"] == "dem"
 
 
+def test_a_campaign_cache_write_skips_only_the_flush(tmp_path, plates_run, monkeypatch):
+    """durable=False (campaign case results): no fsync, the same sealed files, the same atomic
+    replace; the default flushes every file and directory before the rename."""
+    synced: list[int] = []
+    real = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: (synced.append(fd), real(fd))[1])
+    durable = results.write_results(plates_run, tmp_path / "durable")
+    files = len(json.loads((durable / "manifest.json").read_text())["files"])
+    assert len(synced) >= files + 2  # every file, the manifest, the directory and its parent
+    synced.clear()
+    cached = results.write_results(plates_run, tmp_path / "cached", durable=False)
+    assert synced == []
+    assert verify_manifest(cached) and leftovers(tmp_path) == []
+    assert {p.name for p in cached.iterdir()} == {p.name for p in durable.iterdir()}
+    for name in ("timeseries.csv", "pressure_0000.vtp"):
+        assert (cached / name).read_bytes() == (durable / name).read_bytes()
+
+
 def test_missing_changed_and_extra_files_are_refused_by_readers(tmp_path, plates_run):
     out = results.write_results(plates_run, tmp_path / "r")
     (out / "pressure_0064.vtp").write_text("left by an earlier run")  # two runs mixed

@@ -42,3 +42,28 @@ def test_scenes_prints_every_description_whole(capsys):
     for name in builtin_scene_names():
         description = " ".join(tomllib.loads(resolve_scene_path(name).read_text(encoding="utf-8"))["scene"]["description"].split())
         assert f"{name} {description}" in printed
+
+
+def test_fe_progress_defaults_to_a_terminal_and_waits_there(monkeypatch):
+    """`edem fe` progress inside a solve: --no-progress never, --progress from the first
+    iteration, the default only when stderr is a terminal and only once a solve has run
+    TERMINAL_QUIET_S (the many short solves of a small model stay silent)."""
+    import io
+    import sys
+
+    from edem.cli import _fe_solve_progress
+    from fem_reference.progress import TERMINAL_QUIET_S
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    assert _fe_solve_progress(None, None) is None and _fe_solve_progress(False, None) is None
+    forced = _fe_solve_progress(True, None)
+    assert forced.quiet_s == 0.0
+    forced.write("a line")
+    assert sys.stderr.getvalue() == "a line\n"
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    assert _fe_solve_progress(None, None).quiet_s == TERMINAL_QUIET_S
+    assert _fe_solve_progress(False, None) is None

@@ -365,10 +365,11 @@ def test_mpirun_two_ranks_writes_the_same_results(tmp_path):
         pytest.skip("mpiexec or the edem console script not found")
     args = ["--degree", "1", "--mesh-size", "2.0"]
     one = edem_fe(tmp_path / "one", PLATES, *args)
-    proc = subprocess.run([mpiexec, "-n", "2", str(edem), "fe", PLATES, *args, "--out",
+    proc = subprocess.run([mpiexec, "-n", "2", str(edem), "fe", PLATES, *args, "--progress", "--out",
                            str(tmp_path / "two")], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert proc.stdout.count("results:") == 1  # one rank reports
+    assert proc.stderr.count("Newton 0:") == 1  # the progress monitors run on both ranks, rank 0 writes
     two = json.loads((tmp_path / "two" / "summary.json").read_text())
     report("mpi", one=one["final_displacement_mm"], two=two["final_displacement_mm"])
     assert two["n_dofs"] == one["n_dofs"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -269,6 +270,43 @@ def test_resolved_parameters_rebuild_the_same_geometry():
         assert np.array_equal(a.mobile.vertices_mm, b.mobile.vertices_mm)
         assert np.array_equal(a.fixed.triangles, b.fixed.triangles)
         assert a.description
+
+
+def test_a_repeated_build_is_a_private_copy_of_the_kept_one_with_its_warnings_again(monkeypatch):
+    """A campaign worker builds one geometry for many cases: the second build must not mesh
+    again, must equal a fresh build, must not share arrays with the first (a caller may change
+    them) and must report the builder's warnings again (the scene records them per run)."""
+    calls = []
+
+    def counted(**params):
+        calls.append(params)
+        warnings.warn("plates drawn for the test", UserWarning)
+        return B.flat_plates(**params)
+
+    monkeypatch.setitem(B._BUILDERS, "counted_plates", (counted, B.PLATE_PARAMS))
+    B.clear_geometry_cache()
+    with pytest.warns(UserWarning, match="plates drawn"):
+        first = B.build_geometry("counted_plates", {"gap_mm": 2.0})
+    first.mobile.vertices_mm[:] = 0.0  # the caller's copy: the kept geometry must not change
+    with pytest.warns(UserWarning, match="plates drawn"):
+        second = B.build_geometry("counted_plates", {"gap_mm": 2.0})
+    assert len(calls) == 1
+    fresh = B.flat_plates(gap_mm=2.0)
+    assert np.array_equal(second.mobile.vertices_mm, fresh.mobile.vertices_mm)
+    assert np.array_equal(second.fixed.triangles, fresh.fixed.triangles)
+    assert second.parameters == fresh.parameters
+    # other values (2 is not 2.0 for the key) and the eviction of the oldest are real builds
+    for gap in (2, 3.0, 4.0, 5.0, 6.0):
+        with pytest.warns(UserWarning):
+            B.build_geometry("counted_plates", {"gap_mm": gap})
+    assert len(calls) == 6 and len(B._BUILT) == B.BUILT_CACHE_SIZE
+    with pytest.warns(UserWarning):
+        B.build_geometry("counted_plates", {"gap_mm": 2.0})  # evicted by the four newer ones
+    assert len(calls) == 7
+    # a builder replaced under the same name (a test's stand-in, say) is never served the old one's geometry
+    monkeypatch.setitem(B._BUILDERS, "counted_plates", (lambda **params: B.tilted_plane(**params), B.PLATE_PARAMS))
+    assert B.build_geometry("counted_plates", {"gap_mm": 2.0}).parameters == B.tilted_plane(gap_mm=2.0).parameters
+    B.clear_geometry_cache()
 
 
 def test_build_geometry_errors_unknown_builder_parameter_type_range():

@@ -60,3 +60,21 @@ def test_plot_refuses_a_directory_that_does_not_verify(runs, tmp_path, capsys, h
     bad = damaged(runs, tmp_path, how)
     assert main(["plot", str(bad), "--out", str(tmp_path / "p.png")]) == 2
     assert str(bad) in capsys.readouterr().err and not (tmp_path / "p.png").exists()
+
+
+def test_an_empty_map_list_is_read_only_when_the_summary_says_no_maps(tmp_path):
+    """pressure.pvd may list no map only in a directory written without maps (summary
+    pressure_maps = 0); a sealed directory whose list is empty for another reason is refused."""
+    from edem.atomic_dirs import write_manifest
+    from edem.errors import InputError
+    from edem.resultdir import read_result_dir, timeseries_row, write_result_dir
+
+    row = timeseries_row(0, 0.0, [0.0, 0.0, 1.0], 1.0, 1.0, 1.0, [0.0] * 3, [0.0] * 3, 1, 0.0)
+    summary = {"scene": "s", "method": "edem", "steps": 1, "wall_time_s": 0.0, "peak_pressure_mpa": 1.0,
+               "max_contact_area_mm2": 1.0, "final_displacement_mm": [0.0] * 3, "max_force_residual_n": 0.0, "warnings": []}
+    out = write_result_dir(tmp_path / "bare", summary, [row], [])
+    assert read_result_dir(out).frames == ()
+    (out / "summary.json").write_text(json.dumps(summary), encoding="utf-8")  # the key gone, then sealed again
+    write_manifest(out)
+    with pytest.raises(InputError, match="lists no data set"):
+        read_result_dir(out)

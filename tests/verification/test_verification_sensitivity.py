@@ -1,6 +1,6 @@
 """The sensitivity campaign (thesis fig. 4.3.10): h_max x ligament modulus over the ideal stance.
-Every ligament's modulus is set through an array override (verification.sides), each run keeps one
-pressure map (frames "peak"), and the relative changes are computed from the grid."""
+Every ligament's modulus is set through an array override (verification.sides), each run writes its
+time series without pressure maps (frames "none"), and the relative changes are computed from the grid."""
 
 from __future__ import annotations
 
@@ -48,6 +48,24 @@ def test_peak_frames_keep_the_whole_time_series_and_one_map(tmp_path):
     assert run_side("edem", "ideal-stance", {}, tmp_path / "bad", {"frames": "some"}).status == "refused"
 
 
+def test_no_frames_keep_the_whole_time_series_and_say_so(tmp_path):
+    """frames "none": the same summary numbers and time series as a run with every map, a sealed
+    directory without the optional surfaces and .sto whose pressure.pvd lists nothing (summary
+    pressure_maps = 0), and a reader that refuses to draw a map it does not have (exit-2
+    message, not an IndexError)."""
+    full = read_result_dir(run_side("edem", "ideal-stance", {}, tmp_path / "all").result_dir)
+    bare = read_result_dir(run_side("edem", "ideal-stance", {}, tmp_path / "none", {"frames": "none"}).result_dir)
+    assert bare.frames == () and bare.summary["pressure_maps"] == 0 and "pressure_maps" not in full.summary
+    assert set(full.timeseries) == set(bare.timeseries)
+    for column, values in full.timeseries.items():
+        assert np.array_equal(values, bare.timeseries[column]), column
+    for key in ("peak_pressure_mpa", "max_contact_area_mm2", "final_displacement_mm", "max_force_residual_n"):
+        assert bare.summary[key] == full.summary[key]
+    assert {p.name for p in bare.path.iterdir()} == {"summary.json", "scene.toml", "timeseries.csv", "pressure.pvd", "manifest.json"}
+    with pytest.raises(InputError, match="without pressure maps"):
+        bare.frame(0)
+
+
 def test_sensitivity_campaign_is_the_thesis_grid():
     campaign = get_campaign("sensitivity")
     assert len(campaign.cases) == 400 and len({c.name for c in campaign.cases}) == 400
@@ -58,7 +76,7 @@ def test_sensitivity_campaign_is_the_thesis_grid():
     case = campaign.cases[0]
     assert case.overrides["cartilage.max_spring_length_mm"] == case.params["h_max_mm"]
     assert case.overrides["ligaments[*].youngs_modulus_mpa"] == case.params["ligament_modulus_mpa"]
-    assert case.expect.outcome == "converges" and case.options == {"frames": "peak"}
+    assert case.expect.outcome == "converges" and case.options == {"frames": "none"}
 
 
 def _grid_rows(z: np.ndarray, xs, ys):
