@@ -257,8 +257,8 @@ PRESSURE_ON_MOBILE = "pressure_on_mobile_mpa"
 
 def measured_on_mobile(result) -> bool:
     """Whether a result directory carries its area and pressure measured on M too (an FE
-    reference bonded to M: a per-time-point AREA_ON_MOBILE_KEY list and PRESSURE_ON_MOBILE on
-    every pressure map)."""
+    reference bonded to M: a per-time-point AREA_ON_MOBILE_KEY list and PRESSURE_ON_MOBILE point
+    data, looked for on the first map; :func:`series_on_mobile` refuses a later map without it)."""
     areas = result.summary.get(AREA_ON_MOBILE_KEY)
     return (isinstance(areas, list) and len(areas) == len(result.time_s) and len(result.frames) > 0
             and PRESSURE_ON_MOBILE in result.frame(0).point_data)
