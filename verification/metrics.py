@@ -561,6 +561,7 @@ def format_metrics_table(comparison: dict[str, Any]) -> str:
         f"a: {comparison['a']} ({comparison['a_method']}, {comparison['wall_time_a_s']:.3g} s)",
         f"b: {comparison['b']} ({comparison['b_method']}, {comparison['wall_time_b_s']:.3g} s), the reference",
         f"compared: {comparison['mode']} ({len(per_time)}); values at the peak-load instant t = {last['time_a_s']:g} s (|F| = {last.get('load_n', math.nan):.4g} N)",
+        f"b measured on: {comparison.get('b_measured_on', "b's own surface")}",
         head,
         "-" * len(head),
     ]

@@ -331,7 +331,7 @@ def test_springs_are_compared_with_the_fe_measured_on_m(tmp_path):
     row_a = {"time_s": 0.0, "peak_pressure_mpa": fan * float(linear_pressure(pb).max()), "mean_pressure_mpa": 0.55, "contact_area_mm2": 100.0, "disp_z_mm": 0.1}
     a = write_result_dir(tmp_path / "a", [row_a], [(pa, ta, None, cells_a)], "dem")
     result = compare_result_dirs(a, b)
-    assert result["b_measured_on"].startswith("M")
+    assert result["b_measured_on"].startswith("M") and "b measured on: M" in format_metrics_table(result)
     for name in COMPARISON_METRICS:
         assert result["metrics"][name] < 1e-12, name  # round-off of sums of a few hundred terms
     fe_a = write_result_dir(tmp_path / "fe-a", [row_b], [(pb, tb, face, None)], "fe-layer", {"contact_area_on_mobile_mm2": [50.0]})
