@@ -160,6 +160,9 @@ class FERunResult:
             "max_contact_area_mm2": max(float(x.contact_area_mm2) for x in steps),
             "max_contact_area_on_mobile_mm2": max(float(x.contact_area_on_mobile_mm2)
                                                   for x in steps),
+            # per solved time point (the rows of timeseries.csv): verification.metrics compares
+            # the springs, which live on M, with these
+            "contact_area_on_mobile_mm2": [float(x.contact_area_on_mobile_mm2) for x in steps],
             "contact_area_on_mobile_definition": AREA_ON_MOBILE_DEFINITION,
             "final_displacement_mm": [float(v) for v in last.displacement_mm],
             "final_rotation_rad": [float(v) for v in last.rotation_rad],

@@ -248,6 +248,51 @@ def _scalars(series: dict[str, np.ndarray], k: int) -> dict[str, Any]:
     }
 
 
+#: summary.json key of a result whose surface is not M but is mapped onto it (the FE contact face of
+#: fem_reference.scene_run, bonded to M): its contact area measured on M, one value per time point
+AREA_ON_MOBILE_KEY = "contact_area_on_mobile_mm2"
+#: point data of such a result: the pressure as force per area of M (its columns' area ratio applied)
+PRESSURE_ON_MOBILE = "pressure_on_mobile_mpa"
+
+
+def measured_on_mobile(result) -> bool:
+    """Whether a result directory carries its area and pressure measured on M too (an FE
+    reference bonded to M: a per-time-point AREA_ON_MOBILE_KEY list and PRESSURE_ON_MOBILE point
+    data, looked for on the first map; :func:`series_on_mobile` refuses a later map without it)."""
+    areas = result.summary.get(AREA_ON_MOBILE_KEY)
+    return (isinstance(areas, list) and len(areas) == len(result.time_s) and len(result.frames) > 0
+            and PRESSURE_ON_MOBILE in result.frame(0).point_data)
+
+
+def series_on_mobile(result) -> dict[str, np.ndarray]:
+    """The time series (timeseries.csv columns) of a result measured on M too
+    (:func:`measured_on_mobile`) with peak, mean and area taken on M: the area from the summary,
+    the peak the largest nodal force per area of M of each map, the mean the same contact force
+    over the area on M."""
+    series = dict(result.timeseries)
+    area = np.asarray(result.summary[AREA_ON_MOBILE_KEY], dtype=np.float64)
+    peak = np.empty(len(area))
+    for k in range(len(area)):
+        frame = result.frame(frame_index(result, k))
+        if PRESSURE_ON_MOBILE not in frame.point_data:
+            raise InputError(f"the pressure map of time point {k} has no {PRESSURE_ON_MOBILE} point data", file=result.path / "pressure.pvd",
+                             expected="the point data of every map, as the first map has it")
+        peak[k] = float(np.max(frame.point_data[PRESSURE_ON_MOBILE], initial=0.0))
+    force = np.asarray(series["mean_pressure_mpa"], dtype=np.float64) * np.asarray(series["contact_area_mm2"], dtype=np.float64)
+    mean = np.divide(force, area, out=np.zeros_like(area), where=area > 0)
+    series.update(peak_pressure_mpa=peak, mean_pressure_mpa=mean, contact_area_mm2=area)
+    return series
+
+
+def reference_series(a, b) -> tuple[dict[str, np.ndarray], bool]:
+    """b's time series as it is compared with a, and whether on M: the springs live on M, so
+    against a reference that maps its own surface onto M (the FE contact face, whose columns fan
+    out by (R + t) / R on a cylinder) b's area and pressures are taken on M; two such references
+    are compared on their own surfaces."""
+    on_mobile = measured_on_mobile(b) and not measured_on_mobile(a)
+    return (series_on_mobile(b) if on_mobile else b.timeseries), on_mobile
+
+
 def pressure_at_cells(frame) -> np.ndarray:
     """Cell pressure of a frame: its cell data, else the mean of its nodal values per triangle."""
     if "pressure_mpa" in frame.cell_data:
@@ -264,7 +309,7 @@ def same_mesh(frame_a, frame_b) -> bool:
     )
 
 
-def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[str, float]:
+def field_error(frame_a, frame_b, max_distance_mm: float | None = None, pressure_b: str = "pressure_mpa") -> dict[str, float]:
     """L2 relative error of a's pressure against b's at a's spring centroids (docs/method.md#7-comparison-metrics).
 
     a's points are the centroids of its non-degenerate triangles (the EDEM springs), weighted by
@@ -279,6 +324,7 @@ def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[
     ray hit, where an FE slab's contact face lies), not at its centroid: on a curved M the
     closest point of that face to the centroid is off the spring's line by up to h tan(angle).
     Springs without a hit (length 0) are sampled at their centroids.
+    ``pressure_b``: b's nodal field to sample (PRESSURE_ON_MOBILE: b's force per area of M).
     """
     areas = frame_a.areas_mm2
     keep = areas > 0.0
@@ -298,9 +344,9 @@ def field_error(frame_a, frame_b, max_distance_mm: float | None = None) -> dict[
             normal /= np.linalg.norm(normal, axis=1)[:, None]
             points = points + length[:, None] * normal
             sampled_at = "spring ends (centroid + length x normal)"
-    if "pressure_mpa" in frame_b.point_data:
+    if pressure_b in frame_b.point_data:
         proj = project_onto_surface(frame_b.points_mm, frame_b.triangles, points)
-        corner = frame_b.point_data["pressure_mpa"][frame_b.triangles[proj.triangle]]
+        corner = frame_b.point_data[pressure_b][frame_b.triangles[proj.triangle]]
         p_b, distance, source = np.einsum("ij,ij->i", proj.barycentric, corner), proj.distance_mm, "point"
     elif "pressure_mpa" in frame_b.cell_data and shared:
         p_b = frame_b.cell_data["pressure_mpa"][keep]
@@ -341,9 +387,10 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
         pairs, mode = list(zip(subset, range(len(tb)))), "b's time points"
     else:
         pairs, mode = [(len(ta) - 1, len(tb) - 1)], "last time point"
+    series_b, on_mobile = reference_series(a, b)
     per_time = []
     for ka, kb in pairs:
-        sa, sb = _scalars(a.timeseries, ka), _scalars(b.timeseries, kb)
+        sa, sb = _scalars(a.timeseries, ka), _scalars(series_b, kb)
         entry: dict[str, Any] = {
             "time_a_s": float(ta[ka]),
             "time_b_s": float(tb[kb]),
@@ -361,7 +408,8 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
             "contact_area_rel_error": contact_area_error(sa["area"], sb["area"]),
             "displacement_rel_error": displacement_error(sa["disp"], sb["disp"]),
         }
-        entry.update(field_error(a.frame(frame_index(a, ka)), b.frame(frame_index(b, kb)), max_distance_mm))
+        entry.update(field_error(a.frame(frame_index(a, ka)), b.frame(frame_index(b, kb)), max_distance_mm,
+                                 PRESSURE_ON_MOBILE if on_mobile else "pressure_mpa"))
         per_time.append(entry)
     metrics = {name: max(float(e[name]) for e in per_time) for name in COMPARISON_METRICS}
     return {
@@ -372,6 +420,7 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
         "a_scene": a.summary.get("scene"),
         "b_scene": b.summary.get("scene"),
         "mode": mode,
+        "b_measured_on": "M (b's area and pressure mapped onto the mobile surface, where a's springs live)" if on_mobile else "b's own surface",
         "metrics": metrics,
         "wall_time_a_s": float(a.summary.get("wall_time_s", math.nan)),
         "wall_time_b_s": float(b.summary.get("wall_time_s", math.nan)),
@@ -512,6 +561,7 @@ def format_metrics_table(comparison: dict[str, Any]) -> str:
         f"a: {comparison['a']} ({comparison['a_method']}, {comparison['wall_time_a_s']:.3g} s)",
         f"b: {comparison['b']} ({comparison['b_method']}, {comparison['wall_time_b_s']:.3g} s), the reference",
         f"compared: {comparison['mode']} ({len(per_time)}); values at the peak-load instant t = {last['time_a_s']:g} s (|F| = {last.get('load_n', math.nan):.4g} N)",
+        f"b measured on: {comparison.get('b_measured_on', "b's own surface")}",
         head,
         "-" * len(head),
     ]

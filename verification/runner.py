@@ -69,6 +69,7 @@ from verification.metrics import (
     compare_result_dirs,
     cop_metrics,
     matching_time_points,
+    reference_series,
     series_metrics,
 )
 from verification.sides import run_side, side_modules
@@ -228,6 +229,8 @@ def _stability_metrics(case: Case, a: dict[str, Any], wanted: set[str]) -> dict[
 def _series_metrics(wanted: set[str], a: dict[str, Any], b: dict[str, Any] | None) -> dict[str, float]:
     """a_* / b_* summaries of each side's time series, and a_at_b_* of a's at b's time points."""
     def series(side: dict[str, Any]) -> dict[str, Any]:
+        if side is b and a["status"] == OK:  # b as the comparison sees it (on M against springs)
+            return reference_series(read_result_dir(a["result_dir"]), read_result_dir(b["result_dir"]))[0]
         return read_timeseries_csv(Path(side["result_dir"]) / "timeseries.csv")
 
     out: dict[str, float] = {}

@@ -11,8 +11,9 @@ A side turns (scene, overrides, options) into a result directory (docs/result-fo
 * ``fe-problem:<name>``: the FE core (:func:`fem_reference.solve_contact`) on those closed-form
   problems, "unavailable" without dolfinx.
 
-Options of a case reach its sides: ``mesh_size_mm``, ``degree`` and ``steps`` (the time points
-to solve) for the FE reference of a scene; ``mesh_size_mm`` and ``element`` for an FE problem;
+Options of a case reach its sides: ``mesh_size_mm``, ``degree``, ``element``,
+``layers_through_thickness`` (:data:`FE_SCENE_OPTIONS`) and ``steps`` (the time points to solve)
+for the FE reference of a scene; ``mesh_size_mm`` and ``element`` for an FE problem;
 ``frames`` for EDEM/DEM ("all", the default; "peak": only the pressure map of the time point
 of peak pressure; "none": no pressure map, fixed body or .sto file, the optional files of
 docs/result-format.md, for campaigns of hundreds of runs that need the time series only).
@@ -173,6 +174,11 @@ class UnavailableError(Exception):
     """A side that cannot run on this installation (e.g. no FE reference yet)."""
 
 
+#: options of a case that reach the FE reference of its scene as fem_reference.run_scene's
+#: settings (fem_reference.settings.resolve_settings: they override the scene's [fe] table)
+FE_SCENE_OPTIONS = ("mesh_size_mm", "degree", "element", "layers_through_thickness")
+
+
 def _run_fe(model: str) -> SideRunner:
     def runner(scene_ref: str, overrides: dict[str, Any], out_dir: Path, options: dict[str, Any]) -> str:
         why = fe_availability()
@@ -181,7 +187,7 @@ def _run_fe(model: str) -> SideRunner:
         import fem_reference
 
         scene = load_scene(scene_ref, overrides)
-        kwargs = {k: options[k] for k in ("mesh_size_mm", "degree", "steps") if k in options}
+        kwargs = {k: options[k] for k in FE_SCENE_OPTIONS + ("steps",) if k in options}
         if "steps" in kwargs:
             try:
                 params = inspect.signature(fem_reference.run_scene).parameters
@@ -190,7 +196,7 @@ def _run_fe(model: str) -> SideRunner:
             if params and "steps" not in params and not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
                 raise UnavailableError("FE reference not available: fem_reference.run_scene takes no steps= selection")
             kwargs["steps"] = list(kwargs["steps"])
-        record = provenance(scene_ref, overrides, {"model": model, **{k: options[k] for k in ("mesh_size_mm", "degree") if k in options}})
+        record = provenance(scene_ref, overrides, {"model": model, **{k: options[k] for k in FE_SCENE_OPTIONS if k in options}})
         fem_reference.run_scene(scene, model=model, out_dir=out_dir, provenance=record, **kwargs)
         return str(out_dir)
 

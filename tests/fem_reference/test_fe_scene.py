@@ -149,6 +149,7 @@ def test_flat_plates_slab_confined_interior_and_result_directory(tmp_path):
     assert s["method"] == "fe-slab" and s["steps"] == 1 and s["element"] == "P1"
     assert s["mesh_size_mm"] == 0.5 and s["scene"] == "flat-plates"
     assert s["max_contact_area_on_mobile_mm2"] == pytest.approx(s["max_contact_area_mm2"])
+    assert s["contact_area_on_mobile_mm2"] == [s["max_contact_area_on_mobile_mm2"]]  # per time point
     header, rows = timeseries(out)
     assert tuple(header) == TIMESERIES_COLUMNS
     assert len(rows) == 1 and rows[0]["force_z_n"] == load

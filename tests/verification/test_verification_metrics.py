@@ -13,6 +13,7 @@ import pytest
 from edem.atomic_dirs import write_manifest
 from edem.results import TIMESERIES_COLUMNS, write_pvd
 from verification.metrics import (
+    COMPARISON_METRICS,
     compare_result_dirs,
     contact_area_error,
     displacement_error,
@@ -169,10 +170,12 @@ def write_result_dir(
     rows: list[dict[str, float]],
     frames: list[tuple[np.ndarray, np.ndarray, dict | None, dict | None]],
     method: str,
+    summary: dict | None = None,
 ) -> Path:
-    """A result directory (docs/result-format.md) with the given time-series rows and surfaces."""
+    """A result directory (docs/result-format.md) with the given time-series rows and surfaces
+    (``summary``: extra summary.json keys)."""
     root.mkdir(parents=True)
-    (root / "summary.json").write_text(json.dumps({"scene": "synthetic", "method": method, "wall_time_s": 0.5}), encoding="utf-8")
+    (root / "summary.json").write_text(json.dumps({"scene": "synthetic", "method": method, "wall_time_s": 0.5, **(summary or {})}), encoding="utf-8")
     with open(root / "timeseries.csv", "w", newline="", encoding="utf-8") as f:
         writer = csv.writer(f)
         writer.writerow(TIMESERIES_COLUMNS)
@@ -308,3 +311,29 @@ def test_fe_surface_is_sampled_at_the_spring_ends(tmp_path):
     assert result["per_time"][0]["a_sampled_at"].startswith("spring ends")
     assert result["max_projection_distance_mm"] < 1e-12
     assert result["metrics"]["pressure_l2_rel_error"] < 1e-12
+
+
+def test_springs_are_compared_with_the_fe_measured_on_m(tmp_path):
+    """b (FE layout) carries its area and pressure on M too (a per-time-point summary list and
+    pressure_on_mobile_mpa = 1.1 x its face pressure, as a layer 2 mm thick on R 20 mm: the
+    columns fan out by 22/20). A spring run a (on M) is compared with those: a built to match
+    the on-M values has zero errors (peak, mean = the same force over the area on M, area, field),
+    whereas against the face values it would be off by 10 %. Two FE runs (both with on-M data)
+    are still compared on their own surfaces."""
+    fan = 1.1
+    pa, ta = plate_mesh(6, 10.0, 0.0)
+    pb, tb = plate_mesh(17, 10.0, 1.5)
+    face = {"pressure_mpa": linear_pressure(pb), "pressure_on_mobile_mpa": fan * linear_pressure(pb)}
+    row_b = {"time_s": 0.0, "peak_pressure_mpa": float(linear_pressure(pb).max()), "mean_pressure_mpa": 0.5, "contact_area_mm2": 110.0, "disp_z_mm": 0.1}
+    b = write_result_dir(tmp_path / "b", [row_b], [(pb, tb, face, None)], "fe-layer", {"contact_area_on_mobile_mm2": [110.0 / fan]})
+    cells_a = {"pressure_mpa": fan * linear_pressure(pa[ta].mean(axis=1))}
+    # on M: same force (0.5 MPa x 110 mm^2) over 100 mm^2, the largest on-M nodal pressure
+    row_a = {"time_s": 0.0, "peak_pressure_mpa": fan * float(linear_pressure(pb).max()), "mean_pressure_mpa": 0.55, "contact_area_mm2": 100.0, "disp_z_mm": 0.1}
+    a = write_result_dir(tmp_path / "a", [row_a], [(pa, ta, None, cells_a)], "dem")
+    result = compare_result_dirs(a, b)
+    assert result["b_measured_on"].startswith("M") and "b measured on: M" in format_metrics_table(result)
+    for name in COMPARISON_METRICS:
+        assert result["metrics"][name] < 1e-12, name  # round-off of sums of a few hundred terms
+    fe_a = write_result_dir(tmp_path / "fe-a", [row_b], [(pb, tb, face, None)], "fe-layer", {"contact_area_on_mobile_mm2": [50.0]})
+    both_fe = compare_result_dirs(fe_a, b)
+    assert both_fe["b_measured_on"] == "b's own surface" and both_fe["metrics"]["contact_area_rel_error"] == 0.0
