@@ -108,8 +108,9 @@ def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
             ax.plot([x for x, _ in tols], [t for _, t in tols], "k_", markersize=14, mew=2, label="tolerance")
         if metric in exact:
             ax.axhline(exact[metric], color="grey", ls=":", label=f"exact {exact[metric]:g}")
-        for value, text in spec.get("lines") or ():
-            ax.axhline(value, color="grey", ls="--", lw=0.8, label=text)
+        for line_metric, value, text in spec.get("lines") or ():
+            if line_metric == metric:
+                ax.axhline(value, color="grey", ls="--", lw=0.8, label=text)
         slope = spec.get("reference_slope")
         if slope is not None and ok.sum() >= 1:  # through the first point of the (last) series
             x0, y0 = gx[ok][0], ys[ok][0]

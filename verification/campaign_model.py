@@ -157,7 +157,7 @@ class Figure:
     instants: tuple[tuple[str, str], ...] = ()  # "maps": (label, "13%" | "peak-load") per map
     #: "sweep": (label, cases) drawn as separate lines on every panel (e.g. two models); cases holds them all
     series: tuple[tuple[str, tuple[str, ...]], ...] = ()
-    lines: tuple[tuple[float, str], ...] = ()  # "sweep": horizontal reference lines (value, label), e.g. a goal
+    lines: tuple[tuple[str, float, str], ...] = ()  # "sweep": horizontal lines (metric, value, label) on that metric's panel, e.g. a goal
 
 
 @dataclass(frozen=True)
