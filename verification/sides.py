@@ -187,7 +187,7 @@ def _run_fe(model: str) -> SideRunner:
         import fem_reference
 
         scene = load_scene(scene_ref, overrides)
-        kwargs = {k: options[k] for k in ("mesh_size_mm", "degree", "steps") if k in options}
+        kwargs = {k: options[k] for k in FE_OPTIONS if k in options}
         if "steps" in kwargs:
             try:
                 params = inspect.signature(fem_reference.run_scene).parameters
