@@ -512,6 +512,7 @@ def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
         "<p>"
         + f"Finished {h(summary['finished_at'])}; this run took {summary['wall_time_s']:.1f} s ({summary['computed']} cases computed, {summary['cached']} from the cache). "
         + f"Case wall times are those of the run that computed each case (a cached case keeps its own): they add up to {summary['cases_wall_time_s']:.1f} s. "
+        + "An FE run shared by several cases (the same FE inputs) counts in the case that computed it; the cases that reused it show its time beside the side, marked reused. "
         + (f"Dask scheduler {h(str(summary['scheduler']))}." if summary.get("scheduler") else f"{summary.get('jobs')} worker process(es).")
         + ' Campaign data: <a href="metrics.json">metrics.json</a>.</p>',
         *_analyses_html(others),
@@ -521,7 +522,7 @@ def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
     ]
     for row in summary["cases"]:
         declared = f" ({h(row['expected_outcome'])})" if row.get("expected_outcome") else ""
-        side_times = ", ".join(f"{h(s['side'])} {s['wall_time_s']:.3g}" for s in row["sides"])
+        side_times = ", ".join(f"{h(s['side'])} {s['wall_time_s']:.3g}" + (" (shared run, reused)" if s.get("reused") else "") for s in row["sides"])
         parts.append(
             "<tr>"
             f"<td><b>{h(row['name'])}</b><br><span class=\"small\">{h(row['description'])}</span></td>"
