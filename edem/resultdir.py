@@ -491,7 +491,7 @@ def resolved_scene(scene_ref: str | Path, overrides: dict[str, Any] | None = Non
                    method: str | None = None) -> dict[str, Any]:
     """The scene's TOML data after ``overrides``, file paths made absolute, its name pinned.
 
-    ``fe_settings`` (model, mesh_size_mm, degree) are written into ``[fe]``, ``method`` (a
+    ``fe_settings`` (model, mesh_size_mm, degree, element, layers_through_thickness) are written into ``[fe]``, ``method`` (a
     ``--method`` given on the command line) into ``[solver]``. Overrides must
     already be plain dotted keys (``verification.sides.expand_array_overrides`` expands the
     ``array[*].key`` form).

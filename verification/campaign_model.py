@@ -100,7 +100,7 @@ class Case:
     tolerance: dict[str, float] = field(default_factory=dict)  # metric -> max value
     overrides: dict[str, Any] = field(default_factory=dict)  # dotted scene keys, as --set
     expect: Expect | None = None
-    options: dict[str, Any] = field(default_factory=dict)  # side options (FE: mesh_size_mm, degree)
+    options: dict[str, Any] = field(default_factory=dict)  # side options (FE: verification.sides.FE_SCENE_OPTIONS, steps)
     params: dict[str, float] = field(default_factory=dict)  # x values for the report's figures
     maps: bool = False  # render pressure maps of a against b in the report
     #: why each tolerance has its value (verification.verdicts.Basis), beyond the standard ones

@@ -11,8 +11,9 @@ A side turns (scene, overrides, options) into a result directory (docs/result-fo
 * ``fe-problem:<name>``: the FE core (:func:`fem_reference.solve_contact`) on those closed-form
   problems, "unavailable" without dolfinx.
 
-Options of a case reach its sides: ``mesh_size_mm``, ``degree`` and ``steps`` (the time points
-to solve) for the FE reference of a scene; ``mesh_size_mm`` and ``element`` for an FE problem;
+Options of a case reach its sides: ``mesh_size_mm``, ``degree``, ``element``,
+``layers_through_thickness`` (:data:`FE_SCENE_OPTIONS`) and ``steps`` (the time points to solve)
+for the FE reference of a scene; ``mesh_size_mm`` and ``element`` for an FE problem;
 ``frames`` for EDEM/DEM ("all", the default, or "peak": only the pressure map of the time point
 of peak pressure, for campaigns of hundreds of runs that need the time series only).
 
@@ -70,8 +71,11 @@ ANY_MODULES = ("geometries", "edem", "fem_reference", "verification")
 #: coupling approximates the lateral coupling the continuum has anyway). The FE sides are run
 #: without them (side_inputs), so their results cannot depend on them.
 DEM_ONLY_OVERRIDES = ("cartilage.coupling",)
-#: the options of a case the FE reference of a scene reads
-FE_OPTIONS = ("mesh_size_mm", "degree", "steps")
+#: options of a case that reach the FE reference of its scene as fem_reference.run_scene's
+#: settings (fem_reference.settings.resolve_settings: they override the scene's [fe] table)
+FE_SCENE_OPTIONS = ("mesh_size_mm", "degree", "element", "layers_through_thickness")
+#: the options of a case the FE reference of a scene reads: its settings and the time points to solve
+FE_OPTIONS = FE_SCENE_OPTIONS + ("steps",)
 
 
 @dataclass(frozen=True)
@@ -196,7 +200,7 @@ def _run_fe(model: str) -> SideRunner:
             if params and "steps" not in params and not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
                 raise UnavailableError("FE reference not available: fem_reference.run_scene takes no steps= selection")
             kwargs["steps"] = list(kwargs["steps"])
-        record = provenance(scene_ref, overrides, {"model": model, **{k: options[k] for k in ("mesh_size_mm", "degree") if k in options}})
+        record = provenance(scene_ref, overrides, {"model": model, **{k: options[k] for k in FE_SCENE_OPTIONS if k in options}})
         fem_reference.run_scene(scene, model=model, out_dir=out_dir, provenance=record, **kwargs)
         return str(out_dir)
 

@@ -7,6 +7,7 @@ import concurrent.futures
 import json
 import shutil
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -157,8 +158,9 @@ def test_fe_side_calls_run_scene_and_compares_nodal_pressure(tmp_path, monkeypat
 
     calls = {}
 
-    def stand_in(scene, model, out_dir, mesh_size_mm=None, degree=None, provenance=None):
-        calls.update(model=model, mesh_size_mm=mesh_size_mm, degree=degree)
+    def stand_in(scene, model, out_dir, mesh_size_mm=None, degree=None, layers_through_thickness=None, provenance=None):
+        calls.update(model=model, mesh_size_mm=mesh_size_mm, degree=degree, layers=layers_through_thickness,
+                     recorded=tomllib.loads(provenance.scene_toml)["fe"])
         src = Path(tmp_path / "dem-copy")
         shutil.copytree(src, out_dir)
         points = scene.mobile.vertices_mm + np.array([0.0, 0.0, 2.0])
@@ -174,9 +176,10 @@ def test_fe_side_calls_run_scene_and_compares_nodal_pressure(tmp_path, monkeypat
     write_results(run(load_scene(SCENES_DIR / "flat-plates.toml"), "dem"), tmp_path / "dem-copy")
     monkeypatch.setattr(fem_reference, "run_scene", stand_in, raising=False)
     monkeypatch.setattr(sides, "fe_availability", lambda: None)
-    case = Case("vs-fe", "DEM against FE", "flat-plates.toml", ("dem", "fe-layer"), COMPARISON_METRICS, {m: 1e-9 for m in COMPARISON_METRICS}, options={"mesh_size_mm": 0.5, "degree": 2}, basis=EXACT)
+    case = Case("vs-fe", "DEM against FE", "flat-plates.toml", ("dem", "fe-layer"), COMPARISON_METRICS, {m: 1e-9 for m in COMPARISON_METRICS}, options={"mesh_size_mm": 0.5, "degree": 2, "layers_through_thickness": 3}, basis=EXACT)
     summary = run_campaign(Campaign("fe", "FE", (case,)), tmp_path / "fe", jobs=1, report=False)
-    assert calls == {"model": "layer", "mesh_size_mm": 0.5, "degree": 2}
+    settings = {"mesh_size_mm": 0.5, "degree": 2}
+    assert calls == {"model": "layer", **settings, "layers": 3, "recorded": {"model": "layer", **settings, "layers_through_thickness": 3}}
     row = summary["cases"][0]
     assert row["status"] == "verified", row["verdicts"]
     assert row["metrics"]["pressure_l2_rel_error"] < 1e-12  # point data (1 MPa) used, not the cells (5 MPa)
