@@ -351,7 +351,7 @@ def goal_misses(nu: float, errors: dict[str, float | None], ratio: float | None,
         if value is None or not math.isfinite(value):
             misses.append(f"{label} missing")
         elif value > limit:
-            misses.append(f"{label} {100 * value:.0f} % > {100 * limit:.0f} %")
+            misses.append(f"{label} {100 * value:.1f} % > {100 * limit:.0f} %")
     if ratio is None or not math.isfinite(ratio):
         misses.append("L2 ratio missing")
     elif ratio > float(settings["ratio"]):
