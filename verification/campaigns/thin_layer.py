@@ -136,6 +136,7 @@ def campaign() -> Campaign:
     goal = Analysis("goal", "The goal: coupled thin layer within 5 % of the FE up to nu 0.42 and 10 % up to 0.499 (displacement, peak, area), "
                     "pressure-field L2 at most half the independent springs'. Flagged where not met", "goal", tuple(n for pair in pairs for n in pair),
                     {**GOAL, "pairs": pairs, "note": "Errors are |coupled - FE| / FE; the L2 ratio is the coupled bed's pressure-field L2 error over the independent springs' against the same FE run. "
+                     "Figures: <model>-poisson (both models' errors against nu, the goal's lines dashed) and layer-thickness. "
                      "At nu <= 0.25 the thin-layer correction vanishes or changes sign (c2(nu) = nu (4 nu - 1) / (6 (1 - nu)^2)), so the L2 ratio stays near 1 there by construction."})
     return Campaign(
         "thin-layer",
