@@ -361,7 +361,8 @@ def goal_misses(nu: float, errors: dict[str, float | None], ratio: float | None,
 
 def goal_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """``settings``: pairs ((model case, baseline case), ...), metrics, strict, strict_nu, loose,
-    ratio_metric, ratio, group (params key naming a row's group in the sentences, optional)."""
+    ratio_metric, ratio, note (optional). The sentences group the points by the model case's name
+    up to its last '-' (e.g. layer-coupled-F333-t2)."""
     s = analysis.settings
     metrics, ratio_metric = tuple(s["metrics"]), s["ratio_metric"]
     out_rows, values, missed, met = [], [], {}, {}

@@ -14,12 +14,14 @@ FE (P2; Taylor-Hood from nu 0.49): the base cylinder layer (2 mm, 333 N, the nu 
 mesh-convergence study of branch i10b, /work/notes/i10b.md: at 1.0 mm the layer's displacement
 and peak are not converged, and 2 layers move them by at most 0.2 % against 6-8; the default
 layer count at 0.5 mm, ceil(t / size), would double the DOFs and need ~8 GB for Taylor-Hood);
-measured 55-75 s per P2 run and 160 s per Taylor-Hood run at t = 2 mm on an idle share, 2-6 min
-under load 8. Every other case stays at 1.0 mm (``FE_COARSE``: the default layer count there,
-ceil(t / size): 1, 2, 3 elements through the 1, 2, 3 mm layers): the finer FE on all 22 layer runs would have taken the campaign to about
-75 min with --jobs 2 at load 8, past the 45 min it may take. So the 1 and 3 mm layers and the
-load sweep carry the 1.0 mm FE's discretisation error (at 2 mm, compare their 1.0 mm errors with
-the base sweep's 0.5 mm ones). The ankles (slab): 30 s to 4 min per run at 1.0 mm.
+measured 55-75 s per P2 run and 160 s per Taylor-Hood run at t = 2 mm by that study; here,
+under load 8 on the shared 2-core machine, 110-235 s (P2) and 388 s and 797 s (Taylor-Hood, nu
+0.49 and 0.499). Every other case stays at 1.0 mm (``FE_COARSE``: the default layer count there,
+ceil(t / size): 1, 2, 3 elements through the 1, 2, 3 mm layers): the finer FE on all 22 layer
+runs would have taken the campaign to an estimated 75 min with --jobs 2 at that load, past the
+45 min it may take. So the 1 and 3 mm layers and the load sweep carry the 1.0 mm FE's
+discretisation error (at 2 mm, compare their 1.0 mm errors with the base sweep's 0.5 mm ones).
+The ankles (slab): 30 s to 4 min per run at 1.0 mm.
 Tolerances are generous (the campaign measures; it fails only when something is
 broken). The issue's goal (displacement, peak and contact area within 10 % of the FE up to nu
 0.499 and within 5 % up to 0.42, pressure-field L2 at most half the independent springs') is the
@@ -37,8 +39,8 @@ from verification.campaigns.cylinder_plane import ERROR_PANELS, FE_COARSE, FE_CO
 FE_LAYER = {"mesh_size_mm": 0.5, "degree": 2, "layers_through_thickness": 2}
 
 #: wall time with 2 jobs on 2 cores, nothing cached (estimate from measured runs: with every FE
-#: layer at 1.0 mm it took 1421 s at load 4-7; the six base-layer runs at 0.5 mm took 2-6 min each
-#: under load 8 instead of 10-90 s)
+#: layer at 1.0 mm it took 1421 s at load 4-7; the six base-layer runs at 0.5 mm took 1818 s of FE
+#: under load 8 instead of 225 s)
 EXPECTED_TIME_S = 2000.0
 
 NUS = (0.0, 0.3, 0.42, 0.45, 0.49, 0.499)
