@@ -90,24 +90,31 @@ def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
     panels = list(spec["y"])
     logy = spec["logy"] if isinstance(spec["logy"], (list, tuple)) else [spec["logy"]] * len(panels)
     exact = spec.get("exact") or {}
+    # several series of cases on each panel (e.g. two models against one reference), else one
+    series = [(label, [n for n in group if n in rows]) for label, group in spec.get("series") or ()] or [(None, names)]
     fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 3.6), constrained_layout=True, squeeze=False)
     for ax, metric, log in zip(axes[0], panels, logy):
-        ys = np.array([_value(rows[n]["metrics"].get(metric)) for n in names])
-        ok = np.isfinite(xs) & np.isfinite(ys) & ((ys > 0) if log else True)
-        if spec["kind"] == "scatter":
-            ax.plot(xs[ok], ys[ok], "o", markersize=3, alpha=0.6, label=metric.replace("_", " "))
-        else:
-            ax.plot(xs[ok], ys[ok], "o-", label=metric.replace("_", " "))
+        for label, group in series:
+            gx = np.array([_value(rows[n]["params"].get(spec["x"])) for n in group])
+            ys = np.array([_value(rows[n]["metrics"].get(metric)) for n in group])
+            ok = np.isfinite(gx) & np.isfinite(ys) & ((ys > 0) if log else True)
+            if spec["kind"] == "scatter":
+                ax.plot(gx[ok], ys[ok], "o", markersize=3, alpha=0.6, label=label or metric.replace("_", " "))
+            else:
+                ax.plot(gx[ok], ys[ok], "o-", label=label or metric.replace("_", " "))
         tols = [(x, rows[n]["tolerance"].get(metric)) for x, n in zip(xs, names)]
         tols = [(x, t) for x, t in tols if t is not None]
         if tols:
             ax.plot([x for x, _ in tols], [t for _, t in tols], "k_", markersize=14, mew=2, label="tolerance")
         if metric in exact:
             ax.axhline(exact[metric], color="grey", ls=":", label=f"exact {exact[metric]:g}")
+        for line_metric, value, text in spec.get("lines") or ():
+            if line_metric == metric:
+                ax.axhline(value, color="grey", ls="--", lw=0.8, label=text)
         slope = spec.get("reference_slope")
-        if slope is not None and ok.sum() >= 1:
-            x0, y0 = xs[ok][0], ys[ok][0]
-            xr = np.array([xs[ok].min(), xs[ok].max()])
+        if slope is not None and ok.sum() >= 1:  # through the first point of the (last) series
+            x0, y0 = gx[ok][0], ys[ok][0]
+            xr = np.array([gx[ok].min(), gx[ok].max()])
             ax.plot(xr, y0 * (xr / x0) ** slope, ":", color="grey", label=f"slope {slope:g}")
         _finish_panel(ax, spec["logx"], log, spec["x"].replace("_", " "), metric)
     _save(plt, fig, spec["title"], path)
@@ -505,6 +512,7 @@ def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
         "<p>"
         + f"Finished {h(summary['finished_at'])}; this run took {summary['wall_time_s']:.1f} s ({summary['computed']} cases computed, {summary['cached']} from the cache). "
         + f"Case wall times are those of the run that computed each case (a cached case keeps its own): they add up to {summary['cases_wall_time_s']:.1f} s. "
+        + "An FE run shared by several cases (the same FE inputs) counts in the case that computed it; the cases that reused it show its time beside the side, marked reused. "
         + (f"Dask scheduler {h(str(summary['scheduler']))}." if summary.get("scheduler") else f"{summary.get('jobs')} worker process(es).")
         + ' Campaign data: <a href="metrics.json">metrics.json</a>.</p>',
         *_analyses_html(others),
@@ -514,7 +522,7 @@ def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
     ]
     for row in summary["cases"]:
         declared = f" ({h(row['expected_outcome'])})" if row.get("expected_outcome") else ""
-        side_times = ", ".join(f"{h(s['side'])} {s['wall_time_s']:.3g}" for s in row["sides"])
+        side_times = ", ".join(f"{h(s['side'])} {s['wall_time_s']:.3g}" + (" (shared run, reused)" if s.get("reused") else "") for s in row["sides"])
         parts.append(
             "<tr>"
             f"<td><b>{h(row['name'])}</b><br><span class=\"small\">{h(row['description'])}</span></td>"

@@ -20,6 +20,10 @@ its declared band (the thesis's figures) and "unavailable" when their cases coul
   range (from its lowest to its highest value, at every value of the other parameter) beside the
   thesis's.
 * ``table``: one row per case, one column per metric; cases that did not run say why.
+* ``goal``: a target declared in advance for pairs of cases (a model and its baseline against the
+  same reference): each of ``metrics`` of the model within ``strict`` up to ``strict_nu`` and
+  within ``loose`` beyond, and its ``ratio_metric`` at most ``ratio`` times the baseline's. Rows
+  that miss it are flagged with what they miss, and the notes say where in sentences.
 * ``trust``: the main job's opening answer in plain sentences with figures: DEM against the FE
   reference on the ideal ankle (where it agrees), over Poisson's ratio, cartilage thickness and a
   low load (where it breaks), and on the subject-like ankle.
@@ -334,6 +338,69 @@ def pareto_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]
 
 
 # ---------------------------------------------------------------------------------------------
+# goal
+
+
+def goal_misses(nu: float, errors: dict[str, float | None], ratio: float | None, settings: dict[str, Any]) -> list[str]:
+    """What a point misses of the goal (``settings`` of a goal analysis): "displacement 12 % > 10 %", ...;
+    a missing value misses too."""
+    limit = float(settings["strict"]) if nu <= float(settings["strict_nu"]) else float(settings["loose"])
+    misses = []
+    for metric, value in errors.items():
+        label = metric.replace("_rel_error", "").replace("_", " ")
+        if value is None or not math.isfinite(value):
+            misses.append(f"{label} missing")
+        elif value > limit:
+            misses.append(f"{label} {100 * value:.1f} % > {100 * limit:.0f} %")
+    if ratio is None or not math.isfinite(ratio):
+        misses.append("L2 ratio missing")
+    elif ratio > float(settings["ratio"]):
+        misses.append(f"L2 {ratio:.2f} x the baseline's > {float(settings['ratio']):g}")
+    return misses
+
+
+def goal_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """``settings``: pairs ((model case, baseline case), ...), metrics, strict, strict_nu, loose,
+    ratio_metric, ratio, note (optional). The sentences group the points by the model case's name
+    up to its last '-' (e.g. layer-coupled-F333-t2)."""
+    s = analysis.settings
+    metrics, ratio_metric = tuple(s["metrics"]), s["ratio_metric"]
+    out_rows, values, missed, met = [], [], {}, {}
+    for model_name, base_name in s["pairs"]:
+        model, base = rows.get(model_name), rows.get(base_name)
+        if model is None or not model.get("metrics"):
+            why = "case not run" if model is None else _unavailable_message(model)
+            out_rows.append({"cells": [model_name, "–"] + ["–"] * (len(metrics) + 3) + [f"not compared: {why}"], "flag": True})
+            continue
+        nu = float(model["params"].get("poissons_ratio", math.nan))
+        errors = {m: _metric(model, m) for m in metrics}
+        mine, theirs = _metric(model, ratio_metric), None if base is None else _metric(base, ratio_metric)
+        ratio = None if mine is None or not theirs else mine / theirs
+        misses = goal_misses(nu, errors, ratio, s)
+        group = model_name.rsplit("-", 1)[0]
+        (missed if misses else met).setdefault(group, []).append((nu, misses))
+        values.append({"case": model_name, "baseline": base_name, "poissons_ratio": nu, "errors": errors, ratio_metric: mine,
+                       f"baseline_{ratio_metric}": theirs, "ratio": ratio, "misses": misses})
+        out_rows.append({"cells": [model_name, _fmt(nu)] + [_pct(e) for e in errors.values()]
+                         + [_pct(mine), _pct(theirs), _fmt(ratio, 3), "met" if not misses else "not met: " + "; ".join(misses)], "flag": bool(misses)})
+    notes = []
+    for group in dict.fromkeys([*missed, *met]):
+        bad, good = missed.get(group, []), met.get(group, [])
+        text = f"{group}: goal met at nu " + (", ".join(f"{nu:g}" for nu, _m in good) if good else "none")
+        if bad:
+            text += "; not met at " + "; ".join(f"nu {nu:g} ({', '.join(m)})" for nu, m in bad)
+        notes.append(text + ".")
+    columns = ["case", "nu"] + [m.replace("_rel_error", " err").replace("_", " ") for m in metrics] + [f"{ratio_metric.replace('_rel_error', '')} (model)", "(baseline)", "ratio", "goal"]
+    return {
+        "columns": columns,
+        "rows": out_rows,
+        "status": UNAVAILABLE if not values else (FLAGGED if any(r["flag"] for r in out_rows) else REPORTED),
+        "notes": notes + [s.get("note", "")] if s.get("note") else notes,
+        "values": {"rows": values, "met": sum(1 for v in values if not v["misses"]), "points": len(values)},
+    }
+
+
+# ---------------------------------------------------------------------------------------------
 # trust
 
 
@@ -439,6 +506,7 @@ ANALYSES: dict[str, Callable[[Any, dict[str, dict[str, Any]]], dict[str, Any]]] 
     "sensitivity": sensitivity_analysis,
     "table": table_analysis,
     "pareto": pareto_analysis,
+    "goal": goal_analysis,
     "trust": trust_analysis,
 }
 

@@ -137,7 +137,8 @@ class Figure:
 
     kind "sweep": the metrics ``y`` of ``cases`` against their ``params[x]`` (one panel per
     metric); kind "scatter": the same as unjoined points (a population); kind "histogram": the
-    distribution of each metric of ``y`` over the cases; kind "timeseries": timeseries.csv
+    distribution of each metric of ``y`` over the cases (a "sweep" may split its cases into
+    labelled ``series``, one line each); kind "timeseries": timeseries.csv
     ``column`` of both sides of each case.
     """
 
@@ -154,6 +155,9 @@ class Figure:
     exact: dict[str, float] = field(default_factory=dict)  # metric -> exact value, drawn as a line
     param2: str = ""  # "heatmap" / "cuts": the second parameter (the y axis of the heatmap)
     instants: tuple[tuple[str, str], ...] = ()  # "maps": (label, "13%" | "peak-load") per map
+    #: "sweep": (label, cases) drawn as separate lines on every panel (e.g. two models); cases holds them all
+    series: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    lines: tuple[tuple[str, float, str], ...] = ()  # "sweep": horizontal lines (metric, value, label) on that metric's panel, e.g. a goal
 
 
 @dataclass(frozen=True)

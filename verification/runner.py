@@ -13,6 +13,18 @@ last, atomically) is there and every side's result directory verifies against it
 anything missing, truncated or changed makes the case run again. Verdicts are re-judged on every
 run, so changing a tolerance needs no re-run.
 
+The FE references are shared between cases (:func:`verification.sides.is_shared_side`): such a
+side runs once per *side key* (:func:`side_key`: the side, the scene files, the overrides and
+options the side receives (:func:`verification.sides.side_inputs`, so not the discrete bed's own
+keys such as ``cartilage.coupling``), the versions and the source of the side's modules) into
+``OUT/sides/<side>-<key>/`` (the sealed result directory ``result/``, then ``outcome.json``,
+written last), under a lock of that entry; every case that needs it gets a copy in its own
+directory, so a case stays self-contained and verifies by its own manifests. A store entry is
+reused only when its outcome.json names the same key and its result verifies against its
+manifest; the coupled and independent-spring cases of one point, or DEM and EDEM against one
+FE slab, run the FE once, and a change to the discrete code only re-runs the discrete sides.
+The first case of each side key is started first, so parallel workers rarely wait on an entry.
+
 One campaign at a time writes a directory (a lock), workers die with the campaign, and Ctrl-C
 stops it keeping every finished case (:mod:`verification.campaign_safety`). ``OUT/metrics.json``
 gathers the campaign; the HTML report is drawn by the caller (``edem verify`` passes :func:`reports.html.write_campaign_report`).
@@ -31,8 +43,10 @@ side is unavailable (FE reference not installed) are reported and do not fail th
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import dataclasses
 import datetime as _dt
+import fcntl
 import hashlib
 import importlib.metadata
 import importlib.util
@@ -46,7 +60,7 @@ import shutil
 import sys
 import time
 import traceback
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -72,7 +86,7 @@ from verification.metrics import (
     reference_series,
     series_metrics,
 )
-from verification.sides import run_side, side_modules
+from verification.sides import is_shared_side, run_side, side_inputs, side_modules
 from verification.status import ERROR, FAILED, FLAGGED, OK, REFUSED, UNAVAILABLE
 from verification.verdicts import case_verdict, count_verdicts, headline, tolerance_verdicts
 
@@ -83,6 +97,10 @@ SOURCE_ROOT = sources.ROOT
 CASE_GLUE_MODULES = ("verification.runner", "verification.sides", "verification.fe_analytic")
 #: what computes the metrics of every case (hashed with everything it imports)
 METRIC_MODULES = ("verification.metrics", "edem.resultdir")
+#: the glue a shared side runs through (its own source; the side's modules are hashed with all they import)
+SIDE_GLUE_MODULES = ("verification.sides",)
+#: the shared sides' store, under the campaign directory
+SIDE_STORE = "sides"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -154,24 +172,44 @@ def referenced_files(scene_path: Path, overrides: dict[str, Any]) -> list[Path]:
     return files
 
 
-def case_key(case: Case) -> str:
-    """sha256 of everything a case's results depend on (module docstring)."""
+def _input_digest(definition: dict[str, Any], roots: Iterable[str], glue: tuple[str, ...], scene_ref: str, overrides: dict[str, Any]) -> str:
+    """sha256 of a definition, the versions, the source of ``roots`` with all they import and of
+    ``glue``, and the scene file with every file it references."""
     digest = hashlib.sha256()
-    digest.update(json.dumps(json_safe(case.definition()), sort_keys=True).encode())
+    digest.update(json.dumps(json_safe(definition), sort_keys=True).encode())
     digest.update(_package_version().encode())
     digest.update(json.dumps(library_versions(), sort_keys=True).encode())
-    roots = METRIC_MODULES + tuple(m for side in case.sides for m in side_modules(side))
     digest.update(sources.closure_digest(tuple(sorted(set(roots))), SOURCE_ROOT).encode())
-    digest.update(_source_digest(CASE_GLUE_MODULES).encode())
+    digest.update(_source_digest(glue).encode())
     try:
-        scene_path = resolve_scene_path(case.scene_ref())
-        files = [scene_path] + referenced_files(scene_path, case.overrides)
+        scene_path = resolve_scene_path(scene_ref)
+        files = [scene_path] + referenced_files(scene_path, overrides)
     except InputError:
         files = []
     for path in files:
         digest.update(str(path.name).encode())
         digest.update(path.read_bytes() if path.is_file() else b"<missing>")
     return digest.hexdigest()
+
+
+def case_key(case: Case) -> str:
+    """sha256 of everything a case's results depend on (module docstring)."""
+    roots = METRIC_MODULES + tuple(m for side in case.sides for m in side_modules(side))
+    return _input_digest(case.definition(), roots, CASE_GLUE_MODULES, case.scene_ref(), case.overrides)
+
+
+def side_key(case: Case, index: int) -> str | None:
+    """sha256 of everything the case's side ``index`` computes from, when that side is shared
+    (None otherwise): the side, the scene, the overrides and options it receives
+    (:func:`verification.sides.side_inputs`), the versions, the source of its modules with all
+    they import and of the glue that runs it (verification.sides), the scene files. Not the case's
+    name, its other side, its metrics: cases equal in these share the side's run."""
+    side = case.sides[index]
+    if not is_shared_side(side):
+        return None
+    overrides, options = side_inputs(side, case.overrides, case.options)
+    definition = {"side": side, "scene": case.scene, "overrides": overrides, "options": options}
+    return _input_digest(definition, side_modules(side), SIDE_GLUE_MODULES, case.scene_ref(), overrides)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -280,24 +318,81 @@ def _scene_description(case: Case) -> str:
         return ""
 
 
-def execute_case(case: Case, case_dir: str, key: str) -> dict[str, Any]:
+@contextlib.contextmanager
+def _entry_lock(path: Path) -> Iterator[None]:
+    """An exclusive flock on ``path`` (blocking): one worker computes a store entry, the others
+    wait for it and then reuse it. The kernel drops it when its holder dies."""
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
+
+
+def _stored_outcome(entry: Path, key: str) -> dict[str, Any] | None:
+    """The outcome of a complete store entry for ``key`` (its result verifying), else None."""
+    try:
+        outcome = json.loads((entry / "outcome.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(outcome, dict) or outcome.get("key") != key or outcome.get("status") not in (OK, REFUSED):
+        return None  # a crash or an unavailable FE is never stored: it runs again
+    if outcome["status"] == OK and manifest_problems(entry / "result"):
+        return None  # a result file missing, changed or added since it ran
+    return outcome
+
+
+def _shared_side(case: Case, index: int, key: str, store: Path, target: Path) -> dict[str, Any]:
+    """The outcome of a shared side: taken from the store entry of ``key`` or computed into it
+    (under the entry's lock), its result directory copied to ``target``. "shared" names the
+    entry, "reused" says whether this case found it done."""
+    side = case.sides[index]
+    entry = store / f"{_side_dir_name(index, side)[2:]}-{key[:24]}"
+    store.mkdir(parents=True, exist_ok=True)
+    with _entry_lock(entry.with_name(entry.name + ".lock")):
+        outcome = _stored_outcome(entry, key)
+        reused = outcome is not None
+        if outcome is None:
+            if entry.exists():
+                shutil.rmtree(entry)  # an interrupted or stale run of this entry
+            entry.mkdir()
+            outcome = run_side(side, case.scene_ref(), dict(case.overrides), entry / "result", dict(case.options)).to_dict()
+            if outcome["status"] in (OK, REFUSED):
+                outcome.update(key=key, result_dir="result" if outcome["result_dir"] else None)
+                write_json(entry / "outcome.json", outcome)  # last: the entry is complete
+        if outcome["status"] == OK:
+            shutil.copytree(entry / "result", target)
+    outcome = {k: v for k, v in outcome.items() if k != "key"}
+    outcome.update(result_dir=str(target) if outcome["status"] == OK else None, shared=entry.name, reused=reused)
+    return outcome
+
+
+def execute_case(case: Case, case_dir: str, key: str, side_keys: tuple[str | None, ...] = ()) -> dict[str, Any]:
     """Run a case's sides into ``case_dir`` and write its metrics.json (without verdicts).
 
     Top-level and picklable: runs in a ProcessPoolExecutor worker or on a Dask worker. A side
-    refused as the case expects skips the reference side. Never raises for a solver problem:
-    crashes become the "error" outcome with their traceback.
+    refused as the case expects skips the reference side. ``side_keys``: per side, its
+    :func:`side_key` (None: not shared); a shared side comes from the campaign's side store
+    (``case_dir/../../sides``), computed there once. Never raises for a solver problem: crashes
+    become the "error" outcome with their traceback.
     """
     start = time.perf_counter()
     root = Path(case_dir)
     if root.exists():
         shutil.rmtree(root)
     root.mkdir(parents=True)
+    store = root.parent.parent / SIDE_STORE
     sides: list[dict[str, Any]] = []
     for index, side in enumerate(case.sides):
         if index and sides[0]["status"] != OK:
             break  # no point running the reference of a refused or failed subject
-        outcome = run_side(side, case.scene_ref(), dict(case.overrides), root / _side_dir_name(index, side), dict(case.options))
-        sides.append(outcome.to_dict())
+        target = root / _side_dir_name(index, side)
+        shared = side_keys[index] if index < len(side_keys) else None
+        if shared is None:
+            sides.append(run_side(side, case.scene_ref(), dict(case.overrides), target, dict(case.options)).to_dict())
+        else:
+            sides.append(_shared_side(case, index, shared, store, target))
     record: dict[str, Any] = {"case": case.definition(), "key": key, "sides": sides, "metrics": {}, "comparison": None}
     try:
         if not any(s["status"] in (UNAVAILABLE, ERROR) for s in sides):
@@ -385,8 +480,23 @@ def software_versions() -> dict[str, str]:
     return versions
 
 
+Todo = tuple[Case, Path, str, tuple[str | None, ...]]  # case, its directory, its key, its side keys
+
+
+def _first_of_each_side_first(todo: list[Todo]) -> list[Todo]:
+    """``todo`` with the first case of each shared side key ahead of the cases that reuse it, so
+    parallel workers compute different FE runs instead of one waiting on another's."""
+    seen: set[str] = set()
+    first, later = [], []
+    for item in todo:
+        keys = {k for k in item[3] if k}
+        (later if keys & seen else first).append(item)
+        seen |= keys
+    return first + later
+
+
 def _executor_results(
-    todo: list[tuple[Case, Path, str]], jobs: int, scheduler: str | None
+    todo: list[Todo], jobs: int, scheduler: str | None
 ) -> Iterable[tuple[Case, dict[str, Any]]]:
     """Yield (case, record) as cases finish: inline (jobs 1), a process pool or a Dask cluster."""
     if not todo:
@@ -402,15 +512,15 @@ def _executor_results(
             raise InputError(f"cannot reach the Dask scheduler: {exc}", key="--scheduler", expected="the address of a running scheduler, e.g. tcp://host:8786") from None
         with client:
             futures = {
-                client.submit(execute_case, case, str(case_dir), key, key=f"edem-case-{case.name}-{key[:12]}", pure=False): case
-                for case, case_dir, key in todo
+                client.submit(execute_case, case, str(case_dir), key, shared, key=f"edem-case-{case.name}-{key[:12]}", pure=False): case
+                for case, case_dir, key, shared in todo
             }
             for future in as_completed(futures):
                 yield futures[future], future.result()
         return
     if jobs <= 1:
-        for case, case_dir, key in todo:
-            yield case, execute_case(case, str(case_dir), key)
+        for case, case_dir, key, shared in todo:
+            yield case, execute_case(case, str(case_dir), key, shared)
         return
     context = multiprocessing.get_context("spawn")
     before = {p.pid for p in multiprocessing.active_children()}
@@ -419,7 +529,7 @@ def _executor_results(
     )
     try:
         with sigint_blocked():  # the workers start (in submit) with SIGINT blocked until init_worker
-            futures = {pool.submit(execute_case, case, str(case_dir), key): case for case, case_dir, key in todo}
+            futures = {pool.submit(execute_case, case, str(case_dir), key, shared): case for case, case_dir, key, shared in todo}
         for future in concurrent.futures.as_completed(futures):
             yield futures[future], future.result()
     except BaseException:  # Ctrl-C, or the consumer stopped early: no worker goes on writing cases
@@ -477,7 +587,7 @@ def _run_campaign_locked(
         key = case_key(case)
         record = _cached_record(case_dir, key)
         if record is None:
-            todo.append((case, case_dir, key))
+            todo.append((case, case_dir, key, tuple(side_key(case, i) for i in range(len(case.sides)))))
         else:
             records[case.name], cached[case.name] = record, True
     show = sys.stderr.isatty() if progress is None else progress
@@ -489,7 +599,7 @@ def _run_campaign_locked(
     for name in list(records):
         if on_case:
             on_case(name, True)
-    finished = _executor_results(todo, jobs, scheduler)
+    finished = _executor_results(_first_of_each_side_first(todo), jobs, scheduler)
     try:
         for case, record in finished:
             records[case.name], cached[case.name] = record, False

@@ -18,6 +18,11 @@ for the FE reference of a scene; ``mesh_size_mm`` and ``element`` for an FE prob
 of peak pressure; "none": no pressure map, fixed body or .sto file, the optional files of
 docs/result-format.md, for campaigns of hundreds of runs that need the time series only).
 
+A side receives only the overrides and options it reads (:func:`side_inputs`): the FE sides never
+see the override keys only the discrete bed reads (:data:`DEM_ONLY_OVERRIDES`, e.g.
+``cartilage.coupling``), so two cases that differ only there run the identical FE, which the
+runner computes once (:func:`is_shared_side`, verification.runner's side store).
+
 Overrides are dotted scene keys (``--set``), plus ``<array>[*].<key>`` / ``<array>[<i>].<key>``
 for arrays of tables (e.g. ``ligaments[*].youngs_modulus_mpa``), which
 :func:`expand_array_overrides` turns into a whole-array override before the scene is loaded.
@@ -62,6 +67,15 @@ CLOSED_FORM_MODULES = ("edem.scene", "verification.closed_forms")
 FE_EXACT_MODULES = ("verification.fe_analytic",)
 #: for a side runner that does not say (a stand-in): every package that can compute results
 ANY_MODULES = ("geometries", "edem", "fem_reference", "verification")
+#: scene keys only the discrete bed reads: the FE continuum has no such option (the thin-layer
+#: coupling approximates the lateral coupling the continuum has anyway). The FE sides are run
+#: without them (side_inputs), so their results cannot depend on them.
+DEM_ONLY_OVERRIDES = ("cartilage.coupling",)
+#: options of a case that reach the FE reference of its scene as fem_reference.run_scene's
+#: settings (fem_reference.settings.resolve_settings: they override the scene's [fe] table)
+FE_SCENE_OPTIONS = ("mesh_size_mm", "degree", "element", "layers_through_thickness")
+#: the options of a case the FE reference of a scene reads: its settings and the time points to solve
+FE_OPTIONS = FE_SCENE_OPTIONS + ("steps",)
 
 
 @dataclass(frozen=True)
@@ -154,6 +168,7 @@ def _run_discrete(method: str) -> SideRunner:
 
     runner.__doc__ = f"{method.upper()} (edem.solver.run) into a result directory (docs/result-format.md)."
     runner.modules = DISCRETE_MODULES
+    runner.reads_options = ("frames",)
     return runner
 
 
@@ -174,11 +189,6 @@ class UnavailableError(Exception):
     """A side that cannot run on this installation (e.g. no FE reference yet)."""
 
 
-#: options of a case that reach the FE reference of its scene as fem_reference.run_scene's
-#: settings (fem_reference.settings.resolve_settings: they override the scene's [fe] table)
-FE_SCENE_OPTIONS = ("mesh_size_mm", "degree", "element", "layers_through_thickness")
-
-
 def _run_fe(model: str) -> SideRunner:
     def runner(scene_ref: str, overrides: dict[str, Any], out_dir: Path, options: dict[str, Any]) -> str:
         why = fe_availability()
@@ -187,7 +197,7 @@ def _run_fe(model: str) -> SideRunner:
         import fem_reference
 
         scene = load_scene(scene_ref, overrides)
-        kwargs = {k: options[k] for k in FE_SCENE_OPTIONS + ("steps",) if k in options}
+        kwargs = {k: options[k] for k in FE_OPTIONS if k in options}
         if "steps" in kwargs:
             try:
                 params = inspect.signature(fem_reference.run_scene).parameters
@@ -202,6 +212,9 @@ def _run_fe(model: str) -> SideRunner:
 
     runner.__doc__ = f"The FE reference, {model} model (fem_reference.run_scene), docs/method.md#6-the-fe-reference-and-its-discrete-twins."
     runner.modules = FE_MODULES
+    runner.reads_options = FE_OPTIONS
+    runner.ignores_overrides = DEM_ONLY_OVERRIDES
+    runner.shared = True
     return runner
 
 
@@ -237,9 +250,9 @@ TRUTH_STEPS = 128
 
 def _run_fe_truth(scene_ref: str, overrides: dict[str, Any], out_dir: Path, options: dict[str, Any]) -> str:
     """The FE slab at TRUTH_FE on the scene's own geometry mesh (a geometry.mesh_size_mm override
-    of the case, which sweeps the springs, is dropped), ignoring the case's options."""
-    kept = {k: v for k, v in overrides.items() if k != "geometry.mesh_size_mm"}
-    return _run_fe("slab")(scene_ref, kept, out_dir, dict(TRUTH_FE))
+    of the case, which sweeps the springs, never reaches it: ``ignores_overrides``), ignoring the
+    case's options."""
+    return _run_fe("slab")(scene_ref, overrides, out_dir, dict(TRUTH_FE))
 
 
 def resample_load(overrides: dict[str, Any], n_steps: int) -> dict[str, Any]:
@@ -261,7 +274,11 @@ def _run_edem_truth(scene_ref: str, overrides: dict[str, Any], out_dir: Path, op
 
 
 _run_fe_truth.modules = FE_MODULES
+_run_fe_truth.reads_options = ()
+_run_fe_truth.ignores_overrides = DEM_ONLY_OVERRIDES + ("geometry.mesh_size_mm",)
+_run_fe_truth.shared = True
 _run_edem_truth.modules = DISCRETE_MODULES
+_run_edem_truth.reads_options = ("frames",)
 
 SIDES: dict[str, SideRunner] = {
     "edem": _run_discrete("edem"),
@@ -288,6 +305,24 @@ def side_modules(side: str) -> tuple[str, ...]:
     return getattr(SIDES.get(side), "modules", ANY_MODULES)
 
 
+def side_inputs(side: str, overrides: dict[str, Any], options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The overrides and options ``side`` receives from :func:`run_side`: without the override
+    keys its runner declares it ignores (``ignores_overrides``), and only the options it declares
+    it reads (``reads_options``; a runner that does not say gets them all). What a shared side's
+    result depends on besides code and scene files is exactly this pair (its cache key hashes it)."""
+    runner = SIDES.get(side)
+    ignored = getattr(runner, "ignores_overrides", ())
+    read = getattr(runner, "reads_options", None)
+    kept = {k: v for k, v in overrides.items() if k not in ignored}
+    return kept, dict(options) if read is None else {k: v for k, v in options.items() if k in read}
+
+
+def is_shared_side(side: str) -> bool:
+    """Whether cases that give ``side`` the same inputs (:func:`side_inputs`) share one run of it
+    (the FE references: minutes each; verification.runner's side store)."""
+    return bool(getattr(SIDES.get(side), "shared", False))
+
+
 def is_fe_side(side: str) -> bool:
     return side.startswith("fe-")
 
@@ -304,11 +339,12 @@ def run_side(side: str, scene_ref: str, overrides: dict[str, Any], out_dir: str 
     out = Path(out_dir)
     start = time.perf_counter()
     try:
+        overrides, options = side_inputs(side, overrides or {}, options or {})
         overrides = expand_array_overrides(scene_ref, overrides) if overrides else {}
         if side.startswith(CLOSED_FORM_PREFIX):
-            _run_closed_form(scene_ref, overrides, out, options or {}, side[len(CLOSED_FORM_PREFIX) :])
+            _run_closed_form(scene_ref, overrides, out, options, side[len(CLOSED_FORM_PREFIX) :])
         else:
-            SIDES[side](scene_ref, overrides, out, options or {})
+            SIDES[side](scene_ref, overrides, out, options)
     except ResultWriteError as exc:  # disk full...: not the case's outcome, run it again
         return SideOutcome(side, ERROR, None, str(exc), time.perf_counter() - start, type(exc).__name__)
     except (InputError, SolverError) as exc:

@@ -106,3 +106,19 @@ def test_pressure_maps_at_a_time_pick_that_map_in_both_directories(tmp_path):
     centre = [image[80:120, 80 + 200 * k : 120 + 200 * k].reshape(-1, 3).mean(axis=0) for k in range(3)]
     assert np.abs(centre[0] - centre[1]).max() < 0.02  # a (3 MPa at 1 s, not 9 at 2 s) drawn like b
     assert np.abs(centre[2] - centre[2].mean()).max() < 0.05  # a - b = 0: the diverging map's neutral grey
+
+
+def test_a_sweep_with_series_draws_one_line_per_series_and_goal_lines_on_their_panel(tmp_path, monkeypatch):
+    import reports.html as report
+
+    drawn = {}
+    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path: drawn.update(fig=fig))
+    rows = {f"{m}-{nu}": {"params": {"nu": nu}, "metrics": {"a": e * nu, "b": 2 * e * nu}, "tolerance": {}}
+            for m, e in (("x", 1.0), ("y", 0.1)) for nu in (0.1, 0.2, 0.3)}
+    spec = {"name": "s", "title": "s", "kind": "sweep", "cases": list(rows), "x": "nu", "y": ["a", "b"], "logx": False, "logy": True,
+            "series": [["model x", ["x-0.1", "x-0.2", "x-0.3"]], ["model y", ["y-0.1", "y-0.2", "y-0.3"]]], "lines": [["a", 0.05, "goal"]]}
+    report._sweep_figure(spec, rows, tmp_path / "s.png")
+    panel_a, panel_b = drawn["fig"].axes
+    lines_a = {line.get_label(): line for line in panel_a.get_lines()}
+    assert set(lines_a) == {"model x", "model y", "goal"} and {line.get_label() for line in panel_b.get_lines()} == {"model x", "model y"}
+    assert list(lines_a["model y"].get_ydata()) == pytest.approx([0.01, 0.02, 0.03])

@@ -17,6 +17,7 @@ from verification.fe_campaigns import (
     pareto_front,
     resample_load,
 )
+from verification.runner import side_key
 from verification.sides import SIDES, is_fe_side, side_names
 
 NEW = ("cylinder-plane", "subject", "error-vs-runtime")
@@ -57,6 +58,13 @@ def test_cylinder_plane_sweeps_one_at_a_time():
     assert {c.params["thickness_mm"] for c in layer} == set(SWEEP_THICKNESS_MM)
     for case in layer:  # the layer and the plane's gap move together
         assert case.overrides["geometry.plafond_gap_mm"] == case.overrides["cartilage.thickness_mm"] == case.params["thickness_mm"]
+    # every layer point twice, independent springs and coupled thin layer, sharing one FE run
+    springs = [c for c in layer if "cartilage.coupling" not in c.overrides]
+    coupled = {c.name: c for c in layer if c.overrides.get("cartilage.coupling") == "thin-layer"}
+    assert len(springs) == len(coupled) == len(layer) // 2
+    for case in springs:
+        twin = coupled[case.name.replace("layer-", "layer-coupled-", 1)]
+        assert twin.params == case.params and side_key(twin, 1) == side_key(case, 1)
     assert all(c.overrides["ligaments"] == [] for c in slab)
     sweeps = [f for f in campaign.figures if f.kind == "sweep"]
     assert {f.x for f in sweeps} == {"load_n", "poissons_ratio", "thickness_mm"} and len(sweeps) == 5
@@ -65,6 +73,11 @@ def test_cylinder_plane_sweeps_one_at_a_time():
 def test_subject_cases_drop_ligaments_and_fix_ty_at_toe_off():
     campaign = get_campaign("subject")
     assert {c.scene for c in campaign.cases} == {"subject-standing", "subject-toe-off"}
+    # DEM and EDEM, springs and coupled: four cases per scene, one FE run
+    for scene in ("subject-standing", "subject-toe-off"):
+        mine = [c for c in campaign.cases if c.scene == scene]
+        assert {(c.sides[0], c.overrides.get("cartilage.coupling", "none")) for c in mine} == {(m, k) for m in ("dem", "edem") for k in ("none", "thin-layer")}
+        assert len({side_key(c, 1) for c in mine}) == 1
     for case in campaign.cases:
         assert case.sides[1] == "fe-slab" and case.overrides["ligaments"] == []
         assert "ligaments removed" in case.description
@@ -75,7 +88,7 @@ def test_subject_cases_drop_ligaments_and_fix_ty_at_toe_off():
 def test_error_vs_runtime_families_and_truths():
     campaign = get_campaign("error-vs-runtime")
     families = {c.name.rsplit("-", 1)[0] for c in campaign.cases}
-    assert families == {"dem", "fe-p1", "edem"}
+    assert families == {"dem", "dem-coupled", "fe-p1", "edem"}
     for case in campaign.cases:
         family = case.name.rsplit("-", 1)[0]
         assert case.sides[1] == ("edem-128-steps" if family == "edem" else "fe-slab-truth")
@@ -83,6 +96,8 @@ def test_error_vs_runtime_families_and_truths():
     assert {a.kind for a in campaign.analyses} == {"pareto"}
     assert is_fe_side("fe-slab-truth") and not is_fe_side("edem-128-steps")
     assert {"fe-slab-truth", "edem-128-steps"} <= set(SIDES)
+    # the truth ignores the spring mesh and the coupling: every case against it shares one run
+    assert len({side_key(c, 1) for c in campaign.cases if c.sides[1] == "fe-slab-truth"}) == 1
 
 
 def test_resample_load_keeps_the_history():

@@ -3,6 +3,7 @@ verdicts and exit status, FE sides reported unavailable (never faked), and the D
 
 from __future__ import annotations
 
+import concurrent.futures
 import json
 import shutil
 import time
@@ -14,7 +15,7 @@ import pytest
 
 import verification.runner as runner
 import verification.sides as sides
-from edem.atomic_dirs import write_manifest
+from edem.atomic_dirs import manifest_problems, write_manifest
 from edem.cli import main
 from verification.campaigns import SCENES_DIR, Campaign, Case, Expect, get_campaign
 from verification.metrics import COMPARISON_METRICS
@@ -75,9 +76,9 @@ def test_cache_counts_executions_and_tolerance_changes_need_no_rerun(tmp_path, m
     calls = []
     real = runner.execute_case
 
-    def counting(case, case_dir, key):
+    def counting(case, *args):
         calls.append(case.name)
-        return real(case, case_dir, key)
+        return real(case, *args)
 
     monkeypatch.setattr(runner, "execute_case", counting)
     out = tmp_path / "tiny"
@@ -182,6 +183,97 @@ def test_fe_side_calls_run_scene_and_compares_nodal_pressure(tmp_path, monkeypat
     row = summary["cases"][0]
     assert row["status"] == "verified", row["verdicts"]
     assert row["metrics"]["pressure_l2_rel_error"] < 1e-12  # point data (1 MPa) used, not the cells (5 MPa)
+
+
+def _fe_stand_in(tmp_path, monkeypatch, calls: list) -> None:
+    """fem_reference.run_scene replaced by a stand-in (a test double: DEM's result directory,
+    sealed like the real FE's) that records what each call received."""
+    import fem_reference
+
+    from edem.results import write_results
+    from edem.scene import load_scene
+    from edem.solver import run
+
+    def stand_in(scene, model, out_dir, mesh_size_mm=None, degree=None, provenance=None):
+        calls.append({"model": model, "mesh_size_mm": mesh_size_mm, "coupling": scene.cartilage.coupling, "overrides": provenance.summary_keys["overrides"]})
+        write_results(run(scene, "dem"), out_dir)
+
+    monkeypatch.setattr(fem_reference, "run_scene", stand_in, raising=False)
+    monkeypatch.setattr(sides, "fe_availability", lambda: None)
+
+
+def test_cases_giving_the_fe_the_same_inputs_share_one_fe_run(tmp_path, monkeypatch):
+    calls = []
+    _fe_stand_in(tmp_path, monkeypatch, calls)
+    sanity = {m: 10.0 for m in COMPARISON_METRICS}
+    basis = {m: Basis(MODEL_BAND, "test") for m in COMPARISON_METRICS}
+
+    def case(name, overrides, options=None):
+        return Case(name, "DEM vs FE", "flat-plates.toml", ("dem", "fe-layer"), COMPARISON_METRICS, sanity, overrides=overrides,
+                    options=options or {"mesh_size_mm": 1.0}, basis=basis)
+
+    springs = case("springs", {"cartilage.poissons_ratio": 0.49})
+    coupled = case("coupled", {"cartilage.poissons_ratio": 0.49, "cartilage.coupling": "thin-layer"})
+    assert runner.side_key(springs, 1) == runner.side_key(coupled, 1) and runner.side_key(springs, 0) is None
+    assert runner.case_key(springs) != runner.case_key(coupled)
+    out = tmp_path / "share"
+    first = run_campaign(Campaign("share", "", (springs, coupled)), out, jobs=1, report=False)
+    # one FE run, without the key only the discrete bed reads
+    assert len(calls) == 1 and calls[0]["coupling"] == "none" and calls[0]["overrides"] == {"cartilage.poissons_ratio": 0.49}
+    rows = {r["name"]: r for r in first["cases"]}
+    fe = [rows[n]["sides"][1] for n in ("springs", "coupled")]
+    assert fe[0]["shared"] == fe[1]["shared"] and [f["reused"] for f in fe] == [False, True]
+    assert fe[0]["wall_time_s"] == fe[1]["wall_time_s"]  # the run's own cost, not the copy's
+    for name in rows:  # each case holds its own copy, verifying by its manifest
+        assert not manifest_problems(out / "cases" / name / rows[name]["sides"][1]["result_dir"])
+
+    # an FE input that differs (the load; an FE option) runs the FE again, once each
+    calls.clear()
+    loaded = case("loaded", {"cartilage.poissons_ratio": 0.49, "load.force_n": [0.0, 0.0, 800.0]})
+    finer = case("finer", {"cartilage.poissons_ratio": 0.49}, {"mesh_size_mm": 0.5})
+    frames = case("frames", {"cartilage.poissons_ratio": 0.49}, {"mesh_size_mm": 1.0, "frames": "peak"})  # a DEM-only option
+    run_campaign(Campaign("share", "", (springs, coupled, loaded, finer, frames)), out, jobs=1, report=False)
+    assert sorted((c["mesh_size_mm"], c["overrides"].get("load.force_n", [0, 0, 0])[2]) for c in calls) == [(0.5, 0), (1.0, 800.0)]
+
+    # the store outlives the cases: a case run again finds its FE there; a damaged entry runs again
+    calls.clear()
+    shutil.rmtree(out / "cases" / "springs")
+    run_campaign(Campaign("share", "", (springs, coupled)), out, jobs=1, report=False)
+    assert calls == []
+    entry = out / "sides" / fe[0]["shared"] / "result"
+    with open(entry / "summary.json", "a", encoding="utf-8") as f:
+        f.write(" ")
+    shutil.rmtree(out / "cases" / "springs")
+    run_campaign(Campaign("share", "", (springs, coupled)), out, jobs=1, report=False)
+    assert len(calls) == 1 and not manifest_problems(entry)
+
+
+def test_two_workers_wanting_one_fe_run_compute_it_once(tmp_path, monkeypatch):
+    """Two cases with the same FE side key executed at the same time (threads: each opens the
+    entry's lock file itself, so the flock excludes them as it does two worker processes): one
+    computes the entry, the other waits and copies it."""
+    from edem.results import write_results
+    from edem.scene import load_scene
+    from edem.solver import run
+
+    calls = []
+
+    def slow_fe(scene_ref, overrides, out_dir, options):
+        calls.append(scene_ref)
+        time.sleep(0.5)  # long enough for the other thread to reach the lock
+        write_results(run(load_scene(scene_ref, overrides), "dem"), out_dir)
+
+    slow_fe.shared = True
+    monkeypatch.setitem(sides.SIDES, "fe-layer", slow_fe)
+    base = dict(scene="flat-plates.toml", sides=("dem", "fe-layer"), metrics=COMPARISON_METRICS, overrides={})
+    cases = [Case(name, "", **base) for name in ("one", "two")]
+    out = tmp_path / "race"
+    todo = [(c, out / "cases" / c.name, runner.case_key(c), tuple(runner.side_key(c, i) for i in range(2))) for c in cases]
+    assert todo[0][3] == todo[1][3] and todo[0][3][1] is not None
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        records = list(pool.map(lambda t: runner.execute_case(t[0], str(t[1]), t[2], t[3]), todo))
+    assert len(calls) == 1 and sorted(r["sides"][1]["reused"] for r in records) == [False, True]
+    assert all(r["sides"][1]["status"] == "ok" for r in records)
 
 
 def test_a_crashing_side_is_an_error_with_exit_status_1(tmp_path, monkeypatch):

@@ -10,7 +10,8 @@ import pytest
 from verification.campaign_model import Campaign
 from verification.campaigns import describe_campaigns, get_campaign, validate_campaign
 from verification.campaigns.thin_layer import LOADS_N, NUS, THICKNESS_MM, case_name
-from verification.runner import run_campaign
+from verification.analyses import goal_misses
+from verification.runner import run_campaign, side_key
 from verification.sides import fe_availability
 
 
@@ -32,8 +33,24 @@ def test_thin_layer_campaign_pairs_every_point_with_both_models():
     assert {c.params["load_n"] for c in layer} == set(LOADS_N)
     for case in layer:
         assert case.overrides["geometry.plafond_gap_mm"] == case.overrides["cartilage.thickness_mm"] == case.params["thickness_mm"]
-    assert all(c.overrides["ligaments"] == [] and c.sides == ("dem", "fe-slab") for c in coupled if c.scene == "ideal-standing")
+    assert all(c.overrides["ligaments"] == [] and c.sides == ("dem", "fe-slab") for c in coupled if c.scene in ("ideal-standing", "subject-standing"))
+    subject = [c for c in coupled if c.scene == "subject-standing"]
+    assert {c.params["poissons_ratio"] for c in subject} >= {0.3, 0.42, 0.49, 0.499} and {c.params["load_n"] for c in subject} == {333.0}
     assert [f.kind for f in campaign.figures].count("error-vs-time") == 1
+    # the two variants of a point share one FE run: the same FE side key; different points do not
+    keys = {side_key(c, 1) for c in coupled}
+    assert len(keys) == len(coupled) and all(side_key(by_name[k.name.replace("-coupled-", "-springs-")], 1) == side_key(k, 1) for k in coupled)
+    goal = next(a for a in campaign.analyses if a.kind == "goal")
+    assert {pair for pair in goal.settings["pairs"]} == {(c.name, c.name.replace("-coupled-", "-springs-")) for c in coupled}
+
+
+def test_goal_misses_name_each_criterion_with_the_limit_of_its_nu():
+    settings = {"strict": 0.05, "strict_nu": 0.42, "loose": 0.10, "ratio": 0.5}
+    errors = {"displacement_rel_error": 0.06, "peak_pressure_rel_error": 0.04, "contact_area_rel_error": 0.099}
+    # 6 % displacement misses the 5 % of nu <= 0.42, meets the 10 % beyond; the area meets both
+    assert goal_misses(0.42, errors, 0.5, settings) == ["displacement 6.0 % > 5 %", "contact area 9.9 % > 5 %"]
+    assert goal_misses(0.45, errors, 0.5, settings) == []
+    assert goal_misses(0.49, {**errors, "peak_pressure_rel_error": None}, 0.51, settings) == ["peak pressure missing", "L2 0.51 x the baseline's > 0.5"]
 
 
 @pytest.mark.slow
