@@ -49,6 +49,13 @@ FE_TABLE_COLUMNS = [
     {"header": "disp err", "metric": "displacement_rel_error"},
     {"header": "L2 err", "metric": "pressure_l2_rel_error"},
 ]
+def fe_comparison_case(name: str, description: str, scene: str, sides: tuple[str, ...], *, overrides: dict[str, Any],
+                       options: dict[str, Any], maps: bool, params: dict[str, float] | None = None) -> Case:
+    """A discrete side against the FE with this module's metrics, generous tolerances and their basis."""
+    return Case(name, description, scene, sides, FE_COMPARE_METRICS, dict(FE_COMPARE_TOL), overrides=overrides,
+                options=dict(options), params=params or {}, maps=maps, basis=dict(FE_COMPARE_BASIS))
+
+
 #: the two models of the ideal ankle: (prefix, scene, sides, what)
 CP_MODELS = (
     ("slab", "ideal-standing", ("dem", "fe-slab"), "ideal ankle (R 20 mm, 114 deg, plafond 1.5 mm above), threshold-law DEM vs the FE slab"),
@@ -88,19 +95,16 @@ def _cp_cases() -> list[Case]:
             variants.append((coupled_prefix, what.replace("gap-law DEM", "gap-law DEM with the coupled thin layer"), coupled_overrides))
         for name, text, extra in variants:
             cases.append(
-                Case(
+                fe_comparison_case(
                     _cp_name(name, load, nu, thickness),
                     f"{text}: {load:g} N, nu {nu:g}" + (f", layer {thickness:g} mm (plane touching it)" if model == "layer" else ", no ligaments")
                     + f"; FE {element} at 1.0 mm. Generous tolerances (measured, not judged)",
                     scene,
                     sides,
-                    FE_COMPARE_METRICS,
-                    dict(FE_COMPARE_TOL),
                     overrides={**overrides, **extra},
-                    options=dict(FE_COARSE),
+                    options=FE_COARSE,
                     params={"load_n": load, "poissons_ratio": nu, "thickness_mm": thickness},
                     maps=(load, nu, thickness) == (BASE["load"], BASE["nu"], BASE["thickness"]),
-                    basis=dict(FE_COMPARE_BASIS),
                 )
             )
     return cases

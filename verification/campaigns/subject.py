@@ -7,8 +7,8 @@ scene share one FE run (the FE never reads the coupling: verification.runner's s
 
 from __future__ import annotations
 
-from verification.campaign_model import Analysis, Campaign, Case
-from verification.campaigns.cylinder_plane import FE_COARSE, FE_COMPARE_BASIS, FE_COMPARE_METRICS, FE_COMPARE_TOL
+from verification.campaign_model import Analysis, Campaign
+from verification.campaigns.cylinder_plane import FE_COARSE, fe_comparison_case
 
 #: wall time with 2 jobs on 2 cores, nothing cached (measured: 66 s at load 3-5 on the shared 2-core machine, its 8
 #: cases running 2 FE runs; before the coupled cases and the shared FE, 136 s for 4 cases running 4)
@@ -29,17 +29,14 @@ def campaign() -> Campaign:
         for suffix, coupling, bed in COUPLINGS:
             for method in ("dem", "edem"):
                 cases.append(
-                    Case(
+                    fe_comparison_case(
                         f"{scene}-{method}{suffix}-vs-fe",
                         f"{scene}: {method.upper()} ({bed}) vs the FE slab (P2, 1.0 mm), {what}; ligaments removed from the discrete side (the FE models none). Generous tolerances",
                         scene,
                         (method, "fe-slab"),
-                        FE_COMPARE_METRICS,
-                        dict(FE_COMPARE_TOL),
                         overrides={**overrides, **coupling},
-                        options=dict(FE_COARSE),
+                        options=FE_COARSE,
                         maps=method == "dem",
-                        basis=dict(FE_COMPARE_BASIS),
                     )
                 )
     columns = [

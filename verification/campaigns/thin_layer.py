@@ -33,7 +33,7 @@ from __future__ import annotations
 from typing import Any
 
 from verification.campaign_model import Analysis, Campaign, Case, Figure
-from verification.campaigns.cylinder_plane import ERROR_PANELS, FE_COARSE, FE_COMPARE_BASIS, FE_COMPARE_METRICS, FE_COMPARE_TOL, FE_TABLE_COLUMNS
+from verification.campaigns.cylinder_plane import ERROR_PANELS, FE_COARSE, FE_TABLE_COLUMNS, fe_comparison_case
 
 #: the FE layer of the cylinder cases: 0.5 mm in-plane, two elements through the thickness (module docstring)
 FE_LAYER = {"mesh_size_mm": 0.5, "degree": 2, "layers_through_thickness": 2}
@@ -94,19 +94,16 @@ def _cases() -> list[Case]:
         fe_text = f"FE {element} at {fe['mesh_size_mm']:g} mm" + (f", {fe['layers_through_thickness']} elements through the layer" if "layers_through_thickness" in fe else "")
         for variant, extra in VARIANTS.items():
             cases.append(
-                Case(
+                fe_comparison_case(
                     case_name(model, variant, load, thickness, nu),
                     f"{what}; {'coupled thin layer' if extra else 'independent springs'}: {load:g} N, nu {nu:g}"
                     + (f", layer {thickness:g} mm" if thickness is not None else "") + f"; {fe_text}. Measured, not judged",
                     scene,
                     sides,
-                    FE_COMPARE_METRICS,
-                    dict(FE_COMPARE_TOL),
                     overrides={**overrides, **extra},
-                    options=dict(fe),
+                    options=fe,
                     params={"load_n": load, "poissons_ratio": nu, "thickness_mm": thickness or 0.0},
                     maps=(model, load, thickness, nu) in (("layer", BASE_LOAD_N, BASE_THICKNESS_MM, 0.49), ("subject", BASE_LOAD_N, None, 0.49)),
-                    basis=dict(FE_COMPARE_BASIS),
                 )
             )
     return cases
