@@ -553,11 +553,11 @@ class RayCaster:
         o, d = np.take(origins, missed, axis=0), np.take(dirs, missed, axis=0)
         # A sideways direction that never lines up with a mesh's axes or diagonals.
         side = _cross(d, np.array([0.5377, 0.8326, 0.1329]))
-        size = np.einsum("ij,ij->i", side, side)
+        size = row_dot(side, side)
         small = np.flatnonzero(size < 0.09)  # d nearly along that direction: another one
         if small.size:
             side[small] = _cross(d[small], np.array([0.1329, -0.5377, 0.8326]))
-            size[small] = np.einsum("ij,ij->i", side[small], side[small])
+            size[small] = row_dot(side[small], side[small])
         side /= np.sqrt(size)[:, None]
         probe = o + s0[:, None] * d + self._probe_shift_mm * side
         prim = self._embree_run(probe, d, (h + self._step_mm) - s0)["primID"].astype(np.int64)
@@ -576,12 +576,13 @@ class RayCaster:
         """(len(rows),) bool: False only where the segment o + s d, s_start <= s <= s_end, of ray
         ``rows[i]`` certainly stays away from F, so Embree cannot have lost a hit on it.
 
-        Every point of the segment lies within half its length (at most s_end - min(s_start),
-        halved) of its midpoint: one lookup of the midpoint in a grid whose marked cells cover
-        every point that close to F (:meth:`_near_cells`) replaces a probe ray. Most missed rays
-        point away from F from springs far from it.
+        Every point of the segment lies within half its length of its midpoint, and a window
+        never starts before -s_end, so within s_end: one lookup of the midpoint in a grid whose
+        marked cells cover every point that close to F (:meth:`_near_cells`) replaces a probe
+        ray. The reach depends on s_end alone, so one grid serves every call with the same h_max.
+        Most missed rays point away from F from springs far from it.
         """
-        reach = 0.5 * (s_end - float(s_start.min(initial=s_end))) + self._step_mm
+        reach = s_end + self._step_mm
         grid = self._near_cells(reach)
         if grid is None:  # F's triangles too large for a grid: every ray is probed
             return np.ones(rows.size, bool)
