@@ -45,7 +45,7 @@ local frame instead (lengths are invariant under the rigid motion).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -91,6 +91,24 @@ class RayHits:
     spring_length_mm: np.ndarray
     # (n,) int64 index of the hit triangle of F; -1 where none
     triangle: np.ndarray
+
+
+@dataclass(frozen=True)
+class Rays:
+    """Rays checked once by :meth:`RayCaster.prepare`, cast many times by :meth:`RayCaster.cast_rays`."""
+
+    origins_mm: np.ndarray  # (n, 3) float64, read-only
+    directions: np.ndarray  # (n, 3) float64 unit or zero rows, read-only
+    live: np.ndarray | None  # (l,) indices of the rays with a direction; None: every ray has one
+    # (l, 4) rows (origin, 1) of the live rays, formed on first use (see homogeneous_origins)
+    _homogeneous: list = field(default_factory=list, repr=False, compare=False)
+
+    def homogeneous_origins(self) -> np.ndarray:
+        """(l, 4) rows (x, y, z, 1) of the live rays' origins: moved by one affine product."""
+        if not self._homogeneous:
+            origins = self.origins_mm if self.live is None else self.origins_mm[self.live]
+            self._homogeneous.append(np.column_stack([origins, np.ones(origins.shape[0])]))
+        return self._homogeneous[0]
 
 
 def _moller_trumbore(
@@ -292,6 +310,45 @@ class RayCaster:
 
     # -- public ----------------------------------------------------------------------------------
 
+    def prepare(self, origins_mm: np.ndarray, directions: np.ndarray) -> "Rays":
+        """Check rays once for casting many times (e.g. one spring bed at every time point).
+
+        Parameters
+        ----------
+        origins_mm, directions
+            (n, 3) origins (mm) and unit directions, as for :meth:`cast`; zero direction rows are
+            rays without a spring (never hit).
+
+        Returns
+        -------
+        Rays
+            Float64 read-only copies, checked finite and unit (:meth:`cast_rays` casts them).
+        """
+        origins = np.array(origins_mm, dtype=np.float64)
+        dirs = np.array(directions, dtype=np.float64)
+        if origins.ndim != 2 or origins.shape[1] != 3:
+            raise ValueError(f"origins_mm must have shape (n, 3), got {origins.shape}")
+        if dirs.shape != origins.shape:
+            raise ValueError(f"directions must have shape {origins.shape}, got {dirs.shape}")
+        # One reduction instead of two full isfinite passes; a finite sum can only overflow for
+        # coordinates near 1e308, which then take the exact check.
+        if not np.isfinite(origins.sum() + dirs.sum()) and not (
+            np.all(np.isfinite(origins)) and np.all(np.isfinite(dirs))
+        ):
+            raise ValueError("origins_mm and directions must be finite")
+        # |d| within _UNIT_TOLERANCE of 1, compared squared (no square root, no masked gather).
+        squared = row_dot(dirs, dirs)
+        unit = (squared >= (1.0 - _UNIT_TOLERANCE) ** 2) & (squared <= (1.0 + _UNIT_TOLERANCE) ** 2)
+        live = None
+        if not unit.all():
+            has_direction = squared > 0
+            if np.any(has_direction & ~unit):
+                raise ValueError("directions must be unit vectors (or zero rows for no spring)")
+            live = np.flatnonzero(has_direction)
+        for array in (origins, dirs):
+            array.flags.writeable = False
+        return Rays(origins, dirs, live)
+
     def cast(
         self,
         origins_mm: np.ndarray,
@@ -321,56 +378,51 @@ class RayCaster:
             Signed length s_i (negative = interpenetration; ``inf`` if no valid hit in the
             window) and the hit triangle of F (-1 if none).
         """
-        origins = np.asarray(origins_mm, dtype=np.float64)
-        dirs = np.asarray(directions, dtype=np.float64)
-        if origins.ndim != 2 or origins.shape[1] != 3:
-            raise ValueError(f"origins_mm must have shape (n, 3), got {origins.shape}")
-        if dirs.shape != origins.shape:
-            raise ValueError(f"directions must have shape {origins.shape}, got {dirs.shape}")
-        # One reduction instead of two full isfinite passes; a finite sum can only overflow for
-        # coordinates near 1e308, which then take the exact check.
-        if not np.isfinite(origins.sum() + dirs.sum()) and not (
-            np.all(np.isfinite(origins)) and np.all(np.isfinite(dirs))
-        ):
-            raise ValueError("origins_mm and directions must be finite")
+        return self.cast_rays(self.prepare(origins_mm, directions), max_length_mm, rotation, translation)
+
+    def cast_rays(
+        self,
+        rays: "Rays",
+        max_length_mm: float,
+        rotation: np.ndarray | None = None,
+        translation: np.ndarray | None = None,
+    ) -> RayHits:
+        """:meth:`cast` of rays checked once by :meth:`prepare` (same arguments and result)."""
         h = float(max_length_mm)
         if not (np.isfinite(h) and h > 0):
             raise ValueError(f"max_length_mm must be finite and > 0, got {max_length_mm}")
-        # |d| within _UNIT_TOLERANCE of 1, compared squared (no square root, no masked gather).
-        squared = row_dot(dirs, dirs)
-        unit = (squared >= (1.0 - _UNIT_TOLERANCE) ** 2) & (squared <= (1.0 + _UNIT_TOLERANCE) ** 2)
-        all_unit = bool(unit.all())
-        has_direction = unit if all_unit else squared > 0
-        if not all_unit and np.any(has_direction & ~unit):
-            raise ValueError("directions must be unit vectors (or zero rows for no spring)")
-
-        if rotation is not None or translation is not None:
-            rot = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
-            shift = np.zeros(3) if translation is None else np.asarray(translation, float)
+        rot = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
+        shift = np.zeros(3) if translation is None else np.asarray(translation, float)
+        if rotation is not None:
             if rot.shape != (3, 3) or np.abs(rot.T @ rot - np.eye(3)).max() > 1e-9:
                 raise ValueError("rotation must be a 3x3 orthogonal matrix")
             if np.linalg.det(rot) < 0:
                 raise ValueError("rotation must be proper (det = +1), not a reflection")
-            if shift.shape != (3,):
-                raise ValueError(f"translation must have shape (3,), got {shift.shape}")
-            # Row-vector form of x_local = R^T (x_world - t), then relative to F's box centre.
-            origins = add_rows(rows_times(origins, rot), -(shift @ rot + self._centre_mm))
-            dirs = rows_times(dirs, rot)
-        else:
-            origins = add_rows(origins, -self._centre_mm)
+        if shift.shape != (3,):
+            raise ValueError(f"translation must have shape (3,), got {shift.shape}")
 
-        n = len(origins)
-        cast = self._cast_bruteforce if self.backend == "numpy" else self._cast_embree
+        n = rays.origins_mm.shape[0]
         if not (len(self.triangles) and n):
             return RayHits(spring_length_mm=np.full(n, np.inf), triangle=np.full(n, -1, dtype=np.int64))
-        if all_unit:  # the usual case: no gather, no scatter
+        if rays.live is None:  # the usual case: no gather, no scatter
+            origins, dirs = rays.origins_mm, rays.directions
+        else:
+            origins, dirs = rays.origins_mm[rays.live], rays.directions[rays.live]
+        # Row-vector form of x_local = R^T (x_world - t), then relative to F's box centre: one
+        # product of the rows (x, 1) with the 4 x 3 affine matrix (R; -t R - centre).
+        affine = np.empty((4, 3))
+        affine[:3] = rot
+        affine[3] = -(shift @ rot + self._centre_mm)
+        origins = rows_times(rays.homogeneous_origins(), affine)
+        dirs = rows_times(dirs, rot)
+        cast = self._cast_bruteforce if self.backend == "numpy" else self._cast_embree
+        if rays.live is None:
             length, hit = cast(origins, dirs, h)
             return RayHits(spring_length_mm=length, triangle=hit)
         length = np.full(n, np.inf)
         hit = np.full(n, -1, dtype=np.int64)
-        live = np.flatnonzero(has_direction)
-        if live.size:
-            length[live], hit[live] = cast(origins[live], dirs[live], h)
+        if rays.live.size:
+            length[rays.live], hit[rays.live] = cast(origins, dirs, h)
         return RayHits(spring_length_mm=length, triangle=hit)
 
     # -- backends --------------------------------------------------------------------------------
@@ -423,7 +475,9 @@ class RayCaster:
             if active.size == n:  # first round: every ray, one common start (a scalar), no gather
                 o, d, s0 = origins, dirs, seg_start
                 start = -h - step
-                ray = self._embree_run(o + start * d, d, np.full(n, (h + self._reach_mm) - start))
+                start_points = d * start
+                start_points += o
+                ray = self._embree_run(start_points, d, np.full(n, (h + self._reach_mm) - start, np.float32))
                 window_end = (h + step) - start
             else:
                 o, d, s0 = origins[active], dirs[active], seg_start[active]
@@ -433,27 +487,27 @@ class RayCaster:
             none = prim < 0
             missed.append(active[none])
             # A nearest float32 hit beyond the window (and its padding) ends the search: no spring.
-            found = ~none & (ray["tfar"] <= window_end)
+            found = ray["tfar"] <= window_end
+            found &= ~none
             if found.all():  # e.g. every spring facing F: no gather
                 idx, k, u32, v32 = active, prim.astype(np.int64), ray["u"], ray["v"]
             else:
                 # Integer row gathers by np.take: a boolean mask (or []) over (n, 3) rows is
                 # several times slower.
                 rows = np.flatnonzero(found)
-                idx, k, s0 = active[rows], prim[rows].astype(np.int64), s0[rows]
+                idx, k, s0 = active[rows], np.take(prim, rows).astype(np.int64), s0[rows]
                 o, d = np.take(o, rows, axis=0), np.take(d, rows, axis=0)
-                u32, v32 = ray["u"][rows], ray["v"][rows]
-            t, u, v, det = self._remeasure(o, d, k, u32, v32)
+                u32, v32 = np.take(ray["u"], rows), np.take(ray["v"], rows)
+            t, u, v, det, edge = self._remeasure(o, d, k, u32, v32)
             # Embree's float32 answer is only trusted where float64 puts the ray on its triangle;
             # a ray that lands at (or, in float64, just past) an edge or vertex of it is re-solved
             # exactly among the triangles around that triangle: a float32 tie is always between
             # neighbours, so this stays local (never a pass over all of F).
-            # Every other row is on its triangle (inside to _REFERENCE_SLACK, so within the looser
-            # _BARYCENTRIC_SLACK too; nan barycentrics, det == 0, are near_edge).
-            near_edge = ~_inside(u, v, _REFERENCE_SLACK)
-            on_triangle = np.ones(k.size, bool)
-            if near_edge.any():
-                fix = np.flatnonzero(near_edge)
+            # Only the rows the re-measure tested in full can be off their triangle (the others
+            # are inside by more than float32 round-off); nan barycentrics, det == 0, are too.
+            fix = edge[~_inside(u[edge], v[edge], _REFERENCE_SLACK)]
+            lost = fix[:0]
+            if fix.size:
                 far = np.full(fix.size, h + self._reach_mm)
                 t_fix, k_fix, det_fix = self._star_hits(o[fix], d[fix], k[fix], s0[fix], far, front_only=False)
                 found_fix = k_fix >= 0
@@ -461,16 +515,22 @@ class RayCaster:
                 k[fix[found_fix]] = k_fix[found_fix]
                 # No neighbour meets the ray: Embree's triangle was not where the ray passes at
                 # all; it counts as a miss and goes to the probe repair below.
-                on_triangle[fix[~found_fix]] = False
-            facing = det > 0
+                lost = fix[~found_fix]
             in_window = t <= h
-            accept = facing & on_triangle & (t > -h) & in_window
-            # Wrong-facing, or in the padding before the window: skip it and continue past it.
-            # (Any hit beyond the window ends the search: nothing nearer was found.)
-            skip = on_triangle & in_window & (~facing | (t <= -h))
+            accept = (det > 0) & (t > -h)
+            accept &= in_window
+            accept[lost] = False
+            if accept.all():  # e.g. every spring facing F from in front: no mask
+                length[idx], hit[idx] = t, k
+                active = idx[:0]
+                break
             length[idx[accept]] = t[accept]
             hit[idx[accept]] = k[accept]
-            missed.append(idx[~on_triangle])
+            missed.append(idx[lost])
+            # Wrong-facing, or in the padding before the window: skip it and continue past it.
+            # (Any hit beyond the window ends the search: nothing nearer was found.)
+            skip = in_window & ~accept
+            skip[lost] = False
             # Before resuming past a skipped hit, look at the triangles around it: where F folds
             # (a ridge between a front- and a back-facing triangle) Embree may have returned the
             # back-facing one of a tie, and the valid hit sits at the same point.
@@ -500,13 +560,14 @@ class RayCaster:
 
     def _remeasure(
         self, o: np.ndarray, d: np.ndarray, k: np.ndarray, u32: np.ndarray, v32: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(t, u, v, det) in float64 of rays o + t d on Embree's triangles k (see _moller_trumbore).
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(t, u, v, det, edge) in float64 of rays o + t d on Embree's triangles k (see _moller_trumbore).
 
         Where Embree's float32 barycentrics put the hit well inside the triangle (further from every
         edge than float32 round-off can move it) the triangle is certainly right and only the
         plane distance is recomputed in float64 (signed length directly from the true origin);
-        Embree's u, v are returned for those rows. The other rows get a full Moller-Trumbore test.
+        Embree's u, v are returned for those rows. The other rows, ``edge`` (ascending), get a full
+        Moller-Trumbore test.
         """
         rows = np.take(self._plane_rows, k, axis=0)  # take: far cheaper than [] for row gathers
         normal = rows[:, :3]
@@ -523,7 +584,7 @@ class RayCaster:
                 o[edge], d[edge], self._v0[ke], self._edge1[ke], self._edge2[ke]
             )
         self.pairs_tested += k.size
-        return t, u, v, det
+        return t, u, v, det, edge
 
     def _repair_misses(
         self,

@@ -238,13 +238,14 @@ def run(
     free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
     ligaments = ligament_table(scene.ligaments)
     reference_rows = generalised_directions(spring_centroid, spring_normal, g0)
+    rays = caster.prepare(spring_centroid, spring_normal)  # checked once, cast at every time point
     seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
         clock = time.perf_counter()
         if method == "dem":
             pose, stored = Placement.identity(g0), np.zeros((n_springs, 3))
         f_pose = fixed_placement(scene, k)
-        geometry = spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, f_pose, cartilage)
+        geometry = spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, f_pose, cartilage, rays)
         seconds["geometry"] += time.perf_counter() - clock
         clock = time.perf_counter()
         n_c = int(geometry.candidate_index.size)

@@ -15,7 +15,7 @@ import numpy as np
 
 from edem.laws import LAWS, ContactLaw, ElementLaw, LinearElements
 from edem.mechanics import ShearTerms, confined_modulus_mpa, generalised_directions
-from edem.raycast import RayCaster
+from edem.raycast import RayCaster, Rays
 from edem.rowwise import add_rows, rows_times
 
 
@@ -116,6 +116,7 @@ def spring_geometry(
     caster: RayCaster,
     fixed: Placement,
     cartilage: Cartilage,
+    rays: Rays | None = None,
 ) -> SpringGeometry:
     """Geometry stage (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, thesis 4.2.1): place M's springs and measure them against F.
 
@@ -123,14 +124,15 @@ def spring_geometry(
     Rays are cast along the springs' normals in a signed window of +-h_max (so touching or
     interpenetrating bodies still see each other), in F's own frame. Candidates: the threshold
     law takes every spring with a hit and h <= h_max (eq. 4.4); the gap laws take every spring
-    with a hit in the window, and the law decides whether it is compressed.
+    with a hit in the window, and the law decides whether it is compressed. ``rays``: the same
+    springs as ``caster.prepare(centroid_mm, normal)``, checked once for a run of many poses.
     """
     # F's frame seen from M's reference frame: x_F = R_f^T (R_m X + b_m - b_f) = R^T (X - t) with
     # R = R_m^T R_f and t = R_m^T (b_f - b_m), so the reference rays go to F's frame in one step.
     rotation_m, offset_m = mobile.affine()
     rotation_f, offset_f = fixed.affine()
-    hits = caster.cast(
-        centroid_mm, normal, cartilage.max_spring_length_mm,
+    hits = caster.cast_rays(
+        caster.prepare(centroid_mm, normal) if rays is None else rays, cartilage.max_spring_length_mm,
         rotation=rotation_m.T @ rotation_f, translation=rotation_m.T @ (offset_f - offset_m),
     )
     length = hits.spring_length_mm
