@@ -22,6 +22,7 @@ balances the load only in the linear model, not in the geometry: such a result i
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -68,7 +69,7 @@ def motion_bound_mm(u: np.ndarray, arm_bound_mm: float) -> float:
 
 def check_increment(
     u: np.ndarray,
-    spring_points_mm: np.ndarray,
+    spring_points_mm: np.ndarray | Callable[[], np.ndarray],
     reference_point_mm: np.ndarray,
     cartilage: Cartilage,
     where: str,
@@ -78,14 +79,19 @@ def check_increment(
     """Refuse a solve (a DEM pose, an EDEM increment) that moves a contact spring beyond ``WINDOW_FRACTION`` h_max.
 
     ``spring_points_mm`` (n, 3): the centroids of the springs in contact during the increment, or
-    of more springs with ``in_contact`` (n,) bool saying which are (gathered only if needed).
+    of more springs with ``in_contact`` (n,) bool saying which are (gathered only if needed); or a
+    function returning them, called only if the bound below does not settle the check.
     ``arm_bound_mm``: an upper bound on their distance from G (for a rigid M, the largest over
     all its springs at the reference pose, which no motion changes); a motion that cannot move
     any point that close to G by the limit passes without measuring the springs one by one.
     """
     limit = WINDOW_FRACTION * cartilage.max_spring_length_mm
     # (1 + 1e-9): the per-spring measure below has round-off, the bound must stay above it.
-    if spring_points_mm.shape[0] == 0 or motion_bound_mm(u, arm_bound_mm) * (1.0 + 1e-9) <= limit:
+    if motion_bound_mm(u, arm_bound_mm) * (1.0 + 1e-9) <= limit:
+        return
+    if callable(spring_points_mm):
+        spring_points_mm = spring_points_mm()
+    if spring_points_mm.shape[0] == 0:
         return
     if in_contact is not None:
         spring_points_mm = np.take(spring_points_mm, np.flatnonzero(in_contact), axis=0)

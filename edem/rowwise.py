@@ -47,6 +47,8 @@ _ROWS_PER_BLOCK = 256
 def add_rows(rows: np.ndarray, vector: np.ndarray) -> np.ndarray:
     """``rows + vector`` for (n, 3) ``rows`` and a (3,) ``vector``, the same numbers: blocks of
     _ROWS_PER_BLOCK rows are viewed as one long row and get the vector repeated along it."""
+    if rows.shape[0] < _ROWS_PER_BLOCK:  # (a few points: no block to form)
+        return rows + vector
     rows = np.ascontiguousarray(rows)
     out = np.empty_like(rows, dtype=np.result_type(rows, vector))
     whole = rows.shape[0] - rows.shape[0] % _ROWS_PER_BLOCK
