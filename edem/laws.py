@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from functools import cached_property
 from typing import ClassVar
 
 import numpy as np
@@ -43,12 +44,22 @@ class LinearElements:
         return int(self.offset_n.shape[0])
 
     def force_and_stiffness(self, approach_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(s, ds/ddelta) at the approaches (m,)."""
-        return self.offset_n + self.stiffness_n_per_mm * approach_mm, self.stiffness_n_per_mm.copy()
+        """(s, ds/ddelta) at the approaches (m,); ds/ddelta is the law's own array (read only)."""
+        return self.offset_n + self.stiffness_n_per_mm * approach_mm, self.stiffness_n_per_mm
+
+    @cached_property
+    def _twice_stiffness(self) -> np.ndarray:
+        return 2.0 * self.stiffness_n_per_mm
 
     def energy(self, approach_mm: np.ndarray) -> np.ndarray:
         """phi with phi' = max(s, 0): max(s, 0)^2 / (2 c)."""
-        return np.maximum(self.offset_n + self.stiffness_n_per_mm * approach_mm, 0.0) ** 2 / (2.0 * self.stiffness_n_per_mm)
+        # In place on the one new array: a solve evaluates this at every line-search trial.
+        phi = self.stiffness_n_per_mm * approach_mm
+        phi += self.offset_n
+        np.maximum(phi, 0.0, out=phi)
+        np.square(phi, out=phi)
+        phi /= self._twice_stiffness
+        return phi
 
     def max_approach_mm(self) -> np.ndarray:
         """Largest admissible approach: unbounded."""

@@ -335,21 +335,24 @@ def solve_unilateral(
             alpha = min(1.0, float(np.min(0.99 * room[rate > 0] / rate[rate > 0], initial=np.inf)))
         slope = float(grad @ step) if iteration > 1 else 0.0
         known, known_energy = known_energy, None
+        trial_approach = None
         if slope < 0.0:
             # Armijo on Pi. The first, all-active step (DEM's) is taken whole: with non-negative
             # offsets it descends anyway (Pi <= the all-active quadratic it minimises).
-            compressed = s > 0
-            e0, size = known if known is not None else energy(u_f, approach, compressed)
+            # (From the second iteration on, active == (s > 0): the compressed elements.)
+            e0, size = known if known is not None else energy(u_f, approach, active)
             # Differences below the energy's round-off say nothing: the step is then taken.
             noise = 1e-12 * size
             while alpha > 1e-12:
-                trial = energy(u_f + alpha * step, approach + alpha * rate, compressed)
+                trial_approach = approach + alpha * rate
+                trial = energy(u_f + alpha * step, trial_approach, active)
                 if trial[0] <= e0 + 1e-4 * alpha * slope + noise:
                     known_energy = trial if shear is None else None
                     break
                 alpha *= 0.5
         u_f = u_f + alpha * step
-        approach = approach + alpha * rate
+        # (the accepted trial's approaches are this very sum: not formed twice)
+        approach = trial_approach if known_energy is not None else approach + alpha * rate
         s, k = law.force_and_stiffness(approach)
         new_active = s > 0
         residual = gradient(u_f, s, new_active)
