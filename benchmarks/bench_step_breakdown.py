@@ -34,7 +34,7 @@ seconds: dict[str, float] = {}
 # (owner, attribute, label): the stages timed, in the order printed
 STAGES = (
     (solver, "spring_geometry", "geometry"),
-    (raycast.RayCaster, "cast", "  cast()"),
+    (raycast.RayCaster, "cast_rays", "  cast()"),
     (raycast.RayCaster, "_embree_run", "    embree traversal (all passes)"),
     (raycast.RayCaster, "_remeasure", "    float64 re-measure"),
     (raycast.RayCaster, "_repair_misses", "    miss repair (grid + probes)"),

