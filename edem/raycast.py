@@ -310,7 +310,7 @@ class RayCaster:
 
     # -- public ----------------------------------------------------------------------------------
 
-    def prepare(self, origins_mm: np.ndarray, directions: np.ndarray) -> "Rays":
+    def prepare(self, origins_mm: np.ndarray, directions: np.ndarray) -> Rays:
         """Check rays once for casting many times (e.g. one spring bed at every time point).
 
         Parameters
@@ -382,7 +382,7 @@ class RayCaster:
 
     def cast_rays(
         self,
-        rays: "Rays",
+        rays: Rays,
         max_length_mm: float,
         rotation: np.ndarray | None = None,
         translation: np.ndarray | None = None,
@@ -404,10 +404,7 @@ class RayCaster:
         n = rays.origins_mm.shape[0]
         if not (len(self.triangles) and n):
             return RayHits(spring_length_mm=np.full(n, np.inf), triangle=np.full(n, -1, dtype=np.int64))
-        if rays.live is None:  # the usual case: no gather, no scatter
-            origins, dirs = rays.origins_mm, rays.directions
-        else:
-            origins, dirs = rays.origins_mm[rays.live], rays.directions[rays.live]
+        dirs = rays.directions if rays.live is None else rays.directions[rays.live]
         # Row-vector form of x_local = R^T (x_world - t), then relative to F's box centre: one
         # product of the rows (x, 1) with the 4 x 3 affine matrix (R; -t R - centre).
         affine = np.empty((4, 3))
