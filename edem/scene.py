@@ -10,7 +10,7 @@ import pickle
 import tomllib
 import warnings
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -62,6 +62,11 @@ class Viscoelastic:
     allow_unstable: bool = False  # run RK2 beyond dt > 2 tau (with a warning) instead of refusing
 
 
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.flags.writeable = False
+    return array
+
+
 @dataclass(frozen=True, eq=False)
 class Scene:
     """Everything one run needs, validated. Springs: one per non-degenerate mobile triangle."""
@@ -82,22 +87,24 @@ class Scene:
     fe: dict | None = None
     warnings: tuple[str, ...] = ()
 
-    @property
+    # The springs' arrays are formed once per scene (a run reads them, and every RunResult's
+    # n_springs) and handed out read-only: a scene is immutable.
+    @cached_property
     def spring_triangle(self) -> np.ndarray:
         """Index of the mobile triangle that carries each spring (degenerate ones carry none)."""
-        return np.flatnonzero(self.mobile.areas_mm2 > 0.0)
+        return _read_only(np.flatnonzero(self.mobile.areas_mm2 > 0.0))
 
-    @property
+    @cached_property
     def spring_centroid_mm(self) -> np.ndarray:
-        return self.mobile.centroids_mm[self.spring_triangle]
+        return _read_only(self.mobile.centroids_mm[self.spring_triangle])
 
-    @property
+    @cached_property
     def spring_normal(self) -> np.ndarray:
-        return self.mobile.unit_normals[self.spring_triangle]
+        return _read_only(self.mobile.unit_normals[self.spring_triangle])
 
-    @property
+    @cached_property
     def spring_area_mm2(self) -> np.ndarray:
-        return self.mobile.areas_mm2[self.spring_triangle]
+        return _read_only(self.mobile.areas_mm2[self.spring_triangle])
 
     @classmethod
     def from_arrays(
