@@ -284,9 +284,10 @@ def solve_unilateral(
             grad = grad + shear.generalised_force(full(u_f), active[:n_shear])[dofs]
         return grad
 
-    def energy(u_f: np.ndarray, approach: np.ndarray, active: np.ndarray) -> tuple[float, float]:
-        """Pi(u) and the size of the terms it sums (its round-off scale)."""
-        stored = float(law.energy(approach).sum())
+    def energy(u_f: np.ndarray, approach: np.ndarray, active: np.ndarray, phi: np.ndarray | None = None) -> tuple[float, float]:
+        """Pi(u) and the size of the terms it sums (its round-off scale); ``phi``: the elements'
+        energies at ``approach`` if already known."""
+        stored = float((law.energy(approach) if phi is None else phi).sum())
         if shear is not None:
             f = shear.force(full(u_f), active[:n_shear])
             stored += 0.5 * float((np.einsum("ij,ij->i", f, f) / np.maximum(shear.stiffness_n_per_mm, 1e-300)).sum())
@@ -335,7 +336,7 @@ def solve_unilateral(
             alpha = min(1.0, float(np.min(0.99 * room[rate > 0] / rate[rate > 0], initial=np.inf)))
         slope = float(grad @ step) if iteration > 1 else 0.0
         known, known_energy = known_energy, None
-        trial_approach = None
+        accepted = None  # (approach, s, k) of the accepted line-search trial
         if slope < 0.0:
             # Armijo on Pi. The first, all-active step (DEM's) is taken whole: with non-negative
             # offsets it descends anyway (Pi <= the all-active quadratic it minimises).
@@ -345,15 +346,19 @@ def solve_unilateral(
             noise = 1e-12 * size
             while alpha > 1e-12:
                 trial_approach = approach + alpha * rate
-                trial = energy(u_f + alpha * step, trial_approach, active)
+                trial_s, trial_k, trial_phi = law.force_stiffness_energy(trial_approach)
+                trial = energy(u_f + alpha * step, trial_approach, active, trial_phi)
                 if trial[0] <= e0 + 1e-4 * alpha * slope + noise:
                     known_energy = trial if shear is None else None
+                    accepted = trial_approach, trial_s, trial_k
                     break
                 alpha *= 0.5
         u_f = u_f + alpha * step
-        # (the accepted trial's approaches are this very sum: not formed twice)
-        approach = trial_approach if known_energy is not None else approach + alpha * rate
-        s, k = law.force_and_stiffness(approach)
+        if accepted is not None:  # the trial's approaches, forces and stiffnesses are the step's
+            approach, s, k = accepted
+        else:
+            approach = approach + alpha * rate
+            s, k = law.force_and_stiffness(approach)
         new_active = s > 0
         residual = gradient(u_f, s, new_active)
         # Force scale of the problem: the load and every element force (incl. the stored ones).
