@@ -53,19 +53,13 @@ class LinearElements:
 
     def energy(self, approach_mm: np.ndarray) -> np.ndarray:
         """phi with phi' = max(s, 0): max(s, 0)^2 / (2 c)."""
-        # In place on the one new array: a solve evaluates this at every line-search trial.
-        phi = self.stiffness_n_per_mm * approach_mm
-        phi += self.offset_n
-        np.maximum(phi, 0.0, out=phi)
-        np.square(phi, out=phi)
-        phi /= self._twice_stiffness
-        return phi
+        return self.force_stiffness_energy(approach_mm)[2]
 
     def force_stiffness_energy(self, approach_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`force_and_stiffness` and :meth:`energy` at the same approaches, sharing s
-        (the same numbers as the two calls)."""
+        (a solve evaluates both at every line-search trial)."""
         force = self.offset_n + self.stiffness_n_per_mm * approach_mm
-        phi = np.maximum(force, 0.0)
+        phi = np.maximum(force, 0.0)  # then in place on this one new array
         np.square(phi, out=phi)
         phi /= self._twice_stiffness
         return force, self.stiffness_n_per_mm, phi
