@@ -50,7 +50,7 @@ from typing import Literal
 
 import numpy as np
 
-from edem.rowwise import add_rows, row_dot, rows_times
+from edem.rowwise import add_rows, min_rows, row_dot, rows_times
 
 Backend = Literal["embree", "numpy"]
 
@@ -651,12 +651,16 @@ class RayCaster:
             point += middle[:, None] * np.take(dirs, rows, axis=0)
         point = add_rows(point, -lower)
         point *= inverse_cell
-        # Truncation and clipping send points outside the grid to its border cells, which are
-        # never marked: the grid reaches one cell beyond the marks on every side.
-        cell = point.astype(np.int64)
-        np.maximum(cell, 0, out=cell)
-        np.minimum(cell, top, out=cell)
-        return marked[cell @ strides]
+        # Clipping sends points outside the grid to its border cells, which are never marked: the
+        # grid reaches one cell beyond the marks on every side. The cell indices, and the flat
+        # index from them, are whole numbers held exactly in float64 (cheaper than integer rows).
+        np.maximum(point, 0.0, out=point)
+        min_rows(point, top, out=point)
+        np.floor(point, out=point)
+        flat = point[:, 0] * strides[0]
+        flat += point[:, 1] * strides[1]
+        flat += point[:, 2]  # (stride 1)
+        return marked[flat.astype(np.int64)]
 
     def _near_cells(self, reach_mm: float) -> _Grid | None:
         """A grid over F's box padded by ``reach_mm`` whose marked cells hold every point within

@@ -47,12 +47,24 @@ _ROWS_PER_BLOCK = 256
 def add_rows(rows: np.ndarray, vector: np.ndarray) -> np.ndarray:
     """``rows + vector`` for (n, 3) ``rows`` and a (3,) ``vector``, the same numbers: blocks of
     _ROWS_PER_BLOCK rows are viewed as one long row and get the vector repeated along it."""
-    if rows.shape[0] < _ROWS_PER_BLOCK:  # (a few points: no block to form)
-        return rows + vector
+    return _with_each_row(np.add, rows, vector)
+
+
+def min_rows(rows: np.ndarray, vector: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``np.minimum(rows, vector)`` for (n, 3) ``rows`` and a (3,) ``vector``, as :func:`add_rows`
+    (into ``out`` if given, e.g. ``rows`` itself)."""
+    return _with_each_row(np.minimum, rows, vector, out)
+
+
+def _with_each_row(ufunc: np.ufunc, rows: np.ndarray, vector: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``ufunc(rows, vector)`` with the (3,) vector repeated along blocks of _ROWS_PER_BLOCK rows."""
+    if out is None and rows.shape[0] < _ROWS_PER_BLOCK:  # (a few points: no block to form)
+        return ufunc(rows, vector)
     rows = np.ascontiguousarray(rows)
-    out = np.empty_like(rows, dtype=np.result_type(rows, vector))
+    if out is None:
+        out = np.empty_like(rows, dtype=np.result_type(rows, vector))
     whole = rows.shape[0] - rows.shape[0] % _ROWS_PER_BLOCK
     width = rows.shape[1] * _ROWS_PER_BLOCK
-    np.add(rows[:whole].reshape(-1, width), np.tile(vector, _ROWS_PER_BLOCK), out=out[:whole].reshape(-1, width))
-    np.add(rows[whole:], vector, out=out[whole:])
+    ufunc(rows[:whole].reshape(-1, width), np.tile(vector, _ROWS_PER_BLOCK), out=out[:whole].reshape(-1, width))
+    ufunc(rows[whole:], vector, out=out[whole:])
     return out
