@@ -173,6 +173,11 @@ class ContactLaw(ABC):
     #: "carried" (a force carried into the step, the EDEM push-back: the layer starts deflected by
     #: C s0) or "overlap" (geometric: the layer must be compressed by t - h); None: cannot couple
     thin_layer: ClassVar[str | None] = None
+    #: under the coupling, where the layer is: "surface" (bonded to all of M, going on beyond the
+    #: candidates, as the FE layer does) or "candidates" (the cartilage fills the gap only where
+    #: the springs are candidates, as the FE slab does: the layer ends at their boundary with a
+    #: free lateral face, where it can squeeze out)
+    thin_layer_extent: ClassVar[str] = "surface"
 
     @abstractmethod
     def default_window_mm(self, thickness_mm: float | None) -> float:
@@ -208,6 +213,7 @@ class ThresholdLaw(ContactLaw):
     name = "threshold"
     fe_twin = "slab"
     thin_layer = "carried"
+    thin_layer_extent = "candidates"
 
     def default_window_mm(self, thickness_mm: float | None) -> float:
         return 3.5

@@ -161,6 +161,19 @@ def operator_factors(poissons_ratio: float, shear_modulus_mpa: float, thickness_
 # --------------------------------------------------------------------------- surface operators
 
 
+def boundary_vertices(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(n_vertices,) bool: the vertices on an edge that only one of ``triangles`` (m, 3) has."""
+    tri = np.asarray(triangles, np.int64)
+    edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    # One integer key per undirected edge: a 1-D unique is much faster than unique(axis=0).
+    key, count = np.unique(edges[:, 0] * n_vertices + edges[:, 1], return_counts=True)
+    single = key[count == 1]
+    out = np.zeros(n_vertices, bool)
+    out[single // n_vertices] = True
+    out[single % n_vertices] = True
+    return out
+
+
 @dataclass(frozen=True)
 class SurfaceMesh:
     """Intrinsic geometry of the spring-bearing surface: one spring per triangle.
@@ -189,15 +202,7 @@ class SurfaceMesh:
         tri = np.asarray(triangles, np.int64)
         n = tri.shape[0]
         incidence = sp.csr_matrix((np.ones(3 * n), (np.repeat(np.arange(n), 3), tri.ravel())))
-        edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
-        n_v = incidence.shape[1]
-        # One integer key per undirected edge: a 1-D unique is much faster than unique(axis=0).
-        key, count = np.unique(edges[:, 0] * n_v + edges[:, 1], return_counts=True)
-        free = np.zeros(n_v, bool)
-        single = key[count == 1]  # an edge of one triangle only
-        free[single // n_v] = True
-        free[single % n_v] = True
-        return SurfaceMesh(tri, area, out, incidence, free)
+        return SurfaceMesh(tri, area, out, incidence, boundary_vertices(tri, incidence.shape[1]))
 
     def neighbourhood(self, cells: np.ndarray, width_mm: float, enough: int | None = None) -> np.ndarray:
         """Triangles within about ``width_mm`` of the triangles ``cells`` (bool mask, (n,)).
@@ -225,14 +230,18 @@ class SurfaceMesh:
     def from_surface(vertices_mm: np.ndarray, triangles: np.ndarray) -> "SurfaceMesh":
         return SurfaceMesh.from_corners(triangles, vertices_mm[triangles])
 
-    def smoothing_operators(self, cells: np.ndarray, mass_weight: np.ndarray, stiffness_weight: np.ndarray) -> tuple[sp.csc_matrix, "OperatorPattern"]:
+    def smoothing_operators(
+        self, cells: np.ndarray, mass_weight: np.ndarray, stiffness_weight: np.ndarray, edge_at_cells: bool = False
+    ) -> tuple[sp.csc_matrix, "OperatorPattern"]:
         """P1 operators on the triangles ``cells`` (indices, m): H and its pattern (with Q).
 
         H = M + K (v, v): the mass M = Q^T diag(A mass_weight) Q plus the cotangent stiffness K
-        with each triangle weighted by ``stiffness_weight`` (m,) (natural boundary), summed into
-        the cached pattern of these cells (``operator_pattern``): no sparse assembly per call.
+        with each triangle weighted by ``stiffness_weight`` (m,), summed into the cached pattern
+        of these cells (``operator_pattern``): no sparse assembly per call. The smoothed field
+        vanishes on the surface's free edge, and with ``edge_at_cells`` on the cells' own
+        boundary too (the layer ends there); elsewhere the boundary is natural.
         """
-        pattern = self.operator_pattern(cells)
+        pattern = self.operator_pattern(cells, edge_at_cells)
         # One 3 x 3 element matrix per triangle, row-major in (m, 9): mass A m / 9 for every
         # ordered pair of corners (Q^T diag(A m) Q) plus the cotangent stiffness, where the edge
         # opposite corner i carries w cot_i / 2 (off-diagonal -w cot_i / 2 at (j, k) and (k, j),
@@ -246,21 +255,23 @@ class SurfaceMesh:
         element += (self.area_mm2[cells] * np.asarray(mass_weight, float) / 9.0)[:, None]
         return pattern.matrix(pattern.sum_at_slots(element)), pattern
 
-    def operator_pattern(self, cells: np.ndarray) -> "OperatorPattern":
+    def operator_pattern(self, cells: np.ndarray, edge_at_cells: bool = False) -> "OperatorPattern":
         """The sparsity of the operators on the triangles ``cells`` (indices, m), built once per cell set.
 
-        Consecutive time points of a run usually share their cell set (the candidates and the
-        band around them), so the last pattern is kept and reused when the cells are the same.
+        Consecutive time points of a run usually share their cell set (the whole surface when the
+        band around the candidates covers most of it), so the last pattern is kept and reused
+        when the cells are the same. ``edge_at_cells``: see ``smoothing_operators``.
         """
-        key = np.asarray(cells).tobytes()
+        key = (np.asarray(cells).tobytes(), edge_at_cells)
         cached = self.memo.get("pattern")
         if cached is not None and cached[0] == key:
             return cached[1]
         tri = self.triangles[cells]
+        free = self.free_edge_vertex | boundary_vertices(tri, self.free_edge_vertex.shape[0]) if edge_at_cells else self.free_edge_vertex
         # Renumber the vertices the cells use, free-edge ones last (dropped below), in O(n).
-        used = np.zeros(self.free_edge_vertex.shape[0], bool)
+        used = np.zeros(free.shape[0], bool)
         used[tri] = True
-        interior, edge = used & ~self.free_edge_vertex, used & self.free_edge_vertex
+        interior, edge = used & ~free, used & free
         n_v, n_edge = int(interior.sum()), int(edge.sum())
         renumber = np.empty(used.shape[0], np.int64)
         renumber[interior] = np.arange(n_v)
@@ -406,8 +417,12 @@ def layer_compliance(
     thickness_mm: np.ndarray,
     youngs_modulus_mpa: float,
     poissons_ratio: float,
+    edge_at_cells: bool = False,
 ) -> LayerCompliance:
-    """The Pade thin-layer compliance on the springs ``cells`` (indices) with local thickness (m,) mm."""
+    """The Pade thin-layer compliance on the springs ``cells`` (indices) with local thickness (m,) mm.
+
+    ``edge_at_cells``: the layer ends at the boundary of ``cells`` (a free lateral face there),
+    rather than going on beyond them with a natural cut."""
     g = youngs_modulus_mpa / (2.0 * (1.0 + poissons_ratio))
     h = np.broadcast_to(np.asarray(thickness_mm, float), cells.shape)
     area = mesh.area_mm2[cells]
@@ -415,6 +430,6 @@ def layer_compliance(
     if sigma == 0.0:
         return LayerCompliance(c_loc / area, sp.csr_matrix((0, cells.shape[0])), sp.csc_matrix((0, 0)), 0.0)
     # S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl (module docstring, variable thickness).
-    smoothing, pattern = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl)
+    smoothing, pattern = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl, edge_at_cells)
     z = (pattern.q.T @ sp.diags(c_nl)).tocsr()
     return LayerCompliance(c_loc / area, z, smoothing, sigma, np.broadcast_to(c_nl, cells.shape), pattern)

@@ -288,10 +288,14 @@ def coupled_domain(mesh: SurfaceMesh, candidates: np.ndarray, band_mm: float) ->
 class CoupledStep:
     """One time point of DEM/EDEM on the coupled layer: the layer, overlap and elements.
 
-    The layer covers the candidate springs and a band of the surface around them 3 sqrt(b) h
+    Where the law's layer is bonded to all of M (``thin_layer_extent = "surface"``, the gap
+    laws), it covers the candidate springs and a band of the surface around them 3 sqrt(b) h
     wide (three decay lengths of the bulge; there the layer is free: f = 0, no opposing surface),
     so the layer can bulge outside the contact; beyond it the boundary is natural. Where that
-    band would cover half the surface, the layer is the whole surface (``coupled_domain``). Local
+    band would cover half the surface, the layer is the whole surface (``coupled_domain``).
+    Where the cartilage only fills the gap (``"candidates"``, the threshold law, whose FE twin is
+    the slab), the layer is the candidates, and it ends at their boundary with a free lateral
+    face (the smoothed field vanishes there, as at the surface's free edge). Local
     thickness: the length the law's shear springs use (t for the gap law, the current spring
     length for the threshold law; on the band t or the candidates' median). The overlap d0 is t - h for an
     "overlap" law (gap) or C f_carried for a "carried" law (threshold: the EDEM push-back of the
@@ -314,12 +318,13 @@ class CoupledStep:
         # The band: t, or for a law whose thickness is the spring length, the candidates' median.
         band_thickness = float(cartilage.thickness_mm) if law.needs_thickness else float(np.median(candidate_thickness, axis=None)) if cand.size else 1.0
         _, _, _, b = operator_factors(cartilage.poissons_ratio, 1.0, 1.0)
-        domain = coupled_domain(mesh, cand, 3.0 * np.sqrt(b) * band_thickness) if b > 0 else cand
+        ends = law.thin_layer_extent == "candidates"
+        domain = cand if ends or b == 0.0 else coupled_domain(mesh, cand, 3.0 * np.sqrt(b) * band_thickness)
         is_candidate = geometry.candidate[domain]
         length = geometry.spring_length_mm[domain]
         thickness = np.full(domain.shape, band_thickness)
         thickness[is_candidate] = candidate_thickness  # domain is sorted: candidates in their order
-        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio)
+        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends)
         overlap = np.full(domain.shape, -np.inf)
         if law.thin_layer == "carried":
             carried = np.zeros(domain.shape)
