@@ -126,6 +126,7 @@ def solve_thin_layer(
     fixed_dofs: tuple[str, ...] = (),
     shear: ShearTerms | None = None,
     length_scale_mm: float = 1.0,
+    initial_active: np.ndarray | None = None,
     cycle_rtol: float = 1e-7,
     max_iterations: int = 60,
 ) -> ThinLayerSolution:
@@ -134,8 +135,11 @@ def solve_thin_layer(
     ``directions`` (n, 6): rows g_j of the layer's springs; ``overlap_mm`` (n,): d0, -inf where no
     opposing surface can be touched (the free layer around the contact);
     ``ligament_rows`` (n_l, 6) and ``ligament_law``: tension-only ligaments as in
-    ``edem.mechanics.solve_unilateral``. Returns element forces for the springs then the
-    ligaments, with ``active`` the contact set; raises SolverError like ``solve_unilateral``.
+    ``edem.mechanics.solve_unilateral``. ``initial_active`` (n,) bool: the first contact set
+    (from the previous time point, so a slowly varying load needs one or two iterations; the
+    programme is strictly convex, so the answer does not depend on it); by default every
+    candidate. Returns element forces for the springs then the ligaments, with ``active`` the
+    contact set; raises SolverError like ``solve_unilateral``.
     """
     n_c = directions.shape[0]
     if ligament_rows is None:
@@ -149,7 +153,8 @@ def solve_thin_layer(
     touchable = np.isfinite(overlap_mm)  # -inf: free layer with no opposing surface
     # A fixed DOF never moves, so its column of df/du is never used: zero rows skip its solves.
     free_directions = directions * free
-    active = touchable.copy()  # the first iterate takes every candidate, as DEM does
+    warm = None if initial_active is None else initial_active & touchable
+    active = warm if warm is not None and np.any(warm) else touchable.copy()  # cold: every candidate, as DEM does
     ligament_active = np.ones(ligament_rows.shape[0], bool)
     everything: np.ndarray | None = None
     seen: set[bytes] = set()
@@ -306,6 +311,7 @@ class CoupledStep:
     overlap_mm: np.ndarray  # (n_d,) over the layer's springs
     directions: np.ndarray  # (n_d, 6)
     candidate: np.ndarray  # (n_d,) bool: the layer's springs that are candidates, in candidate order
+    springs: np.ndarray  # (n_d,) int: the layer's springs among all of M's
     ligament_rows: np.ndarray
     ligament_law: LinearElements
 
@@ -334,7 +340,7 @@ class CoupledStep:
             overlap[is_candidate] = (thickness - length)[is_candidate]
         rows = np.zeros((domain.shape[0], 6))
         rows[is_candidate] = directions  # domain is sorted, so candidates keep their order
-        return CoupledStep(layer, overlap, rows, is_candidate, ligament_rows, ligament_law)
+        return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law)
 
     def _to_candidates(self, solution: ThinLayerSolution) -> ThinLayerSolution:
         n_d, c = self.directions.shape[0], self.candidate
@@ -344,12 +350,17 @@ class CoupledStep:
         solution.deflection_mm, solution.gap_mm = solution.deflection_mm[c], solution.gap_mm[c]
         return solution
 
-    def solve(self, load, fixed_dofs, shear, length_scale_mm) -> ThinLayerSolution:
-        """The coupled solve; forces, contact set, deflection and gap of the candidates (then ligaments)."""
+    def solve(self, load, fixed_dofs, shear, length_scale_mm, released_before: np.ndarray | None = None) -> ThinLayerSolution:
+        """The coupled solve; forces, contact set, deflection and gap of the candidates (then ligaments).
+
+        ``released_before`` (n_springs,) bool over all of M's springs: the candidates out of
+        contact at the previous time point. The first iterate of the active set is every
+        candidate but those (new candidates start in contact, as in a cold start)."""
         return self._to_candidates(
             solve_thin_layer(
                 self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
+                initial_active=None if released_before is None else ~released_before[self.springs],
             )
         )
 

@@ -173,6 +173,22 @@ def test_dem_and_edem_agree_on_the_first_step_and_edem_balances_every_step():
     assert edem.steps[-1].displacement_mm[2] == pytest.approx(dem.steps[-1].displacement_mm[2], rel=0.1)
 
 
+def test_previous_contact_as_first_guess_finds_the_cold_start_solution():
+    """DEM over a load ramp starts each active set from the previous time point's contact; the
+    programme is strictly convex, so every time point equals its cold solve (a one-point scene)
+    to round-off (1e-9 of the peak: the balance's own 1e-7 cycle tolerance is not reached by a
+    set that converges) in no more iterations."""
+    cylinder, tibia = cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 2.3)
+    common = dict(fixed_dofs=CYLINDER_DOFS, poissons_ratio=0.45, law="gap", thickness_mm=2.0)
+    loads = ramp(1500.0, 5)
+    warm = run(coupled(make_scene(cylinder, tibia, loads, **common)), "dem").steps
+    cold = [run(coupled(make_scene(cylinder, tibia, load, **common)), "dem").steps[0] for load in loads]
+    for w, c in zip(warm, cold):
+        np.testing.assert_allclose(w.pressure_mpa, c.pressure_mpa, rtol=0.0, atol=1e-9 * c.peak_pressure_mpa)
+        assert np.array_equal(w.in_contact, c.in_contact)
+    assert sum(w.iterations for w in warm[1:]) < sum(c.iterations for c in cold[1:])
+
+
 def test_edem_load_then_unload_retraces_its_path_on_the_coupled_layer():
     """Load to 2 kN and back to zero (threshold law, nu 0.45). At 1000 N the unloading pose
     matches the loading one up to the incremental law's first-order error (the coupled thickness
