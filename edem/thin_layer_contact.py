@@ -22,10 +22,15 @@ contact stiffness D_I^T df_I/du; then I is updated: springs with f_j <= 0 leave,
 surface would penetrate (y_j < 0, including where the layer bulges outside the contact) enter.
 For C with non-positive off-diagonal entries (nu > 1/4: an M-matrix) this converges in a few
 iterations. Ligaments (tension-only) and the shear springs enter the 6 x 6 as in the spring bed.
+A nonlinear law (gap-log) adds to w its columns' excess e(f) over the linear column
+(``ContactLaw.column_excess_mm``); each iteration linearises it at the previous forces, which
+changes Lam and d0 only, so the same factorisation serves (Newton on the same active set).
 """
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,14 +59,20 @@ class ActiveSystem:
     force_per_mm: np.ndarray  # (n_I, 6)
     vertex0: np.ndarray  # (v,) z at u = 0
     vertex_per_mm: np.ndarray  # (v, 6)
+    local_mm_per_n: np.ndarray  # (n_c,) the local compliance it was built with
 
     @staticmethod
-    def build(layer: LayerCompliance, directions: np.ndarray, overlap_mm: np.ndarray, active: np.ndarray) -> "ActiveSystem":
-        lam = 1.0 / layer.local_mm_per_n[active]
+    def build(
+        layer: LayerCompliance, directions: np.ndarray, overlap_mm: np.ndarray, active: np.ndarray, local_mm_per_n: np.ndarray | None = None
+    ) -> "ActiveSystem":
+        """``local_mm_per_n`` (n_c,): the local compliance, the layer's unless a nonlinear column
+        is linearised (``solve_thin_layer``)."""
+        local = layer.local_mm_per_n if local_mm_per_n is None else local_mm_per_n
+        lam = 1.0 / local[active]
         rhs = np.column_stack([overlap_mm[active], directions[active]])  # (n_I, 7)
         if not layer.coupled:
             forces = lam[:, None] * rhs
-            return ActiveSystem(active, forces[:, 0], forces[:, 1:], np.zeros(0), np.zeros((0, 6)))
+            return ActiveSystem(active, forces[:, 0], forces[:, 1:], np.zeros(0), np.zeros((0, 6)), local)
         # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T, added on H's fixed pattern.
         weight = np.zeros(active.shape[0])
         weight[active] = lam
@@ -75,16 +86,16 @@ class ActiveSystem:
         if nonzero.size:
             vertex[:, nonzero] = solve(np.asarray(layer.z @ loads))
             forces[:, nonzero] -= lam[:, None] * (layer.sigma * np.asarray(layer.z.T @ vertex[:, nonzero])[active])
-        return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:])
+        return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
         return self.force0_n + self.force_per_mm @ u
 
     def deflection(self, layer: LayerCompliance, u: np.ndarray) -> np.ndarray:
-        """w = C f at every candidate for the forces of this set under u."""
+        """w = C f at every candidate for the forces of this set under u (local part as built)."""
         f = np.zeros(self.active.shape[0])
         f[self.active] = self.forces(u)
-        w = layer.local_mm_per_n * f
+        w = self.local_mm_per_n * f
         if layer.coupled:
             w = w + layer.sigma * (layer.z.T @ (self.vertex0 + self.vertex_per_mm @ u))
         return w
@@ -127,7 +138,9 @@ def solve_thin_layer(
     shear: ShearTerms | None = None,
     length_scale_mm: float = 1.0,
     initial_active: np.ndarray | None = None,
+    column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
     cycle_rtol: float = 1e-7,
+    newton_rtol: float = 1e-10,
     max_iterations: int = 60,
 ) -> ThinLayerSolution:
     """Unilateral equilibrium of the rigid body on the coupled layer (module docstring).
@@ -138,8 +151,11 @@ def solve_thin_layer(
     ``edem.mechanics.solve_unilateral``. ``initial_active`` (n,) bool: the first contact set
     (from the previous time point, so a slowly varying load needs one or two iterations; the
     programme is strictly convex, so the answer does not depend on it); by default every
-    candidate. Returns element forces for the springs then the ligaments, with ``active`` the
-    contact set; raises SolverError like ``solve_unilateral``.
+    candidate. ``column``: a nonlinear law's columns, f (n,) -> (excess (n,) mm, its derivative
+    (n,) mm/N) (``ContactLaw.column_excess_mm``): w(f) = C f + excess(f), linearised at the
+    previous iterate's forces (Newton; converged when the forces move by less than
+    ``newton_rtol`` of the largest). Returns element forces for the springs then the ligaments,
+    with ``active`` the contact set; raises SolverError like ``solve_unilateral``.
     """
     n_c = directions.shape[0]
     if ligament_rows is None:
@@ -159,14 +175,19 @@ def solve_thin_layer(
     everything: np.ndarray | None = None
     seen: set[bytes] = set()
     force_scale = 1e-300
+    # A nonlinear column, linearised at these forces: w(f) ~ (local + slope) f + nonlocal f + shift.
+    linearised_at, local, shift = np.zeros(n_c), None, 0.0
     for iteration in range(1, max_iterations + 1):
-        system = ActiveSystem.build(layer, free_directions, overlap_mm, active)
+        if column is not None:
+            excess, slope = column(linearised_at)
+            local, shift = layer.local_mm_per_n + slope, excess - slope * linearised_at
+        system = ActiveSystem.build(layer, free_directions, overlap_mm - shift, active, local)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         stiffness = system.stiffness(directions) + k_other
         rhs = load - system.pushback(directions) - f_other
         if unrestrained_dofs(stiffness, free, length_scale_mm):
             if everything is None:
-                full = ActiveSystem.build(layer, free_directions, overlap_mm, touchable)
+                full = ActiveSystem.build(layer, free_directions, overlap_mm - shift, touchable, local)
                 k_all, _ = _others(ligament_rows, ligament_law, np.ones_like(ligament_active), shear, touchable)
                 everything = full.stiffness(directions) + k_all
                 missing = unrestrained_dofs(everything, free, length_scale_mm)
@@ -178,12 +199,14 @@ def solve_thin_layer(
         u = _solve_free(stiffness, rhs, free)
         f = np.zeros(n_c)
         f[active] = system.forces(u)
-        w = system.deflection(layer, u)
+        w = system.deflection(layer, u) + shift
         gap = w - overlap_mm - directions @ u
         tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
         new_active = np.where(active, f > 0.0, gap < 0.0)
         new_ligaments = tension > 0.0
-        if np.array_equal(new_active, active) and np.array_equal(new_ligaments, ligament_active):
+        settled = column is None or float(np.abs(f - linearised_at).max(initial=0.0)) <= newton_rtol * float(np.abs(f).max(initial=0.0))
+        linearised_at = np.where(active, f, 0.0)
+        if settled and np.array_equal(new_active, active) and np.array_equal(new_ligaments, ligament_active):
             break
         if not np.any(new_active) and not np.any(new_ligaments) and not np.any(load):
             active, ligament_active, u = new_active, new_ligaments, np.zeros(6)  # nothing to carry
@@ -197,7 +220,7 @@ def solve_thin_layer(
         signature = np.packbits(np.concatenate([new_active, new_ligaments])).tobytes()
         force_scale = max(force_scale, float(np.linalg.norm(load * to_newton)) + float(np.abs(f).sum()))
         violation = max(float(np.abs(np.minimum(f, 0.0)).sum()), float(np.abs(np.minimum(gap, 0.0) * spring_scale)[~active].sum()))
-        if signature in seen and violation <= cycle_rtol * force_scale:
+        if settled and signature in seen and violation <= cycle_rtol * force_scale:
             break
         seen.add(signature)
         if not np.any(new_active) and not np.any(new_ligaments):
@@ -243,13 +266,16 @@ def thin_layer_viscoelastic_increment(
     load: np.ndarray,
     weights: tuple[float, float],
     fixed_dofs: tuple[str, ...],
+    column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Kelvin-Voigt increment on the coupled layer (``edem.viscoelastic``, eq. 6.18).
 
     The contact set is frozen at the quasi-static set under T_k (``elastic_active``: springs then
     ligaments) plus the springs that carried a force into the step (so they can creep back); u = K^-1 [phi (T_{k-1} - p) + psi (T_k - T_{k-1})]
-    with K the coupled contact stiffness and p the push-back of that set at u = 0. Returns u and the
-    elastic element forces (springs then ligaments) to commit.
+    with K the coupled contact stiffness and p the push-back of that set at u = 0. A nonlinear
+    ``column`` (``solve_thin_layer``) is linearised at the forces carried into the step, the
+    state at u = 0, as the spring bed linearises its law there. Returns u and the elastic element
+    forces (springs then ligaments) to commit.
     """
     phi, psi = weights
     n_c = directions.shape[0]
@@ -259,7 +285,11 @@ def thin_layer_viscoelastic_increment(
     u = np.zeros(6)
     f = np.zeros(n_c)
     if np.any(active):
-        system = ActiveSystem.build(layer, directions * free, overlap_mm, active)  # fixed DOFs: no solves (solve_thin_layer)
+        local, shift = None, 0.0
+        if column is not None:
+            excess, slope = column(carried_force_n)
+            local, shift = layer.local_mm_per_n + slope, excess - slope * carried_force_n
+        system = ActiveSystem.build(layer, directions * free, overlap_mm - shift, active, local)  # fixed DOFs: no solves (solve_thin_layer)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         if phi or psi:
             k = system.stiffness(directions) + k_other
@@ -314,6 +344,7 @@ class CoupledStep:
     springs: np.ndarray  # (n_d,) int: the layer's springs among all of M's
     ligament_rows: np.ndarray
     ligament_law: LinearElements
+    column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None  # a nonlinear law's columns (solve_thin_layer)
 
     @staticmethod
     def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law) -> "CoupledStep":
@@ -340,7 +371,11 @@ class CoupledStep:
             overlap[is_candidate] = (thickness - length)[is_candidate]
         rows = np.zeros((domain.shape[0], 6))
         rows[is_candidate] = directions  # domain is sorted, so candidates keep their order
-        return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law)
+        column = None
+        if law.nonlinear:
+            column = functools.partial(law.column_excess_mm, area_mm2=mesh.area_mm2[domain], confined_modulus_mpa=cartilage.confined_modulus_mpa,
+                                       thickness_mm=cartilage.thickness_mm)
+        return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law, column)
 
     def _to_candidates(self, solution: ThinLayerSolution) -> ThinLayerSolution:
         n_d, c = self.directions.shape[0], self.candidate
@@ -360,7 +395,7 @@ class CoupledStep:
             solve_thin_layer(
                 self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
-                initial_active=None if released_before is None else ~released_before[self.springs],
+                initial_active=None if released_before is None else ~released_before[self.springs], column=self.column,
             )
         )
 
@@ -385,6 +420,6 @@ class CoupledStep:
         active[c], carried[c] = elastic.active[:n_c], carried_force_n
         u, force = thin_layer_viscoelastic_increment(
             self.directions, self.layer, self.overlap_mm, self.ligament_rows, self.ligament_law, self._shear(shear),
-            np.concatenate([active, elastic.active[n_c:]]), carried, previous_load, load, weights, fixed_dofs,
+            np.concatenate([active, elastic.active[n_c:]]), carried, previous_load, load, weights, fixed_dofs, self.column,
         )
         return u, np.concatenate([force[: c.shape[0]][c], force[c.shape[0]:]])
