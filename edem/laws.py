@@ -196,6 +196,14 @@ class ContactLaw(ABC):
     #: "carried" (a force carried into the step, the EDEM push-back: the layer starts deflected by
     #: C s0) or "overlap" (geometric: the layer must be compressed by t - h); None: cannot couple
     thin_layer: ClassVar[str | None] = None
+    #: under the coupling, where the layer is: "surface" (bonded to all of M, going on beyond the
+    #: candidates, as the FE layer does) or "candidates" (the cartilage fills the gap only where
+    #: the springs are candidates, as the FE slab does: the layer ends at their boundary with a
+    #: free lateral face, where it can squeeze out)
+    thin_layer_extent: ClassVar[str] = "surface"
+    #: whether s(delta) is nonlinear: the coupled layer then linearises its columns at each
+    #: iteration (:meth:`column_excess_mm`)
+    nonlinear: ClassVar[bool] = False
 
     @abstractmethod
     def default_window_mm(self, thickness_mm: float | None) -> float:
@@ -212,6 +220,14 @@ class ContactLaw(ABC):
         """The element law s(delta) of the candidates (N); ``stored_normal_force_n`` is the EDEM
         push-back per candidate (zero for DEM)."""
         ...
+
+    def column_excess_mm(
+        self, force_n: np.ndarray, area_mm2: np.ndarray, confined_modulus_mpa: float, thickness_mm: float | None
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Under the coupling, a nonlinear law's column: how much more than the linear t f / (A E')
+        a column deflects (mm) under its force f (N) when its neighbours carry the same pressure,
+        and the derivative (mm/N); arrays (m,). None for a linear law (the default)."""
+        return None
 
     @abstractmethod
     def shear_length_mm(self, spring_length_mm: np.ndarray, thickness_mm: float | None) -> np.ndarray:
@@ -231,6 +247,7 @@ class ThresholdLaw(ContactLaw):
     name = "threshold"
     fe_twin = "slab"
     thin_layer = "carried"
+    thin_layer_extent = "candidates"
 
     def default_window_mm(self, thickness_mm: float | None) -> float:
         return 3.5
@@ -278,11 +295,19 @@ class GapLogLaw(GapLaw):
 
     name = "gap-log"
     needs_positive_length = True
-    thin_layer = None  # the coupled layer is linear
+    nonlinear = True
 
     def elements(self, area_mm2, spring_length_mm, confined_modulus_mpa, thickness_mm, stored_normal_force_n):
         t = float(thickness_mm)
         return LogElements(t - spring_length_mm, area_mm2 * confined_modulus_mpa / t, np.full(spring_length_mm.shape, t))
+
+    def column_excess_mm(self, force_n, area_mm2, confined_modulus_mpa, thickness_mm):
+        """The law inverted, d = t (1 - exp(-x)) with x = f / (A E') (its linear extension for
+        f <= 0), minus t x: -t (x + expm1(-x)) <= 0, derivative t expm1(-x) / (A E')."""
+        t = float(thickness_mm)
+        per_n = 1.0 / (area_mm2 * confined_modulus_mpa)
+        x = np.maximum(force_n, 0.0) * per_n
+        return -t * (x + np.expm1(-x)), t * np.expm1(-x) * per_n
 
 
 #: every contact law by name (the scene's ``cartilage.law``)

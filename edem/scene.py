@@ -360,11 +360,12 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         )
     coupling = cart.string("coupling", "none", COUPLINGS)
     if coupling == "thin-layer" and spring_law.thin_layer is None:
+        coupled_laws = " or ".join(f'"{name}"' for name, each in LAWS.items() if each.thin_layer is not None)
         raise InputError(
-            "the thin-layer coupling is linear: it has no logarithmic law",
+            f"the {law} law has no thin-layer form",
             file=file,
             key="cartilage.coupling",
-            expected='law = "gap" or "threshold" with coupling = "thin-layer", or coupling = "none"',
+            expected=f'law = {coupled_laws} with coupling = "thin-layer", or coupling = "none"',
         )
     cartilage = Cartilage(
         coupling=coupling,

@@ -236,6 +236,7 @@ def run(
     stored = np.zeros((3, n_springs))
     pose = Placement.identity(g0)
     layer_mesh = coupled_layer_mesh(scene) if cartilage.coupling == "thin-layer" else None
+    released = None
     steps: list[StepResult] = []
     unbalanced: list[tuple[int, float]] = []  # DEM time points whose re-measured springs miss the load
     free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
@@ -287,7 +288,9 @@ def run(
                 )
             else:
                 coupled = CoupledStep.build(layer_mesh, geometry, cartilage, stored_normal, directions[:n_c], lig_rows, lig_law)
-                solution = coupled.solve(loads[k], scene.fixed_dofs, shear, length_scale)
+                solution = coupled.solve(loads[k], scene.fixed_dofs, shear, length_scale, released)
+                released = np.zeros(n_springs, bool)  # the candidates out of contact: the next solve's first guess
+                released[cand_idx] = ~solution.active[:n_c]
         except SolverError as exc:
             cause = (
                 f" (no spring is a candidate here: no part of the fixed body lies within h_max = "

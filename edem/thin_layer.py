@@ -78,15 +78,26 @@ condition p = 0 (for e -> 0 and a plate in full contact it gives the squeeze-fil
 (3 G d / 2 h^3)(a^2 - x^2) plus an O(h^2/a^2) edge term; a no-flux edge would confine the
 incompressible layer and make it rigid). Where the contact solve cuts the surface to a band
 around the candidates (``edem.thin_layer_contact``), the layer goes on, and the cut is natural.
+
+Factorisation. The vertex matrices are SPD and banded once renumbered by reverse Cuthill-McKee
+(half-bandwidth about the square root of the vertex count on a surface patch), so LAPACK's banded
+Cholesky factors them; it took 0.35-0.65x the time of SuperLU's symmetric-mode LU on the ankle
+surfaces (1.1k-14k vertices). The ordering depends on the sparsity only and is found once per
+cell set (``OperatorPattern``); past ``MAX_BANDED_HALF_WIDTH`` the sparse LU takes over.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import spsolve
+from scipy.linalg import cho_solve_banded, cholesky_banded
+from scipy.sparse.csgraph import reverse_cuthill_mckee
+from scipy.sparse.linalg import splu
+
+from edem.errors import SolverError
 
 # --------------------------------------------------------------------------- symbols
 
@@ -150,6 +161,19 @@ def operator_factors(poissons_ratio: float, shear_modulus_mpa: float, thickness_
 # --------------------------------------------------------------------------- surface operators
 
 
+def boundary_vertices(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(n_vertices,) bool: the vertices on an edge that only one of ``triangles`` (m, 3) has."""
+    tri = np.asarray(triangles, np.int64)
+    edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    # One integer key per undirected edge: a 1-D unique is much faster than unique(axis=0).
+    key, count = np.unique(edges[:, 0] * n_vertices + edges[:, 1], return_counts=True)
+    single = key[count == 1]
+    out = np.zeros(n_vertices, bool)
+    out[single // n_vertices] = True
+    out[single % n_vertices] = True
+    return out
+
+
 @dataclass(frozen=True)
 class SurfaceMesh:
     """Intrinsic geometry of the spring-bearing surface: one spring per triangle.
@@ -164,6 +188,7 @@ class SurfaceMesh:
     cotangents: np.ndarray  # (n, 3)
     incidence: sp.csr_matrix  # (n, n_vertices) triangle-vertex incidence
     free_edge_vertex: np.ndarray  # (n_vertices,) bool: on the surface's boundary (the cartilage's free edge)
+    memo: dict = field(default_factory=dict, compare=False, repr=False)  # the transposed incidence and the last operator pattern
 
     @staticmethod
     def from_corners(triangles: np.ndarray, corners_mm: np.ndarray) -> "SurfaceMesh":
@@ -177,26 +202,24 @@ class SurfaceMesh:
         tri = np.asarray(triangles, np.int64)
         n = tri.shape[0]
         incidence = sp.csr_matrix((np.ones(3 * n), (np.repeat(np.arange(n), 3), tri.ravel())))
-        edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
-        n_v = incidence.shape[1]
-        # One integer key per undirected edge: a 1-D unique is much faster than unique(axis=0).
-        key, count = np.unique(edges[:, 0] * n_v + edges[:, 1], return_counts=True)
-        free = np.zeros(n_v, bool)
-        single = key[count == 1]  # an edge of one triangle only
-        free[single // n_v] = True
-        free[single % n_v] = True
-        return SurfaceMesh(tri, area, out, incidence, free)
+        return SurfaceMesh(tri, area, out, incidence, boundary_vertices(tri, incidence.shape[1]))
 
-    def neighbourhood(self, cells: np.ndarray, width_mm: float) -> np.ndarray:
+    def neighbourhood(self, cells: np.ndarray, width_mm: float, enough: int | None = None) -> np.ndarray:
         """Triangles within about ``width_mm`` of the triangles ``cells`` (bool mask, (n,)).
 
-        Grown ring by ring through shared vertices; a ring is about one triangle size sqrt(2 A) wide.
+        Grown ring by ring through shared vertices; a ring is about one triangle size sqrt(2 A)
+        wide. With ``enough``, the growth stops once the mask holds that many triangles.
         """
-        incidence, incidence_t = self.incidence, self.incidence.T.tocsr()
+        incidence = self.incidence
+        if "incidence_t" not in self.memo:
+            self.memo["incidence_t"] = incidence.T.tocsr()
+        incidence_t = self.memo["incidence_t"]
         mask = np.zeros(self.triangles.shape[0], bool)
         mask[cells] = True
         size = float(np.sqrt(2.0 * self.area_mm2[mask]).mean()) if np.any(mask) else 1.0
         for _ in range(int(np.ceil(width_mm / max(size, 1e-12)))):
+            if enough is not None and np.count_nonzero(mask) >= enough:
+                break
             grown = incidence @ (incidence_t @ mask.astype(float)) > 0
             if np.array_equal(grown, mask):
                 break
@@ -207,52 +230,149 @@ class SurfaceMesh:
     def from_surface(vertices_mm: np.ndarray, triangles: np.ndarray) -> "SurfaceMesh":
         return SurfaceMesh.from_corners(triangles, vertices_mm[triangles])
 
-    def smoothing_operators(self, cells: np.ndarray, mass_weight: np.ndarray, stiffness_weight: np.ndarray) -> tuple[sp.csc_matrix, sp.csr_matrix, np.ndarray]:
-        """P1 operators on the triangles ``cells`` (indices, m): (H, Q, slots).
+    def smoothing_operators(
+        self, cells: np.ndarray, mass_weight: np.ndarray, stiffness_weight: np.ndarray, edge_at_cells: bool = False
+    ) -> tuple[sp.csc_matrix, "OperatorPattern"]:
+        """P1 operators on the triangles ``cells`` (indices, m): H and its pattern (with Q).
 
         H = M + K (v, v): the mass M = Q^T diag(A mass_weight) Q plus the cotangent stiffness K
-        with each triangle weighted by ``stiffness_weight`` (m,) (natural boundary), in one pass;
-        Q (m, v): triangle value = mean of its corners. Vertices are renumbered to those the
-        cells use; those on the surface's free edge are left out (the smoothed field vanishes
-        there, module docstring), the rest of the subset's boundary is natural. ``slots`` (m, 9)
-        int: where each triangle's corner pair (i, j), row-major, sits in ``H.data`` (canonical
-        CSC), -1 for a pair on the free edge; a matrix Q^T diag(x) Q is then H's pattern with
-        x / 9 added at the slots (no sparse product, no re-assembly).
+        with each triangle weighted by ``stiffness_weight`` (m,), summed into the cached pattern
+        of these cells (``operator_pattern``): no sparse assembly per call. The smoothed field
+        vanishes on the surface's free edge, and with ``edge_at_cells`` on the cells' own
+        boundary too (the layer ends there); elsewhere the boundary is natural.
         """
+        pattern = self.operator_pattern(cells, edge_at_cells)
+        # One 3 x 3 element matrix per triangle, row-major in (m, 9): mass A m / 9 for every
+        # ordered pair of corners (Q^T diag(A m) Q) plus the cotangent stiffness, where the edge
+        # opposite corner i carries w cot_i / 2 (off-diagonal -w cot_i / 2 at (j, k) and (k, j),
+        # diagonal the sum over the corner's two edges).
+        half = 0.5 * self.cotangents[cells] * np.asarray(stiffness_weight, float)[:, None]  # (m, 3)
+        element = np.empty((half.shape[0], 9))
+        element[:, [0, 4, 8]] = half.sum(axis=1)[:, None] - half
+        element[:, [5, 7]] = -half[:, [0]]
+        element[:, [2, 6]] = -half[:, [1]]
+        element[:, [1, 3]] = -half[:, [2]]
+        element += (self.area_mm2[cells] * np.asarray(mass_weight, float) / 9.0)[:, None]
+        return pattern.matrix(pattern.sum_at_slots(element)), pattern
+
+    def operator_pattern(self, cells: np.ndarray, edge_at_cells: bool = False) -> "OperatorPattern":
+        """The sparsity of the operators on the triangles ``cells`` (indices, m), built once per cell set.
+
+        Consecutive time points of a run usually share their cell set (the whole surface when the
+        band around the candidates covers most of it), so the last pattern is kept and reused
+        when the cells are the same. ``edge_at_cells``: see ``smoothing_operators``.
+        """
+        key = (np.asarray(cells).tobytes(), edge_at_cells)
+        cached = self.memo.get("pattern")
+        if cached is not None and cached[0] == key:
+            return cached[1]
         tri = self.triangles[cells]
+        free = self.free_edge_vertex | boundary_vertices(tri, self.free_edge_vertex.shape[0]) if edge_at_cells else self.free_edge_vertex
         # Renumber the vertices the cells use, free-edge ones last (dropped below), in O(n).
-        used = np.zeros(self.free_edge_vertex.shape[0], bool)
+        used = np.zeros(free.shape[0], bool)
         used[tri] = True
-        interior, edge = used & ~self.free_edge_vertex, used & self.free_edge_vertex
+        interior, edge = used & ~free, used & free
         n_v, n_edge = int(interior.sum()), int(edge.sum())
         renumber = np.empty(used.shape[0], np.int64)
         renumber[interior] = np.arange(n_v)
         renumber[edge] = np.arange(n_v, n_v + n_edge)
         local = renumber[tri]
         m = tri.shape[0]
-        # One 3 x 3 element matrix per triangle: mass A m / 9 for every ordered pair of corners
-        # (Q^T diag(A m) Q) plus the cotangent stiffness, where the edge opposite corner k
-        # carries w cot_k / 2 (off-diagonal -w cot_k / 2, diagonal the sum over the corner's two edges).
-        half = 0.5 * self.cotangents[cells] * np.asarray(stiffness_weight, float)[:, None]  # (m, 3)
-        element = np.repeat((self.area_mm2[cells] * np.asarray(mass_weight, float) / 9.0)[:, None, None], 3, axis=1).repeat(3, axis=2)
-        for i in range(3):
-            j, k = (i + 1) % 3, (i + 2) % 3
-            element[:, i, i] += half[:, j] + half[:, k]
-            element[:, j, k] -= half[:, i]
-            element[:, k, j] -= half[:, i]
         rows = np.repeat(local, 3, axis=1).ravel()
         cols = np.tile(local, (1, 3)).ravel()
-        vals = element.ravel()
         inside = (rows < n_v) & (cols < n_v)  # free-edge vertices: the smoothed field vanishes there
-        smoothing = sp.coo_matrix((vals[inside], (rows[inside], cols[inside])), shape=(n_v, n_v)).tocsc()
-        smoothing.sum_duplicates()  # canonical: sorted row indices, so column-major keys increase
-        stored = np.repeat(np.arange(n_v, dtype=np.int64), np.diff(smoothing.indptr)) * n_v + smoothing.indices
+        shape = sp.coo_matrix((np.ones(int(inside.sum())), (rows[inside], cols[inside])), shape=(n_v, n_v)).tocsc()
+        shape.sum_duplicates()  # canonical: sorted row indices, so column-major keys increase
+        stored = np.repeat(np.arange(n_v, dtype=np.int64), np.diff(shape.indptr)) * n_v + shape.indices
         slots = np.full(9 * m, -1, np.int64)
         slots[inside] = np.searchsorted(stored, cols[inside] * n_v + rows[inside])
         corner = local.ravel()
         kept = corner < n_v
         q = sp.csr_matrix((np.full(int(kept.sum()), 1.0 / 3.0), (np.repeat(np.arange(m), 3)[kept], corner[kept])), shape=(m, n_v))
-        return smoothing, q, slots.reshape(m, 9)
+        pattern = OperatorPattern(shape.indices, shape.indptr, slots.reshape(m, 9), q)
+        self.memo["pattern"] = (key, pattern)
+        return pattern
+
+
+# Past this half-bandwidth (after reverse Cuthill-McKee) the sparse LU is the cheaper factor: on
+# the ankle surfaces LAPACK's banded Cholesky took 0.35-0.65x SuperLU's time at half-bandwidths
+# 47-156 (1.1k-14k vertices), a ratio growing about like the bandwidth (benchmarks/bench_thin_layer.py).
+MAX_BANDED_HALF_WIDTH = 256
+
+
+@dataclass
+class OperatorPattern:
+    """Sparsity of H = M + K on a cell set (v, v), canonical CSC, and the transfer Q (m, v).
+
+    ``slots[t]`` (9,) int: where triangle t's corner pair (i, j), row-major, sits in the
+    matrix's data, -1 for a pair on the free edge; Q^T diag(x) Q is then the pattern with x / 9
+    added at the slots (no sparse product, no re-assembly). The band layout of the factorisation
+    (an ordering and where each stored entry goes) depends on the pattern only, so it is found
+    at the first factorisation and reused.
+    """
+
+    indices: np.ndarray
+    indptr: np.ndarray
+    slots: np.ndarray  # (m, 9) int
+    q: sp.csr_matrix  # (m, v)
+    band: tuple[np.ndarray, np.ndarray, np.ndarray, int] | None = None  # (ordering, entries kept, their flat band positions, half-width)
+
+    @property
+    def n_vertices(self) -> int:
+        return self.indptr.shape[0] - 1
+
+    def matrix(self, data: np.ndarray) -> sp.csc_matrix:
+        return sp.csc_matrix((data, self.indices, self.indptr), shape=(self.n_vertices, self.n_vertices))
+
+    def sum_at_slots(self, per_pair: np.ndarray) -> np.ndarray:
+        """Matrix data (nnz,) from values per triangle and corner pair (m, 9), or per triangle
+        (m,) for the same value on its nine pairs, summed where they meet."""
+        kept, slot = self.kept_pairs
+        weights = per_pair.ravel()[kept] if per_pair.ndim == 2 else per_pair[kept // 9]
+        return np.bincount(slot, weights=weights, minlength=self.indices.shape[0])
+
+    @functools.cached_property
+    def kept_pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The corner pairs off the free edge: their flat positions in (m, 9) and their slots."""
+        kept = np.flatnonzero(self.slots.ravel() >= 0)
+        return kept, self.slots.ravel()[kept]
+
+    def _band_layout(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        if self.band is None:
+            n = self.n_vertices
+            order = reverse_cuthill_mckee(self.matrix(np.ones(self.indices.shape[0])).tocsr(), symmetric_mode=True).astype(np.int64)
+            position = np.empty(n, np.int64)
+            position[order] = np.arange(n)
+            row = position[self.indices]
+            col = position[np.repeat(np.arange(n), np.diff(self.indptr))]
+            lower = np.flatnonzero(row >= col)  # LAPACK's lower band storage: ab[i - j, j] = A[i, j]
+            width = int((row - col)[lower].max(initial=0))
+            self.band = (order, lower, (row - col)[lower] * n + col[lower], width)
+        return self.band
+
+    def factorise(self, data: np.ndarray):
+        """Factor of the SPD matrix with this pattern and ``data`` (nnz,); returns solve(rhs (v,) or (v, k)).
+
+        Banded Cholesky in reverse Cuthill-McKee order up to MAX_BANDED_HALF_WIDTH, SuperLU's
+        symmetric-mode LU (diagonal pivots, minimum-degree ordering) beyond.
+        """
+        order, lower, flat, width = self._band_layout()
+        n = self.n_vertices
+        try:
+            if width > MAX_BANDED_HALF_WIDTH:
+                return splu(self.matrix(data), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}).solve
+            band = np.zeros((width + 1, n))
+            band.flat[flat] = data[lower]
+            factor = cholesky_banded(band, overwrite_ab=True, lower=True, check_finite=False)
+        except (np.linalg.LinAlgError, RuntimeError) as error:  # RuntimeError: SuperLU's "singular matrix"
+            raise SolverError(f"the coupled thin-layer matrix is not positive definite ({error})") from None
+
+        def solve(rhs: np.ndarray) -> np.ndarray:
+            out = np.empty_like(rhs)
+            out[order] = cho_solve_banded((factor, True), rhs[order], overwrite_b=True, check_finite=False)
+            return out
+
+        return solve
 
 
 @dataclass(frozen=True)
@@ -268,18 +388,16 @@ class LayerCompliance:
     h: sp.csc_matrix  # (v, v) canonical CSC
     sigma: float
     nonlocal_weight: np.ndarray = None  # (m,) c_nl: Z = Q^T diag(c_nl)
-    slots: np.ndarray = None  # (m, 9) positions of each spring's corner pairs in h.data (SurfaceMesh.smoothing_operators)
+    pattern: OperatorPattern = None  # H's sparsity, slots and ordering (SurfaceMesh.operator_pattern)
 
-    def coupled_matrix(self, spring_weight: np.ndarray) -> sp.csc_matrix:
-        """H + sigma Z diag(spring_weight) Z^T (v, v) for weights (m,) in N/mm, on H's pattern.
+    def factorise_coupled(self, spring_weight: np.ndarray):
+        """Factor of H + sigma Z diag(spring_weight) Z^T (v, v) for weights (m,) in N/mm: solve(rhs).
 
         Z diag(x) Z^T = Q^T diag(c_nl^2 x) Q puts c_nl^2 x / 9 on every corner pair of each
-        triangle, all of them entries of H, so only H.data changes.
+        triangle, all of them entries of H, so only H's data changes.
         """
-        ok = self.slots >= 0
-        per_pair = np.broadcast_to((self.sigma * self.nonlocal_weight**2 * spring_weight / 9.0)[:, None], self.slots.shape)
-        data = self.h.data + np.bincount(self.slots[ok], weights=per_pair[ok], minlength=self.h.data.shape[0])
-        return sp.csc_matrix((data, self.h.indices, self.h.indptr), shape=self.h.shape)
+        per_pair = self.sigma * self.nonlocal_weight**2 * spring_weight / 9.0
+        return self.pattern.factorise(self.h.data + self.pattern.sum_at_slots(per_pair))
 
     @property
     def coupled(self) -> bool:
@@ -289,7 +407,7 @@ class LayerCompliance:
         """Surface deflection w (m,) in mm under spring forces f (m,) in N."""
         w = self.local_mm_per_n * force_n
         if self.coupled:
-            w = w + self.sigma * (self.z.T @ spsolve(self.h, self.z @ force_n))
+            w = w + self.sigma * (self.z.T @ self.pattern.factorise(self.h.data)(self.z @ force_n))
         return w
 
 
@@ -299,8 +417,12 @@ def layer_compliance(
     thickness_mm: np.ndarray,
     youngs_modulus_mpa: float,
     poissons_ratio: float,
+    edge_at_cells: bool = False,
 ) -> LayerCompliance:
-    """The Pade thin-layer compliance on the springs ``cells`` (indices) with local thickness (m,) mm."""
+    """The Pade thin-layer compliance on the springs ``cells`` (indices) with local thickness (m,) mm.
+
+    ``edge_at_cells``: the layer ends at the boundary of ``cells`` (a free lateral face there),
+    rather than going on beyond them with a natural cut."""
     g = youngs_modulus_mpa / (2.0 * (1.0 + poissons_ratio))
     h = np.broadcast_to(np.asarray(thickness_mm, float), cells.shape)
     area = mesh.area_mm2[cells]
@@ -308,6 +430,6 @@ def layer_compliance(
     if sigma == 0.0:
         return LayerCompliance(c_loc / area, sp.csr_matrix((0, cells.shape[0])), sp.csc_matrix((0, 0)), 0.0)
     # S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl (module docstring, variable thickness).
-    smoothing, q, slots = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl)
-    z = (q.T @ sp.diags(c_nl)).tocsr()
-    return LayerCompliance(c_loc / area, z, smoothing, sigma, np.broadcast_to(c_nl, cells.shape), slots)
+    smoothing, pattern = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl, edge_at_cells)
+    z = (pattern.q.T @ sp.diags(c_nl)).tocsr()
+    return LayerCompliance(c_loc / area, z, smoothing, sigma, np.broadcast_to(c_nl, cells.shape), pattern)

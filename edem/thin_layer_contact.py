@@ -22,14 +22,18 @@ contact stiffness D_I^T df_I/du; then I is updated: springs with f_j <= 0 leave,
 surface would penetrate (y_j < 0, including where the layer bulges outside the contact) enter.
 For C with non-positive off-diagonal entries (nu > 1/4: an M-matrix) this converges in a few
 iterations. Ligaments (tension-only) and the shear springs enter the 6 x 6 as in the spring bed.
+A nonlinear law (gap-log) adds to w its columns' excess e(f) over the linear column
+(``ContactLaw.column_excess_mm``); each iteration linearises it at the previous forces, which
+changes Lam and d0 only, so the same factorisation serves (Newton on the same active set).
 """
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse.linalg import splu
 
 from edem.errors import SolverError
 from edem.laws import LinearElements
@@ -55,38 +59,43 @@ class ActiveSystem:
     force_per_mm: np.ndarray  # (n_I, 6)
     vertex0: np.ndarray  # (v,) z at u = 0
     vertex_per_mm: np.ndarray  # (v, 6)
+    local_mm_per_n: np.ndarray  # (n_c,) the local compliance it was built with
 
     @staticmethod
-    def build(layer: LayerCompliance, directions: np.ndarray, overlap_mm: np.ndarray, active: np.ndarray) -> "ActiveSystem":
-        lam = 1.0 / layer.local_mm_per_n[active]
+    def build(
+        layer: LayerCompliance, directions: np.ndarray, overlap_mm: np.ndarray, active: np.ndarray, local_mm_per_n: np.ndarray | None = None
+    ) -> "ActiveSystem":
+        """``local_mm_per_n`` (n_c,): the local compliance, the layer's unless a nonlinear column
+        is linearised (``solve_thin_layer``)."""
+        local = layer.local_mm_per_n if local_mm_per_n is None else local_mm_per_n
+        lam = 1.0 / local[active]
         rhs = np.column_stack([overlap_mm[active], directions[active]])  # (n_I, 7)
         if not layer.coupled:
             forces = lam[:, None] * rhs
-            return ActiveSystem(active, forces[:, 0], forces[:, 1:], np.zeros(0), np.zeros((0, 6)))
+            return ActiveSystem(active, forces[:, 0], forces[:, 1:], np.zeros(0), np.zeros((0, 6)), local)
         # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T, added on H's fixed pattern.
         weight = np.zeros(active.shape[0])
         weight[active] = lam
-        matrix = layer.coupled_matrix(weight)
-        # SPD: symmetric ordering and diagonal pivots (about 1.5x faster than the default LU).
-        factor = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-        loads = np.zeros((active.shape[0], 7))
-        loads[active] = lam[:, None] * rhs
-        # A zero column (DEM: no overlap before the increment) needs no triangular solves.
-        nonzero = np.flatnonzero(np.any(loads, axis=0))
-        vertex = np.zeros((matrix.shape[0], 7))
+        solve = layer.factorise_coupled(weight)
+        # A zero column (DEM: no overlap before the increment; a fixed DOF) needs no solves.
+        nonzero = np.flatnonzero(np.any(rhs, axis=0))
+        loads = np.zeros((active.shape[0], nonzero.size))
+        loads[active] = lam[:, None] * rhs[:, nonzero]
+        vertex = np.zeros((layer.h.shape[0], 7))
+        forces = lam[:, None] * rhs
         if nonzero.size:
-            vertex[:, nonzero] = factor.solve(np.asarray(layer.z @ loads[:, nonzero]))
-        forces = lam[:, None] * (rhs - layer.sigma * np.asarray(layer.z.T @ vertex)[active])
-        return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:])
+            vertex[:, nonzero] = solve(np.asarray(layer.z @ loads))
+            forces[:, nonzero] -= lam[:, None] * (layer.sigma * np.asarray(layer.z.T @ vertex[:, nonzero])[active])
+        return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
         return self.force0_n + self.force_per_mm @ u
 
     def deflection(self, layer: LayerCompliance, u: np.ndarray) -> np.ndarray:
-        """w = C f at every candidate for the forces of this set under u."""
+        """w = C f at every candidate for the forces of this set under u (local part as built)."""
         f = np.zeros(self.active.shape[0])
         f[self.active] = self.forces(u)
-        w = layer.local_mm_per_n * f
+        w = self.local_mm_per_n * f
         if layer.coupled:
             w = w + layer.sigma * (layer.z.T @ (self.vertex0 + self.vertex_per_mm @ u))
         return w
@@ -128,7 +137,10 @@ def solve_thin_layer(
     fixed_dofs: tuple[str, ...] = (),
     shear: ShearTerms | None = None,
     length_scale_mm: float = 1.0,
+    initial_active: np.ndarray | None = None,
+    column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
     cycle_rtol: float = 1e-7,
+    newton_rtol: float = 1e-10,
     max_iterations: int = 60,
 ) -> ThinLayerSolution:
     """Unilateral equilibrium of the rigid body on the coupled layer (module docstring).
@@ -136,8 +148,14 @@ def solve_thin_layer(
     ``directions`` (n, 6): rows g_j of the layer's springs; ``overlap_mm`` (n,): d0, -inf where no
     opposing surface can be touched (the free layer around the contact);
     ``ligament_rows`` (n_l, 6) and ``ligament_law``: tension-only ligaments as in
-    ``edem.mechanics.solve_unilateral``. Returns element forces for the springs then the
-    ligaments, with ``active`` the contact set; raises SolverError like ``solve_unilateral``.
+    ``edem.mechanics.solve_unilateral``. ``initial_active`` (n,) bool: the first contact set
+    (from the previous time point, so a slowly varying load needs one or two iterations; the
+    programme is strictly convex, so the answer does not depend on it); by default every
+    candidate. ``column``: a nonlinear law's columns, f (n,) -> (excess (n,) mm, its derivative
+    (n,) mm/N) (``ContactLaw.column_excess_mm``): w(f) = C f + excess(f), linearised at the
+    previous iterate's forces (Newton; converged when the forces move by less than
+    ``newton_rtol`` of the largest). Returns element forces for the springs then the ligaments,
+    with ``active`` the contact set; raises SolverError like ``solve_unilateral``.
     """
     n_c = directions.shape[0]
     if ligament_rows is None:
@@ -149,19 +167,27 @@ def solve_thin_layer(
     to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)
     spring_scale = 1.0 / layer.local_mm_per_n  # N/mm: weighs the gap against the force in the NCP
     touchable = np.isfinite(overlap_mm)  # -inf: free layer with no opposing surface
-    active = touchable.copy()  # the first iterate takes every candidate, as DEM does
+    # A fixed DOF never moves, so its column of df/du is never used: zero rows skip its solves.
+    free_directions = directions * free
+    warm = None if initial_active is None else initial_active & touchable
+    active = warm if warm is not None and np.any(warm) else touchable.copy()  # cold: every candidate, as DEM does
     ligament_active = np.ones(ligament_rows.shape[0], bool)
     everything: np.ndarray | None = None
     seen: set[bytes] = set()
     force_scale = 1e-300
+    # A nonlinear column, linearised at these forces: w(f) ~ (local + slope) f + nonlocal f + shift.
+    linearised_at, local, shift = np.zeros(n_c), None, 0.0
     for iteration in range(1, max_iterations + 1):
-        system = ActiveSystem.build(layer, directions, overlap_mm, active)
+        if column is not None:
+            excess, slope = column(linearised_at)
+            local, shift = layer.local_mm_per_n + slope, excess - slope * linearised_at
+        system = ActiveSystem.build(layer, free_directions, overlap_mm - shift, active, local)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         stiffness = system.stiffness(directions) + k_other
         rhs = load - system.pushback(directions) - f_other
         if unrestrained_dofs(stiffness, free, length_scale_mm):
             if everything is None:
-                full = ActiveSystem.build(layer, directions, overlap_mm, touchable)
+                full = ActiveSystem.build(layer, free_directions, overlap_mm - shift, touchable, local)
                 k_all, _ = _others(ligament_rows, ligament_law, np.ones_like(ligament_active), shear, touchable)
                 everything = full.stiffness(directions) + k_all
                 missing = unrestrained_dofs(everything, free, length_scale_mm)
@@ -173,12 +199,14 @@ def solve_thin_layer(
         u = _solve_free(stiffness, rhs, free)
         f = np.zeros(n_c)
         f[active] = system.forces(u)
-        w = system.deflection(layer, u)
+        w = system.deflection(layer, u) + shift
         gap = w - overlap_mm - directions @ u
         tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
         new_active = np.where(active, f > 0.0, gap < 0.0)
         new_ligaments = tension > 0.0
-        if np.array_equal(new_active, active) and np.array_equal(new_ligaments, ligament_active):
+        settled = column is None or float(np.abs(f - linearised_at).max(initial=0.0)) <= newton_rtol * float(np.abs(f).max(initial=0.0))
+        linearised_at = np.where(active, f, 0.0)
+        if settled and np.array_equal(new_active, active) and np.array_equal(new_ligaments, ligament_active):
             break
         if not np.any(new_active) and not np.any(new_ligaments) and not np.any(load):
             active, ligament_active, u = new_active, new_ligaments, np.zeros(6)  # nothing to carry
@@ -192,7 +220,7 @@ def solve_thin_layer(
         signature = np.packbits(np.concatenate([new_active, new_ligaments])).tobytes()
         force_scale = max(force_scale, float(np.linalg.norm(load * to_newton)) + float(np.abs(f).sum()))
         violation = max(float(np.abs(np.minimum(f, 0.0)).sum()), float(np.abs(np.minimum(gap, 0.0) * spring_scale)[~active].sum()))
-        if signature in seen and violation <= cycle_rtol * force_scale:
+        if settled and signature in seen and violation <= cycle_rtol * force_scale:
             break
         seen.add(signature)
         if not np.any(new_active) and not np.any(new_ligaments):
@@ -238,13 +266,16 @@ def thin_layer_viscoelastic_increment(
     load: np.ndarray,
     weights: tuple[float, float],
     fixed_dofs: tuple[str, ...],
+    column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Kelvin-Voigt increment on the coupled layer (``edem.viscoelastic``, eq. 6.18).
 
     The contact set is frozen at the quasi-static set under T_k (``elastic_active``: springs then
     ligaments) plus the springs that carried a force into the step (so they can creep back); u = K^-1 [phi (T_{k-1} - p) + psi (T_k - T_{k-1})]
-    with K the coupled contact stiffness and p the push-back of that set at u = 0. Returns u and the
-    elastic element forces (springs then ligaments) to commit.
+    with K the coupled contact stiffness and p the push-back of that set at u = 0. A nonlinear
+    ``column`` (``solve_thin_layer``) is linearised at the forces carried into the step, the
+    state at u = 0, as the spring bed linearises its law there. Returns u and the elastic element
+    forces (springs then ligaments) to commit.
     """
     phi, psi = weights
     n_c = directions.shape[0]
@@ -254,7 +285,11 @@ def thin_layer_viscoelastic_increment(
     u = np.zeros(6)
     f = np.zeros(n_c)
     if np.any(active):
-        system = ActiveSystem.build(layer, directions, overlap_mm, active)
+        local, shift = None, 0.0
+        if column is not None:
+            excess, slope = column(carried_force_n)
+            local, shift = layer.local_mm_per_n + slope, excess - slope * carried_force_n
+        system = ActiveSystem.build(layer, directions * free, overlap_mm - shift, active, local)  # fixed DOFs: no solves (solve_thin_layer)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         if phi or psi:
             k = system.stiffness(directions) + k_other
@@ -270,13 +305,32 @@ def coupled_layer_mesh(scene) -> SurfaceMesh:
     return SurfaceMesh.from_surface(scene.mobile.vertices_mm, scene.mobile.triangles[scene.spring_triangle])
 
 
+def coupled_domain(mesh: SurfaceMesh, candidates: np.ndarray, band_mm: float) -> np.ndarray:
+    """The springs the coupled layer covers (sorted indices): the candidates and a band ``band_mm`` wide.
+
+    Where that band covers at least half the spring-bearing surface, the whole surface instead:
+    the layer is then the cartilage up to its free edge, and its operator pattern and
+    fill-reducing ordering are built once per run rather than once per time point (the band
+    moves with the candidates), which outweighs the larger factorisation (at most about 2.5x the
+    band's for a sparse factor growing like n^1.3; benchmarks/bench_thin_layer.py).
+    """
+    n = mesh.triangles.shape[0]
+    band = mesh.neighbourhood(candidates, band_mm, enough=(n + 1) // 2)
+    return np.arange(n) if 2 * np.count_nonzero(band) >= n else np.flatnonzero(band)
+
+
 @dataclass(frozen=True)
 class CoupledStep:
     """One time point of DEM/EDEM on the coupled layer: the layer, overlap and elements.
 
-    The layer covers the candidate springs and a band of the surface around them 3 sqrt(b) h
+    Where the law's layer is bonded to all of M (``thin_layer_extent = "surface"``, the gap
+    laws), it covers the candidate springs and a band of the surface around them 3 sqrt(b) h
     wide (three decay lengths of the bulge; there the layer is free: f = 0, no opposing surface),
-    so the layer can bulge outside the contact; beyond it the boundary is natural. Local
+    so the layer can bulge outside the contact; beyond it the boundary is natural. Where that
+    band would cover half the surface, the layer is the whole surface (``coupled_domain``).
+    Where the cartilage only fills the gap (``"candidates"``, the threshold law, whose FE twin is
+    the slab), the layer is the candidates, and it ends at their boundary with a free lateral
+    face (the smoothed field vanishes there, as at the surface's free edge). Local
     thickness: the length the law's shear springs use (t for the gap law, the current spring
     length for the threshold law; on the band t or the candidates' median). The overlap d0 is t - h for an
     "overlap" law (gap) or C f_carried for a "carried" law (threshold: the EDEM push-back of the
@@ -287,8 +341,10 @@ class CoupledStep:
     overlap_mm: np.ndarray  # (n_d,) over the layer's springs
     directions: np.ndarray  # (n_d, 6)
     candidate: np.ndarray  # (n_d,) bool: the layer's springs that are candidates, in candidate order
+    springs: np.ndarray  # (n_d,) int: the layer's springs among all of M's
     ligament_rows: np.ndarray
     ligament_law: LinearElements
+    column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None  # a nonlinear law's columns (solve_thin_layer)
 
     @staticmethod
     def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law) -> "CoupledStep":
@@ -299,12 +355,13 @@ class CoupledStep:
         # The band: t, or for a law whose thickness is the spring length, the candidates' median.
         band_thickness = float(cartilage.thickness_mm) if law.needs_thickness else float(np.median(candidate_thickness, axis=None)) if cand.size else 1.0
         _, _, _, b = operator_factors(cartilage.poissons_ratio, 1.0, 1.0)
-        domain = np.flatnonzero(mesh.neighbourhood(cand, 3.0 * np.sqrt(b) * band_thickness)) if b > 0 else cand
+        ends = law.thin_layer_extent == "candidates"
+        domain = cand if ends or b == 0.0 else coupled_domain(mesh, cand, 3.0 * np.sqrt(b) * band_thickness)
         is_candidate = geometry.candidate[domain]
         length = geometry.spring_length_mm[domain]
         thickness = np.full(domain.shape, band_thickness)
         thickness[is_candidate] = candidate_thickness  # domain is sorted: candidates in their order
-        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio)
+        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends)
         overlap = np.full(domain.shape, -np.inf)
         if law.thin_layer == "carried":
             carried = np.zeros(domain.shape)
@@ -314,7 +371,11 @@ class CoupledStep:
             overlap[is_candidate] = (thickness - length)[is_candidate]
         rows = np.zeros((domain.shape[0], 6))
         rows[is_candidate] = directions  # domain is sorted, so candidates keep their order
-        return CoupledStep(layer, overlap, rows, is_candidate, ligament_rows, ligament_law)
+        column = None
+        if law.nonlinear:
+            column = functools.partial(law.column_excess_mm, area_mm2=mesh.area_mm2[domain], confined_modulus_mpa=cartilage.confined_modulus_mpa,
+                                       thickness_mm=cartilage.thickness_mm)
+        return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law, column)
 
     def _to_candidates(self, solution: ThinLayerSolution) -> ThinLayerSolution:
         n_d, c = self.directions.shape[0], self.candidate
@@ -324,12 +385,17 @@ class CoupledStep:
         solution.deflection_mm, solution.gap_mm = solution.deflection_mm[c], solution.gap_mm[c]
         return solution
 
-    def solve(self, load, fixed_dofs, shear, length_scale_mm) -> ThinLayerSolution:
-        """The coupled solve; forces, contact set, deflection and gap of the candidates (then ligaments)."""
+    def solve(self, load, fixed_dofs, shear, length_scale_mm, released_before: np.ndarray | None = None) -> ThinLayerSolution:
+        """The coupled solve; forces, contact set, deflection and gap of the candidates (then ligaments).
+
+        ``released_before`` (n_springs,) bool over all of M's springs: the candidates out of
+        contact at the previous time point. The first iterate of the active set is every
+        candidate but those (new candidates start in contact, as in a cold start)."""
         return self._to_candidates(
             solve_thin_layer(
                 self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
+                initial_active=None if released_before is None else ~released_before[self.springs], column=self.column,
             )
         )
 
@@ -354,6 +420,6 @@ class CoupledStep:
         active[c], carried[c] = elastic.active[:n_c], carried_force_n
         u, force = thin_layer_viscoelastic_increment(
             self.directions, self.layer, self.overlap_mm, self.ligament_rows, self.ligament_law, self._shear(shear),
-            np.concatenate([active, elastic.active[n_c:]]), carried, previous_load, load, weights, fixed_dofs,
+            np.concatenate([active, elastic.active[n_c:]]), carried, previous_load, load, weights, fixed_dofs, self.column,
         )
         return u, np.concatenate([force[: c.shape[0]][c], force[c.shape[0]:]])
