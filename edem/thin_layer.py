@@ -78,6 +78,8 @@ condition p = 0 (for e -> 0 and a plate in full contact it gives the squeeze-fil
 (3 G d / 2 h^3)(a^2 - x^2) plus an O(h^2/a^2) edge term; a no-flux edge would confine the
 incompressible layer and make it rigid). Where the contact solve cuts the surface to a band
 around the candidates (``edem.thin_layer_contact``), the layer goes on, and the cut is natural.
+Where the layer itself ends inside the surface (the threshold law's cartilage fills the gap only
+where the springs are candidates), its edge is free like the surface's (``edge_at_cells``).
 
 Factorisation. The vertex matrices are SPD and banded once renumbered by reverse Cuthill-McKee
 (half-bandwidth about the square root of the vertex count on a surface patch), so LAPACK's banded

@@ -309,10 +309,10 @@ def coupled_domain(mesh: SurfaceMesh, candidates: np.ndarray, band_mm: float) ->
     """The springs the coupled layer covers (sorted indices): the candidates and a band ``band_mm`` wide.
 
     Where that band covers at least half the spring-bearing surface, the whole surface instead:
-    the layer is then the cartilage up to its free edge, and its operator pattern and
-    fill-reducing ordering are built once per run rather than once per time point (the band
-    moves with the candidates), which outweighs the larger factorisation (at most about 2.5x the
-    band's for a sparse factor growing like n^1.3; benchmarks/bench_thin_layer.py).
+    the layer is then the cartilage up to its free edge, and its operator pattern and band
+    ordering are built once per run rather than once per time point (the band moves with the
+    candidates). On the ankles, whose band covers about 80 % of the surface, that outweighed the
+    larger factorisation (benchmarks/bench_thin_layer.py).
     """
     n = mesh.triangles.shape[0]
     band = mesh.neighbourhood(candidates, band_mm, enough=(n + 1) // 2)
