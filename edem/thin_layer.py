@@ -358,8 +358,10 @@ class OperatorPattern:
         Banded Cholesky in reverse Cuthill-McKee order up to MAX_BANDED_HALF_WIDTH, SuperLU's
         symmetric-mode LU (diagonal pivots, minimum-degree ordering) beyond.
         """
-        order, lower, flat, width = self._band_layout()
         n = self.n_vertices
+        if n == 0:  # every vertex on a free edge: the smoothed field vanishes, the layer is local
+            return np.zeros_like
+        order, lower, flat, width = self._band_layout()
         try:
             if width > MAX_BANDED_HALF_WIDTH:
                 return splu(self.matrix(data), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}).solve

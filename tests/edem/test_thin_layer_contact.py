@@ -16,6 +16,7 @@ from edem.raycast import RayCaster
 from edem.scene import Viscoelastic, load_scene
 from edem.solver import fixed_placement, run
 from edem.springs import Ligament, Placement, spring_geometry
+from edem.thin_layer import operator_factors
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 from geometries.surface import TriangleSurface
 
@@ -166,6 +167,21 @@ def test_threshold_layer_ends_with_a_free_face_where_the_candidates_end():
     error = np.sqrt((area * (step.pressure_mpa[inside] - expected) ** 2).sum() / (area * expected**2).sum())
     assert error < 0.03
     assert abs(balance(scene, step)[2]) <= 1e-9 * force
+
+
+def test_a_layer_without_interior_vertices_is_its_local_columns():
+    """A rigid disk small enough that the threshold law's layer (its candidates) has every vertex
+    on its free edge: the smoothed field vanishes, so each column has the local compliance c_loc
+    alone (squeezing out on every side): d = F c_loc / (G_c A) with G_c the columns' total area."""
+    h, nu, force = 1.0, 0.45, 5.0
+    scene = coupled(make_scene(grid_plate(10, 10, 20), disk(0.3, h), [0, 0, force], fixed_dofs=("tx", "ty", "rx", "ry", "rz"),
+                               poissons_ratio=nu, law="threshold", max_spring_length_mm=2 * h))
+    step = run(scene, "dem").steps[0]
+    area = scene.spring_area_mm2[step.in_contact].sum()
+    c_loc, _, _, _ = operator_factors(nu, E / (2 * (1 + nu)), h)
+    assert 0 < step.in_contact.sum() <= 8
+    assert step.displacement_mm[2] == pytest.approx(force * float(c_loc) / area, rel=1e-9)
+    np.testing.assert_allclose(step.pressure_mpa[step.in_contact], force / area, rtol=1e-9)
 
 
 @pytest.mark.parametrize("law", ("threshold", "gap"))
