@@ -45,7 +45,8 @@ local frame instead (lengths are invariant under the rigid motion).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -100,15 +101,12 @@ class Rays:
     origins_mm: np.ndarray  # (n, 3) float64, read-only
     directions: np.ndarray  # (n, 3) float64 unit or zero rows, read-only
     live: np.ndarray | None  # (l,) indices of the rays with a direction; None: every ray has one
-    # (l, 4) rows (origin, 1) of the live rays, formed on first use (see homogeneous_origins)
-    _homogeneous: list = field(default_factory=list, repr=False, compare=False)
 
+    @cached_property
     def homogeneous_origins(self) -> np.ndarray:
         """(l, 4) rows (x, y, z, 1) of the live rays' origins: moved by one affine product."""
-        if not self._homogeneous:
-            origins = self.origins_mm if self.live is None else self.origins_mm[self.live]
-            self._homogeneous.append(np.column_stack([origins, np.ones(origins.shape[0])]))
-        return self._homogeneous[0]
+        origins = self.origins_mm if self.live is None else self.origins_mm[self.live]
+        return np.column_stack([origins, np.ones(origins.shape[0])])
 
 
 def _moller_trumbore(
@@ -410,7 +408,7 @@ class RayCaster:
         affine = np.empty((4, 3))
         affine[:3] = rot
         affine[3] = -(shift @ rot + self._centre_mm)
-        origins = rows_times(rays.homogeneous_origins(), affine)
+        origins = rows_times(rays.homogeneous_origins, affine)
         dirs = rows_times(dirs, rot)
         cast = self._cast_bruteforce if self.backend == "numpy" else self._cast_embree
         if rays.live is None:

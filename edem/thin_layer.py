@@ -190,7 +190,7 @@ class SurfaceMesh:
     cotangents: np.ndarray  # (n, 3)
     incidence: sp.csr_matrix  # (n, n_vertices) triangle-vertex incidence
     free_edge_vertex: np.ndarray  # (n_vertices,) bool: on the surface's boundary (the cartilage's free edge)
-    memo: dict = field(default_factory=dict, compare=False, repr=False)  # the transposed incidence and the last operator pattern
+    memo: dict = field(default_factory=dict, compare=False, repr=False)  # the last operator pattern
 
     @staticmethod
     def from_corners(triangles: np.ndarray, corners_mm: np.ndarray) -> "SurfaceMesh":
@@ -212,10 +212,7 @@ class SurfaceMesh:
         Grown ring by ring through shared vertices; a ring is about one triangle size sqrt(2 A)
         wide. With ``enough``, the growth stops once the mask holds that many triangles.
         """
-        incidence = self.incidence
-        if "incidence_t" not in self.memo:
-            self.memo["incidence_t"] = incidence.T.tocsr()
-        incidence_t = self.memo["incidence_t"]
+        incidence, incidence_t = self.incidence, self.incidence_t
         mask = np.zeros(self.triangles.shape[0], bool)
         mask[cells] = True
         size = float(np.sqrt(2.0 * self.area_mm2[mask]).mean()) if np.any(mask) else 1.0
@@ -227,6 +224,11 @@ class SurfaceMesh:
                 break
             mask = grown
         return mask
+
+    @functools.cached_property
+    def incidence_t(self) -> sp.csr_matrix:
+        """(n_vertices, n) the incidence transposed, for growing masks ring by ring."""
+        return self.incidence.T.tocsr()
 
     @staticmethod
     def from_surface(vertices_mm: np.ndarray, triangles: np.ndarray) -> "SurfaceMesh":
@@ -317,7 +319,6 @@ class OperatorPattern:
     indptr: np.ndarray
     slots: np.ndarray  # (m, 9) int
     q: sp.csr_matrix  # (m, v)
-    band: tuple[np.ndarray, np.ndarray, np.ndarray, int] | None = None  # (ordering, entries kept, their flat band positions, half-width)
 
     @property
     def n_vertices(self) -> int:
@@ -339,18 +340,19 @@ class OperatorPattern:
         kept = np.flatnonzero(self.slots.ravel() >= 0)
         return kept, self.slots.ravel()[kept]
 
-    def _band_layout(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-        if self.band is None:
-            n = self.n_vertices
-            order = reverse_cuthill_mckee(self.matrix(np.ones(self.indices.shape[0])).tocsr(), symmetric_mode=True).astype(np.int64)
-            position = np.empty(n, np.int64)
-            position[order] = np.arange(n)
-            row = position[self.indices]
-            col = position[np.repeat(np.arange(n), np.diff(self.indptr))]
-            lower = np.flatnonzero(row >= col)  # LAPACK's lower band storage: ab[i - j, j] = A[i, j]
-            width = int((row - col)[lower].max(initial=0))
-            self.band = (order, lower, (row - col)[lower] * n + col[lower], width)
-        return self.band
+    @functools.cached_property
+    def band(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """(ordering, the stored entries in the lower band, their flat positions in LAPACK's band
+        storage, half-width) of the reverse Cuthill-McKee renumbering; built on first use."""
+        n = self.n_vertices
+        order = reverse_cuthill_mckee(self.matrix(np.ones(self.indices.shape[0])).tocsr(), symmetric_mode=True).astype(np.int64)
+        position = np.empty(n, np.int64)
+        position[order] = np.arange(n)
+        row = position[self.indices]
+        col = position[np.repeat(np.arange(n), np.diff(self.indptr))]
+        lower = np.flatnonzero(row >= col)  # LAPACK's lower band storage: ab[i - j, j] = A[i, j]
+        width = int((row - col)[lower].max(initial=0))
+        return order, lower, (row - col)[lower] * n + col[lower], width
 
     def factorise(self, data: np.ndarray):
         """Factor of the SPD matrix with this pattern and ``data`` (nnz,); returns solve(rhs (v,) or (v, k)).
@@ -361,7 +363,7 @@ class OperatorPattern:
         n = self.n_vertices
         if n == 0:  # every vertex on a free edge: the smoothed field vanishes, the layer is local
             return np.zeros_like
-        order, lower, flat, width = self._band_layout()
+        order, lower, flat, width = self.band
         try:
             if width > MAX_BANDED_HALF_WIDTH:
                 return splu(self.matrix(data), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}).solve

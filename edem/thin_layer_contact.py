@@ -352,15 +352,18 @@ class CoupledStep:
         cand = np.flatnonzero(geometry.candidate)
         law = cartilage.spring_law
         candidate_thickness = law.shear_length_mm(geometry.spring_length_mm[cand], cartilage.thickness_mm)  # the h of k_s = G / h
-        # The band: t, or for a law whose thickness is the spring length, the candidates' median.
-        band_thickness = float(cartilage.thickness_mm) if law.needs_thickness else float(np.median(candidate_thickness, axis=None)) if cand.size else 1.0
         _, _, _, b = operator_factors(cartilage.poissons_ratio, 1.0, 1.0)
         ends = law.thin_layer_extent == "candidates"
-        domain = cand if ends or b == 0.0 else coupled_domain(mesh, cand, 3.0 * np.sqrt(b) * band_thickness)
+        if ends or b == 0.0:  # the layer is the candidates
+            domain, thickness = cand, candidate_thickness
+        else:
+            # The band: t, or for a law whose thickness is the spring length, the candidates' median.
+            band_thickness = float(cartilage.thickness_mm) if law.needs_thickness else float(np.median(candidate_thickness)) if cand.size else 1.0
+            domain = coupled_domain(mesh, cand, 3.0 * np.sqrt(b) * band_thickness)
+            thickness = np.full(domain.shape, band_thickness)
+            thickness[geometry.candidate[domain]] = candidate_thickness  # domain is sorted: candidates in their order
         is_candidate = geometry.candidate[domain]
         length = geometry.spring_length_mm[domain]
-        thickness = np.full(domain.shape, band_thickness)
-        thickness[is_candidate] = candidate_thickness  # domain is sorted: candidates in their order
         layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends)
         overlap = np.full(domain.shape, -np.inf)
         if law.thin_layer == "carried":

@@ -10,8 +10,8 @@ layer, and at 333 N on both ankles; loads 333, 1000, 4190 N at nu 0.42 and 0.49 
 they share one FE run (the FE never reads ``cartilage.coupling``: verification.runner's side store).
 
 FE (P2; Taylor-Hood from nu 0.49): the base cylinder layer (2 mm, 333 N, the nu sweep) at
-0.5 mm in-plane with two elements through the thickness given explicitly (``FE_LAYER``: the FE
-mesh-convergence study of branch i10b, /work/notes/i10b.md: at 1.0 mm the layer's displacement
+0.5 mm in-plane with two elements through the thickness given explicitly (``FE_LAYER``: the layer's
+FE mesh-convergence study, docs/campaigns.md: at 1.0 mm the layer's displacement
 and peak are not converged, and 2 layers move them by at most 0.2 % against 6-8; the default
 layer count at 0.5 mm, ceil(t / size), would double the DOFs and need ~8 GB for Taylor-Hood);
 measured 55-75 s per P2 run and 160 s per Taylor-Hood run at t = 2 mm by that study; here,
