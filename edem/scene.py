@@ -22,6 +22,7 @@ from edem.laws import LAWS
 from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, load_series_from_table
 from edem.mechanics import DOF_NAMES
 from edem.springs import Cartilage, Ligament
+from edem.thin_layer import LAYER_SYMBOLS
 from edem.tables import SceneTable, not_utf8
 from geometries.builders import build_geometry
 from geometries.mesh_io import MAX_COORDINATE_MM
@@ -39,6 +40,7 @@ SECTIONS = {
         "thickness_mm",
         "shear_modulus_mpa",
         "coupling",
+        "thin_layer_symbol",
     },
     "load": None,  # checked by edem.loads
     "kinematics": None,  # checked by edem.loads
@@ -367,8 +369,17 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             key="cartilage.coupling",
             expected=f'law = {coupled_laws} with coupling = "thin-layer", or coupling = "none"',
         )
+    symbol = cart.string("thin_layer_symbol", "pade", tuple(LAYER_SYMBOLS))
+    if cart.has("thin_layer_symbol") and coupling != "thin-layer":
+        raise InputError(
+            "thin_layer_symbol only applies to the coupled thin layer",
+            file=file,
+            key="cartilage.thin_layer_symbol",
+            expected='coupling = "thin-layer" with it, or no thin_layer_symbol',
+        )
     cartilage = Cartilage(
         coupling=coupling,
+        thin_layer_symbol=symbol,
         youngs_modulus_mpa=cart.number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
         poissons_ratio=cart.number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
         law=law,

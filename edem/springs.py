@@ -54,6 +54,7 @@ class Cartilage:
     thickness_mm: float | None = None  # undeformed combined thickness t (gap laws)
     shear_modulus_mpa: float = 0.0
     coupling: str = "none"  # none (independent springs) | thin-layer (edem.thin_layer)
+    thin_layer_symbol: str = "pade"  # under the coupling, a name of edem.thin_layer.LAYER_SYMBOLS
 
     @property
     def confined_modulus_mpa(self) -> float:

@@ -160,6 +160,127 @@ def operator_factors(poissons_ratio: float, shear_modulus_mpa: float, thickness_
     return h_over_g * a / b, h_over_g * abs(c1) / b, -float(np.sign(c1)), b
 
 
+@dataclass(frozen=True)
+class LayerSymbol:
+    """A rational model of the layer's compliance, C G / h ~ local + sum_i s_i / (1 + b_i (kh)^2).
+
+    Each term s_i / (1 + b_i x) is one screened-Poisson smoothing on the surface (module docstring:
+    w = c_loc p + sum_i s_i (h/G) S_i p). ``dirichlet[i]``: whether term i's smoothed field vanishes
+    at a free edge (else the edge is natural for it).
+    """
+
+    local: float
+    strengths: tuple[float, ...] = ()
+    screenings: tuple[float, ...] = ()
+    dirichlet: tuple[bool, ...] = ()
+
+    def __call__(self, kh: np.ndarray) -> np.ndarray:
+        x = np.asarray(kh, float) ** 2
+        return self.local + sum(s / (1.0 + b * x) for s, b in zip(self.strengths, self.screenings))
+
+    def error_bound(self, poissons_ratio: float, max_kh: float = 1.0) -> float:
+        """Largest relative error against the exact compliance over 0 < kh <= max_kh."""
+        kh = np.linspace(1e-3, max_kh, 4001)
+        return float(np.max(np.abs(self(kh) / exact_layer_compliance(kh, poissons_ratio) - 1.0)))
+
+
+def pade_symbol(poissons_ratio: float) -> LayerSymbol:
+    """The [1/1] Pade as a LayerSymbol: local a / b and one term -c1 / b (none where b = 0)."""
+    e, a, b = pade_coefficients(poissons_ratio)
+    _, c1, _ = taylor_coefficients(poissons_ratio)
+    if b == 0.0 or abs(c1) <= 1e-12 * e * b:
+        return LayerSymbol(e)
+    return LayerSymbol(a / b, (-c1 / b,), (b,), (True,))
+
+
+#: The two-pole symbol is fitted to the exact compliance over 0 <= kh <= this: the shortest waves
+#: a spring mesh resolves on a layer, pi h / spacing (6-12 for a 2 mm layer on 0.5-1 mm springs).
+TWO_POLE_MAX_KH = 12.0
+
+
+def _two_pole_terms(c0: float, c1: float, b: np.ndarray, x: np.ndarray, exact: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For screenings b (k, 2) with b[:, 0] < b[:, 1]: the least-squares relative fit over x of
+    local + s1/(1 + b1 x) + s2/(1 + b2 x) with C(0) = c0 and C'(0) = c1 held exactly.
+
+    Returns (local (k,), strengths (k, 2), rms relative error (k,)). The two constraints leave s1
+    free: C = c0 + s1 u1 + s2 u2 with u_i = 1/(1 + b_i x) - 1 and s2 = -(c1 + s1 b1) / b2.
+    """
+    u1 = 1.0 / (1.0 + b[:, :1] * x) - 1.0
+    u2 = 1.0 / (1.0 + b[:, 1:] * x) - 1.0
+    base = (c0 - c1 / b[:, 1:] * u2) / exact  # (k, n) relative, at s1 = 0
+    slope = (u1 - b[:, :1] / b[:, 1:] * u2) / exact
+    s1 = ((1.0 - base) * slope).sum(axis=1) / np.maximum((slope * slope).sum(axis=1), 1e-300)
+    s2 = -(c1 + s1 * b[:, 0]) / b[:, 1]
+    rms = np.sqrt(((base + s1[:, None] * slope - 1.0) ** 2).mean(axis=1))
+    return c0 - s1 - s2, np.column_stack([s1, s2]), rms
+
+
+def _definiteness_margin(local: np.ndarray, s: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """local + min(0, min over x >= 0 of g(x)), g(x) = s1/(1 + b1 x) + s2/(1 + b2 x): a lower bound
+    (in h/G) of the compliance C on any mesh (``two_pole_symbol``). Rows of s, b: (k, 2).
+
+    With one mass M and stiffness K, both H_i = M + b_i K are diagonal in the basis of K v = lam M v,
+    where the two terms weigh each mode by g(lam); bounded below by min(0, min g) times a
+    projection, they leave C >= local + min(0, min g). Holding a negative term's field at zero on
+    an edge only raises it. g is smallest at x = 0, at infinity (0) or where g' = 0:
+    sqrt(-s1 b1) ... solved below for the one stationary point of a pair of opposite signs.
+    """
+    lowest = np.minimum(s.sum(axis=1), 0.0)  # g(0); g(inf) = 0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        # g'(x) = 0: (1 + b2 x) sqrt(-s1 b1) = (1 + b1 x) sqrt(s2 b2) for s1 < 0 < s2 (and the mirror).
+        r1, r2 = np.sqrt(np.abs(s[:, 0] * b[:, 0])), np.sqrt(np.abs(s[:, 1] * b[:, 1]))
+        x = (r2 - r1) / (r1 * b[:, 1] - r2 * b[:, 0])
+        inner = s[:, 0] / (1.0 + b[:, 0] * x) + s[:, 1] / (1.0 + b[:, 1] * x)
+    stationary = (s[:, 0] * s[:, 1] < 0.0) & np.isfinite(x) & (x > 0.0)
+    return local + np.minimum(lowest, np.where(stationary, inner, 0.0))
+
+
+@functools.lru_cache(maxsize=64)
+def two_pole_symbol(poissons_ratio: float) -> LayerSymbol:
+    """Two screened-Poisson terms fitted to the exact compliance for 0 <= kh <= TWO_POLE_MAX_KH.
+
+    The Pade has one term, so it levels off at short waves (C -> a/b) where the layer, like a
+    half-space, gets stiffer as (1 - nu)/kh: its contact edges are too soft. Two terms of opposite
+    sign follow the exact curve over the whole range (a bulge term, and a short-range term for the
+    surface's sag around a load). Fit: C(0) = G/E' and the thin-layer coefficient c1 exactly, the
+    rest by least squares in relative error (a 61 x 61 grid of screenings, then Nelder-Mead), among
+    the fits whose compliance stays, on any mesh, above half the smaller of its own limits C(0) =
+    G/E' and C(inf) = local (``_definiteness_margin``; the Pade's bound is G/E' itself). A term with s_i < 0 (the bulge) vanishes
+    on a free edge like the Pade's; a term with s_i > 0 is natural there (held at zero it would
+    lower the bound).
+    """
+    from scipy.optimize import minimize
+
+    c0, c1, _ = taylor_coefficients(poissons_ratio)
+    q = np.concatenate([np.linspace(0.0, 1.0, 51), np.geomspace(1.0, TWO_POLE_MAX_KH, 200)[1:]])
+    x, exact = q * q, exact_layer_compliance(q, poissons_ratio)
+    grid = np.linspace(np.log(1e-3), np.log(1e2), 61)
+    i, j = np.triu_indices(grid.size, 1)
+    b = np.exp(np.column_stack([grid[i], grid[j]]))
+    local, s, rms = _two_pole_terms(c0, c1, b, x, exact)
+    rms = np.where(_definiteness_margin(local, s, b) >= 0.5 * np.minimum(local, c0), rms, np.inf)
+
+    def objective(log_b: np.ndarray) -> float:
+        pair = np.exp(np.sort(log_b))[None]
+        if pair[0, 1] <= pair[0, 0] * (1.0 + 1e-9):
+            return np.inf
+        lo, st, err = _two_pole_terms(c0, c1, pair, x, exact)
+        return float(err[0]) if _definiteness_margin(lo, st, pair)[0] >= 0.5 * min(float(lo[0]), c0) else np.inf
+
+    best = int(np.argmin(rms))
+    if not np.isfinite(rms[best]):
+        raise ValueError(f"no positive definite two-pole fit at Poisson's ratio {poissons_ratio}")
+    refined = minimize(objective, np.log(b[best]), method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9})
+    pair = np.exp(np.sort(refined.x))[None] if refined.fun <= rms[best] else b[best][None]
+    lo, st, _ = _two_pole_terms(c0, c1, pair, x, exact)
+    strengths = tuple(float(v) for v in st[0])
+    return LayerSymbol(float(lo[0]), strengths, tuple(float(v) for v in pair[0]), tuple(v < 0.0 for v in strengths))
+
+
+#: ``[cartilage] thin_layer_symbol``: the rational model of the layer's compliance.
+LAYER_SYMBOLS = {"pade": pade_symbol, "two-pole": two_pole_symbol}
+
+
 # --------------------------------------------------------------------------- surface operators
 
 
@@ -190,7 +311,7 @@ class SurfaceMesh:
     cotangents: np.ndarray  # (n, 3)
     incidence: sp.csr_matrix  # (n, n_vertices) triangle-vertex incidence
     free_edge_vertex: np.ndarray  # (n_vertices,) bool: on the surface's boundary (the cartilage's free edge)
-    memo: dict = field(default_factory=dict, compare=False, repr=False)  # the last operator pattern
+    memo: dict = field(default_factory=dict, compare=False, repr=False)  # the operator patterns of the last cell set
 
     @staticmethod
     def from_corners(triangles: np.ndarray, corners_mm: np.ndarray) -> "SurfaceMesh":
@@ -235,7 +356,7 @@ class SurfaceMesh:
         return SurfaceMesh.from_corners(triangles, vertices_mm[triangles])
 
     def smoothing_operators(
-        self, cells: np.ndarray, mass_weight: np.ndarray, stiffness_weight: np.ndarray, edge_at_cells: bool = False
+        self, cells: np.ndarray, mass_weight: np.ndarray, stiffness_weight: np.ndarray, edge_at_cells: bool = False, dirichlet: bool = True
     ) -> tuple[sp.csc_matrix, "OperatorPattern"]:
         """P1 operators on the triangles ``cells`` (indices, m): H and its pattern (with Q).
 
@@ -243,9 +364,10 @@ class SurfaceMesh:
         with each triangle weighted by ``stiffness_weight`` (m,), summed into the cached pattern
         of these cells (``operator_pattern``): no sparse assembly per call. The smoothed field
         vanishes on the surface's free edge, and with ``edge_at_cells`` on the cells' own
-        boundary too (the layer ends there); elsewhere the boundary is natural.
+        boundary too (the layer ends there); elsewhere the boundary is natural. Without
+        ``dirichlet`` it is natural everywhere.
         """
-        pattern = self.operator_pattern(cells, edge_at_cells)
+        pattern = self.operator_pattern(cells, edge_at_cells, dirichlet)
         # One 3 x 3 element matrix per triangle, row-major in (m, 9): mass A m / 9 for every
         # ordered pair of corners (Q^T diag(A m) Q) plus the cotangent stiffness, where the edge
         # opposite corner i carries w cot_i / 2 (off-diagonal -w cot_i / 2 at (j, k) and (k, j),
@@ -259,19 +381,27 @@ class SurfaceMesh:
         element += (self.area_mm2[cells] * np.asarray(mass_weight, float) / 9.0)[:, None]
         return pattern.matrix(pattern.sum_at_slots(element)), pattern
 
-    def operator_pattern(self, cells: np.ndarray, edge_at_cells: bool = False) -> "OperatorPattern":
+    def operator_pattern(self, cells: np.ndarray, edge_at_cells: bool = False, dirichlet: bool = True) -> "OperatorPattern":
         """The sparsity of the operators on the triangles ``cells`` (indices, m), built once per cell set.
 
         Consecutive time points of a run usually share their cell set (the whole surface when the
-        band around the candidates covers most of it), so the last pattern is kept and reused
-        when the cells are the same. ``edge_at_cells``: see ``smoothing_operators``.
+        band around the candidates covers most of it), so the patterns of the last cell set are
+        kept and reused. ``edge_at_cells``, ``dirichlet``: see ``smoothing_operators``.
         """
-        key = (np.asarray(cells).tobytes(), edge_at_cells)
-        cached = self.memo.get("pattern")
-        if cached is not None and cached[0] == key:
-            return cached[1]
+        key = np.asarray(cells).tobytes()
+        if self.memo.get("cells") != key:
+            self.memo.clear()
+            self.memo["cells"] = key
+        cached = self.memo.get((edge_at_cells, dirichlet))
+        if cached is not None:
+            return cached
         tri = self.triangles[cells]
-        free = self.free_edge_vertex | boundary_vertices(tri, self.free_edge_vertex.shape[0]) if edge_at_cells else self.free_edge_vertex
+        if not dirichlet:
+            free = np.zeros(self.free_edge_vertex.shape[0], bool)
+        elif edge_at_cells:
+            free = self.free_edge_vertex | boundary_vertices(tri, self.free_edge_vertex.shape[0])
+        else:
+            free = self.free_edge_vertex
         # Renumber the vertices the cells use, free-edge ones last (dropped below), in O(n).
         used = np.zeros(free.shape[0], bool)
         used[tri] = True
@@ -294,7 +424,7 @@ class SurfaceMesh:
         kept = corner < n_v
         q = sp.csr_matrix((np.full(int(kept.sum()), 1.0 / 3.0), (np.repeat(np.arange(m), 3)[kept], corner[kept])), shape=(m, n_v))
         pattern = OperatorPattern(shape.indices, shape.indptr, slots.reshape(m, 9), q)
-        self.memo["pattern"] = (key, pattern)
+        self.memo[(edge_at_cells, dirichlet)] = pattern
         return pattern
 
 
@@ -382,38 +512,68 @@ class OperatorPattern:
 
 
 @dataclass(frozen=True)
-class LayerCompliance:
-    """w = C f on a set of springs: C = diag(local) + sigma Z^T H^-1 Z (module docstring).
+class SmoothingTerm:
+    """One term sigma Z^T H^-1 Z of the compliance (module docstring): Z = Q^T diag(weight)."""
 
-    ``local`` is c_loc / A in mm/N; Z (v, m) in mm/MPa; H (v, v) in mm^3/MPa.
-    sigma = 0 means no coupling (independent springs, Z empty).
-    """
+    sigma: float  # +1 or -1
+    z: sp.csr_matrix  # (v, m) in mm/MPa
+    h: sp.csc_matrix  # (v, v) canonical CSC, mm^3/MPa
+    weight: np.ndarray  # (m,) c_nl in mm/MPa
+    pattern: OperatorPattern  # H's sparsity, slots and ordering (SurfaceMesh.operator_pattern)
 
-    local_mm_per_n: np.ndarray  # (m,)
-    z: sp.csr_matrix  # (v, m)
-    h: sp.csc_matrix  # (v, v) canonical CSC
-    sigma: float
-    nonlocal_weight: np.ndarray = None  # (m,) c_nl: Z = Q^T diag(c_nl)
-    pattern: OperatorPattern = None  # H's sparsity, slots and ordering (SurfaceMesh.operator_pattern)
-
-    def factorise_coupled(self, spring_weight: np.ndarray):
-        """Factor of H + sigma Z diag(spring_weight) Z^T (v, v) for weights (m,) in N/mm: solve(rhs).
+    def coupled_data(self, spring_weight: np.ndarray) -> np.ndarray:
+        """Data (nnz,) of H + sigma Z diag(spring_weight) Z^T on H's pattern.
 
         Z diag(x) Z^T = Q^T diag(c_nl^2 x) Q puts c_nl^2 x / 9 on every corner pair of each
         triangle, all of them entries of H, so only H's data changes.
         """
-        per_pair = self.sigma * self.nonlocal_weight**2 * spring_weight / 9.0
-        return self.pattern.factorise(self.h.data + self.pattern.sum_at_slots(per_pair))
+        return self.h.data + self.pattern.sum_at_slots(self.sigma * self.weight**2 * spring_weight / 9.0)
+
+
+@dataclass(frozen=True)
+class LayerCompliance:
+    """w = C f on a set of springs: C = diag(local) + sum_i sigma_i Z_i^T H_i^-1 Z_i (module docstring).
+
+    ``local`` is c_loc / A in mm/N. No term means no coupling (independent springs). The contact
+    solve works on the terms' vertex fields stacked, z = (sigma H)^-1 Z f with Z = [Z_1; Z_2 ...]
+    and sigma H = diag(sigma_i H_i), so that w = local f + Z^T z.
+    """
+
+    local_mm_per_n: np.ndarray  # (m,)
+    terms: tuple[SmoothingTerm, ...] = ()
 
     @property
     def coupled(self) -> bool:
-        return self.sigma != 0.0
+        return bool(self.terms)
+
+    @functools.cached_property
+    def z(self) -> sp.csr_matrix:
+        """(V, m): the terms' Z stacked (V the sum of their vertex counts)."""
+        return sp.vstack([t.z for t in self.terms]).tocsr() if len(self.terms) > 1 else self.terms[0].z
+
+    def factorise_coupled(self, spring_weight: np.ndarray):
+        """Factor of sigma H + Z diag(spring_weight) Z^T (V, V) for weights (m,) in N/mm: solve(rhs).
+
+        One term: sigma (H + sigma Z diag(x) Z^T), SPD (module docstring), by the pattern's
+        banded Cholesky. Two: the block matrix is symmetric but indefinite (its blocks' signs
+        differ), so SuperLU factors it (column approximate minimum degree).
+        """
+        if len(self.terms) == 1:
+            term = self.terms[0]
+            solve = term.pattern.factorise(term.coupled_data(spring_weight))
+            return solve if term.sigma > 0 else (lambda rhs: -solve(rhs))
+        coupling = self.z @ sp.diags(spring_weight) @ self.z.T
+        block = sp.block_diag([t.sigma * t.h for t in self.terms]) + coupling
+        try:
+            return splu(block.tocsc(), permc_spec="COLAMD").solve
+        except RuntimeError as error:  # SuperLU's "singular matrix"
+            raise SolverError(f"the coupled thin-layer matrix is singular ({error})") from None
 
     def deflection(self, force_n: np.ndarray) -> np.ndarray:
         """Surface deflection w (m,) in mm under spring forces f (m,) in N."""
         w = self.local_mm_per_n * force_n
-        if self.coupled:
-            w = w + self.sigma * (self.z.T @ self.pattern.factorise(self.h.data)(self.z @ force_n))
+        for term in self.terms:
+            w = w + term.sigma * (term.z.T @ term.pattern.factorise(term.h.data)(term.z @ force_n))
         return w
 
 
@@ -424,18 +584,20 @@ def layer_compliance(
     youngs_modulus_mpa: float,
     poissons_ratio: float,
     edge_at_cells: bool = False,
+    symbol: str = "pade",
 ) -> LayerCompliance:
-    """The Pade thin-layer compliance on the springs ``cells`` (indices) with local thickness (m,) mm.
+    """The thin-layer compliance on the springs ``cells`` (indices) with local thickness (m,) mm.
 
     ``edge_at_cells``: the layer ends at the boundary of ``cells`` (a free lateral face there),
-    rather than going on beyond them with a natural cut."""
+    rather than going on beyond them with a natural cut. ``symbol``: a name of LAYER_SYMBOLS."""
     g = youngs_modulus_mpa / (2.0 * (1.0 + poissons_ratio))
     h = np.broadcast_to(np.asarray(thickness_mm, float), cells.shape)
-    area = mesh.area_mm2[cells]
-    c_loc, c_nl, sigma, b = operator_factors(poissons_ratio, g, h)
-    if sigma == 0.0:
-        return LayerCompliance(c_loc / area, sp.csr_matrix((0, cells.shape[0])), sp.csc_matrix((0, 0)), 0.0)
-    # S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl (module docstring, variable thickness).
-    smoothing, pattern = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl, edge_at_cells)
-    z = (pattern.q.T @ sp.diags(c_nl)).tocsr()
-    return LayerCompliance(c_loc / area, z, smoothing, sigma, np.broadcast_to(c_nl, cells.shape), pattern)
+    h_over_g = h / g
+    model = LAYER_SYMBOLS[symbol](poissons_ratio)
+    terms = []
+    for strength, b, dirichlet in zip(model.strengths, model.screenings, model.dirichlet):
+        # S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl (module docstring, variable thickness).
+        c_nl = abs(strength) * h_over_g
+        smoothing, pattern = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl, edge_at_cells, dirichlet)
+        terms.append(SmoothingTerm(float(np.sign(strength)), (pattern.q.T @ sp.diags(c_nl)).tocsr(), smoothing, np.broadcast_to(c_nl, cells.shape), pattern))
+    return LayerCompliance(model.local * h_over_g / mesh.area_mm2[cells], tuple(terms))

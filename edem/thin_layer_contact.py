@@ -12,9 +12,11 @@ Contact is the complementarity problem
 the KKT system of the convex quadratic programme min 1/2 f.C f - f.d0 over f >= 0, sum f g = T
 (u is the multiplier of the balance). It is solved by the primal-dual active set method
 (semismooth Newton on min(f, k y) = 0): for a set I of springs in contact, f_N = 0 and
-w_I = d_I(u), which with the auxiliary vertex field z = H^-1 Z f is the sparse system
+w_I = d_I(u), which with the auxiliary vertex fields z = (sigma H)^-1 Z f of the compliance's
+smoothing terms (``LayerCompliance``: one for the Pade, two for the two-pole symbol) is the
+sparse system
 
-    f_I = Lam (d0_I + D_I u - sigma Z_I^T z),   (H + sigma Z_I Lam Z_I^T) z = Z_I Lam (d0_I + D_I u),
+    f_I = Lam (d0_I + D_I u - Z_I^T z),   (sigma H + Z_I Lam Z_I^T) z = Z_I Lam (d0_I + D_I u),
 
 Lam = diag(A / c_loc)_I. One sparse factorisation of the vertex matrix per iteration gives f_I and
 z as affine functions of u (seven right-hand sides), so balance is a 6 x 6 solve with the coupled
@@ -38,7 +40,7 @@ import numpy as np
 from edem.errors import SolverError
 from edem.laws import LinearElements
 from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, singular_stiffness_error, unrestrained_dofs
-from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance, operator_factors
+from edem.thin_layer import LAYER_SYMBOLS, LayerCompliance, SurfaceMesh, layer_compliance
 
 
 @dataclass
@@ -57,8 +59,8 @@ class ActiveSystem:
     active: np.ndarray  # (n_c,) bool
     force0_n: np.ndarray  # (n_I,)
     force_per_mm: np.ndarray  # (n_I, 6)
-    vertex0: np.ndarray  # (v,) z at u = 0
-    vertex_per_mm: np.ndarray  # (v, 6)
+    vertex0: np.ndarray  # (V,) the stacked vertex fields z at u = 0 (LayerCompliance)
+    vertex_per_mm: np.ndarray  # (V, 6)
     local_mm_per_n: np.ndarray  # (n_c,) the local compliance it was built with
 
     @staticmethod
@@ -73,7 +75,7 @@ class ActiveSystem:
         if not layer.coupled:
             forces = lam[:, None] * rhs
             return ActiveSystem(active, forces[:, 0], forces[:, 1:], np.zeros(0), np.zeros((0, 6)), local)
-        # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T, added on H's fixed pattern.
+        # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T.
         weight = np.zeros(active.shape[0])
         weight[active] = lam
         solve = layer.factorise_coupled(weight)
@@ -81,11 +83,11 @@ class ActiveSystem:
         nonzero = np.flatnonzero(np.any(rhs, axis=0))
         loads = np.zeros((active.shape[0], nonzero.size))
         loads[active] = lam[:, None] * rhs[:, nonzero]
-        vertex = np.zeros((layer.h.shape[0], 7))
+        vertex = np.zeros((layer.z.shape[0], 7))
         forces = lam[:, None] * rhs
         if nonzero.size:
             vertex[:, nonzero] = solve(np.asarray(layer.z @ loads))
-            forces[:, nonzero] -= lam[:, None] * (layer.sigma * np.asarray(layer.z.T @ vertex[:, nonzero])[active])
+            forces[:, nonzero] -= lam[:, None] * np.asarray(layer.z.T @ vertex[:, nonzero])[active]
         return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
@@ -97,7 +99,7 @@ class ActiveSystem:
         f[self.active] = self.forces(u)
         w = self.local_mm_per_n * f
         if layer.coupled:
-            w = w + layer.sigma * (layer.z.T @ (self.vertex0 + self.vertex_per_mm @ u))
+            w = w + layer.z.T @ (self.vertex0 + self.vertex_per_mm @ u)
         return w
 
     def stiffness(self, directions: np.ndarray) -> np.ndarray:
@@ -327,7 +329,8 @@ class CoupledStep:
     laws), it covers the candidate springs and a band of the surface around them 3 sqrt(b) h
     wide (three decay lengths of the bulge; there the layer is free: f = 0, no opposing surface),
     so the layer can bulge outside the contact; beyond it the boundary is natural. Where that
-    band would cover half the surface, the layer is the whole surface (``coupled_domain``).
+    band would cover half the surface, the layer is the whole surface (``coupled_domain``); b is the
+    symbol's largest screening.
     Where the cartilage only fills the gap (``"candidates"``, the threshold law, whose FE twin is
     the slab), the layer is the candidates, and it ends at their boundary with a free lateral
     face (the smoothed field vanishes there, as at the surface's free edge). Local
@@ -352,7 +355,7 @@ class CoupledStep:
         cand = np.flatnonzero(geometry.candidate)
         law = cartilage.spring_law
         candidate_thickness = law.shear_length_mm(geometry.spring_length_mm[cand], cartilage.thickness_mm)  # the h of k_s = G / h
-        _, _, _, b = operator_factors(cartilage.poissons_ratio, 1.0, 1.0)
+        b = max(LAYER_SYMBOLS[cartilage.thin_layer_symbol](cartilage.poissons_ratio).screenings, default=0.0)
         ends = law.thin_layer_extent == "candidates"
         if ends or b == 0.0:  # the layer is the candidates
             domain, thickness = cand, candidate_thickness
@@ -364,7 +367,7 @@ class CoupledStep:
             thickness[geometry.candidate[domain]] = candidate_thickness  # domain is sorted: candidates in their order
         is_candidate = geometry.candidate[domain]
         length = geometry.spring_length_mm[domain]
-        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends)
+        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends, cartilage.thin_layer_symbol)
         overlap = np.full(domain.shape, -np.inf)
         if law.thin_layer == "carried":
             carried = np.zeros(domain.shape)

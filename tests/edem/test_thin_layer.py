@@ -185,9 +185,10 @@ def test_incompressible_flat_punch_has_the_thin_layer_parabolic_pressure():
     inside = np.flatnonzero(r < a)
     # Contact: w = delta on the punch, f = 0 outside. With z = H^-1 Z f:
     # local f_I + sigma Z_I^T z = delta, H z - Z_I f_I = 0.
-    zi = layer.z[:, inside]
-    system = sp.bmat([[sp.diags(layer.local_mm_per_n[inside]), layer.sigma * zi.T], [-zi, layer.h]]).tocsc()
-    solution = spsolve(system, np.concatenate([np.full(inside.size, delta), np.zeros(layer.h.shape[0])]))
+    (term,) = layer.terms
+    zi = term.z[:, inside]
+    system = sp.bmat([[sp.diags(layer.local_mm_per_n[inside]), term.sigma * zi.T], [-zi, term.h]]).tocsc()
+    solution = spsolve(system, np.concatenate([np.full(inside.size, delta), np.zeros(term.h.shape[0])]))
     pressure = solution[: inside.size] / mesh.area_mm2[inside]
     g = E / (2 * (1 + nu))
     core = r[inside] < a - 3 * h
@@ -198,7 +199,7 @@ def test_incompressible_flat_punch_has_the_thin_layer_parabolic_pressure():
 
 @pytest.mark.parametrize("banded", [True, False])
 def test_coupled_factor_solves_to_round_off_on_both_paths(banded, monkeypatch):
-    """H + sigma Z diag(x) Z^T x = b through the banded Cholesky and through the sparse LU.
+    """(sigma H + Z diag(x) Z^T) x = b through the banded Cholesky and through the sparse LU.
 
     Residual against the assembled matrix within 1e-11 of |A| |x|: round-off (2e-16) times the
     matrix's condition, which for these operators stays below about 1e3 (mass plus a Laplacian
@@ -213,13 +214,14 @@ def test_coupled_factor_solves_to_round_off_on_both_paths(banded, monkeypatch):
     mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
     cells = np.arange(plate.n_triangles)
     layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49)
+    (term,) = layer.terms
     rng = np.random.default_rng(3)
     # The contact solve's weights: 1 / local compliance on the springs in contact, 0 elsewhere.
     for active in (np.ones(cells.size, bool), rng.uniform(size=cells.size) < 0.4):
         weight = np.where(active, 1.0 / layer.local_mm_per_n, 0.0)
-        matrix = layer.h + layer.sigma * (layer.z @ sp.diags(weight) @ layer.z.T)
+        matrix = term.sigma * term.h + layer.z @ sp.diags(weight) @ layer.z.T
         rhs = rng.standard_normal((matrix.shape[0], 2))
         x = layer.factorise_coupled(weight)(rhs)
         scale = abs(matrix).max() * np.abs(x).max()
         assert np.abs(matrix @ x - rhs).max() <= 1e-11 * scale
-    assert (layer.pattern.band[3] <= thin_layer.MAX_BANDED_HALF_WIDTH) == banded
+    assert (term.pattern.band[3] <= thin_layer.MAX_BANDED_HALF_WIDTH) == banded
