@@ -15,19 +15,24 @@ from verification.runner import run_campaign, side_key
 from verification.sides import fe_availability
 
 
-def test_thin_layer_campaign_pairs_every_point_with_both_models():
+def test_thin_layer_campaign_pairs_every_point_with_all_three_beds():
     campaign = get_campaign("thin-layer")
     validate_campaign(campaign)
     assert f"thin-layer ({len(campaign.cases)} cases, " in describe_campaigns("thin-layer")
     by_name = {c.name: c for c in campaign.cases}
     coupled = [c for c in campaign.cases if "-coupled-" in c.name]
-    assert len(coupled) * 2 == len(campaign.cases)
+    assert len(coupled) * 3 == len(campaign.cases)
+    dem_only = ("cartilage.coupling", "cartilage.thin_layer_symbol")
     for case in coupled:
         twin = by_name[case.name.replace("-coupled-", "-springs-")]
-        # the same scene, load, nu, thickness and FE; only the coupling differs
-        assert case.overrides["cartilage.coupling"] == "thin-layer" and "cartilage.coupling" not in twin.overrides
-        assert {k: v for k, v in case.overrides.items() if k != "cartilage.coupling"} == twin.overrides
-        assert (case.scene, case.sides, case.options) == (twin.scene, twin.sides, twin.options)
+        two_pole = by_name[case.name.replace("-coupled-", "-two-pole-")]
+        # the same scene, load, nu, thickness and FE; only the coupling and its symbol differ
+        assert case.overrides["cartilage.coupling"] == two_pole.overrides["cartilage.coupling"] == "thin-layer"
+        assert "cartilage.thin_layer_symbol" not in case.overrides and two_pole.overrides["cartilage.thin_layer_symbol"] == "two-pole"
+        assert "cartilage.coupling" not in twin.overrides
+        for other in (case, two_pole):
+            assert {k: v for k, v in other.overrides.items() if k not in dem_only} == twin.overrides
+            assert (other.scene, other.sides, other.options) == (twin.scene, twin.sides, twin.options)
     layer = [c for c in coupled if c.scene == "cylinder-layer"]
     assert {(c.params["thickness_mm"], c.params["poissons_ratio"]) for c in layer if c.params["load_n"] == 333.0} == {(t, nu) for t in THICKNESS_MM for nu in NUS}
     assert {c.params["load_n"] for c in layer} == set(LOADS_N)
@@ -37,11 +42,16 @@ def test_thin_layer_campaign_pairs_every_point_with_both_models():
     subject = [c for c in coupled if c.scene == "subject-standing"]
     assert {c.params["poissons_ratio"] for c in subject} >= {0.3, 0.42, 0.49, 0.499} and {c.params["load_n"] for c in subject} == {333.0}
     assert [f.kind for f in campaign.figures].count("error-vs-time") == 1
-    # the two variants of a point share one FE run: the same FE side key; different points do not
+    # the three variants of a point share one FE run: the same FE side key; different points do not
     keys = {side_key(c, 1) for c in coupled}
-    assert len(keys) == len(coupled) and all(side_key(by_name[k.name.replace("-coupled-", "-springs-")], 1) == side_key(k, 1) for k in coupled)
-    goal = next(a for a in campaign.analyses if a.kind == "goal")
-    assert {pair for pair in goal.settings["pairs"]} == {(c.name, c.name.replace("-coupled-", "-springs-")) for c in coupled}
+    assert len(keys) == len(coupled)
+    for case in coupled:
+        assert side_key(by_name[case.name.replace("-coupled-", "-springs-")], 1) == side_key(case, 1) == side_key(by_name[case.name.replace("-coupled-", "-two-pole-")], 1)
+    goals = {a.name: a for a in campaign.analyses if a.kind == "goal"}
+    assert set(goals) == {"goal", "goal-two-pole"}
+    for name, variant in (("goal", "-coupled-"), ("goal-two-pole", "-two-pole-")):
+        expected = {(c.name.replace("-coupled-", variant), c.name.replace("-coupled-", "-springs-")) for c in coupled}
+        assert set(goals[name].settings["pairs"]) == expected
 
 
 def test_goal_misses_name_each_criterion_with_the_limit_of_its_nu():
