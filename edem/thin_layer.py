@@ -73,10 +73,12 @@ unresolved; here checkerboards see the finite local compliance c_loc. The intrin
 (areas, cotangents) do not change under the rigid motions of the body, so they are computed once.
 
 Boundaries. Where the spring-bearing surface ends, the cartilage has a free lateral face: there
-the smoothed field vanishes (S p = 0, Dirichlet), the Pade form of the thin-layer free-edge
-condition p = 0 (for e -> 0 and a plate in full contact it gives the squeeze-film paraboloid
-(3 G d / 2 h^3)(a^2 - x^2) plus an O(h^2/a^2) edge term; a no-flux edge would confine the
-incompressible layer and make it rigid). Where the contact solve cuts the surface to a band
+the smoothed field vanishes (S p = 0, Dirichlet). For e -> 0 and a plate in full contact it gives
+the squeeze-film paraboloid (3 G d / 2 h^3)(a^2 - x^2) plus a uniform offset d / c_loc (the edge
+pressure w / c_loc), so the edge is stiffer than the thin-layer condition p = 0; the solid lies
+between the two (its free face still carries some pressure: docs/method.md, section 3). A no-flux
+edge would confine the incompressible layer and make it rigid. Of the two-pole symbol's terms
+(``two_pole_symbol``) the bulge term vanishes there, the sag term is natural. Where the contact solve cuts the surface to a band
 around the candidates (``edem.thin_layer_contact``), the layer goes on, and the cut is natural.
 Where the layer itself ends inside the surface (the threshold law's cartilage fills the gap only
 where the springs are candidates), its edge is free like the surface's (``edge_at_cells``).
