@@ -11,7 +11,7 @@ springs, one run measures in the same process, median of several rounds:
 
 Absolute times vary 2-3x between runs on a shared machine; the ratio is measured in one run.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/bench_step_vs_cast.py [--rounds 5] [--quick]
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_step_vs_cast.py [--rounds 5] [--quick | --sweep]
 """
 
 from __future__ import annotations
@@ -49,7 +49,8 @@ def bare_rays(scene, steps) -> list[tuple[np.ndarray, np.ndarray]]:
     return rays
 
 
-def bench(name: str, mesh_size_mm: float | None, rounds: int) -> float:
+def bench(name: str, mesh_size_mm: float | None, rounds: int) -> tuple[int, float, float]:
+    """Prints and returns (springs, EDEM s per step, bare cast s per step)."""
     overrides = {} if mesh_size_mm is None else {"geometry.mesh_size_mm": mesh_size_mm}
     scene = load_scene(name, overrides)
     caster = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles)
@@ -80,15 +81,29 @@ def bench(name: str, mesh_size_mm: float | None, rounds: int) -> float:
         f"(geometry {1e3 * geometry:6.3f}), bare Embree {1e3 * cast:6.3f} ms/step, "
         f"ratio {ratio:5.2f}x (target <= {TARGET_RATIO:g}x: {'met' if ratio <= TARGET_RATIO else 'MISSED'})"
     )
-    return ratio
+    return result.n_springs, step, cast
+
+
+def sweep(name: str, sizes_mm: tuple[float, ...], rounds: int) -> None:
+    """Step and cast over the spring count: the least-squares lines t = a + b n say how much of a
+    step does not grow with the springs (Python and numpy call overhead) against the cast's."""
+    n, step, cast = np.array([bench(name, size, rounds) for size in sizes_mm]).T
+    (b_step, a_step), (b_cast, a_cast) = np.polyfit(n, step, 1), np.polyfit(n, cast, 1)
+    at_3k = a_cast + b_cast * 3000.0
+    print(f"{name}: EDEM step {1e3 * a_step:.3f} ms + {1e6 * b_step:.4f} us/spring, bare cast {1e3 * a_cast:.3f} ms + {1e6 * b_cast:.4f} us/spring; "
+          f"the step's fixed part alone is {a_step / at_3k:.2f}x the bare cast at 3k springs, its per-spring part {b_step / b_cast:.2f}x the cast's")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--quick", action="store_true", help="only the ~3k-spring cases")
+    parser.add_argument("--sweep", action="store_true", help="the ideal ankle over six spring counts, with the fixed and per-spring parts of each")
     args = parser.parse_args()
     print(f"median of {args.rounds} rounds, per time point")
+    if args.sweep:
+        sweep("ideal-stance", (3.0, 2.0, 1.4, 0.94, 0.6, 0.4, 0.3), args.rounds)
+        return
     for name, small, large in CASES:
         for size in (small,) if args.quick else (small, large):
             bench(name, size, args.rounds)

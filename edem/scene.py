@@ -377,6 +377,15 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             key="cartilage.thin_layer_symbol",
             expected='coupling = "thin-layer" with it, or no thin_layer_symbol',
         )
+    if symbol == "two-pole" and spring_law.nonlinear:
+        # A log column adds -(t / A E')(1 - exp(-f / A E')) to the local compliance when linearised;
+        # the two-pole's local part (about G/E' or less) can then turn negative.
+        raise InputError(
+            f"the {law} law's columns cannot be linearised on the two-pole symbol (its local compliance is below the column's)",
+            file=file,
+            key="cartilage.thin_layer_symbol",
+            expected=f'thin_layer_symbol = "pade" with law = "{law}", or law = "gap" with "two-pole"',
+        )
     cartilage = Cartilage(
         coupling=coupling,
         thin_layer_symbol=symbol,

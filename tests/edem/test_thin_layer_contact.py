@@ -358,12 +358,17 @@ def test_coupled_dem_is_not_judged_by_the_independent_springs_remeasure():
 
 def test_thin_layer_symbol_is_refused_without_the_coupling_or_when_unknown():
     """Exit-2 errors name the key and what it expects: the symbol only means something under the
-    coupling, and only the registered symbols exist."""
+    coupling, only the registered symbols exist, and the log law's columns need the Pade's local
+    compliance."""
     with pytest.raises(InputError) as alone:
         load_scene("cylinder-layer", {"cartilage.thin_layer_symbol": "two-pole"})
     assert alone.value.key == "cartilage.thin_layer_symbol" and 'coupling = "thin-layer"' in alone.value.expected
     with pytest.raises(InputError) as unknown:
         load_scene("cylinder-layer", {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "pade-2"})
     assert unknown.value.key == "cartilage.thin_layer_symbol" and all(name in unknown.value.expected for name in ("pade", "two-pole"))
+    # gap-log linearises its columns into the local compliance, which the two-pole's can be too small to take
+    with pytest.raises(InputError) as log_law:
+        load_scene("cylinder-layer", {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole", "cartilage.law": "gap-log"})
+    assert log_law.value.key == "cartilage.thin_layer_symbol" and '"pade"' in log_law.value.expected
     scene = load_scene("cylinder-layer", {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole"})
     assert scene.cartilage.thin_layer_symbol == "two-pole"
