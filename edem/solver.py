@@ -303,6 +303,8 @@ def run(
             warnings.append(f"time point {k} (t = {t:g} s): the layer's surface penetrates the fixed body by {solution.max_penetration_mm:.3g} mm out of contact")
         if k == 0:
             warnings += precompression_warning(geometry, cartilage)
+            if layer_mesh is not None:
+                warnings += coupled.resolution_warning(layer_mesh)
             warnings += weak_dofs_warning(directions, law, shear, solution, scene.fixed_dofs, length_scale)
         overstrained = int((solution.active[:n_c] & (compression_ratio(geometry, cartilage, directions[:n_c] @ solution.displacement) >= 1.0)).sum())
         if overstrained:

@@ -16,7 +16,7 @@ from edem.raycast import RayCaster
 from edem.scene import Viscoelastic, load_scene
 from edem.solver import fixed_placement, run
 from edem.springs import Ligament, Placement, spring_geometry
-from edem.thin_layer import pade_symbol
+from edem.thin_layer import pade_symbol, two_pole_symbol
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 from geometries.surface import TriangleSurface
 
@@ -372,3 +372,16 @@ def test_thin_layer_symbol_is_refused_without_the_coupling_or_when_unknown():
     assert log_law.value.key == "cartilage.thin_layer_symbol" and '"pade"' in log_law.value.expected
     scene = load_scene("cylinder-layer", {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole"})
     assert scene.cartilage.thin_layer_symbol == "two-pole"
+
+
+def test_an_under_resolved_smoothing_term_is_warned():
+    """The two-pole's sag term is sqrt(b) h ~ 0.46 mm long on the 2 mm layer at nu 0.49; the
+    built-in cylinder's springs are ~0.86 mm across, so it warns, with the length to aim for; the
+    Pade's single term (~1.3 h) does not."""
+    scene = load_scene("cylinder-layer", {"cartilage.coupling": "thin-layer", "cartilage.poissons_ratio": 0.49})
+    assert not [w for w in run(scene).warnings if "smoothing length" in w]
+    two_pole = run(replace(scene, cartilage=replace(scene.cartilage, thin_layer_symbol="two-pole"))).warnings
+    (warning,) = [w for w in two_pole if "smoothing length" in w]
+    length = np.sqrt(min(two_pole_symbol(0.49).screenings)) * scene.cartilage.thickness_mm
+    size = np.sqrt(2.0 * np.median(scene.spring_area_mm2))
+    assert length < size and f"length, {length:.2g} mm" in warning and f"size {size:.2g} mm" in warning
