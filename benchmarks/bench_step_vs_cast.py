@@ -98,7 +98,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--quick", action="store_true", help="only the ~3k-spring cases")
-    parser.add_argument("--sweep", action="store_true", help="the ideal ankle over six spring counts, with the fixed and per-spring parts of each")
+    parser.add_argument("--sweep", action="store_true", help="the ideal ankle over seven spring counts (348-28862), fitted as a fixed plus a per-spring part")
     args = parser.parse_args()
     print(f"median of {args.rounds} rounds, per time point")
     if args.sweep:
