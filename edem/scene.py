@@ -22,7 +22,7 @@ from edem.laws import LAWS
 from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, load_series_from_table
 from edem.mechanics import DOF_NAMES
 from edem.springs import Cartilage, Ligament
-from edem.thin_layer import LAYER_SYMBOLS
+from edem.thin_layer import LAYER_SYMBOLS, taylor_coefficients
 from edem.tables import SceneTable, not_utf8
 from geometries.builders import build_geometry
 from geometries.mesh_io import MAX_COORDINATE_MM
@@ -377,15 +377,6 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             key="cartilage.thin_layer_symbol",
             expected='coupling = "thin-layer" with it, or no thin_layer_symbol',
         )
-    if symbol == "two-pole" and spring_law.nonlinear:
-        # A log column adds -(t / A E')(1 - exp(-f / A E')) to the local compliance when linearised;
-        # the two-pole's local part (about G/E' or less) can then turn negative.
-        raise InputError(
-            f"the {law} law's columns cannot be linearised on the two-pole symbol (its local compliance is below the column's)",
-            file=file,
-            key="cartilage.thin_layer_symbol",
-            expected=f'thin_layer_symbol = "pade" with law = "{law}", or law = "gap" with "two-pole"',
-        )
     cartilage = Cartilage(
         coupling=coupling,
         thin_layer_symbol=symbol,
@@ -396,6 +387,20 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         thickness_mm=thickness,
         shear_modulus_mpa=cart.number("shear_modulus_mpa", 0.0, nonnegative=True, what="a shear modulus in MPa (>= 0)"),
     )
+    if coupling == "thin-layer" and spring_law.nonlinear:
+        # Linearised at a force f, a nonlinear column takes up to (G/E') h/(G A) off the local
+        # compliance (ContactLaw.column_excess_mm: t/(A E') (1 - exp(-f/(A E')))), which must stay
+        # positive for every f: the symbol's local part must be at least G/E' (up to round-off).
+        local, confined = LAYER_SYMBOLS[symbol](cartilage.poissons_ratio).local, taylor_coefficients(cartilage.poissons_ratio)[0]
+        if local < confined * (1.0 - 1e-12):
+            raise InputError(
+                f"the {law} law's columns cannot be linearised on the {symbol} symbol at Poisson's ratio "
+                f"{cartilage.poissons_ratio:g}: its local compliance, {local:.3g} h/G, is below the column's G/E' = {confined:.3g} h/G",
+                file=file,
+                key="cartilage.thin_layer_symbol" if cart.has("thin_layer_symbol") else "cartilage.law",
+                expected=f'law = "gap" with the coupling, or coupling = "none" with law = "{law}" '
+                         "(the Pade symbol takes it at nu = 0, 1/4 and above)",
+            )
     load = load_series_from_table(data["load"], path)
     if from_model:
         from edem.opensim_model import model_geometry

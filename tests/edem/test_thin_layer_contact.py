@@ -16,7 +16,7 @@ from edem.raycast import RayCaster
 from edem.scene import Viscoelastic, load_scene
 from edem.solver import fixed_placement, run
 from edem.springs import Ligament, Placement, spring_geometry
-from edem.thin_layer import pade_symbol, two_pole_symbol
+from edem.thin_layer import pade_symbol, taylor_coefficients, two_pole_symbol
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 from geometries.surface import TriangleSurface
 
@@ -358,18 +358,27 @@ def test_coupled_dem_is_not_judged_by_the_independent_springs_remeasure():
 
 def test_thin_layer_symbol_is_refused_without_the_coupling_or_when_unknown():
     """Exit-2 errors name the key and what it expects: the symbol only means something under the
-    coupling, only the registered symbols exist, and the log law's columns need the Pade's local
-    compliance."""
+    coupling, only the registered symbols exist, and the log law's columns need a local compliance
+    of at least G/E'."""
     with pytest.raises(InputError) as alone:
         load_scene("cylinder-layer", {"cartilage.thin_layer_symbol": "two-pole"})
     assert alone.value.key == "cartilage.thin_layer_symbol" and 'coupling = "thin-layer"' in alone.value.expected
     with pytest.raises(InputError) as unknown:
         load_scene("cylinder-layer", {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "pade-2"})
     assert unknown.value.key == "cartilage.thin_layer_symbol" and all(name in unknown.value.expected for name in ("pade", "two-pole"))
-    # gap-log linearises its columns into the local compliance, which the two-pole's can be too small to take
-    with pytest.raises(InputError) as log_law:
-        load_scene("cylinder-layer", {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole", "cartilage.law": "gap-log"})
-    assert log_law.value.key == "cartilage.thin_layer_symbol" and '"pade"' in log_law.value.expected
+    # gap-log linearises its columns into the local compliance, taking up to G/E' off it: refused
+    # where the symbol's local part is below G/E' (the two-pole; the Pade between nu 0 and 1/4,
+    # whose factor then lost definiteness under 4 kN), taken from G/E' up (the Pade at nu 0, 1/4, 0.3)
+    log = {"cartilage.coupling": "thin-layer", "cartilage.law": "gap-log"}
+    with pytest.raises(InputError) as two_pole:
+        load_scene("cylinder-layer", {**log, "cartilage.thin_layer_symbol": "two-pole"})
+    assert two_pole.value.key == "cartilage.thin_layer_symbol" and "G/E'" in str(two_pole.value)
+    with pytest.raises(InputError) as low_nu:
+        load_scene("cylinder-layer", {**log, "cartilage.poissons_ratio": 0.1})
+    assert low_nu.value.key == "cartilage.law"
+    for nu in (0.0, 0.25, 0.3):
+        assert pade_symbol(nu).local >= taylor_coefficients(nu)[0] * (1 - 1e-12)
+        load_scene("cylinder-layer", {**log, "cartilage.poissons_ratio": nu})
     scene = load_scene("cylinder-layer", {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole"})
     assert scene.cartilage.thin_layer_symbol == "two-pole"
 
