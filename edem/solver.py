@@ -115,13 +115,17 @@ def weak_dofs_warning(
     fixed_dofs: tuple[str, ...],
     length_scale_mm: float,
     ratio: float = 1e-4,
+    coupled: bool = False,
 ) -> list[str]:
     """Warn about free DOFs that are restrained only by round-off-like stiffness (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs).
 
     A faceted cylinder's normals tilt slightly off radial, so sliding along its axis is not
     exactly singular but about 1e-5 as stiff as the rest: the solve succeeds and the body drifts.
+    ``coupled``: the active rows are weighed by their columns' small-strain stiffness. A coupled
+    layer's surface moves by C f, not by g . u, so its columns' law at g . u means nothing (and
+    is not finite past a log column's range); the layer restrains the same DOFs as its rows.
     """
-    _, stiffness = law.force_and_stiffness(directions @ solution.displacement)
+    _, stiffness = law.force_and_stiffness(directions @ (0.0 * solution.displacement if coupled else solution.displacement))
     k = assemble_stiffness(directions, stiffness, solution.active, shear)
     free = np.array([d not in fixed_dofs for d in DOF_NAMES])
     weak = unrestrained_dofs(k, free, length_scale_mm, rtol=ratio)
@@ -305,7 +309,7 @@ def run(
             warnings += precompression_warning(geometry, cartilage)
             if layer_mesh is not None:
                 warnings += coupled.resolution_warning(layer_mesh)
-            warnings += weak_dofs_warning(directions, law, shear, solution, scene.fixed_dofs, length_scale)
+            warnings += weak_dofs_warning(directions, law, shear, solution, scene.fixed_dofs, length_scale, coupled=layer_mesh is not None)
         overstrained = int((solution.active[:n_c] & (compression_ratio(geometry, cartilage, directions[:n_c] @ solution.displacement) >= 1.0)).sum())
         if overstrained:
             warnings.append(

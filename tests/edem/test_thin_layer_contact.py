@@ -60,6 +60,21 @@ def test_gap_log_columns_follow_the_logarithmic_law_where_the_coupling_vanishes(
     assert step.displacement_mm[2] == pytest.approx(t * -np.expm1(-0.3), rel=1e-9)
 
 
+def test_coupled_gap_log_past_its_columns_range_is_warned_not_a_linear_algebra_error():
+    """At p = 3 E' (nu 0.45) the coupled layer's linear part carries the approach past t, where the
+    log column's own law has no finite stiffness. The weak-DOF check weighs the rows by the
+    columns' small-strain stiffness (it once evaluated the log law there and ended in an
+    eigensolver's LinAlgError): the run ends, balanced, with the strain warning."""
+    t, nu, area = 2.0, 0.45, 400.0
+    force = 3.0 * confined_modulus_mpa(E, nu) * area
+    scene = make_scene(grid_plate(20, 20, 16), plane(lambda x, y: t), [0, 0, force], fixed_dofs=("tx", "ty", "rz"),
+                       poissons_ratio=nu, law="gap-log", thickness_mm=t, max_spring_length_mm=5 * t)
+    result = run(coupled(scene), "dem")
+    assert result.steps[0].displacement_mm[2] > t
+    assert abs(balance(scene, result.steps[0])[2]) <= 1e-9 * force
+    assert any("strain >= 100 %" in w for w in result.warnings)
+
+
 def test_gap_log_on_the_coupled_layer_is_the_gap_law_at_small_strain_and_stiffer_beyond():
     """Coupled cylinder (nu 0.45): the log law's column differs from the linear one by about d / 2t
     relative, so at 3 N the two coupled solutions agree within the largest strain (0.4 %), and at
