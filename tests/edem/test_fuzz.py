@@ -2,7 +2,8 @@
 
 A few hundred mutations of small scenes, their load files (CSV and OpenSim .sto) and their mesh
 files (OBJ): values swapped for huge integers, non-finite numbers, wrong types, deep nesting,
-non-UTF-8 bytes, truncation, bad paths and names. Each case runs the CLI's ``main`` in-process
+non-UTF-8 bytes, truncation, bad paths and names; and the coupled thin layer's keys at the ends
+of their ranges on the unmutated scenes. Each case runs the CLI's ``main`` in-process
 (a handful through a real subprocess) and must end with status 0 or 2 (never an uncaught
 exception), with a message on stderr for status 2 and no NaN in any file written.
 """
@@ -205,6 +206,29 @@ def _case(rng: random.Random, root: Path) -> list[str]:
     return ["run", str(root / "scene.toml"), "--out", str(out), *extra]
 
 
+# The coupled thin layer's keys (issue 10) at the ends of their ranges, set on the unmutated
+# bases: a fuzz of these found a LinAlgError in the coupled gap-log layer's weak-DOF check.
+COUPLED_SETTINGS = {
+    "cartilage.thin_layer_symbol": ['"pade"', '"two-pole"'],
+    "cartilage.poissons_ratio": ["0", "0.1", "0.45", "0.499", "0.4999999", "-0.999"],
+    "cartilage.law": ['"threshold"', '"gap"', '"gap-log"'],
+    "cartilage.thickness_mm": ["1e-9", "1.0", "2.0"],
+    "load.force_scale": ["1", "1000", "1e6"],
+    "solver.method": ['"dem"', '"edem"'],
+    "viscoelastic.relaxation_time_s": ["1e-6", "0.1"],
+}
+N_COUPLED_CASES = 80
+
+
+def _coupled_case(rng: random.Random, root: Path) -> list[str]:
+    """Write an unmutated base under `root` and return its argv with the coupled layer on."""
+    root.mkdir(parents=True)
+    for name, text in BASE_FILES[rng.choice(list(BASE_FILES))].items():
+        (root / name).write_text(text)
+    settings = ['cartilage.coupling="thin-layer"'] + [f"{key}={rng.choice(values)}" for key, values in COUPLED_SETTINGS.items() if rng.random() < 0.6]
+    return ["run", str(root / "scene.toml"), "--out", str(root / "out"), *(a for s in settings for a in ("--set", s))]
+
+
 def _run_in_process(argv: list[str]) -> tuple[int, str]:
     err = io.StringIO()
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
@@ -234,11 +258,11 @@ def test_unmutated_fuzz_bases_solve(tmp_path, base):
     assert status == 0, err
 
 
-def test_fuzzed_scenes_load_files_and_meshes_exit_0_or_2_without_traceback_or_nan(tmp_path):
-    rng = random.Random(SEED)
+def _failures(cases) -> list[str]:
+    """What went wrong in each (number, argv) case: an escaped exception, a status other than 0 or
+    2, a silent status 2, or NaN written."""
     failures: list[str] = []
-    for n in range(N_CASES):
-        argv = _case(rng, tmp_path / f"case{n:03d}")
+    for n, argv in cases:
         try:
             status, err = _run_in_process(argv)
         except BaseException as exc:  # noqa: BLE001 - any escape is what the test looks for
@@ -249,6 +273,18 @@ def test_fuzzed_scenes_load_files_and_meshes_exit_0_or_2_without_traceback_or_na
         nan_files = _written_nan(Path(argv[3]))
         if nan_files:
             failures.append(f"case {n}: NaN written in {nan_files}")
+    return failures
+
+
+def test_fuzzed_scenes_load_files_and_meshes_exit_0_or_2_without_traceback_or_nan(tmp_path):
+    rng = random.Random(SEED)
+    failures = _failures((n, _case(rng, tmp_path / f"case{n:03d}")) for n in range(N_CASES))
+    assert not failures, "\n".join(failures)
+
+
+def test_coupled_layer_settings_at_their_range_ends_exit_0_or_2_without_traceback_or_nan(tmp_path):
+    rng = random.Random(SEED)
+    failures = _failures((n, _coupled_case(rng, tmp_path / f"case{n:03d}")) for n in range(N_COUPLED_CASES))
     assert not failures, "\n".join(failures)
 
 
