@@ -30,6 +30,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_edem.py
 	$(PY) benchmarks/bench_raycast.py
 	$(PY) benchmarks/bench_thin_layer.py
+	$(PY) benchmarks/bench_step_vs_cast.py --floor
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

@@ -9,9 +9,15 @@ springs, one run measures in the same process, median of several rounds:
   the pose the step starts from, moved into F's frame, over the signed window), with no float64
   re-measure, no repairs and no solve: the floor the step is compared with.
 
+``--floor`` also times a skeleton step in the solver's numpy idiom: only what no step can skip
+(rays into F's frame, the Embree pass, the float64 plane distance of the hits, the candidates,
+their rows turned with M, one Newton iteration on the 6 DOFs, the pressure scattered over the
+springs), with no edge or miss repair, no line search, no EDEM push-back and no checks. Where
+the skeleton alone is near 3x the bare cast, numpy cannot give a full step within 3x.
+
 Absolute times vary 2-3x between runs on a shared machine; the ratio is measured in one run.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/bench_step_vs_cast.py [--rounds 5] [--quick | --sweep]
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_step_vs_cast.py [--rounds 5] [--quick | --sweep | --floor]
 """
 
 from __future__ import annotations
@@ -26,7 +32,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from edem.mechanics import generalised_directions  # noqa: E402
 from edem.raycast import RayCaster  # noqa: E402
+from edem.rowwise import row_dot, rows_times  # noqa: E402
 from edem.scene import load_scene  # noqa: E402
 from edem.solver import fixed_placement, run  # noqa: E402
 from edem.springs import Placement  # noqa: E402
@@ -84,6 +92,61 @@ def bench(name: str, mesh_size_mm: float | None, rounds: int) -> tuple[int, floa
     return result.n_springs, step, cast
 
 
+def skeleton_step_s(scene, caster: RayCaster, steps) -> float:
+    """Seconds per time point of the skeleton step (module docstring) over the run's poses and loads."""
+    h = scene.cartilage.max_spring_length_mm
+    rays = caster.prepare(scene.spring_centroid_mm, scene.spring_normal)
+    reference_rows = generalised_directions(scene.spring_centroid_mm, scene.spring_normal, scene.reference_point_mm)
+    area = scene.spring_area_mm2
+    modulus = scene.cartilage.confined_modulus_mpa
+    poses = [Placement.identity(scene.reference_point_mm)] + [s.mobile_placement for s in steps[:-1]]
+    fixed = [fixed_placement(scene, k) for k in range(len(steps))]
+    loads = [np.concatenate([s.force_n, s.moment_nmm]) for s in steps]
+    start = time.perf_counter()
+    for pose, f_pose, load in zip(poses, fixed, loads):
+        (rotation_m, offset_m), (rotation_f, offset_f) = pose.affine(), f_pose.affine()
+        rotation = rotation_m.T @ rotation_f
+        affine = np.empty((4, 3))
+        affine[:3] = rotation
+        affine[3] = -((rotation_m.T @ (offset_f - offset_m)) @ rotation + caster._centre_mm)
+        origins, directions = rows_times(rays.homogeneous_origins, affine), rows_times(rays.directions, rotation)
+        starts = directions * -h
+        starts += origins
+        ray = caster._embree_run(starts, directions, np.full(len(origins), 2.0 * h, np.float32))
+        hit = np.flatnonzero(ray["primID"] >= 0)
+        plane = np.take(caster._plane_rows, np.take(ray["primID"], hit), axis=0)
+        length = (plane[:, 3] - row_dot(plane[:, :3], np.take(origins, hit, axis=0))) / row_dot(plane[:, :3], np.take(directions, hit, axis=0))
+        inside = length <= h
+        candidate, length = hit[inside], length[inside]
+        turn = np.zeros((6, 6))
+        turn[:3, :3] = turn[3:, 3:] = pose.rotation.T
+        columns = np.ascontiguousarray(rows_times(np.take(reference_rows, candidate, axis=0), turn).T)
+        stiffness = modulus * area[candidate] / length
+        u = np.linalg.solve(np.einsum("ik,jk->ij", columns * stiffness, columns), load)
+        force = stiffness * np.einsum("i,ij->j", u, columns)
+        pressure = np.zeros(area.size)
+        pressure[candidate] = np.maximum(force, 0.0) / area[candidate]
+    return (time.perf_counter() - start) / len(steps)
+
+
+def floor(name: str, mesh_size_mm: float | None, rounds: int) -> None:
+    """Prints the skeleton step and the bare cast per time point, medians of interleaved rounds."""
+    scene = load_scene(name, {} if mesh_size_mm is None else {"geometry.mesh_size_mm": mesh_size_mm})
+    caster = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles)
+    steps = run(scene, "edem", caster=caster).steps
+    h = scene.cartilage.max_spring_length_mm
+    rays = [(np.ascontiguousarray(o - caster._centre_mm, dtype=np.float32), np.ascontiguousarray(d, dtype=np.float32)) for o, d in bare_rays(scene, steps)]
+    skeleton, cast = [], []
+    for _ in range(rounds):
+        skeleton.append(skeleton_step_s(scene, caster, steps))
+        begin = time.perf_counter()
+        for o, d in rays:
+            caster._scene.run(o, d, dists=np.full(len(o), 2.0 * h, np.float32), output=1)
+        cast.append((time.perf_counter() - begin) / len(steps))
+    a, b = statistics.median(skeleton), statistics.median(cast)
+    print(f"{name:15s} {len(scene.spring_area_mm2):7d} springs: skeleton step {1e3 * a:7.3f} ms, bare Embree {1e3 * b:6.3f} ms, ratio {a / b:5.2f}x")
+
+
 def sweep(name: str, sizes_mm: tuple[float, ...], rounds: int) -> None:
     """Step and cast over the spring count: the least-squares lines t = a + b n say how much of a
     step does not grow with the springs (Python and numpy call overhead) against the cast's."""
@@ -98,6 +161,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--quick", action="store_true", help="only the ~3k-spring cases")
+    parser.add_argument("--floor", action="store_true", help="also the skeleton step (module docstring) against the bare cast")
     parser.add_argument("--sweep", action="store_true", help="the ideal ankle over seven spring counts (348-28862), fitted as a fixed plus a per-spring part")
     args = parser.parse_args()
     print(f"median of {args.rounds} rounds, per time point")
@@ -107,6 +171,8 @@ def main() -> None:
     for name, small, large in CASES:
         for size in (small,) if args.quick else (small, large):
             bench(name, size, args.rounds)
+            if args.floor:
+                floor(name, size, args.rounds)
 
 
 if __name__ == "__main__":
