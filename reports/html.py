@@ -102,7 +102,10 @@ def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
                 ax.plot(gx[ok], ys[ok], "o", markersize=3, alpha=0.6, label=label or metric.replace("_", " "))
             else:
                 ax.plot(gx[ok], ys[ok], "o-", label=label or metric.replace("_", " "))
-        tols = [(x, rows[n]["tolerance"].get(metric)) for x, n in zip(xs, names)]
+        # A sanity bound (1000 %, it catches a broken run) makes no accuracy claim: not drawn
+        # beside the errors as if it were their tolerance.
+        tols = [(x, rows[n]["tolerance"].get(metric)) for x, n in zip(xs, names)
+                if (rows[n].get("verdicts") or {}).get(metric, {}).get("kind") != "sanity"]
         tols = [(x, t) for x, t in tols if t is not None]
         if tols:
             ax.plot([x for x, _ in tols], [t for _, t in tols], "k_", markersize=14, mew=2, label="tolerance")

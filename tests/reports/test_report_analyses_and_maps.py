@@ -122,3 +122,19 @@ def test_a_sweep_with_series_draws_one_line_per_series_and_goal_lines_on_their_p
     lines_a = {line.get_label(): line for line in panel_a.get_lines()}
     assert set(lines_a) == {"model x", "model y", "goal"} and {line.get_label() for line in panel_b.get_lines()} == {"model x", "model y"}
     assert list(lines_a["model y"].get_ydata()) == pytest.approx([0.01, 0.02, 0.03])
+
+
+def test_a_sweep_draws_accuracy_tolerances_but_not_sanity_bounds(tmp_path, monkeypatch):
+    """A sanity bound (1000 %: a broken run) is no accuracy claim; a model band is drawn."""
+    import reports.html as report
+
+    drawn = {}
+    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path: drawn.update(fig=fig))
+    rows = {f"c{nu}": {"params": {"nu": nu}, "metrics": {"a": nu, "b": nu}, "tolerance": {"a": 10.0, "b": 0.5},
+                       "verdicts": {"a": {"kind": "sanity"}, "b": {"kind": "model-band"}}} for nu in (0.1, 0.2)}
+    spec = {"name": "s", "title": "s", "kind": "sweep", "cases": list(rows), "x": "nu", "y": ["a", "b"], "logx": False, "logy": True}
+    report._sweep_figure(spec, rows, tmp_path / "s.png")
+    panel_a, panel_b = drawn["fig"].axes
+    assert "tolerance" not in {line.get_label() for line in panel_a.get_lines()}
+    tolerance = [line for line in panel_b.get_lines() if line.get_label() == "tolerance"]
+    assert len(tolerance) == 1 and list(tolerance[0].get_ydata()) == [0.5, 0.5]
