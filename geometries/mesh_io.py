@@ -316,7 +316,7 @@ def _read_vtk(path: Path, key: str | None):
     return reader.GetOutput()
 
 
-def _vtk_cells(data, file: str) -> tuple[np.ndarray, list[_Cells], list[_Cells], list[str]]:
+def _vtk_cells(data, file: str, key: str | None) -> tuple[np.ndarray, list[_Cells], list[_Cells], list[str]]:
     """Points, polygons, triangle strips and cell type names of a VTK dataset.
 
     PolyData: its polygons and strips (vertices and lines ignored). Other datasets: their 2D
@@ -326,51 +326,65 @@ def _vtk_cells(data, file: str) -> tuple[np.ndarray, list[_Cells], list[_Cells],
     """
     load_vtk()
     from vtkmodules.util.numpy_support import vtk_to_numpy
-    from vtkmodules.vtkCommonDataModel import vtkCellTypes, vtkCellTypeUtilities
+    from vtkmodules.vtkCommonDataModel import vtkCellTypeUtilities
     from vtkmodules.vtkFiltersCore import vtkAppendFilter
 
     def name(cell_type: int) -> str:
         return vtkCellTypeUtilities.GetClassNameFromTypeId(int(cell_type))[3:].lower()
 
     def arrays(cells) -> tuple[np.ndarray, np.ndarray]:
-        return (vtk_to_numpy(cells.GetOffsetsArray()).astype(np.int64),
-                vtk_to_numpy(cells.GetConnectivityArray()).astype(np.int64))
+        offsets = vtk_to_numpy(cells.GetOffsetsArray()).astype(np.int64)
+        connectivity = vtk_to_numpy(cells.GetConnectivityArray()).astype(np.int64)
+        # VTK's legacy readers take a corrupted binary cell array as it comes (a fuzz found
+        # offsets of 1e18, on which VTK's own cell walks crash the process): checked before any
+        # of them, the offsets must walk the connectivity once, from its start to its end.
+        if offsets.size and (offsets[0] != 0 or offsets[-1] != connectivity.size or np.any(np.diff(offsets) < 0)):
+            raise _unreadable("its cell offsets do not walk its connectivity array once: a corrupted cell array", file, key)
+        return offsets, connectivity
 
     if not data.IsA("vtkPolyData") and not data.IsA("vtkUnstructuredGrid"):
-        to_grid = vtkAppendFilter()  # structured grids and images: as an unstructured grid
+        to_grid = vtkAppendFilter()  # structured grids and images (implicit cells): as an unstructured grid
         to_grid.SetInputData(data)
         to_grid.Update()
         data = to_grid.GetOutput()
-    distinct = vtkCellTypes()
-    data.GetDistinctCellTypes(distinct)
-    types = [name(distinct.GetCellType(i)) for i in range(distinct.GetNumberOfTypes())]
+    # From here on, no VTK call walks the cells: their types and arrays are read as numbers.
+    if data.IsA("vtkPolyData"):
+        cell_arrays = [arrays(data.GetPolys()), arrays(data.GetStrips())]
+        counts = zip(("vertex", "line", "polygon", "triangle_strip"), (data.GetNumberOfVerts(), data.GetNumberOfLines(), *(o.size - 1 for o, _ in cell_arrays)))
+        types = [kind for kind, count in counts if count > 0]
+    else:
+        cell_types = vtk_to_numpy(data.GetCellTypes()) if data.GetNumberOfCells() else np.zeros(0, np.uint8)
+        offsets, connectivity = arrays(data.GetCells()) if cell_types.size else (np.zeros(1, np.int64), np.zeros(0, np.int64))
+        if offsets.size != cell_types.size + 1:
+            raise _unreadable(f"{cell_types.size} cell types for {offsets.size - 1} cells: a corrupted cell array", file, key)
+        unknown = [int(t) for t in np.unique(cell_types) if vtkCellTypeUtilities.GetClassNameFromTypeId(int(t)) == "UnknownClass"]
+        if unknown:
+            raise _unreadable(f"cell type {unknown[0]} is not a VTK cell type: a corrupted cell array", file, key)
+        types = [name(t) for t in np.unique(cell_types)]
     if data.GetNumberOfPoints() == 0:
         points = np.empty((0, 3))
     else:
         points = vtk_to_numpy(data.GetPoints().GetData()).astype(np.float64)
     if data.IsA("vtkPolyData"):
-        polys, strips = [], []
-        for cells, out in ((data.GetPolys(), polys), (data.GetStrips(), strips)):
-            offsets, connectivity = arrays(cells)
-            out.append((np.diff(offsets), connectivity))
-        return points, polys, strips, types
+        (poly_offsets, poly_connectivity), (strip_offsets, strip_connectivity) = cell_arrays
+        return points, [(np.diff(poly_offsets), poly_connectivity)], [(np.diff(strip_offsets), strip_connectivity)], types
 
     polys, strips, dropped, corner_only = [], [], set(), set()
-    if data.GetNumberOfCells():
-        cell_types = vtk_to_numpy(data.GetCellTypes())
-        offsets, connectivity = arrays(data.GetCells())
-        for cell_type in np.unique(cell_types):
-            ids = np.flatnonzero(cell_types == cell_type)
-            if cell_type in (6, 7):  # triangle strip, polygon
-                cells = _cells_of(offsets, connectivity, ids)
-                (strips if cell_type == 6 else polys).append(cells)
-            elif cell_type in _CORNERS:
-                corners = offsets[ids][:, None] + np.asarray(_CORNERS[cell_type])
-                polys.append(_block(connectivity[corners]))
-                if cell_type not in _LINEAR_2D:
-                    corner_only.add(name(cell_type))
-            elif vtkCellTypeUtilities.GetDimension(int(cell_type)) == 2:
-                dropped.add(name(cell_type))
+    for cell_type in np.unique(cell_types):
+        ids = np.flatnonzero(cell_types == cell_type)
+        if cell_type in (6, 7):  # triangle strip, polygon
+            cells = _cells_of(offsets, connectivity, ids)
+            (strips if cell_type == 6 else polys).append(cells)
+        elif cell_type in _CORNERS:
+            need = max(_CORNERS[cell_type]) + 1
+            if np.any(offsets[ids + 1] - offsets[ids] < need):
+                raise _unreadable(f"{name(cell_type)} cells with fewer than {need} points: a corrupted cell array", file, key)
+            corners = offsets[ids][:, None] + np.asarray(_CORNERS[cell_type])
+            polys.append(_block(connectivity[corners]))
+            if cell_type not in _LINEAR_2D:
+                corner_only.add(name(cell_type))
+        elif vtkCellTypeUtilities.GetDimension(int(cell_type)) == 2:
+            dropped.add(name(cell_type))
     if corner_only:
         _warn(f"{file}: higher-order cells ({', '.join(sorted(corner_only))}) were read as "
               "flat triangles through their corner nodes; mid-side nodes ignored")
@@ -439,7 +453,7 @@ def read_surface(
     suffix = path.suffix.lower()
     strips: list[_Cells] = []
     if suffix in (".vtk", ".vtp", ".vtu"):
-        points, polys, strips, types = _vtk_cells(_read_vtk(path, key), file)
+        points, polys, strips, types = _vtk_cells(_read_vtk(path, key), file, key)
     elif suffix in _MESHIO_READ:
         points, polys, types = _read_meshio(path, key)
     else:

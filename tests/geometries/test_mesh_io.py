@@ -354,6 +354,34 @@ def test_damaged_vtk_files_are_refused(tmp_path):
         read_surface(bad)
 
 
+def _legacy_grid_text(offsets: list[int], connectivity: list[int], cell_types: list[int]) -> str:
+    """A legacy (5.1) ASCII unstructured grid of 3 points with the given cell arrays, as written."""
+    return ("# vtk DataFile Version 5.1\ndamaged\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS 3 double\n0 0 0 1 0 0 0 1 0\n"
+            f"CELLS {len(offsets)} {len(connectivity)}\nOFFSETS vtktypeint64\n{' '.join(map(str, offsets))}\n"
+            f"CONNECTIVITY vtktypeint64\n{' '.join(map(str, connectivity))}\nCELL_TYPES {len(cell_types)}\n{' '.join(map(str, cell_types))}\n")
+
+
+@pytest.mark.parametrize("offsets, connectivity, cell_types, detail", [
+    ([0, 99999999999], [0, 1, 2], [5], "offsets do not walk"),  # VTK's own cell walk crashed the process
+    ([0, 4, 3], [0, 1, 2], [5, 5], "offsets do not walk"),
+    ([0, 3], [0, 1, 2], [199], "cell type 199 is not a VTK cell type"),
+    ([0, 2], [0, 1], [5], "triangle cells with fewer than 3 points"),  # an IndexError before
+])
+def test_corrupted_vtk_cell_arrays_are_refused_before_vtk_walks_them(tmp_path, offsets, connectivity, cell_types, detail):
+    """Invariant: VTK's legacy readers take a corrupted cell array as it comes (a mesh fuzz found
+    them); its offsets, cell sizes and types are checked as numbers before any VTK call walks
+    the cells, and refused naming the file. The same file with sound arrays reads."""
+    pytest.importorskip("vtk")
+    good = tmp_path / "good.vtk"
+    good.write_text(_legacy_grid_text([0, 3], [0, 1, 2], [5]))
+    assert read_surface(good).n_triangles == 1
+    bad = tmp_path / "bad.vtk"
+    bad.write_text(_legacy_grid_text(offsets, connectivity, cell_types))
+    with pytest.raises(InputError, match=f"could not read the mesh .*{detail}") as err:
+        read_surface(bad, key="geometry.mobile")
+    assert str(bad) in str(err.value) and "geometry.mobile" in str(err.value)
+
+
 def test_write_vtp_keeps_cell_data(tmp_path):
     """Invariant: write_vtp (also used for the result pressure maps) stores float64 points,
     int64 connectivity and the per-triangle arrays exactly."""
