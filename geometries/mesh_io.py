@@ -139,6 +139,9 @@ _CORNERS.update(dict.fromkeys((22, 34, 69, 76), (0, 1, 2)))
 _CORNERS.update(dict.fromkeys((23, 28, 30, 70, 77), (0, 1, 2, 3)))
 _LINEAR_2D = (5, 6, 7, 8, 9)
 
+#: where a PLY file's header must have ended (its element and property lines, and comments)
+_PLY_HEADER_BYTES = 1 << 20
+
 #: cells as (size of every cell, their vertex indices concatenated)
 _Cells = tuple[np.ndarray, np.ndarray]
 
@@ -400,6 +403,13 @@ def _read_meshio(path: Path, key: str | None) -> tuple[np.ndarray, list[_Cells],
 
     file = str(path)
     file_format = _MESHIO_READ[path.suffix.lower()]
+    if file_format == "ply":
+        # meshio's PLY reader loops for ever on a header cut before its end (it reads empty
+        # lines at the end of the file); a header is a few hundred bytes of text.
+        with path.open("rb") as stream:
+            head = stream.read(_PLY_HEADER_BYTES)
+        if b"end_header" not in head:
+            raise _unreadable(f"no 'end_header' line in its first {_PLY_HEADER_BYTES // 1024} KiB: a PLY header cut short", file, key)
     try:
         with warnings.catch_warnings():
             # meshio's STL reader can overflow harmlessly while telling ascii from binary

@@ -382,6 +382,19 @@ def test_corrupted_vtk_cell_arrays_are_refused_before_vtk_walks_them(tmp_path, o
     assert str(bad) in str(err.value) and "geometry.mobile" in str(err.value)
 
 
+def test_ply_with_its_header_cut_short_is_refused(tmp_path):
+    """Invariant: a PLY file cut inside its header (a fuzz found it; meshio's reader looped for
+    ever there) is refused naming the file; the whole file reads."""
+    whole, surface = tmp_path / "whole.ply", icosahedron()
+    write_surface(whole, surface)
+    assert read_surface(whole).n_triangles == surface.n_triangles
+    cut = tmp_path / "cut.ply"
+    cut.write_bytes(whole.read_bytes()[: whole.read_bytes().index(b"end_header") - 5])
+    with pytest.raises(InputError, match="no 'end_header' line") as err:
+        read_surface(cut)
+    assert str(cut) in str(err.value)
+
+
 def test_write_vtp_keeps_cell_data(tmp_path):
     """Invariant: write_vtp (also used for the result pressure maps) stores float64 points,
     int64 connectivity and the per-triangle arrays exactly."""
