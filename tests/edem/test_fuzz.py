@@ -3,7 +3,8 @@
 A few hundred mutations of small scenes, their load files (CSV and OpenSim .sto) and their mesh
 files (OBJ): values swapped for huge integers, non-finite numbers, wrong types, deep nesting,
 non-UTF-8 bytes, truncation, bad paths and names; and the coupled thin layer's keys at the ends
-of their ranges on the unmutated scenes. Each case runs the CLI's ``main`` in-process
+of their ranges on the unmutated scenes; and byte-wise mutations of the mesh files in every
+format a scene reads (STL, PLY, VTK, VTU, VTP). Each case runs the CLI's ``main`` in-process
 (a handful through a real subprocess) and must end with status 0 or 2 (never an uncaught
 exception), with a message on stderr for status 2 and no NaN in any file written.
 """
@@ -23,6 +24,7 @@ import numpy as np
 import pytest
 
 from edem.cli import main
+from geometries.mesh_io import read_surface, write_surface
 
 ROOT = Path(__file__).resolve().parents[2]
 N_CASES = 300  # ~0.1 s each in-process on the CI machine: well under a minute
@@ -229,6 +231,53 @@ def _coupled_case(rng: random.Random, root: Path) -> list[str]:
     return ["run", str(root / "scene.toml"), "--out", str(root / "out"), *(a for s in settings for a in ("--set", s))]
 
 
+# Every mesh format a scene reads (binary STL beside the lossless ascii one), mutated byte-wise:
+# this fuzz found a segfault in VTK's walk of corrupted legacy cell offsets and an endless loop
+# in meshio's reader of a PLY header cut short.
+MESH_FORMATS = (".stl", ".ply", ".vtk", ".vtu", ".vtp", "-binary.stl")
+N_MESH_CASES = 120
+
+
+def _flip_bytes(data: bytes, rng: random.Random) -> bytes:
+    flipped = bytearray(data)
+    for _ in range(rng.randint(1, 8)):
+        flipped[rng.randrange(len(flipped))] = rng.randrange(256)
+    return bytes(flipped)
+
+
+def _write_mesh_case(root: Path, fmt: str, files: dict[str, bytes]) -> list[str]:
+    """The mesh base's scene and load under ``root`` with its bodies ``files`` in format ``fmt``; its argv."""
+    root.mkdir(parents=True)
+    for name, data in files.items():
+        (root / name).write_bytes(data)
+    (root / "load.sto").write_text(LOAD_STO)
+    (root / "scene.toml").write_text(SCENE_MESH.replace('"mobile.obj"', f'"mobile{fmt}"').replace('"fixed.obj"', f'"fixed{fmt}"'))
+    return ["run", str(root / "scene.toml"), "--out", str(root / "out")]
+
+
+def _mesh_case(rng: random.Random, root: Path, bases: dict[str, dict[str, bytes]]) -> list[str]:
+    """The mesh base with both bodies in one format, one of them mutated."""
+    fmt = rng.choice(MESH_FORMATS)
+    files = {f"{body}{fmt}": data for body, data in bases[fmt].items()}
+    victim = rng.choice(list(files))
+    files[victim] = rng.choice([_corrupt_bytes, _flip_bytes])(files[victim], rng)
+    return _write_mesh_case(root, fmt, files)
+
+
+def _mesh_bases(root: Path) -> dict[str, dict[str, bytes]]:
+    """The mesh base's two plates written in every format of MESH_FORMATS: format -> body -> bytes."""
+    root.mkdir()
+    bases: dict[str, dict[str, bytes]] = {}
+    for body in ("mobile", "fixed"):
+        (root / f"{body}.obj").write_text(BASE_FILES["mesh"][f"{body}.obj"])
+        surface = read_surface(root / f"{body}.obj")
+        for fmt in MESH_FORMATS:
+            path = root / f"{body}{fmt}"
+            write_surface(path, surface, binary=True if fmt == "-binary.stl" else None)
+            bases.setdefault(fmt, {})[body] = path.read_bytes()
+    return bases
+
+
 def _run_in_process(argv: list[str]) -> tuple[int, str]:
     err = io.StringIO()
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
@@ -297,3 +346,13 @@ def test_fuzzed_cases_through_a_real_process_print_no_traceback(tmp_path, n):
     proc = subprocess.run([sys.executable, "-m", "edem", *argv], capture_output=True, text=True, env=env, timeout=120)
     assert proc.returncode in (0, 2), proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr, proc.stderr[-2000:]
+
+
+def test_mutated_mesh_files_of_every_format_exit_0_or_2_without_traceback_or_nan(tmp_path):
+    bases = _mesh_bases(tmp_path / "bases")
+    for fmt in MESH_FORMATS:  # unmutated, the base solves in every format
+        status, err = _run_in_process(_write_mesh_case(tmp_path / f"base{fmt}", fmt, {f"{b}{fmt}": d for b, d in bases[fmt].items()}))
+        assert status == 0, (fmt, err)
+    rng = random.Random(SEED)
+    failures = _failures((n, _mesh_case(rng, tmp_path / f"case{n:03d}", bases)) for n in range(N_MESH_CASES))
+    assert not failures, "\n".join(failures)
