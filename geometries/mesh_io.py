@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import re
 import signal
 import sys
 import threading
@@ -288,6 +289,12 @@ def _read_vtk(path: Path, key: str | None):
         return obj
 
     if path.suffix.lower() == ".vtk":
+        # VTK reads a version line it cannot parse as an older layout (a warning only) and then
+        # crashes the process on a 5.1 file's cell arrays (found by a mesh fuzz): refused here.
+        with path.open("rb") as stream:
+            first = stream.readline(256)
+        if not re.fullmatch(rb"# vtk DataFile Version \d+\.\d+\s*", first):
+            raise _unreadable(f"its first line is {first[:60]!r}, not '# vtk DataFile Version <major>.<minor>'", file, key)
         # the generic legacy reader names the dataset type; that type's own reader reads it
         # (the generic one would swallow its delegate's errors)
         sniffer = watched(vtkGenericDataObjectReader())

@@ -382,6 +382,17 @@ def test_corrupted_vtk_cell_arrays_are_refused_before_vtk_walks_them(tmp_path, o
     assert str(bad) in str(err.value) and "geometry.mobile" in str(err.value)
 
 
+def test_legacy_vtk_with_an_unparsable_version_line_is_refused(tmp_path):
+    """Invariant: VTK reads a 5.1 file whose version it cannot parse with an older layout and
+    crashed the process (a mesh fuzz found '5.l'); the first line is checked before VTK reads."""
+    pytest.importorskip("vtk")
+    bad = tmp_path / "version.vtk"
+    bad.write_text(_legacy_grid_text([0, 3], [0, 1, 2], [5]).replace("Version 5.1", "Version 5.l"))
+    with pytest.raises(InputError, match="its first line is .*5.l") as err:
+        read_surface(bad)
+    assert str(bad) in str(err.value)
+
+
 def test_ply_with_its_header_cut_short_is_refused(tmp_path):
     """Invariant: a PLY file cut inside its header (a fuzz found it; meshio's reader looped for
     ever there) is refused naming the file; the whole file reads."""
