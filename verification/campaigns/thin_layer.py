@@ -57,6 +57,8 @@ VARIANTS = {
     "springs": ({}, "independent springs"),
 }
 COUPLED_VARIANTS = ("coupled", "two-pole")
+#: the figures' legend of each variant
+SERIES_LABELS = {"coupled": "coupled, Pade", "two-pole": "coupled, two-pole", "springs": "independent springs"}
 #: (model, scene, sides, what)
 MODELS = (
     ("layer", "cylinder-layer", ("dem", "fe-layer"), "cylinder (R 20 mm) with a bonded layer on a plane, gap-law DEM vs the FE layer"),
@@ -127,7 +129,7 @@ def campaign() -> Campaign:
 
     def overlay(name: str, title: str, x: str, series: dict[str, tuple[str, ...]]) -> Figure:
         return Figure(name, title, "sweep", tuple(n for group in series.values() for n in group), x=x, y=ERROR_PANELS, logy=True,
-                      series=tuple(series.items()), lines=GOAL_LINES)
+                      series=tuple((SERIES_LABELS[variant], group) for variant, group in series.items()), lines=GOAL_LINES)
 
     for tag, what, model, load, t in sweeps:
         series = {variant: tuple(case_name(model, variant, load, t, nu) for nu in NUS) for variant in VARIANTS}
