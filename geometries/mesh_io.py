@@ -256,6 +256,25 @@ def _triangulate(points: np.ndarray, polys: list[_Cells], strips: list[_Cells]) 
     return connectivity[starts[:, None] + np.arange(3)]
 
 
+#: the most points, cells or components a VTK XML file may declare (a joint surface has < 1e7)
+_MAX_XML_COUNT = 10**9
+
+
+def _check_xml_counts(path: Path, key: str | None) -> None:
+    """Refuse a VTK XML file whose declared sizes (``NumberOfPoints``, ``NumberOfCells``,
+    ``NumberOfComponents``...) are not whole numbers in range: VTK's XML readers resize their
+    arrays to them unchecked, and a negative or huge one aborts the process (a mesh fuzz found
+    ``NumberOfComponents="-3"``). Read as bytes up to the appended binary data, if any."""
+    with path.open("rb") as stream:
+        text = stream.read()
+    text = text.split(b"<AppendedData", 1)[0]
+    for name, value in re.findall(rb'(NumberOf\w+)\s*=\s*"([^"]*)"', text):
+        low = 1 if name == b"NumberOfComponents" else 0
+        if not (re.fullmatch(rb"\s*\d{1,10}\s*", value) and low <= int(value) <= _MAX_XML_COUNT):
+            raise _unreadable(f"{name.decode()}=\"{value.decode(errors='replace')[:20]}\" is not a whole number "
+                              f"from {low} to {_MAX_XML_COUNT:.0e}", str(path), key)
+
+
 def _read_vtk(path: Path, key: str | None):
     """The dataset of a VTK file, read by VTK's own readers: legacy .vtk of any dataset type,
     XML .vtp (PolyData) and .vtu (UnstructuredGrid).
@@ -288,6 +307,8 @@ def _read_vtk(path: Path, key: str | None):
         obj.AddObserver("ErrorEvent", on_error)
         return obj
 
+    if path.suffix.lower() in (".vtp", ".vtu"):
+        _check_xml_counts(path, key)
     if path.suffix.lower() == ".vtk":
         # VTK reads a version line it cannot parse as an older layout (a warning only) and then
         # crashes the process on a 5.1 file's cell arrays (found by a mesh fuzz): refused here.

@@ -393,6 +393,28 @@ def test_legacy_vtk_with_an_unparsable_version_line_is_refused(tmp_path):
     assert str(bad) in str(err.value)
 
 
+@pytest.mark.parametrize("suffix", [".vtu", ".vtp"])
+@pytest.mark.parametrize("attribute, value", [("NumberOfComponents", "-3"), ("NumberOfPoints", "99999999999999"), ("cells", "x")])
+def test_vtk_xml_with_a_declared_size_out_of_range_is_refused(tmp_path, suffix, attribute, value):
+    """Invariant: VTK's XML readers resize their arrays to the declared sizes unchecked, and
+    NumberOfComponents="-3" (a mesh fuzz) aborted the process; such a size is refused naming
+    the file and the attribute. The file as written reads."""
+    pytest.importorskip("vtk")
+    if attribute == "cells":
+        attribute = "NumberOfCells" if suffix == ".vtu" else "NumberOfPolys"
+    whole, surface = tmp_path / f"whole{suffix}", icosahedron()
+    write_surface(whole, surface)
+    assert read_surface(whole).n_triangles == surface.n_triangles
+    text = whole.read_bytes()
+    found = re.search(rf'{attribute}="[^"]*"'.encode(), text)
+    assert found, attribute  # the writer declares it
+    bad = tmp_path / f"bad{suffix}"
+    bad.write_bytes(text[: found.start()] + f'{attribute}="{value}"'.encode() + text[found.end():])
+    with pytest.raises(InputError, match=f"{attribute}=.*is not a whole number") as err:
+        read_surface(bad)
+    assert str(bad) in str(err.value)
+
+
 def test_ply_with_its_header_cut_short_is_refused(tmp_path):
     """Invariant: a PLY file cut inside its header (a fuzz found it; meshio's reader looped for
     ever there) is refused naming the file; the whole file reads."""
