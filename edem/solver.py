@@ -125,7 +125,8 @@ def weak_dofs_warning(
     layer's surface moves by C f, not by g . u, so its columns' law at g . u means nothing (and
     is not finite past a log column's range); the layer restrains the same DOFs as its rows.
     """
-    _, stiffness = law.force_and_stiffness(directions @ (0.0 * solution.displacement if coupled else solution.displacement))
+    approach = np.zeros(directions.shape[0]) if coupled else directions @ solution.displacement
+    _, stiffness = law.force_and_stiffness(approach)
     k = assemble_stiffness(directions, stiffness, solution.active, shear)
     free = np.array([d not in fixed_dofs for d in DOF_NAMES])
     weak = unrestrained_dofs(k, free, length_scale_mm, rtol=ratio)
