@@ -34,6 +34,7 @@ import numpy as np
 
 from edem.errors import InputError
 from edem.tables import SceneTable
+from geometries.mesh_io import MAX_COORDINATE_MM
 from geometries.surface import TriangleSurface
 
 if TYPE_CHECKING:
@@ -138,6 +139,14 @@ def body_surface(osim, model, body_name: str, model_file: Path, search_path: lis
         # scale about the mesh frame's origin, then place the mesh frame in the body frame (m -> mm)
         placed = surface.vertices_mm * scale
         placed = placed @ _matrix(transform.R()).T + _vector(transform.p()) * M_TO_MM
+        # A NaN or huge scale factor or frame offset in the model (a fuzz found them) would
+        # reach the KD-trees and the ray caster as non-finite points.
+        if not (np.all(np.isfinite(placed)) and np.abs(placed).max(initial=0.0) <= MAX_COORDINATE_MM):
+            raise InputError(
+                f"body '{body_name}': its mesh {name!r}, scaled by {scale.tolist()} and placed by its frame, has vertices "
+                f"that are not finite or lie beyond {MAX_COORDINATE_MM:g} mm", file=model_file, key=key,
+                expected="finite scale_factors and frame locations and orientations that keep the bone within a metre or so",
+            )
         vertices.append(placed)
         triangles.append(surface.triangles + offset)
         offset += len(placed)
@@ -217,6 +226,15 @@ def load_opensim_bodies(table: dict[str, Any], scene_file: Path, time_s: np.ndar
         rotation[k], translation[k] = _matrix(pose.R()), _vector(pose.p()) * M_TO_MM
         in_ground = bodies["mobile_body"].getTransformInGround(state)
         ground_rotation[k], ground_translation[k] = _matrix(in_ground.R()), _vector(in_ground.p()) * M_TO_MM
+    placed = np.isfinite(rotation).all(axis=(1, 2)) & np.isfinite(translation).all(axis=1) & np.isfinite(ground_rotation).all(axis=(1, 2))
+    placed &= np.isfinite(ground_translation).all(axis=1) & (np.abs(translation).max(axis=1) <= MAX_COORDINATE_MM)
+    if not placed.all():
+        k = int(np.flatnonzero(~placed)[0])
+        raise InputError(
+            f"at time point {k} (t = {time_s[k]:g} s) the model places '{tab.string('fixed_body')}' in '{tab.string('mobile_body')}' "
+            f"at non-finite or farther than {MAX_COORDINATE_MM:g} mm coordinates", file=model_file, key=tab.key("model"),
+            expected=f"finite joint and frame parameters in the model and finite coordinates in {motion_file}",
+        )
     only = {key: tab.strings(key, len(tab.table[key])) if tab.has(key) else None for key in ("mobile_meshes", "fixed_meshes")}
     mobile = body_surface(osim, model, tab.string("mobile_body"), model_file, search_path, only["mobile_meshes"], tab.key("mobile_body"))
     fixed = body_surface(osim, model, tab.string("fixed_body"), model_file, search_path, only["fixed_meshes"], tab.key("fixed_body"))

@@ -5,6 +5,7 @@ frames, and `edem run` end to end."""
 from __future__ import annotations
 
 import csv
+import shutil
 import sys
 from pathlib import Path
 
@@ -145,3 +146,20 @@ def test_opensim_model_and_motion_drive_edem_run_end_to_end(model_dir, capsys):
     for row in rows:
         assert float(row["force_residual_n"]) <= 1e-8 * 300.0  # the solver's round-off tolerance
         assert float(row["contact_area_mm2"]) > 0
+
+
+@pytest.mark.parametrize("original, damaged, message", [
+    ("<scale_factors>2 2 2</scale_factors>", "<scale_factors>nan 2 2</scale_factors>", r"body 'tibia': its mesh 'tibia_plate.stl'.*not finite"),
+    ("<translation>0 -0.40000000000000002 0</translation>", "<translation>0 nan 0</translation>", r"at time point 0 .*places 'tibia' in 'talus'"),
+])
+def test_a_model_placing_a_body_at_non_finite_coordinates_is_refused(model_dir, tmp_path, original, damaged, message):
+    """A NaN scale factor or frame offset in the .osim (a fuzz found both: they reached a KD-tree
+    as a ValueError, or an IndexError in the orientation) is exit 2 naming the model file."""
+    shutil.copytree(model_dir, tmp_path, dirs_exist_ok=True)
+    model = tmp_path / "two_body_ankle.osim"
+    text = model.read_text(encoding="utf-8")
+    assert original in text  # the fixture writes it
+    model.write_text(text.replace(original, damaged, 1), encoding="utf-8")
+    with pytest.raises(InputError, match=message) as err:
+        load_scene(write_scene(tmp_path, INLINE_LOAD))
+    assert str(model) in str(err.value)
