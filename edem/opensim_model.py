@@ -213,7 +213,11 @@ def load_opensim_bodies(table: dict[str, Any], scene_file: Path, time_s: np.ndar
             names = [model.getBodySet().get(i).getName() for i in range(model.getBodySet().getSize())]
             raise tab.error(key, f"the model has no body '{name}'", "one of " + ", ".join(names))
         bodies[key] = model.getBodySet().get(name)
-    state = model.initSystem()
+    try:
+        state = model.initSystem()
+    except Exception as exc:  # e.g. a socket naming a frame the model does not have
+        raise InputError(f"OpenSim cannot assemble the model: {str(exc).strip().splitlines()[0]}", file=model_file, key=tab.key("model"),
+                         expected="a model OpenSim can initialise (every joint's frames and sockets present)") from None
     coordinates, missing = _motion_coordinates(osim, model, motion_file, time_s, tab.key("motion"))
     coordinate_set = model.getCoordinateSet()
     rotation, translation = np.empty((len(time_s), 3, 3)), np.empty((len(time_s), 3))

@@ -163,3 +163,64 @@ def test_a_model_placing_a_body_at_non_finite_coordinates_is_refused(model_dir, 
     with pytest.raises(InputError, match=message) as err:
         load_scene(write_scene(tmp_path, INLINE_LOAD))
     assert str(model) in str(err.value)
+
+
+def test_a_model_opensim_cannot_assemble_is_refused(model_dir, tmp_path):
+    """A joint frame whose parent socket names no frame (an .osim fuzz found it) made
+    Model.initSystem raise a RuntimeError from C++: exit 2 naming the model file."""
+    shutil.copytree(model_dir, tmp_path, dirs_exist_ok=True)
+    model = tmp_path / "two_body_ankle.osim"
+    text = model.read_text(encoding="utf-8")
+    assert "<socket_parent>/bodyset/tibia</socket_parent>" in text
+    model.write_text(text.replace("<socket_parent>/bodyset/tibia</socket_parent>", "<socket_parent>/bodyset/fibula</socket_parent>", 1), encoding="utf-8")
+    with pytest.raises(InputError, match="OpenSim cannot assemble the model") as err:
+        load_scene(write_scene(tmp_path, INLINE_LOAD))
+    assert str(model) in str(err.value)
+
+
+def _mutated(text: str, rng) -> str:
+    """One damage of a text file: cut short, a number made hostile, a line dropped, a word renamed."""
+    import re
+
+    kind = rng.randrange(4)
+    if kind == 0:
+        return text[: rng.randrange(len(text) + 1)]
+    if kind == 1:
+        numbers = list(re.finditer(r"-?\d+(\.\d+)?(e-?\d+)?", text))
+        m = rng.choice(numbers)
+        return text[: m.start()] + rng.choice(["nan", "inf", "-1", "1e300", "0", "abc", "99999999999"]) + text[m.end():]
+    if kind == 2:
+        lines = text.splitlines()
+        del lines[rng.randrange(len(lines))]
+        return "\n".join(lines)
+    m = rng.choice(list(re.finditer(r"[A-Za-z_]{3,}", text)))
+    return text[: m.start()] + rng.choice(["x", "talus", "tibia", "ground", ""]) + text[m.end():]
+
+
+N_MODEL_FUZZ_CASES = 120  # about 20 ms each: most damage is refused while the model loads
+
+
+def test_damaged_models_and_motions_exit_0_or_2_without_traceback(model_dir, tmp_path):
+    """Seeded fuzz of the .osim and the motion (an .osim fuzz of 450 cases found the three classes
+    of refusal above): every run ends with status 0, or 2 with a message."""
+    import contextlib
+    import io
+    import random
+
+    rng = random.Random(13)
+    failures = []
+    for n in range(N_MODEL_FUZZ_CASES):
+        folder = tmp_path / f"case{n:02d}"
+        shutil.copytree(model_dir, folder)
+        victim = folder / rng.choice(["two_body_ankle.osim", "walk.mot"])
+        victim.write_text(_mutated(victim.read_text(encoding="utf-8"), rng), encoding="utf-8")
+        err = io.StringIO()
+        try:
+            with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+                status = main(["run", str(write_scene(folder, INLINE_LOAD)), "--out", str(folder / "out")])
+        except BaseException as exc:  # noqa: BLE001 - any escape is what the test looks for
+            failures.append(f"case {n} ({victim.name}): {type(exc).__name__}: {str(exc)[:200]}")
+            continue
+        if status not in (0, 2) or (status == 2 and not err.getvalue().strip()):
+            failures.append(f"case {n} ({victim.name}): status {status}, stderr {err.getvalue()[:200]!r}")
+    assert not failures, "\n".join(failures)
