@@ -232,11 +232,14 @@ def load_opensim_bodies(table: dict[str, Any], scene_file: Path, time_s: np.ndar
         ground_rotation[k], ground_translation[k] = _matrix(in_ground.R()), _vector(in_ground.p()) * M_TO_MM
     placed = np.isfinite(rotation).all(axis=(1, 2)) & np.isfinite(translation).all(axis=1) & np.isfinite(ground_rotation).all(axis=(1, 2))
     placed &= np.isfinite(ground_translation).all(axis=1) & (np.abs(translation).max(axis=1) <= MAX_COORDINATE_MM)
+    # A joint axis of (0, 1e300, 1) leaves OpenSim's rotation far from orthogonal (a fuzz found it).
+    placed &= np.abs(np.einsum("kji,kjl->kil", rotation, rotation) - np.eye(3)).max(axis=(1, 2)) <= 1e-9
     if not placed.all():
         k = int(np.flatnonzero(~placed)[0])
         raise InputError(
             f"at time point {k} (t = {time_s[k]:g} s) the model places '{tab.string('fixed_body')}' in '{tab.string('mobile_body')}' "
-            f"at non-finite or farther than {MAX_COORDINATE_MM:g} mm coordinates", file=model_file, key=tab.key("model"),
+            f"at non-finite or farther than {MAX_COORDINATE_MM:g} mm coordinates, or turned by a matrix that is not a rotation",
+            file=model_file, key=tab.key("model"),
             expected=f"finite joint and frame parameters in the model and finite coordinates in {motion_file}",
         )
     only = {key: tab.strings(key, len(tab.table[key])) if tab.has(key) else None for key in ("mobile_meshes", "fixed_meshes")}

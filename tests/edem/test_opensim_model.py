@@ -151,10 +151,12 @@ def test_opensim_model_and_motion_drive_edem_run_end_to_end(model_dir, capsys):
 @pytest.mark.parametrize("original, damaged, message", [
     ("<scale_factors>2 2 2</scale_factors>", "<scale_factors>nan 2 2</scale_factors>", r"body 'tibia': its mesh 'tibia_plate.stl'.*not finite"),
     ("<translation>0 -0.40000000000000002 0</translation>", "<translation>0 nan 0</translation>", r"at time point 0 .*places 'tibia' in 'talus'"),
+    ("<axis>0 0 1</axis>", "<axis>0 1e300 1</axis>", r"at time point 1 \(t = 0.5 s\).*not a rotation"),  # at 0 the angle is 0
 ])
 def test_a_model_placing_a_body_at_non_finite_coordinates_is_refused(model_dir, tmp_path, original, damaged, message):
-    """A NaN scale factor or frame offset in the .osim (a fuzz found both: they reached a KD-tree
-    as a ValueError, or an IndexError in the orientation) is exit 2 naming the model file."""
+    """A NaN scale factor or frame offset, or a joint axis of (0, 1e300, 1), in the .osim (a fuzz
+    found them: they reached a KD-tree as a ValueError, the orientation as an IndexError, the
+    ray caster as a non-orthogonal rotation) is exit 2 naming the model file."""
     shutil.copytree(model_dir, tmp_path, dirs_exist_ok=True)
     model = tmp_path / "two_body_ankle.osim"
     text = model.read_text(encoding="utf-8")
