@@ -684,6 +684,13 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
              + np.cross(res.bone_rotation_rad, pts - np.asarray(scene.reference_point_mm)))
     approach = -np.einsum("ij,ij->i", rigid, nu) - gap
     contact = p > tol
+    # A bone pressed farther than the cartilage is thick anywhere has gone through it: the linear
+    # solve still balances (a load 1e12 times too large gave 7e10 mm), but not on this geometry.
+    deepest = float(np.max(approach[contact], initial=0.0))
+    if deepest > float(thickness.max()):
+        raise SolverError(
+            f"time point {k}: the bone moves {deepest:.3g} mm into the cartilage, more than its greatest thickness "
+            f"{float(thickness.max()):.3g} mm: it has gone through it, where small-strain FE does not hold; check the load's units and scale")
     nominal = float(np.max(approach[contact] / thickness[contact], initial=0.0))
     return FEStepResult(
         step=k, time_s=t, force_n=force, moment_nmm=moment,

@@ -340,6 +340,21 @@ def test_bad_fe_input_exits_2(capsys, args, key):
     assert key in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize("depth_over_thickness", [0.5, 2.0])
+def test_a_bone_pressed_through_the_cartilage_exits_2(tmp_path, capsys, depth_over_thickness):
+    """Closed form at nu = 0: the slab compresses by d = (F / A) h / E. At d = h / 2 the run ends
+    (exit 0); at d = 2 h the bone would have gone through the 2 mm slab (a load 1e12 times too
+    large gave 7e10 mm and exit 0): exit 2 naming the depth and the thickness."""
+    force = depth_over_thickness * E * 400.0  # 20 x 20 mm plates
+    rc = main(["fe", PLATES, "--out", str(tmp_path / "fe"), "--degree", "1", "--mesh-size", "2",
+               "--set", "cartilage.poissons_ratio=0.0", "--set", f"load.force_n=[0.0, 0.0, {force}]"])
+    err = capsys.readouterr().err
+    if depth_over_thickness < 1.0:
+        assert rc == 0, err
+    else:
+        assert rc == 2 and "more than its greatest thickness 2 mm" in err and "Traceback" not in err
+
+
 def test_unresisted_loaded_dof_exits_2(tmp_path, capsys):
     """No equilibrium: frictionless contact with a flat plane cannot carry a load along the
     plane (tx free, load with an x component): exit 2 naming the DOF."""
