@@ -122,6 +122,13 @@ def _others(ligament_rows, ligament_law, ligament_active, shear, active):
     return k, f0
 
 
+def _linearised(layer: LayerCompliance, column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], force_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A nonlinear column linearised at the forces (n,) N: w(f) ~ (local + slope) f + nonlocal f + shift.
+    Returns (local + slope (n,) mm/N, shift (n,) mm)."""
+    excess, slope = column(force_n)
+    return layer.local_mm_per_n + slope, excess - slope * force_n
+
+
 def _solve_free(k: np.ndarray, rhs: np.ndarray, free: np.ndarray) -> np.ndarray:
     u = np.zeros(6)
     u[free] = np.linalg.solve(k[np.ix_(free, free)], rhs[free])
@@ -181,8 +188,7 @@ def solve_thin_layer(
     linearised_at, local, shift = np.zeros(n_c), None, 0.0
     for iteration in range(1, max_iterations + 1):
         if column is not None:
-            excess, slope = column(linearised_at)
-            local, shift = layer.local_mm_per_n + slope, excess - slope * linearised_at
+            local, shift = _linearised(layer, column, linearised_at)
         system = ActiveSystem.build(layer, free_directions, overlap_mm - shift, active, local)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         stiffness = system.stiffness(directions) + k_other
@@ -287,10 +293,7 @@ def thin_layer_viscoelastic_increment(
     u = np.zeros(6)
     f = np.zeros(n_c)
     if np.any(active):
-        local, shift = None, 0.0
-        if column is not None:
-            excess, slope = column(carried_force_n)
-            local, shift = layer.local_mm_per_n + slope, excess - slope * carried_force_n
+        local, shift = (None, 0.0) if column is None else _linearised(layer, column, carried_force_n)
         system = ActiveSystem.build(layer, directions * free, overlap_mm - shift, active, local)  # fixed DOFs: no solves (solve_thin_layer)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         if phi or psi:
