@@ -50,15 +50,13 @@ THICKNESS_MM = (1.0, 2.0, 3.0)
 LOADS_N = (333.0, 1000.0, 4190.0)
 LOAD_NUS = (0.42, 0.49)
 BASE_LOAD_N, BASE_THICKNESS_MM = 333.0, 2.0
-#: name: (overrides, what); the coupled variants each have their goal analysis against the springs
+#: name: (overrides, what, the figures' legend); the coupled variants each have their goal analysis against the springs
 VARIANTS = {
-    "coupled": ({"cartilage.coupling": "thin-layer"}, "coupled thin layer (Pade symbol)"),
-    "two-pole": ({"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole"}, "coupled thin layer (two-pole symbol)"),
-    "springs": ({}, "independent springs"),
+    "coupled": ({"cartilage.coupling": "thin-layer"}, "coupled thin layer (Pade symbol)", "coupled, Pade"),
+    "two-pole": ({"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole"}, "coupled thin layer (two-pole symbol)", "coupled, two-pole"),
+    "springs": ({}, "independent springs", "independent springs"),
 }
 COUPLED_VARIANTS = ("coupled", "two-pole")
-#: the figures' legend of each variant
-SERIES_LABELS = {"coupled": "coupled, Pade", "two-pole": "coupled, two-pole", "springs": "independent springs"}
 #: (model, scene, sides, what)
 MODELS = (
     ("layer", "cylinder-layer", ("dem", "fe-layer"), "cylinder (R 20 mm) with a bonded layer on a plane, gap-law DEM vs the FE layer"),
@@ -102,7 +100,7 @@ def _cases() -> list[Case]:
         element = "Taylor-Hood P2-P1" if nu >= 0.49 else "P2"
         fe = FE_LAYER if (model, load, thickness) == ("layer", BASE_LOAD_N, BASE_THICKNESS_MM) else FE_COARSE
         fe_text = f"FE {element} at {fe['mesh_size_mm']:g} mm" + (f", {fe['layers_through_thickness']} elements through the layer" if "layers_through_thickness" in fe else "")
-        for variant, (extra, bed) in VARIANTS.items():
+        for variant, (extra, bed, _) in VARIANTS.items():
             cases.append(
                 fe_comparison_case(
                     case_name(model, variant, load, thickness, nu),
@@ -129,7 +127,7 @@ def campaign() -> Campaign:
 
     def overlay(name: str, title: str, x: str, series: dict[str, tuple[str, ...]]) -> Figure:
         return Figure(name, title, "sweep", tuple(n for group in series.values() for n in group), x=x, y=ERROR_PANELS, logy=True,
-                      series=tuple((SERIES_LABELS[variant], group) for variant, group in series.items()), lines=GOAL_LINES)
+                      series=tuple((VARIANTS[variant][2], group) for variant, group in series.items()), lines=GOAL_LINES)
 
     for tag, what, model, load, t in sweeps:
         series = {variant: tuple(case_name(model, variant, load, t, nu) for nu in NUS) for variant in VARIANTS}
