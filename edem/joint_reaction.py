@@ -8,7 +8,9 @@ mirror. A load file never has its axes guessed: `[load] axes` says how they map.
 A JointReaction ReactionLoads column is named ``<joint>_on_<body>_in_<frame>_<c>``: the force
 (``fx, fy, fz`` in N) and moment (``mx, my, mz`` in N m) that the joint applies *on* ``<body>``,
 *expressed in* ``<frame>``'s axes, the moment taken *about* the joint centre whose position
-(``px, py, pz`` in m) is given in that frame too.
+(``px, py, pz`` in m) is given in that frame too. The scene's load presses the mobile body into
+the fixed one: minus a reaction on the mobile body (its equilibrium), a reaction on the fixed
+body as is (action and reaction); edem.loads applies that sign.
 """
 
 from __future__ import annotations

@@ -425,8 +425,14 @@ def _load_from_file(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def _joint_reaction(tab: SceneTable, data: _DataFile, prefix: str) -> tuple[float, list[str] | None, str]:
-    """Sign (+1: the load is on the mobile body, -1: on the fixed one), the joint-centre columns
-    and the scene frame of an auto-detected JointReaction triple; refuses what it cannot place."""
+    """Sign, the joint-centre columns and the scene frame of an auto-detected JointReaction triple;
+    refuses what it cannot place.
+
+    The columns are the load the joint applies *on* ``<body>``. The scene's load is the one pressing
+    M into F, which the contact balances: by M's equilibrium, minus the joint's load on M (sign -1);
+    by action and reaction, the joint's load on F as is (sign +1). Forces and moments alike: both
+    act at the same joint centre, so the moment is negated about that point before it moves to G.
+    """
     key = tab.key("file")
     columns = JointReactionColumns.parse(prefix)
     if not tab.has("axes"):
@@ -443,9 +449,9 @@ def _joint_reaction(tab: SceneTable, data: _DataFile, prefix: str) -> tuple[floa
                               "which body is the scene's mobile one is not said",
                          f"[load] mobile_body = \"{columns.body}\" (and fixed_body = the other) so the load's sign is known")
     if columns.body == mobile:
-        sign = 1.0
+        sign = -1.0  # the joint holds M back: what presses M into F is the opposite
     elif columns.body == fixed:
-        sign = -1.0  # the load on F; M carries its reaction
+        sign = 1.0  # the joint's load on F is what M transmits to F
     else:
         raise data.error(key, f"the load is on body '{columns.body}', neither mobile_body '{mobile}' nor fixed_body '{fixed}'",
                          "a JointReaction of the joint between the scene's two bodies (on_child or on_parent)")

@@ -98,3 +98,85 @@ def tibia_pose_in_talus_mm(angle_deg: float, slide_m: float) -> tuple[np.ndarray
     r = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
     p = (JOINT_CENTRE_IN_TIBIA_M + [slide_m, 0.0, 0.0]) * 1000.0
     return r.T, -r.T @ p
+
+
+def add_prescribed_force(model_file: Path, out_file: Path, body: str, force_n: tuple[tuple[float, float], ...],
+                         point_m: tuple[float, float, float], end_time_s: float) -> Path:
+    """A copy of the model without gravity and with a PrescribedForce on ``body``: its components
+    (body frame) ramp linearly from ``force_n[i][0]`` at t = 0 to ``force_n[i][1]`` at ``end_time_s``,
+    applied at the fixed ``point_m`` of the body. The only external load, so JointReaction must
+    answer with it (quasi-statically: the motion holds the coordinates still)."""
+    from edem.opensim_model import import_opensim
+
+    osim = import_opensim()
+    model = osim.Model(str(model_file))
+    model.setGravity(osim.Vec3(0))
+
+    def ramp(start: float, end: float):
+        function = osim.PiecewiseLinearFunction()
+        function.addPoint(0.0, start)
+        function.addPoint(end_time_s, end)
+        return function
+
+    force = osim.PrescribedForce("external_load", model.getBodySet().get(body))
+    force.setForceIsInGlobalFrame(False)
+    force.setPointIsInGlobalFrame(False)
+    force.setForceFunctions(*(ramp(*f) for f in force_n))
+    force.setPointFunctions(*(osim.Constant(p) for p in point_m))
+    model.addForce(force)
+    model.finalizeConnections()
+    model.printToXML(str(out_file))
+    return out_file
+
+
+def run_joint_reaction(model_file: Path, motion_file: Path, joint: str, on_body: str, in_frame: str,
+                       results_dir: Path, time_range_s: tuple[float, float], external_loads: Path | None = None,
+                       forces_file: Path | None = None, lowpass_hz: float = -1.0) -> Path:
+    """OpenSim's AnalyzeTool over a motion with JointReaction (applying the actuator forces of
+    ``forces_file``, a StaticOptimization result, when given): the ReactionLoads .sto OpenSim wrote."""
+    from edem.opensim_model import import_opensim
+
+    osim = import_opensim()
+    reaction = osim.JointReaction()
+    reaction.setName("JointReaction")
+    for setter, value in ((reaction.setJointNames, joint), (reaction.setOnBody, on_body), (reaction.setInFrame, in_frame)):
+        names = osim.ArrayStr()
+        names.append(value)
+        setter(names)
+    if forces_file is not None:
+        reaction.setForcesFileName(str(forces_file))
+    _analyze(osim, "edem_jr", reaction, model_file, motion_file, results_dir, time_range_s, external_loads, lowpass_hz)
+    (written,) = results_dir.glob("edem_jr_JointReaction_ReactionLoads.sto")
+    return written
+
+
+def run_static_optimization(model_file: Path, motion_file: Path, results_dir: Path, time_range_s: tuple[float, float],
+                            external_loads: Path, lowpass_hz: float) -> Path:
+    """OpenSim's StaticOptimization over a motion: the actuator forces .sto it wrote."""
+    from edem.opensim_model import import_opensim
+
+    osim = import_opensim()
+    _analyze(osim, "edem_so", osim.StaticOptimization(), model_file, motion_file, results_dir, time_range_s, external_loads, lowpass_hz)
+    (written,) = results_dir.glob("edem_so_StaticOptimization_force.sto")
+    return written
+
+
+def _analyze(osim, name: str, analysis, model_file: Path, motion_file: Path, results_dir: Path,
+             time_range_s: tuple[float, float], external_loads: Path | None, lowpass_hz: float) -> None:
+    tool = osim.AnalyzeTool()
+    tool.setName(name)
+    tool.setModelFilename(str(model_file))
+    tool.setCoordinatesFileName(str(motion_file))
+    tool.setLowpassCutoffFrequency(lowpass_hz)
+    tool.setInitialTime(time_range_s[0])
+    tool.setFinalTime(time_range_s[1])
+    tool.setResultsDir(str(results_dir))
+    if external_loads is not None:
+        tool.setExternalLoadsFileName(str(external_loads))
+    analysis.setStartTime(time_range_s[0])
+    analysis.setEndTime(time_range_s[1])
+    tool.updAnalysisSet().cloneAndAppend(analysis)
+    results_dir.mkdir(parents=True, exist_ok=True)
+    setup = results_dir / f"{name}_setup.xml"
+    tool.printToXML(str(setup))
+    osim.AnalyzeTool(str(setup)).run()  # from its setup file, as OpenSim's GUI and command-line tool run it

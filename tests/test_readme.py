@@ -42,7 +42,8 @@ def test_opensim_section_runs_as_written(tmp_path):
     write_motion(tmp_path / "walk.mot", time, [0.0, 4.0, 8.0], [0.0, 0.0005, 0.001])
     prefix = "ankle_on_talus_in_tibia"
     names = ["time"] + [f"{prefix}_{q}{c}" for q in "fmp" for c in "xyz"]
-    rows = ["\t".join(f"{v:g}" for v in [t, 0.0, 400.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.4, 0.0]) for t in time]
+    # the tibia holding the talus down with 400 N, as OpenSim writes a talus pressed up into it
+    rows = ["\t".join(f"{v:g}" for v in [t, 0.0, -400.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.4, 0.0]) for t in time]
     (tmp_path / "ankle_reaction.sto").write_text(
         "\n".join(["Joint Reaction Loads", "version=1", "nRows=3", f"nColumns={len(names)}", "inDegrees=no", "endheader", "\t".join(names), *rows]) + "\n"
     )

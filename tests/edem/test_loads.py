@@ -166,15 +166,16 @@ def test_csv_custom_columns_with_negation(scene):
 # --------------------------------------------------------------------------- OpenSim JointReaction
 
 
-def test_sto_jointreaction_autodetected_and_moments_converted_nm_to_nmm(scene):
-    """On the mobile body (talus_r), in ground, axes kept: forces as given, moments N m -> N mm,
+def test_sto_jointreaction_on_the_mobile_body_is_negated_and_moments_converted_nm_to_nmm(scene):
+    """On the mobile body (talus_r), in ground, axes kept: the joint's load on M negated (what
+    presses M into F, by M's equilibrium), moments N m -> N mm and negated about the same point,
     the joint centre (px, py, pz) m -> mm as the point the moment is about."""
     rows = jointreaction_rows()
     write_jointreaction_sto(scene.parent / "jr.sto", rows)
     load = load_series_from_table({"file": "jr.sto", "axes": "same", "mobile_body": "talus_r"}, scene)
     np.testing.assert_allclose(load.time_s, rows[:, 0])
-    np.testing.assert_allclose(load.force_n, rows[:, 1:4])
-    np.testing.assert_allclose(load.moment_nmm, rows[:, 4:7] * 1000.0)
+    np.testing.assert_allclose(load.force_n, -rows[:, 1:4])
+    np.testing.assert_allclose(load.moment_nmm, -rows[:, 4:7] * 1000.0)
     np.testing.assert_allclose(load.point_mm, rows[:, 7:10] * 1000.0)
     assert load.frame == "global"
 
@@ -196,8 +197,8 @@ def test_opensim_axes_preset_maps_anterior_up_right_onto_scene_right_anterior_up
     write_jointreaction_sto(scene.parent / "jr.sto", rows)
     load = load_series_from_table({"file": "jr.sto", "axes": "opensim", "mobile_body": "talus_r"}, scene)
     fx, fy, fz, mx, my, mz, px, py, pz = (rows[:, k] for k in range(1, 10))
-    np.testing.assert_allclose(load.force_n, np.column_stack([fz, fx, fy]))
-    np.testing.assert_allclose(load.moment_nmm, 1000.0 * np.column_stack([mz, mx, my]))
+    np.testing.assert_allclose(load.force_n, -np.column_stack([fz, fx, fy]))  # on M: negated
+    np.testing.assert_allclose(load.moment_nmm, -1000.0 * np.column_stack([mz, mx, my]))
     np.testing.assert_allclose(load.point_mm, 1000.0 * np.column_stack([pz, px, py]))
     f, r = np.array([1.0, 2.0, 3.0]), np.array([-4.0, 0.5, 2.0])
     from edem.joint_reaction import axes_matrix
@@ -213,16 +214,16 @@ def test_axes_that_are_not_a_rotation_are_refused(scene, axes):
     assert info.value.key == "load.axes" and "opensim" in info.value.expected
 
 
-def test_jointreaction_on_the_fixed_body_is_reversed_and_turns_with_it(scene):
-    """ankle_r_on_tibia_r_in_tibia_r: the load on the tibia (F), in the tibia's frame: M carries
-    its reaction (sign -1) and the components turn with F (frame "fixed")."""
+def test_jointreaction_on_the_fixed_body_is_used_as_is_and_turns_with_it(scene):
+    """ankle_r_on_tibia_r_in_tibia_r: the joint's load on the tibia (F), in the tibia's frame, is
+    what M transmits to F (sign +1), and the components turn with F (frame "fixed")."""
     rows = jointreaction_rows()
     prefix = "ankle_r_on_tibia_r_in_tibia_r"
     write_jointreaction_sto(scene.parent / "jr.sto", rows, prefixes=(prefix,))
     table = {"file": "jr.sto", "axes": "same", "mobile_body": "talus_r", "fixed_body": "tibia_r"}
     load = load_series_from_table(table, scene)
-    np.testing.assert_allclose(load.force_n, -rows[:, 1:4])
-    np.testing.assert_allclose(load.moment_nmm, -1000.0 * rows[:, 4:7])
+    np.testing.assert_allclose(load.force_n, rows[:, 1:4])
+    np.testing.assert_allclose(load.moment_nmm, 1000.0 * rows[:, 4:7])
     np.testing.assert_allclose(load.point_mm, 1000.0 * rows[:, 7:10])
     assert load.frame == "fixed"
     with pytest.raises(InputError, match="expressed in the fixed frame"):
@@ -235,7 +236,7 @@ def test_sto_moment_unit_nmm_keeps_values(scene):
     rows = jointreaction_rows()
     write_jointreaction_sto(scene.parent / "jr.sto", rows)
     load = load_series_from_table({"file": "jr.sto", "moment_unit": "nmm", "axes": "same", "mobile_body": "talus_r"}, scene)
-    np.testing.assert_allclose(load.moment_nmm, rows[:, 4:7])
+    np.testing.assert_allclose(load.moment_nmm, -rows[:, 4:7])  # on M: negated, not scaled
 
 
 def test_sto_negated_column_mapping_onto_scene_axes(scene):

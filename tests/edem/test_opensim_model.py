@@ -132,7 +132,7 @@ def test_jointreaction_in_ground_equals_the_same_load_in_the_welded_tibia_frame(
     np.testing.assert_allclose(applied_loads(ground), applied_loads(tibia), rtol=1e-9, atol=1e-9)
     # at the last time point the tibia turned by -8 deg in the talus frame: the force with it
     rotation, _ = tibia_pose_in_talus_mm(ANGLE_DEG[-1], SLIDE_M[-1])
-    np.testing.assert_allclose(applied_loads(tibia)[-1, :3], rotation @ f, rtol=1e-12)
+    np.testing.assert_allclose(applied_loads(tibia)[-1, :3], -rotation @ f, rtol=1e-12)  # on the talus: negated
 
 
 def test_opensim_model_and_motion_drive_edem_run_end_to_end(model_dir, capsys):
