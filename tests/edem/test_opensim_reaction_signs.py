@@ -16,9 +16,11 @@ import numpy as np
 import pytest
 
 pytest.importorskip("opensim")
-from opensim_fixtures import add_prescribed_force, build_model, run_joint_reaction, write_motion  # noqa: E402
+from opensim_fixtures import GAIT2392, add_prescribed_force, build_model, gait2392_ankle_reaction, run_joint_reaction, write_motion  # noqa: E402
 
 from edem.cli import main  # noqa: E402
+from edem.joint_reaction import axes_matrix  # noqa: E402
+from edem.loads import read_opensim_table  # noqa: E402
 from edem.resultdir import read_timeseries_csv  # noqa: E402
 from edem.scene import load_scene  # noqa: E402
 
@@ -97,3 +99,63 @@ def test_contact_balances_the_external_load_opensim_s_joint_carried(loaded_model
     np.testing.assert_allclose(contact_force[:, 1], force[:, 1], rtol=1e-6)
     np.testing.assert_allclose(contact_moment[:, 0], moment[:, 0], atol=1e-6 * scale * 10.0)  # arm ~10 mm
     assert np.all(series["contact_area_mm2"] > 0)
+
+
+LOADED_N = 1000.0  # "loaded instant": the issue's bound; stance loads reach 3-6 body weights (4 kN)
+
+
+@pytest.mark.skipif(not GAIT2392.is_dir(), reason=f"public OpenSim data not at {GAIT2392}")
+def test_gait2392_reaction_presses_the_ideal_ankle_into_contact_and_the_contact_balances_minus_it(tmp_path):
+    """subject01's walk through OpenSim's static optimisation and JointReaction (ankle_r on the
+    talus, in the tibia) drives the built-in ideal ankle (the ideal stance's constraints, no
+    ligaments, so only the contact carries the load; the IK's ankle angle turns the tibia): every
+    instant over 1 kN is in contact,
+    and on the free DOFs (ty, tz) the contact resultant equals minus the reaction turned into the
+    scene (OpenSim x anterior, y up, z right onto x right, y anterior, z up; then the tibia's
+    rotation by the ankle angle about -x). Before the sign fix the run was refused as pulling the
+    bodies apart (with the stance's ligaments the talus hung 8.5 mm from them, no contact at 3.7 kN).
+
+    Tolerance: 1e-6 of the peak load. EDEM balances every step to 1e-10 of the load and nothing
+    but the contact and the constraints (tx, rotations) carries it, so only round-off separates them."""
+    reaction = gait2392_ankle_reaction(tmp_path / "opensim")
+    table = read_opensim_table(reaction, "reaction")
+    prefix = "ankle_r_on_talus_r_in_tibia_r"
+    force_in_tibia = np.column_stack([table.column(f"{prefix}_f{c}", "reaction") for c in "xyz"])
+    scene = tmp_path / "gait.toml"
+    scene.write_text(f"""[scene]
+name = "gait2392-ideal-ankle"
+[geometry]
+builtin = "ideal_ankle"
+[cartilage]
+youngs_modulus_mpa = 10.35
+poissons_ratio = 0.42
+max_spring_length_mm = 3.5
+[load]
+file = "{reaction}"
+axes = "opensim"
+mobile_body = "talus_r"
+fixed_body = "tibia_r"
+[kinematics]
+file = "{GAIT2392 / 'subject01_walk1_ik.mot'}"
+angle_column = "ankle_angle_r"
+axis_point_mm = [0.0, 0.0, -20.0]
+axis_direction = [-1.0, 0.0, 0.0]
+[constraints]
+fixed_dofs = ["tx", "rx", "ry", "rz"]
+[solver]
+method = "edem"
+""", encoding="utf-8")
+    assert main(["run", str(scene), "--out", str(tmp_path / "out")]) == 0
+    series = read_timeseries_csv(tmp_path / "out" / "timeseries.csv")
+    np.testing.assert_allclose(series["time_s"], table.column("time", "reaction"))
+    angle = np.radians(series["joint_angle_deg"])
+    # the tibia turns by the angle about -x: R_x(-angle) carries its axes into the scene's
+    c, s = np.cos(angle), np.sin(angle)
+    turn = np.zeros((len(angle), 3, 3))
+    turn[:, 0, 0], turn[:, 1, 1], turn[:, 1, 2], turn[:, 2, 1], turn[:, 2, 2] = 1.0, c, s, -s, c
+    pressing = -np.einsum("kij,kj->ki", turn, force_in_tibia @ axes_matrix("opensim").T)
+    contact = np.column_stack([series[f"contact_force_{c}_n"] for c in "xyz"])
+    loaded = np.linalg.norm(force_in_tibia, axis=1) > LOADED_N
+    assert loaded.sum() >= 30  # most of the 48 stance rows carry more than 1 kN
+    assert np.all(series["contact_area_mm2"][loaded] > 0)
+    np.testing.assert_allclose(contact[loaded, 1:], pressing[loaded, 1:], atol=1e-6 * np.abs(pressing).max())
