@@ -10,7 +10,8 @@ The Python face of the package::
 
 :meth:`Scene.from_arrays` builds a scene from meshes already in memory. Bad input raises
 :class:`InputError` (a ValueError naming the file, key and expectation); a time point without
-equilibrium raises :class:`SolverError`. Importing ``edem`` loads neither dolfinx, pyvista, VTK,
+equilibrium raises :class:`SolverError`; :func:`solve` issues each of the run's warnings (the lines
+``summary.json`` lists) as an :class:`EdemWarning`. Importing ``edem`` loads neither dolfinx, pyvista, VTK,
 dask, matplotlib nor OpenSim.
 
 The solver names load on first use (PEP 562), so that ``edem --help``, whose module lives in
@@ -25,6 +26,7 @@ from typing import TYPE_CHECKING
 from edem.errors import InputError, SolverError
 
 if TYPE_CHECKING:
+    from edem.plausibility import EdemWarning
     from edem.results import write_results
     from edem.scene import Scene, load_scene
     from edem.solver import RunResult, solve
@@ -33,6 +35,7 @@ __version__ = "0.1.0"
 
 #: public name -> the module defining it
 _LAZY = {
+    "EdemWarning": "edem.plausibility",
     "write_results": "edem.results",
     "Scene": "edem.scene",
     "load_scene": "edem.scene",
@@ -40,7 +43,7 @@ _LAZY = {
     "solve": "edem.solver",
 }
 
-__all__ = ["InputError", "RunResult", "Scene", "SolverError", "load_scene", "solve", "write_results"]
+__all__ = ["EdemWarning", "InputError", "RunResult", "Scene", "SolverError", "load_scene", "solve", "write_results"]
 
 
 def __getattr__(name: str):

@@ -103,7 +103,7 @@ def check_increment(
             f"{where}: the solve moves the mobile body by {describe_motion(u)} (a contact spring by "
             f"{moved:.3g} mm, more than {WINDOW_FRACTION:g} x the ray window "
             f"h_max = {cartilage.max_spring_length_mm:g} mm): the pose leaves the geometry the solve was computed "
-            "from. Use more time points (smaller load steps), fix the DOFs nothing resists in [constraints] "
+            "from. Use more time points (smaller load steps: [load] max_step_s), fix the DOFs nothing resists in [constraints] "
             "fixed_dofs, or check the load's axes and units"
         )
 

@@ -38,7 +38,7 @@ NM_TO_NMM = 1000.0
 LOAD_KEYS = (
     "force_n", "moment_nmm", "time_s", "file", "time_column", "force_columns",
     "moment_columns", "moment_unit", "force_scale", "time_range_s", "frame", "axes", "mobile_body",
-    "fixed_body",
+    "fixed_body", "max_step_s",
 )
 """Keys allowed in the `[load]` table."""
 
@@ -77,6 +77,7 @@ class LoadSeries:
     frame: str = "global"
     point_mm: np.ndarray | None = None
     in_ground: bool = False  # a JointReaction expressed in OpenSim's ground (taken as the scene's axes)
+    given_time_s: np.ndarray | None = None  # the times given, when `max_step_s` added points between them
 
     def __post_init__(self) -> None:
         t = np.asarray(self.time_s, dtype=np.float64)
@@ -96,6 +97,8 @@ class LoadSeries:
         object.__setattr__(self, "time_s", _readonly(t))
         object.__setattr__(self, "force_n", _readonly(f))
         object.__setattr__(self, "moment_nmm", _readonly(m))
+        if self.given_time_s is not None:
+            object.__setattr__(self, "given_time_s", _readonly(self.given_time_s))
         if self.point_mm is not None:
             p = np.asarray(self.point_mm, dtype=np.float64)
             if p.shape != (n, 3) or not np.isfinite(p).all():
@@ -285,8 +288,9 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
       `<p>_fx, <p>_fy, <p>_fz` is used with its `<p>_mx, <p>_my, <p>_mz` moments (zero when absent).
       OpenSim moments are N·m and are multiplied by 1000 to N·mm unless `moment_unit = "nmm"`;
       CSV moments are N·mm unless `moment_unit = "nm"`.
-    Optional in all forms: `force_scale` (multiplies the force only; default 1) and
-    `time_range_s = [t0, t1]` (keeps the time points with t0 <= t <= t1).
+    Optional in all forms: `force_scale` (multiplies the force only; default 1),
+    `time_range_s = [t0, t1]` (keeps the time points with t0 <= t <= t1) and `max_step_s` (splits
+    every longer step into equal ones, the load interpolated linearly; the kinematics follow).
     """
     tab = SceneTable(table, scene_file, "load", LOAD_KEYS)
     if tab.has("file") and tab.has("force_n"):
@@ -317,6 +321,12 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
                                             f"[{time_s[0]}, {time_s[-1]}] s", "a range containing load time points")
         time_s, force_n, moment_nmm = time_s[keep], force_n[keep], moment_nmm[keep]
         point_mm = None if point_mm is None else point_mm[keep]
+    given_time_s = None
+    if tab.has("max_step_s"):
+        given_time_s = time_s
+        time_s = _split_steps(tab, time_s)
+        force_n, moment_nmm = _interpolate(given_time_s, force_n, time_s), _interpolate(given_time_s, moment_nmm, time_s)
+        point_mm = None if point_mm is None else _interpolate(given_time_s, point_mm, time_s)
     in_ground = file_frame == "ground"
     file_frame = "global" if in_ground else file_frame
     frame = tab.string("frame", file_frame or "global")
@@ -332,7 +342,32 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
     if not np.all(np.isfinite(force_n)):  # finite values times force_scale can overflow
         raise tab.error("force_scale", f"the scaled force overflows (largest |force| before scaling "
                         f"{np.abs(force_n / tab.number('force_scale', 1.0)).max():.3g} N)", "a scale that keeps the force finite")
-    return LoadSeries(time_s, force_n, moment_nmm, frame, point_mm, in_ground)
+    return LoadSeries(time_s, force_n, moment_nmm, frame, point_mm, in_ground, given_time_s)
+
+
+MAX_TIME_POINTS = 100_000
+"""More time points than this from `max_step_s` is refused (each is a solve)."""
+
+
+def _split_steps(tab: SceneTable, time_s: np.ndarray) -> np.ndarray:
+    """The given times with every step longer than `max_step_s` split into equal steps (each given
+    time kept, so no peak of the load is cut)."""
+    step = tab.number("max_step_s", positive=True, what="the longest load step in s (> 0)")
+    if time_s.size < 2:
+        return time_s
+    parts = np.maximum(np.ceil(np.diff(time_s) / step - 1e-9), 1.0)  # 1e-9: a step equal to max_step_s stays whole
+    total = float(parts.sum()) + 1.0
+    if total > MAX_TIME_POINTS:
+        raise tab.error("max_step_s", f"{step:g} s over {time_s[-1] - time_s[0]:g} s makes {total:.0f} time points",
+                        f"at most {MAX_TIME_POINTS} time points (a larger max_step_s, or time_range_s)")
+    n = parts.astype(int)
+    fractions = np.concatenate([np.arange(k) / k for k in n])
+    return np.append(np.repeat(time_s[:-1], n) + fractions * np.repeat(np.diff(time_s), n), time_s[-1])
+
+
+def _interpolate(time_s: np.ndarray, values: np.ndarray, new_time_s: np.ndarray) -> np.ndarray:
+    """(n, 3) values linearly interpolated column by column onto new_time_s."""
+    return np.column_stack([np.interp(new_time_s, time_s, values[:, j]) for j in range(values.shape[1])])
 
 
 def _axes(tab: SceneTable) -> np.ndarray:
@@ -472,7 +507,8 @@ def _joint_reaction(tab: SceneTable, data: _DataFile, prefix: str) -> tuple[floa
 # --------------------------------------------------------------------------- [kinematics]
 
 
-def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.ndarray) -> JointKinematics:
+def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.ndarray,
+                            given_time_s: np.ndarray | None = None) -> JointKinematics:
     """Build the joint rotation from a scene's `[kinematics]` table at the load times `time_s`
     (docs/method.md#2-edem-the-time-dependent-incremental-method step 1, README.md#scene-files).
 
@@ -481,7 +517,8 @@ def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.
     `file = "ik.mot"` (OpenSim .mot/.sto) with `angle_column` (leading "-" negates) and optional
     `time_column` (default `time`). The file's angle is in degrees when its header says
     `inDegrees=yes`, radians when `inDegrees=no`; it is linearly interpolated onto `time_s`,
-    which must lie within the file's time range.
+    which must lie within the file's time range. ``given_time_s``: the load's times before
+    `[load] max_step_s` split its steps; inline angles are given at those and interpolated.
     """
     tab = SceneTable(table, scene_file, "kinematics", KINEMATICS_KEYS)
     time_s = np.asarray(time_s, dtype=np.float64).reshape(-1)
@@ -504,12 +541,19 @@ def angle_series_from_table(table: dict[str, Any], scene_file: Path, time_s: np.
         for key in ("angle_column", "time_column"):
             if tab.has(key):
                 raise tab.error(key, f"'{key}' only applies with 'file'", "no column keys with angle_deg")
-        angle_deg = _inline_angles(tab, time_s.size)
+        if given_time_s is None:
+            angle_deg = _inline_angles(tab, time_s.size)
+        else:
+            angle_deg = np.interp(time_s, given_time_s, _inline_angles(tab, given_time_s.size))
     else:
         angle_deg = _file_angles(tab, time_s)
     if np.abs(angle_deg).max() > 360.0:  # more than a full turn is no joint angle (a unit or column mix-up)
         key = "angle_deg" if tab.has("angle_deg") else "file"
-        raise tab.error(key, f"angle {angle_deg[np.argmax(np.abs(angle_deg))]:g} deg", "joint angles within +-360 deg")
+        worst = angle_deg[np.argmax(np.abs(angle_deg))]
+        hint = (f" ({np.radians(worst):g} rad in a file that says inDegrees=no: the values look like degrees)"
+                if tab.has("file") else "")
+        raise tab.error(key, f"angle {worst:g} deg{hint}",
+                        "joint angles within +-360 deg" + (" (inDegrees=yes when the file is in degrees)" if hint else ""))
     return JointKinematics(axis_point, axis / norm, np.deg2rad(angle_deg))
 
 

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from edem.errors import InputError
+from edem.plausibility import check_load_bodies, check_motion_units
 from edem.tables import SceneTable
 from geometries.mesh_io import MAX_COORDINATE_MM
 from geometries.surface import TriangleSurface
@@ -155,9 +156,9 @@ def body_surface(osim, model, body_name: str, model_file: Path, search_path: lis
     return clean_surface(merged, key=key)
 
 
-def _motion_coordinates(osim, model, motion_file: Path, time_s: np.ndarray, key: str) -> tuple[dict[str, np.ndarray], list[str]]:
+def _motion_coordinates(osim, model, motion_file: Path, time_s: np.ndarray, key: str) -> tuple[dict[str, np.ndarray], list[str], list[str]]:
     """Every model coordinate the motion gives, in SI (rad, m), linearly interpolated to ``time_s``;
-    and the names of the coordinates it leaves at their defaults."""
+    the names of the coordinates it leaves at their defaults; and warnings."""
     from edem.loads import read_opensim_table
 
     data = read_opensim_table(motion_file, key)
@@ -171,7 +172,8 @@ def _motion_coordinates(osim, model, motion_file: Path, time_s: np.ndarray, key:
         )
     columns = {c.split("/")[-2] if c.endswith("/value") else c: c for c in data.columns}
     values: dict[str, np.ndarray] = {}
-    missing = []
+    missing: list[str] = []
+    notes: list[str] = []
     coordinate_set = model.getCoordinateSet()
     for i in range(coordinate_set.getSize()):
         coordinate = coordinate_set.get(i)
@@ -180,13 +182,15 @@ def _motion_coordinates(osim, model, motion_file: Path, time_s: np.ndarray, key:
             missing.append(name)
             continue
         column = data.column(columns[name], key)
-        if coordinate.getMotionType() == osim.Coordinate.Rotational and data.in_degrees:
-            column = np.radians(column)
+        if coordinate.getMotionType() == osim.Coordinate.Rotational:
+            notes += check_motion_units(name, column, data.in_degrees, (coordinate.getRangeMin(), coordinate.getRangeMax()), motion_file, key)
+            if data.in_degrees:
+                column = np.radians(column)
         values[name] = np.interp(np.clip(time_s, file_time[0], file_time[-1]), file_time, column)
     if not values:
         raise InputError("no column of the motion names a coordinate of the model", file=motion_file, key=key,
                          expected="coordinate names (e.g. ankle_angle_r) or paths ending in /<coordinate>/value")
-    return values, missing
+    return values, missing, notes
 
 
 def load_opensim_bodies(table: dict[str, Any], scene_file: Path, time_s: np.ndarray) -> OpenSimBodies:
@@ -202,10 +206,17 @@ def load_opensim_bodies(table: dict[str, Any], scene_file: Path, time_s: np.ndar
             raise tab.error(key, f"file not found: {path}", "an existing file (relative to the scene file)")
     search_path = [scene_file.parent / p for p in (tab.table.get("geometry_path") or [])]
     osim = import_opensim()
+    # OpenSim logs "Couldn't find file" for every mesh of every body it cannot find (16 lines for
+    # gait2392 with four meshes copied); the two bodies used are looked up by body_surface, which
+    # says where it looked.
+    level = osim.Logger.getLevelString()
+    osim.Logger.setLevelString("error")
     try:
         model = osim.Model(str(model_file))
     except Exception as exc:  # opensim raises its own exception types from C++
         raise InputError(f"OpenSim cannot read the model: {str(exc).strip().splitlines()[0]}", file=model_file, key=tab.key("model")) from None
+    finally:
+        osim.Logger.setLevelString(level)
     bodies = {}
     for key in ("mobile_body", "fixed_body"):
         name = tab.string(key)
@@ -218,7 +229,7 @@ def load_opensim_bodies(table: dict[str, Any], scene_file: Path, time_s: np.ndar
     except Exception as exc:  # e.g. a socket naming a frame the model does not have
         raise InputError(f"OpenSim cannot assemble the model: {str(exc).strip().splitlines()[0]}", file=model_file, key=tab.key("model"),
                          expected="a model OpenSim can initialise (every joint's frames and sockets present)") from None
-    coordinates, missing = _motion_coordinates(osim, model, motion_file, time_s, tab.key("motion"))
+    coordinates, missing, warnings = _motion_coordinates(osim, model, motion_file, time_s, tab.key("motion"))
     coordinate_set = model.getCoordinateSet()
     rotation, translation = np.empty((len(time_s), 3, 3)), np.empty((len(time_s), 3))
     ground_rotation, ground_translation = np.empty((len(time_s), 3, 3)), np.empty((len(time_s), 3))
@@ -245,7 +256,6 @@ def load_opensim_bodies(table: dict[str, Any], scene_file: Path, time_s: np.ndar
     only = {key: tab.strings(key, len(tab.table[key])) if tab.has(key) else None for key in ("mobile_meshes", "fixed_meshes")}
     mobile = body_surface(osim, model, tab.string("mobile_body"), model_file, search_path, only["mobile_meshes"], tab.key("mobile_body"))
     fixed = body_surface(osim, model, tab.string("fixed_body"), model_file, search_path, only["fixed_meshes"], tab.key("fixed_body"))
-    warnings = []
     if missing:
         warnings.append(
             f"{motion_file}: {len(missing)} model coordinate(s) are not in the motion and stay at their default values "
@@ -288,6 +298,7 @@ def model_geometry(
     from geometries.mesh_io import check_pair_distance, orient_pair
 
     file = str(scene_file)
+    check_load_bodies(data["load"], data["opensim"], file)
     if "kinematics" in data:
         raise InputError("[kinematics] and [opensim] both place the fixed body", file=file, key="kinematics",
                          expected="one of them: [opensim] takes every coordinate from its motion")

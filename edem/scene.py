@@ -21,6 +21,7 @@ from edem.errors import InputError
 from edem.laws import LAWS
 from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, load_series_from_table
 from edem.mechanics import DOF_NAMES
+from edem.plausibility import scene_warnings
 from edem.springs import Cartilage, Ligament
 from edem.thin_layer import LAYER_SYMBOLS, taylor_coefficients
 from edem.tables import SceneTable, not_utf8
@@ -411,8 +412,9 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         mobile, fixed, reference_point, attachments, geo_description = _load_geometry(data["geometry"], path, cartilage, notes)
         kinematics = None
         if "kinematics" in data:
-            kinematics = angle_series_from_table(data["kinematics"], path, load.time_s)
+            kinematics = angle_series_from_table(data["kinematics"], path, load.time_s, load.given_time_s)
     description = description or geo_description
+    notes += scene_warnings(cartilage.youngs_modulus_mpa, load, data["load"], mobile)
     if not np.any(mobile.areas_mm2 > 0.0):
         raise InputError(
             f"the mobile surface has no triangle of non-zero area ({len(mobile.triangles)} triangles), so it carries no spring",

@@ -25,6 +25,7 @@ from edem.mechanics import (
     unrestrained_dofs,
 )
 from edem.opensim_model import BodyPoses
+from edem.plausibility import emit, merge_repeated
 from edem.raycast import RayCaster
 from edem.rowwise import row_dot
 from edem.scene import Scene, Viscoelastic
@@ -413,7 +414,7 @@ def run(
     if unbalanced:
         worst = max(unbalanced, key=lambda item: item[1])
         warnings.append(remeasured_warning(len(unbalanced), worst[0], worst[1]))
-    return RunResult(scene, method, steps, time.perf_counter() - started, warnings, seconds)
+    return RunResult(scene, method, steps, time.perf_counter() - started, merge_repeated(warnings), seconds)
 
 
 def solve(scene: Scene, method: str | None = None, *, progress: Callable[[int], None] | None = None) -> RunResult:
@@ -442,8 +443,15 @@ def solve(scene: Scene, method: str | None = None, *, progress: Callable[[int], 
         An unknown method.
     SolverError
         A time point without equilibrium (the message names it and says why).
+
+    Warns
+    -----
+    EdemWarning
+        Each of the scene's and the run's warnings (those ``summary.json`` lists).
     """
-    return run(scene, method, progress=progress)
+    result = run(scene, method, progress=progress)
+    emit(list(scene.warnings) + result.warnings)
+    return result
 
 
 def viscoelastic_increment(
