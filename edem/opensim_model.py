@@ -208,15 +208,16 @@ def load_opensim_bodies(table: dict[str, Any], scene_file: Path, time_s: np.ndar
     osim = import_opensim()
     # OpenSim logs "Couldn't find file" for every mesh of every body it cannot find (16 lines for
     # gait2392 with four meshes copied); the two bodies used are looked up by body_surface, which
-    # says where it looked.
-    level = osim.Logger.getLevelString()
-    osim.Logger.setLevelString("error")
+    # says where it looked. The level goes back to at least warnings: a return to info is itself
+    # logged ("Set log level to Info"), as is every model load.
+    level = max(osim.Logger.getLevel(), osim.Logger.Level_Warn)
+    osim.Logger.setLevel(osim.Logger.Level_Error)
     try:
         model = osim.Model(str(model_file))
     except Exception as exc:  # opensim raises its own exception types from C++
         raise InputError(f"OpenSim cannot read the model: {str(exc).strip().splitlines()[0]}", file=model_file, key=tab.key("model")) from None
     finally:
-        osim.Logger.setLevelString(level)
+        osim.Logger.setLevel(level)
     bodies = {}
     for key in ("mobile_body", "fixed_body"):
         name = tab.string(key)
