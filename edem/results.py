@@ -10,6 +10,7 @@ from edem.loads import JointKinematics
 from edem.opensim_model import BodyPoses
 from edem.resultdir import TIMESERIES_COLUMNS, Frame, Provenance, SurfaceFrame, timeseries_row, write_pvd, write_result_dir
 from edem.solver import RunResult, StepResult
+from edem.thickness import thickness_summary
 
 __all__ = ["TIMESERIES_COLUMNS", "summary", "timeseries_rows", "pressure_frame", "write_pvd", "write_results"]
 
@@ -32,6 +33,7 @@ def summary(run: RunResult) -> dict:
         "max_moment_residual_nmm": max(s.moment_residual_nmm for s in steps),
         "law": run.scene.cartilage.law,
         "warnings": list(run.scene.warnings) + list(run.warnings),
+        **thickness_summary(run.scene.cartilage.layers),  # measured thickness only
     }
 
 
