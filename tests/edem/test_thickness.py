@@ -104,3 +104,52 @@ def test_measured_uniform_layers_are_the_uniform_coupled_layer(law):
     # same equations on the same surfaces: round-off only
     assert a.displacement_mm[2] == pytest.approx(b.displacement_mm[2], rel=1e-9)
     np.testing.assert_allclose(a.pressure_mpa, b.pressure_mpa, rtol=1e-7, atol=1e-12)
+
+
+# --------------------------------------------------------------------------------------------
+# scene files
+
+
+def _plate_scene_file(tmp_path, cartilage: str, geometry: str = 'mobile_bone = "bone.stl"') -> str:
+    write_surface(tmp_path / "mobile.stl", grid_plate(20.0, 20.0, 10))
+    write_surface(tmp_path / "bone.stl", grid_plate(24.0, 24.0, 4, z_mm=-T_M))
+    write_surface(tmp_path / "fixed.stl", grid_plate(20.0, 20.0, 10, z_mm=T_F, facing_up=False))
+    path = tmp_path / "plates.toml"
+    path.write_text(
+        f'[geometry]\nmobile = "mobile.stl"\nfixed = "fixed.stl"\n{geometry}\n\n'
+        f"[cartilage]\nyoungs_modulus_mpa = {E}\npoissons_ratio = {NU}\n{cartilage}\n\n"
+        f"[load]\nforce_n = [0, 0, {FORCE_N}]\n\n[constraints]\nfixed_dofs = {json.dumps(list(PLATE_FIXED))}\n"
+    )
+    return str(path)
+
+
+def test_scene_file_bone_gives_the_series_closed_form_and_the_thickness_distribution(tmp_path):
+    scene = load_scene(_plate_scene_file(tmp_path, f'law = "gap"\nmax_spring_length_mm = 4.0\nfixed_thickness_mm = {T_F}'))
+    run = solve(scene, method="dem")
+    # p = 1 MPa through both layers in series; round-off only (exact plates, ascii STL is lossless)
+    assert run.steps[0].displacement_mm[2] == pytest.approx((T_M + T_F) / E_CONF, abs=1e-9)
+    report = json.loads(json.dumps(summary(run)))["cartilage_thickness"]
+    assert report["mobile"]["source"] == "bone" and report["fixed"]["source"] == "uniform"
+    for key in ("min_mm", "median_mm", "max_mm"):
+        assert report["mobile"][key] == pytest.approx(T_M, abs=1e-9)
+        assert report["fixed"][key] == T_F
+    assert report["mobile"]["measured_area_share"] == 1.0 and report["fixed"]["uniform_area_share"] == 1.0
+
+
+@pytest.mark.parametrize(
+    ("cartilage", "geometry", "key"),
+    [
+        # one combined thickness beside per-side layers: which one is meant is not known
+        ('law = "gap"\nmax_spring_length_mm = 4.0\nthickness_mm = 2.0\nfixed_thickness_mm = 0.8', 'mobile_bone = "bone.stl"', "cartilage.thickness_mm"),
+        # F has neither a bone nor a uniform layer
+        ('law = "gap"\nmax_spring_length_mm = 4.0', 'mobile_bone = "bone.stl"', "cartilage.fixed_thickness_mm"),
+        # the window cannot default to twice a thickness that is not one number
+        ("law = \"gap\"\nfixed_thickness_mm = 0.8", 'mobile_bone = "bone.stl"', "cartilage.max_spring_length_mm"),
+        # the rays stop before the articular surfaces meet (0.8 + 1.2 mm of uniform layers)
+        ("law = \"gap\"\nmax_spring_length_mm = 1.5\nmobile_thickness_mm = 1.2\nfixed_thickness_mm = 0.8", "", "cartilage.max_spring_length_mm"),
+    ],
+)
+def test_layer_keys_that_contradict_each_other_are_refused_naming_the_key(tmp_path, cartilage, geometry, key):
+    with pytest.raises(InputError) as caught:
+        load_scene(_plate_scene_file(tmp_path, cartilage, geometry))
+    assert caught.value.key == key and caught.value.file.endswith("plates.toml")
