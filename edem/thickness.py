@@ -100,10 +100,13 @@ def measure_layer(
         Distance to the bone; NaN where none lies within (0, search_mm].
     measured : (k,) bool
     """
-    hits = RayCaster(bone.vertices_mm, bone.triangles).cast(centroid_mm, -np.asarray(normal, float), search_mm)
-    depth = hits.spring_length_mm
-    # The signed window also sees a bone in front of the articular surface (s <= 0): that is no
-    # layer under it, so it counts as not measured.
+    inward = -np.asarray(normal, float)
+    # The caster's window is signed, (-h, h] about the origin, nearest hit first: centred half-way
+    # down, it looks at depths (0, search_mm] only, so a bone beside the rim in front of the
+    # articular surface cannot hide the bone below it.
+    half = 0.5 * float(search_mm)
+    hits = RayCaster(bone.vertices_mm, bone.triangles).cast(np.asarray(centroid_mm, float) + half * inward, inward, half)
+    depth = hits.spring_length_mm + half
     measured = np.isfinite(depth) & (depth > 0.0)
     return np.where(measured, depth, np.nan), measured
 
