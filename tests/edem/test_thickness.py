@@ -35,7 +35,7 @@ def _arrays(surface: TriangleSurface) -> tuple[np.ndarray, np.ndarray]:
     return surface.vertices_mm, surface.triangles
 
 
-def _plates(which: str, gap_mm: float, law: str, **options):
+def _plates(which: str, gap_mm: float, law: str, force_n=(0.0, 0.0, FORCE_N)):
     """Two plates whose articular surfaces are ``gap_mm`` apart; ``which`` says where bones are
     given ("mobile", "fixed", "both"); a side without one is its bone with a uniform layer."""
     mobile_bone = which in ("mobile", "both")
@@ -52,7 +52,7 @@ def _plates(which: str, gap_mm: float, law: str, **options):
         kwargs["fixed_bone"] = _arrays(plane(lambda x, y: gap_mm + T_F))
     else:
         kwargs["fixed_thickness_mm"] = T_F
-    return make_scene(mobile, fixed, [0.0, 0.0, FORCE_N], law=law, max_spring_length_mm=4.0, fixed_dofs=PLATE_FIXED, **kwargs, **options)
+    return make_scene(mobile, fixed, force_n, law=law, max_spring_length_mm=4.0, fixed_dofs=PLATE_FIXED, **kwargs)
 
 
 @pytest.mark.parametrize("which", ["mobile", "fixed", "both"])
@@ -69,6 +69,20 @@ def test_two_uniform_layers_in_series_match_the_plate_closed_form(which, law):
     assert step.displacement_mm[2] == pytest.approx(expected, abs=1e-9)
     assert step.pressure_mpa.max() == pytest.approx(p, rel=1e-9)
     assert step.contact_area_mm2 == pytest.approx(400.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("law", ["gap", "gap-log"])
+def test_edem_load_ramp_through_measured_layers_follows_the_closed_form_at_every_step(law):
+    # EDEM re-measures the bone-to-bone lengths at every pose (F's layer at the triangle each ray
+    # meets): over a ramp each step must sit where the closed form puts the static answer.
+    forces = np.array([100.0, 200.0, 400.0])
+    scene = _plates("both", 0.3, law, force_n=np.column_stack([0 * forces, 0 * forces, forces]))
+    total = T_M + T_F
+    for step, force in zip(solve(scene, method="edem").steps, forces):
+        p = force / 400.0
+        expected = 0.3 + (total * (1.0 - math.exp(-p / E_CONF)) if law == "gap-log" else p * total / E_CONF)
+        # plates: the laws are exact and the poses re-measured in float64 (round-off only)
+        assert step.displacement_mm[2] == pytest.approx(expected, abs=1e-9)
 
 
 def test_tapered_layer_matches_independent_springs_with_local_thickness():
