@@ -22,7 +22,7 @@ from edem.scene import load_scene
 from edem.solver import solve
 from geometries.mesh_io import write_surface
 from geometries.surface import TriangleSurface
-from tests.support import grid_plate, make_scene, plane
+from support import grid_plate, make_scene, plane
 
 E, NU = 10.35, 0.42
 E_CONF = confined_modulus_mpa(E, NU)
