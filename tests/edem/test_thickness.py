@@ -167,3 +167,15 @@ def test_layer_keys_that_contradict_each_other_are_refused_naming_the_key(tmp_pa
     with pytest.raises(InputError) as caught:
         load_scene(_plate_scene_file(tmp_path, cartilage, geometry))
     assert caught.value.key == key and caught.value.file.endswith("plates.toml")
+
+
+def test_result_maps_carry_each_sides_layer(tmp_path):
+    # The pressure maps carry M's layer and fixed.vtp F's, as measured (1.2 mm to the bone plate)
+    # and as given (0.8 mm uniform): ParaView shows the thickness the springs used.
+    from edem.resultdir import read_result_dir, read_surface_frame
+    from edem.results import write_results
+
+    scene = load_scene(_plate_scene_file(tmp_path, f'law = "gap"\nmax_spring_length_mm = 4.0\nfixed_thickness_mm = {T_F}'))
+    out = write_results(solve(scene, method="dem"), tmp_path / "out")
+    np.testing.assert_allclose(read_result_dir(out).frame(0).cell_data["thickness_mm"], T_M, atol=1e-9)  # float64 re-measure
+    np.testing.assert_array_equal(read_surface_frame(out / "fixed.vtp").cell_data["thickness_mm"], T_F)
