@@ -119,7 +119,7 @@ def measured_spring_force_n(initial: SpringGeometry, measured: SpringGeometry, c
     h = measured.spring_length_mm[sel]
     hit = np.isfinite(h)
     elements = cartilage.spring_law.elements(
-        initial.area_mm2[sel], h0, cartilage.confined_modulus_mpa, cartilage.thickness_mm, np.zeros(h0.shape)
+        initial.area_mm2[sel], h0, cartilage.confined_modulus_mpa, initial.candidate_thickness_mm(cartilage), np.zeros(h0.shape)
     )
     with np.errstate(divide="ignore", invalid="ignore"):
         force = elements.force_and_stiffness(np.where(hit, h0 - h, 0.0))[0]

@@ -177,12 +177,18 @@ def stack_elements(*laws: ElementLaw) -> ElementLaw:
 # contact laws
 
 
+def _thickness(thickness_mm: float | np.ndarray) -> float | np.ndarray:
+    """t as given: one thickness (float) or one per candidate (measured thickness, edem.thickness)."""
+    return float(thickness_mm) if np.ndim(thickness_mm) == 0 else np.asarray(thickness_mm, dtype=float)
+
+
 class ContactLaw(ABC):
     """A spring-bed contact law. Subclasses set the class attributes and the methods below.
 
     Arrays are per candidate spring: ``area_mm2`` A, ``spring_length_mm`` h (signed ray length),
     ``approach_mm`` delta; ``thickness_mm`` is the undeformed combined thickness t (None for
-    laws without one).
+    laws without one), one value or one per candidate (measured thickness: then h is the
+    bone-to-bone length, docs/method.md#measured-cartilage-thickness).
     """
 
     name: ClassVar[str]
@@ -242,7 +248,9 @@ class ContactLaw(ABC):
 
 class ThresholdLaw(ContactLaw):
     """Linear springs of the current length h, candidates h <= h_max: s = s_stored + A E' / h delta
-    (incremental: the stiffness follows the current h; eq. 3.7)."""
+    (incremental: the stiffness follows the current h; eq. 3.7). With measured thickness h is the
+    bone-to-bone length, so k = A E' / (t_M + t_F) where the articular surfaces touch; the
+    candidates stay those within h_max along the ray."""
 
     name = "threshold"
     fe_twin = "slab"
@@ -278,14 +286,14 @@ class GapLaw(ContactLaw):
         return 2.0 * float(thickness_mm)
 
     def elements(self, area_mm2, spring_length_mm, confined_modulus_mpa, thickness_mm, stored_normal_force_n):
-        t = float(thickness_mm)
+        t = _thickness(thickness_mm)
         return LinearElements(area_mm2 * confined_modulus_mpa * (t - spring_length_mm) / t, area_mm2 * confined_modulus_mpa / t)
 
     def shear_length_mm(self, spring_length_mm, thickness_mm):
-        return np.full(spring_length_mm.shape, float(thickness_mm))
+        return np.full(spring_length_mm.shape, _thickness(thickness_mm))
 
     def strain(self, spring_length_mm, approach_mm, thickness_mm):
-        t = float(thickness_mm)
+        t = _thickness(thickness_mm)
         return (t - spring_length_mm + approach_mm) / t
 
 
@@ -298,13 +306,13 @@ class GapLogLaw(GapLaw):
     nonlinear = True
 
     def elements(self, area_mm2, spring_length_mm, confined_modulus_mpa, thickness_mm, stored_normal_force_n):
-        t = float(thickness_mm)
+        t = _thickness(thickness_mm)
         return LogElements(t - spring_length_mm, area_mm2 * confined_modulus_mpa / t, np.full(spring_length_mm.shape, t))
 
     def column_excess_mm(self, force_n, area_mm2, confined_modulus_mpa, thickness_mm):
         """The law inverted, d = t (1 - exp(-x)) with x = f / (A E') (its linear extension for
         f <= 0), minus t x: -t (x + expm1(-x)) <= 0, derivative t expm1(-x) / (A E')."""
-        t = float(thickness_mm)
+        t = _thickness(thickness_mm)
         per_n = 1.0 / (area_mm2 * confined_modulus_mpa)
         x = np.maximum(force_n, 0.0) * per_n
         return -t * (x + np.expm1(-x)), t * np.expm1(-x) * per_n

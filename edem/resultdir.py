@@ -476,7 +476,7 @@ def non_finite_count(result_dir: str | Path) -> int:
 SOURCE_ROOT = Path(__file__).resolve().parents[1]
 SCENE_FILE = "scene.toml"
 #: scene keys that name files, relative to the scene file: (section, key)
-FILE_KEYS = (("geometry", "mobile"), ("geometry", "fixed"), ("load", "file"), ("kinematics", "file"))
+FILE_KEYS = (("geometry", "mobile"), ("geometry", "fixed"), ("geometry", "mobile_bone"), ("geometry", "fixed_bone"), ("load", "file"), ("kinematics", "file"))
 
 
 @lru_cache(maxsize=1)

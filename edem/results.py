@@ -10,6 +10,7 @@ from edem.loads import JointKinematics
 from edem.opensim_model import BodyPoses
 from edem.resultdir import TIMESERIES_COLUMNS, Frame, Provenance, SurfaceFrame, timeseries_row, write_pvd, write_result_dir
 from edem.solver import RunResult, StepResult
+from edem.thickness import thickness_summary
 
 __all__ = ["TIMESERIES_COLUMNS", "summary", "timeseries_rows", "pressure_frame", "write_pvd", "write_results"]
 
@@ -32,6 +33,7 @@ def summary(run: RunResult) -> dict:
         "max_moment_residual_nmm": max(s.moment_residual_nmm for s in steps),
         "law": run.scene.cartilage.law,
         "warnings": list(run.scene.warnings) + list(run.warnings),
+        **thickness_summary(run.scene.cartilage.layers),  # measured thickness only
     }
 
 
@@ -63,8 +65,8 @@ def timeseries_rows(run: RunResult) -> list[dict[str, float]]:
 
 def pressure_frame(run: RunResult, s: StepResult) -> Frame:
     """The mobile surface at the step's pose with cell data pressure_mpa, spring_length_mm (0
-    where the ray found nothing: see ray_hit), in_contact and ray_hit (0/1). Degenerate triangles
-    carry no spring: 0 everywhere."""
+    where the ray found nothing: see ray_hit), in_contact and ray_hit (0/1), and with measured
+    thickness thickness_mm (M's layer). Degenerate triangles carry no spring: 0 everywhere."""
     scene = run.scene
     spring_triangle = scene.spring_triangle
     n_tri = scene.mobile.triangles.shape[0]
@@ -79,6 +81,10 @@ def pressure_frame(run: RunResult, s: StepResult) -> Frame:
     contact[spring_triangle] = s.in_contact
     points = s.mobile_placement.points(scene.mobile.vertices_mm)
     cells = {"pressure_mpa": pressure, "spring_length_mm": length, "in_contact": contact, "ray_hit": ray_hit}
+    layers = scene.cartilage.layers
+    if layers is not None:  # measured thickness: M's own layer per triangle
+        cells["thickness_mm"] = np.zeros(n_tri)
+        cells["thickness_mm"][spring_triangle] = layers.mobile.thickness_mm
     return Frame(s.step, s.time_s, SurfaceFrame(points, scene.mobile.triangles, {}, cells))
 
 
@@ -132,7 +138,7 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
         data["frames"] = note
     chosen = [] if time_series_only else range(len(run.steps)) if frame_steps is None else frame_steps
     frames = [pressure_frame(run, run.steps[k]) for k in chosen]
-    fixed = None if time_series_only else SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles)
+    fixed = None if time_series_only else SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles, {}, _fixed_cells(run))
     return write_result_dir(out_dir, data, timeseries_rows(run), frames, fixed,
                             fixed_frames=[fixed_frame(run, run.steps[k]) for k in chosen], opensim_sto=not time_series_only,
                             overwrite=overwrite, provenance=provenance, durable=durable)
@@ -141,4 +147,10 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
 def fixed_frame(run: RunResult, s: StepResult) -> Frame:
     """The fixed body placed where the step's kinematics put it (scene axes, mm)."""
     fixed = run.scene.fixed
-    return Frame(s.step, s.time_s, SurfaceFrame(s.fixed_placement.points(fixed.vertices_mm), fixed.triangles))
+    return Frame(s.step, s.time_s, SurfaceFrame(s.fixed_placement.points(fixed.vertices_mm), fixed.triangles, {}, _fixed_cells(run)))
+
+
+def _fixed_cells(run: RunResult) -> dict[str, np.ndarray]:
+    """The fixed body's cell data: with measured thickness, F's layer per triangle (thickness_mm)."""
+    layers = run.scene.cartilage.layers
+    return {} if layers is None else {"thickness_mm": layers.fixed.thickness_mm}

@@ -9,7 +9,7 @@ from __future__ import annotations
 import pickle
 import tomllib
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
 from importlib import resources
 from pathlib import Path
@@ -24,6 +24,7 @@ from edem.mechanics import DOF_NAMES
 from edem.plausibility import scene_warnings
 from edem.springs import Cartilage, Ligament
 from edem.thin_layer import LAYER_SYMBOLS, taylor_coefficients
+from edem.thickness import CARTILAGE_KEYS, GEOMETRY_KEYS, array_layers, scene_layers, uses_layers
 from edem.tables import SceneTable, not_utf8
 from geometries.builders import build_geometry
 from geometries.mesh_io import MAX_COORDINATE_MM
@@ -42,6 +43,7 @@ SECTIONS = {
         "shear_modulus_mpa",
         "coupling",
         "thin_layer_symbol",
+        *CARTILAGE_KEYS,  # measured thickness (edem.thickness)
     },
     "load": None,  # checked by edem.loads
     "kinematics": None,  # checked by edem.loads
@@ -52,7 +54,7 @@ SECTIONS = {
     "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness"},
     "opensim": None,  # checked by edem.opensim_model
 }
-FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm"}
+FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm", *GEOMETRY_KEYS}
 COUPLINGS = ("none", "thin-layer")
 
 
@@ -135,6 +137,10 @@ class Scene:
         method: str = "edem",
         name: str = "scene",
         description: str = "",
+        mobile_bone: tuple[np.ndarray, np.ndarray] | None = None,
+        fixed_bone: tuple[np.ndarray, np.ndarray] | None = None,
+        mobile_thickness_mm: float | None = None,
+        fixed_thickness_mm: float | None = None,
     ) -> Scene:
         """A scene from meshes and loads already in memory (no TOML file, no mesh cleaning).
 
@@ -172,6 +178,13 @@ class Scene:
         kinematics, ligaments, viscoelastic, method, name, description
             As the scene file's ``[kinematics]``, ``[[ligaments]]``, ``[viscoelastic]``,
             ``[solver] method`` and ``[scene]``.
+        mobile_bone, fixed_bone : (vertices (m, 3) mm, triangles (k, 3) int), optional
+            Subchondral bone under M's / F's surface: that side's cartilage thickness is measured
+            (docs/method.md#measured-cartilage-thickness); with either, or a per-side thickness,
+            ``thickness_mm`` is not given and the gap laws need ``max_spring_length_mm``.
+        mobile_thickness_mm, fixed_thickness_mm : float, optional
+            Uniform layer of a side without a bone (its surface is then its bone), or where the
+            bone is not found below a side with one.
 
         Returns
         -------
@@ -198,7 +211,13 @@ class Scene:
         if law not in LAWS:
             raise InputError(f"unknown contact law {law!r}", file=source, key="law", expected="one of " + ", ".join(LAWS))
         spring_law = LAWS[law]
-        if spring_law.needs_thickness and thickness_mm is None:
+        bones, uniform = {"mobile": mobile_bone, "fixed": fixed_bone}, {"mobile": mobile_thickness_mm, "fixed": fixed_thickness_mm}
+        layered = any(v is not None for v in (*bones.values(), *uniform.values()))
+        if layered and (thickness_mm is not None or (spring_law.needs_thickness and max_spring_length_mm is None)):
+            raise InputError("per-side layers replace thickness_mm, and the window cannot default to twice it", file=source,
+                             key="thickness_mm" if thickness_mm is not None else "max_spring_length_mm",
+                             expected="no thickness_mm, and max_spring_length_mm in mm")
+        if spring_law.needs_thickness and thickness_mm is None and not layered:
             raise InputError(f"the '{law}' law needs the undeformed thickness", file=source, key="thickness_mm", expected="a thickness in mm > 0")
         window = spring_law.default_window_mm(thickness_mm) if max_spring_length_mm is None else float(max_spring_length_mm)
         if not -1.0 < poissons_ratio < 0.5 or youngs_modulus_mpa <= 0 or window <= 0:
@@ -217,6 +236,8 @@ class Scene:
         if reference_point_mm is None:
             areas = mobile.areas_mm2
             reference_point_mm = (mobile.centroids_mm * areas[:, None]).sum(axis=0) / areas.sum()
+        notes: list[str] = []
+        layers = array_layers(mobile, fixed, np.flatnonzero(mobile.areas_mm2 > 0.0), bones, uniform, window, notes) if layered else None
         return cls(
             name=name,
             description=description,
@@ -224,13 +245,14 @@ class Scene:
             mobile=mobile,
             fixed=fixed,
             reference_point_mm=np.asarray(reference_point_mm, dtype=np.float64),
-            cartilage=Cartilage(float(youngs_modulus_mpa), float(poissons_ratio), law, window, thickness_mm, float(shear_modulus_mpa)),
+            cartilage=Cartilage(float(youngs_modulus_mpa), float(poissons_ratio), law, window, thickness_mm, float(shear_modulus_mpa), layers=layers),
             load=load,
             kinematics=kinematics,
             fixed_dofs=tuple(fixed_dofs),
             ligaments=tuple(ligaments),
             viscoelastic=viscoelastic,
             method=method,
+            warnings=tuple(notes),
         )
 
 
@@ -349,12 +371,14 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
     law = cart.string("law", "threshold", tuple(LAWS))
     spring_law = LAWS[law]
     thickness = cart.optional_number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
-    if spring_law.needs_thickness and thickness is None:
+    layered = uses_layers(data)  # per-side layers (edem.thickness) replace thickness_mm
+    if spring_law.needs_thickness and thickness is None and not layered:
         raise InputError(f"the '{law}' law needs the undeformed thickness", file=file, key="cartilage.thickness_mm", expected="a thickness in mm > 0")
     # Beyond a kilometre the ray window is no longer a length on a joint (and its float32 reach overflows).
-    window = cart.number("max_spring_length_mm", spring_law.default_window_mm(thickness), positive=True,
-                         high=MAX_COORDINATE_MM, what=f"h_max in mm (> 0 and < {MAX_COORDINATE_MM:g})")
-    if spring_law.needs_thickness and window < thickness:
+    window = cart.number("max_spring_length_mm", None if layered and thickness is None and spring_law.needs_thickness else spring_law.default_window_mm(thickness),
+                         positive=True, high=MAX_COORDINATE_MM, what=f"h_max in mm (> 0 and < {MAX_COORDINATE_MM:g})"
+                         + ("; with per-side layers it has no default" if layered else ""))
+    if spring_law.needs_thickness and thickness is not None and window < thickness:
         raise InputError(
             f"the ray window h_max = {window:g} mm is shorter than the thickness {thickness:g} mm",
             file=file,
@@ -421,6 +445,9 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             file=mobile.source or file, key="geometry.mobile" if mobile.source else "geometry",
             expected="a surface mesh whose triangles have distinct corners",
         )
+    layers = scene_layers(data, path, mobile, fixed, np.flatnonzero(mobile.areas_mm2 > 0.0), window, notes)
+    if layers is not None:
+        cartilage = replace(cartilage, layers=layers)
 
     constraints = SceneTable(data.get("constraints", {}), file, "constraints", SECTIONS["constraints"])
     fixed_dofs = constraints.table.get("fixed_dofs", [])

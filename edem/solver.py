@@ -142,23 +142,24 @@ def weak_dofs_warning(
 def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> list[str]:
     """Say so when a gap-law bed starts compressed (t larger than the gap h): it pushes the
     bodies apart before any load, so the first time point's result includes that preload."""
-    if cartilage.thickness_mm is None:
+    t = geometry.candidate_thickness_mm(cartilage)  # (measured thickness: one per candidate)
+    if t is None or not cartilage.spring_law.needs_thickness:
         return []
-    t = float(cartilage.thickness_mm)
     h = geometry.candidate_length_mm
     compressed = h < t * (1.0 - 1e-9)
     if not np.any(compressed):
         return []
+    thickness = f"thickness t = {float(t):g} mm" if np.ndim(t) == 0 else "local total thickness t_M + t_F"
     return [
         f"the {cartilage.law} bed starts pre-compressed: {int(compressed.sum())} springs are shorter than the "
-        f"thickness t = {t:g} mm, by up to {float((t - h).max()):.3g} mm (the gap between the surfaces is less "
-        "than t): the bodies push apart before any load; check thickness_mm against the gap"
+        f"{thickness}, by up to {float((t - h).max()):.3g} mm (the gap between the surfaces is less "
+        "than t): the bodies push apart before any load; check the thickness against the gap"
     ]
 
 
 def compression_ratio(geometry: SpringGeometry, cartilage: Cartilage, approach_mm: np.ndarray) -> np.ndarray:
     """Compression over undeformed length of the candidate springs after an approach (strain)."""
-    return cartilage.spring_law.strain(geometry.candidate_length_mm, approach_mm, cartilage.thickness_mm)
+    return cartilage.spring_law.strain(geometry.candidate_length_mm, approach_mm, geometry.candidate_thickness_mm(cartilage))
 
 
 def applied_loads(scene: Scene) -> np.ndarray:

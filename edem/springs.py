@@ -8,8 +8,9 @@ law (:mod:`edem.laws`); ``ligament_elements`` does the same for the tension-only
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,6 +18,9 @@ from edem.laws import LAWS, ContactLaw, ElementLaw, LinearElements
 from edem.mechanics import ShearTerms, confined_modulus_mpa, generalised_directions
 from edem.raycast import RayCaster, Rays
 from edem.rowwise import add_rows, rows_times
+
+if TYPE_CHECKING:
+    from edem.thickness import Layers
 
 
 @dataclass(frozen=True)
@@ -55,6 +59,8 @@ class Cartilage:
     shear_modulus_mpa: float = 0.0
     coupling: str = "none"  # none (independent springs) | thin-layer (edem.thin_layer)
     thin_layer_symbol: str = "pade"  # under the coupling, a name of edem.thin_layer.LAYER_SYMBOLS
+    # measured thickness (edem.thickness): each side's layer; None: thickness_mm is the combined one
+    layers: Layers | None = field(default=None, compare=False, repr=False)
 
     @property
     def confined_modulus_mpa(self) -> float:
@@ -80,6 +86,9 @@ class SpringGeometry:
     area_mm2: np.ndarray  # (n,)
     spring_length_mm: np.ndarray  # (n,) signed ray length, +inf where no hit in the window
     candidate: np.ndarray  # (n,) bool
+    # with measured thickness (cartilage.layers): the spring length above is bone to bone and this
+    # is each spring's total thickness T = t_M + t_F (n,); None: the cartilage's thickness_mm
+    thickness_mm: np.ndarray | None = None
 
     @cached_property
     def centroid_mm(self) -> np.ndarray:
@@ -102,6 +111,11 @@ class SpringGeometry:
     def candidate_length_mm(self) -> np.ndarray:
         """(c,) signed ray lengths of the candidates."""
         return np.take(self.spring_length_mm, self.candidate_index)
+
+    def candidate_thickness_mm(self, cartilage: Cartilage) -> np.ndarray | float | None:
+        """The undeformed thickness the law takes: (c,) per candidate with measured thickness,
+        else the cartilage's ``thickness_mm``."""
+        return cartilage.thickness_mm if self.thickness_mm is None else np.take(self.thickness_mm, self.candidate_index)
 
     @cached_property
     def candidate_centroid_mm(self) -> np.ndarray:
@@ -138,7 +152,12 @@ def spring_geometry(
     )
     length = hits.spring_length_mm
     candidate = cartilage.spring_law.candidates(length, cartilage.max_spring_length_mm)
-    return SpringGeometry(centroid_mm, normal, mobile, area_mm2, length, candidate)
+    # measured thickness: the laws see bone-to-bone lengths and per-spring thicknesses (the window
+    # and the candidates stay on the ray between the scene surfaces)
+    thickness = None
+    if cartilage.layers is not None:
+        length, thickness = cartilage.layers.along_rays(length, hits.triangle)
+    return SpringGeometry(centroid_mm, normal, mobile, area_mm2, length, candidate, thickness)
 
 
 def contact_law(
@@ -151,7 +170,7 @@ def contact_law(
     """
     return cartilage.spring_law.elements(
         np.take(geometry.area_mm2, geometry.candidate_index), geometry.candidate_length_mm, cartilage.confined_modulus_mpa,
-        cartilage.thickness_mm, stored_normal_force_n,
+        geometry.candidate_thickness_mm(cartilage), stored_normal_force_n,
     )
 
 
@@ -168,7 +187,7 @@ def shear_terms(
     if cartilage.shear_modulus_mpa == 0.0:
         return None
     sel = geometry.candidate_index
-    h = cartilage.spring_law.shear_length_mm(geometry.candidate_length_mm, cartilage.thickness_mm)
+    h = cartilage.spring_law.shear_length_mm(geometry.candidate_length_mm, geometry.candidate_thickness_mm(cartilage))
     return ShearTerms(
         arm_mm=geometry.candidate_centroid_mm - reference_point_mm,
         normals=geometry.mobile.vectors(np.take(geometry.reference_normal, sel, axis=0)),

@@ -358,17 +358,19 @@ class CoupledStep:
         """``directions`` (n_c, 6) and ``carried_force_n`` (n_c,) are those of the candidates."""
         cand = np.flatnonzero(geometry.candidate)
         law = cartilage.spring_law
-        candidate_thickness = law.shear_length_mm(geometry.spring_length_mm[cand], cartilage.thickness_mm)  # the h of k_s = G / h
+        candidate_thickness = law.shear_length_mm(geometry.spring_length_mm[cand], geometry.candidate_thickness_mm(cartilage))  # the h of k_s = G / h
         screenings = LAYER_SYMBOLS[cartilage.thin_layer_symbol](cartilage.poissons_ratio).screenings
         b = max(screenings, default=0.0)
         ends = law.thin_layer_extent == "candidates"
         if ends or b == 0.0:  # the layer is the candidates
             domain, thickness = cand, candidate_thickness
         else:
-            # The band: t, or for a law whose thickness is the spring length, the candidates' median.
-            band_thickness = float(cartilage.thickness_mm) if law.needs_thickness else float(np.median(candidate_thickness)) if cand.size else 1.0
+            # The band: t, or for a law whose thickness is the spring length, the candidates' median;
+            # with measured thickness (edem.thickness) each spring of the band has its own t.
+            measured = geometry.thickness_mm is not None and law.needs_thickness
+            band_thickness = float(cartilage.thickness_mm) if law.needs_thickness and not measured else float(np.median(candidate_thickness)) if cand.size else 1.0
             domain = coupled_domain(mesh, cand, 3.0 * np.sqrt(b) * band_thickness)
-            thickness = np.full(domain.shape, band_thickness)
+            thickness = geometry.thickness_mm[domain] if measured else np.full(domain.shape, band_thickness)
             thickness[geometry.candidate[domain]] = candidate_thickness  # domain is sorted: candidates in their order
         is_candidate = geometry.candidate[domain]
         length = geometry.spring_length_mm[domain]
@@ -385,7 +387,7 @@ class CoupledStep:
         column = None
         if law.nonlinear:
             column = functools.partial(law.column_excess_mm, area_mm2=mesh.area_mm2[domain], confined_modulus_mpa=cartilage.confined_modulus_mpa,
-                                       thickness_mm=cartilage.thickness_mm)
+                                       thickness_mm=thickness)
         shortest = float(np.sqrt(min(screenings)) * np.median(candidate_thickness)) if screenings and cand.size else np.inf
         return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law, column, shortest)
 

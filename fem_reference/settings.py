@@ -105,6 +105,12 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
                                or layers < 1):
         raise InputError(f"{layers!r} is not a number of layers", file=file, key=layers_key,
                          expected="an integer >= 1")
+    if scene.cartilage.layers is not None:
+        # (measured thickness, edem.thickness): the slab fills the gap and the layer is uniform, so
+        # either would silently model another cartilage than the springs'
+        raise InputError(f"the FE {fe_model.name} model does not take measured or per-side cartilage thickness",
+                         file=file, key="geometry.mobile_bone, geometry.fixed_bone, cartilage.mobile_thickness_mm, cartilage.fixed_thickness_mm",
+                         expected="a scene with one combined thickness_mm for the FE reference")
     if fe_model.needs_thickness and scene.cartilage.thickness_mm is None:
         raise InputError(f"the FE {fe_model.name} model needs the undeformed cartilage thickness",
                          file=file, key="cartilage.thickness_mm",

@@ -165,7 +165,7 @@ def referenced_files(scene_path: Path, overrides: dict[str, Any]) -> list[Path]:
         return []
     apply_overrides(data, dict(overrides))
     files = []
-    for section, keys in (("geometry", ("mobile", "fixed")), ("load", ("file",)), ("kinematics", ("file",))):
+    for section, keys in (("geometry", ("mobile", "fixed", "mobile_bone", "fixed_bone")), ("load", ("file",)), ("kinematics", ("file",))):
         table = data.get(section, {})
         if isinstance(table, dict):
             files += [scene_path.parent / table[k] for k in keys if isinstance(table.get(k), str)]

@@ -325,6 +325,16 @@ def test_layer_without_thickness_exits_2(capsys):
     assert "cartilage.thickness_mm" in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize("model", ["slab", "layer"])
+def test_measured_thickness_is_refused_by_the_fe_models(capsys, model):
+    """docs/method.md#measured-cartilage-thickness: neither FE model takes per-side layers (the
+    slab fills the gap, the layer is uniform), so a scene with them exits 2 naming the keys."""
+    sets = ["--set", "cartilage.mobile_thickness_mm=1.0", "--set", "cartilage.fixed_thickness_mm=1.0"]
+    assert main(["fe", PLATES, "--model", model, "--out", "/nonexistent/never", *sets]) == 2
+    err = capsys.readouterr().err
+    assert "does not take measured or per-side cartilage thickness" in err and "Traceback" not in err
+
+
 @pytest.mark.parametrize("args, key", [
     (["--steps", "7"], "--steps"),
     (["--steps", "a-b"], "--steps"),
