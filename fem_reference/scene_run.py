@@ -8,7 +8,7 @@ Models (docs/method.md#6-the-fe-reference-and-its-discrete-twins): :data:`fem_re
 law, and ``layer``, the twin of the ``gap`` laws), built with :mod:`geometries.fe_solids`.
 
 The obstacle is F's triangulation at the time point's pose (:class:`RigidSurface`); the load is
-:func:`edem.solver.applied_loads` of that time point; the free rigid motions of the bone are the
+:meth:`edem.scene.Scene.applied_loads` of that time point; the free rigid motions of the bone are the
 scene's free DOFs (``[constraints] fixed_dofs``), rotations about G = ``reference_point_mm``
 (small rotations: ``q x (x - G)``). Frictionless contact cannot resist a free motion along which
 every contact normal is perpendicular (a bone sliding along a flat tibia): such a motion is fixed
@@ -61,7 +61,6 @@ from edem.atomic_dirs import ResultWriteError
 from edem.mechanics import DOF_NAMES
 from edem.raycast import RayCaster
 from edem.resultdir import Frame, Provenance, SurfaceFrame, timeseries_row, write_result_dir
-from edem.solver import applied_loads, fixed_placement
 from fem_reference.contact import _fe_modules, solve_contact
 from fem_reference.models import FE_MODELS, FEGeometry, contact_surface
 from fem_reference.problem import (
@@ -213,7 +212,7 @@ def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: S
 
     if not selected:
         return None
-    mask, thickness = FE_MODELS[settings.model].sizing_surface(scene, caster, fixed_placement(scene, selected[0]))
+    mask, thickness = FE_MODELS[settings.model].sizing_surface(scene, caster, scene.fixed_placement(selected[0]))
     if not mask.any():
         return None  # the model refuses this with its own message
     edge = _mean_edge(scene.mobile.vertices_mm, scene.mobile.triangles[mask])
@@ -225,7 +224,7 @@ def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: S
 
 def _build_geometry(scene: Any, settings: FESettings, k: int, caster: RayCaster, solid_cache: dict) -> FEGeometry:
     """The model's solid and F's triangulation (the obstacle) at time point k."""
-    f_pose = fixed_placement(scene, k)
+    f_pose = scene.fixed_placement(k)
     rotation, translation = f_pose.affine()
     obstacle = RigidSurface(f_pose.points(scene.fixed.vertices_mm), scene.fixed.triangles, candidates=16)
     pose_key = (np.round(rotation, 14).tobytes(), np.round(translation, 12).tobytes())
@@ -390,7 +389,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     comm = MPI.COMM_WORLD if comm is None else comm
 
     caster = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles)
-    loads = applied_loads(scene)
+    loads = scene.applied_loads()
     warnings: list[str] = list(scene.warnings)
     if scene.ligaments:
         warnings.append(f"the FE reference does not model ligaments: the scene's "
