@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -14,6 +13,7 @@ from edem.errors import InputError, SolverError
 from edem.laws import stack_elements
 from edem.mechanics import DOF_NAMES, generalised_directions, rotation_matrix, rotation_vector, turn_rows
 from edem.raycast import RayCaster
+from edem.results import RunResult, StepResult
 from edem.rowwise import row_dot
 from edem.scene import Scene
 from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, ligament_table, shear_terms, spring_geometry
@@ -22,64 +22,6 @@ from edem.viscoelastic import check_rk2_stability, integrator_weights
 
 #: the discrete methods: DEM (static, from M's initial pose at every time point) and EDEM (docs/method.md#2-edem-the-time-dependent-incremental-method)
 METHODS = ("edem", "dem")
-
-
-@dataclass
-class StepResult:
-    """One time point: the state every output file is written from (docs/result-format.md)."""
-
-    step: int
-    time_s: float
-    force_n: np.ndarray  # applied load (3,)
-    moment_nmm: np.ndarray
-    displacement_mm: np.ndarray  # of G from its initial pose (EDEM: accumulated; DEM: this point)
-    rotation_rad: np.ndarray  # rotation vector of M from its initial pose
-    pressure_mpa: np.ndarray  # (n_springs,) normal contact pressure (elastic + viscous), 0 out of contact
-    viscous_pressure_mpa: np.ndarray  # (n_springs,) the dashpots' share of it (0 without [viscoelastic])
-    spring_length_mm: np.ndarray  # (n_springs,) at the start of the step, +inf where no hit
-    in_contact: np.ndarray  # (n_springs,) bool
-    ligament_force_n: np.ndarray  # (n_ligaments,) tension
-    iterations: int
-    force_residual_n: float
-    moment_residual_nmm: float
-    mobile_placement: Placement  # pose of M after the step (for the pressure maps)
-    fixed_placement: Placement
-    area_mm2: np.ndarray  # (n_springs,) spring areas
-    # DEM: the load fraction the springs measured again at the solved pose leave unbalanced (None: EDEM)
-    remeasured_imbalance: float | None = None
-    # sum of p A n over the springs (N), its moment about G (N mm) and the centre of pressure (mm),
-    # springs where the solve measured them (so they balance the load with ligaments and constraints)
-    contact_force_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    contact_moment_nmm: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    centre_of_pressure_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-    @property
-    def contact_area_mm2(self) -> float:
-        return float(self.area_mm2[self.in_contact].sum())
-
-    @property
-    def peak_pressure_mpa(self) -> float:
-        return float(self.pressure_mpa.max(initial=0.0))
-
-    @property
-    def mean_pressure_mpa(self) -> float:
-        """Total normal contact force over the contact area."""
-        area = self.contact_area_mm2
-        return float((self.pressure_mpa * self.area_mm2).sum() / area) if area > 0 else 0.0
-
-
-@dataclass
-class RunResult:
-    scene: Scene
-    method: str
-    steps: list[StepResult]
-    wall_time_s: float
-    warnings: list[str]
-    seconds: dict[str, float]  # wall time of the geometry stage (ray casting) and of the solves
-
-    @property
-    def n_springs(self) -> int:
-        return int(self.scene.spring_area_mm2.shape[0])
 
 
 def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> list[str]:
