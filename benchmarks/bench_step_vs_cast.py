@@ -36,7 +36,7 @@ from edem.mechanics import generalised_directions  # noqa: E402
 from edem.raycast import RayCaster  # noqa: E402
 from edem.rowwise import row_dot, rows_times  # noqa: E402
 from edem.scene import load_scene  # noqa: E402
-from edem.solver import fixed_placement, run  # noqa: E402
+from edem.solver import run  # noqa: E402
 from edem.springs import Placement  # noqa: E402
 
 # (scene, mesh size giving ~3k springs, ~30k springs); sizes measured on the built-in builders.
@@ -50,7 +50,7 @@ def bare_rays(scene, steps) -> list[tuple[np.ndarray, np.ndarray]]:
     poses = [Placement.identity(scene.reference_point_mm)] + [s.mobile_placement for s in steps[:-1]]
     rays = []
     for k, pose in enumerate(poses):
-        rotation, translation = fixed_placement(scene, k).affine()
+        rotation, translation = scene.fixed_placement(k).affine()
         origins = (pose.points(scene.spring_centroid_mm) - translation) @ rotation
         directions = pose.vectors(scene.spring_normal) @ rotation
         rays.append((origins - h * directions, directions))
@@ -100,7 +100,7 @@ def skeleton_step_s(scene, caster: RayCaster, steps) -> float:
     area = scene.spring_area_mm2
     modulus = scene.cartilage.confined_modulus_mpa
     poses = [Placement.identity(scene.reference_point_mm)] + [s.mobile_placement for s in steps[:-1]]
-    fixed = [fixed_placement(scene, k) for k in range(len(steps))]
+    fixed = [scene.fixed_placement(k) for k in range(len(steps))]
     loads = [np.concatenate([s.force_n, s.moment_nmm]) for s in steps]
     start = time.perf_counter()
     for pose, f_pose, load in zip(poses, fixed, loads):

@@ -27,9 +27,9 @@ from edem.errors import InputError, SolverError
 
 if TYPE_CHECKING:
     from edem.plausibility import EdemWarning
-    from edem.results import write_results
+    from edem.results import RunResult, write_results
     from edem.scene import Scene, load_scene
-    from edem.solver import RunResult, solve
+    from edem.solver import solve
 
 __version__ = "0.1.0"
 
@@ -39,7 +39,7 @@ _LAZY = {
     "write_results": "edem.results",
     "Scene": "edem.scene",
     "load_scene": "edem.scene",
-    "RunResult": "edem.solver",
+    "RunResult": "edem.results",
     "solve": "edem.solver",
 }
 

@@ -1,8 +1,11 @@
 """The result directory: the one module that writes and reads it (docs/result-format.md).
 
-Every producer writes the same layout through :func:`write_result_dir` (``edem run`` through
-:func:`edem.results.write_results`, ``edem fe`` through :mod:`fem_reference.scene_run`, the closed
-forms of :mod:`verification.closed_forms`, the FE problems of :mod:`verification.fe_analytic`),
+Every producer writes the same layout through :func:`write_result_dir`. A run of a scene, DEM/EDEM
+(:class:`edem.results.RunResult`) or FE (:class:`fem_reference.scene_run.FERunResult`), keeps one
+contract, :class:`RunOutput` (its summary, time series rows and frames), and is written by one
+writer, :func:`write_run` (under MPI by rank 0 only); the closed forms of
+:mod:`verification.closed_forms` and the FE problems of :mod:`verification.fe_analytic` write a
+single static solution (:func:`write_static_result_dir`),
 and every consumer (``edem compare``, the campaign metrics, the reports) reads it through
 :func:`read_result_dir`.
 
@@ -75,11 +78,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from edem.atomic_dirs import atomic_result_dir, verify_manifest
+from edem.atomic_dirs import ResultWriteError, atomic_result_dir, verify_manifest
 from geometries.errors import InputError, SolverError
 
 SUMMARY_FILE = "summary.json"
@@ -225,6 +228,96 @@ def write_result_dir(
         if opensim_sto:
             write_sto(tmp / STO_FILE, columns, [[float(row[c]) for c in columns] for row in timeseries], name=str(summary.get("scene", "edem")))
     return out
+
+
+class RunOutput(Protocol):
+    """The result contract of a run of a scene, DEM/EDEM or FE: what its directory is written from."""
+
+    scene: Any  # edem.scene.Scene: its fixed body is fixed.vtp
+    #: also write the time series as timeseries.sto
+    opensim_sto: bool
+
+    def summary(self) -> dict[str, Any]:
+        """summary.json: the keys every producer writes (module docstring) and its own."""
+        ...
+
+    def timeseries_rows(self) -> list[dict[str, float]]:
+        """timeseries.csv, one row per time point: :func:`timeseries_row`'s columns, then extra ones."""
+        ...
+
+    def frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
+        """The pressure maps of the time points at ``positions`` in the run (default: all)."""
+        ...
+
+    def fixed_frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
+        """The fixed body placed at those time points (fixed.pvd; empty: not written)."""
+        ...
+
+
+class Communicator(Protocol):
+    """What :func:`write_run` needs of an MPI communicator (mpi4py's ``Comm``)."""
+
+    rank: int
+
+    def bcast(self, value: Any, root: int = 0) -> Any: ...
+
+
+def write_run(
+    run: RunOutput,
+    out_dir: str | Path,
+    *,
+    frame_steps: Sequence[int] | None = None,
+    note: str | None = None,
+    overwrite: bool = False,
+    provenance: Provenance | None = None,
+    durable: bool = True,
+    time_series_only: bool = False,
+    comm: Communicator | None = None,
+) -> Path:
+    """Write a run's result directory (:func:`write_result_dir`) from its :class:`RunOutput`.
+
+    ``frame_steps``: positions in the run whose maps are written (default: all); ``note``: the
+    summary's ``frames`` entry when only some are; ``time_series_only``: no surface at all and no
+    timeseries.sto. ``comm``: under MPI, only rank 0 writes, and every rank learns whether it
+    worked, raising the same error (no rank waits for ever on one that failed); None: this process
+    writes. Errors as :func:`write_result_dir`.
+    """
+    if comm is None:
+        return _write_run(run, out_dir, frame_steps, note, overwrite, provenance, durable, time_series_only)
+    failure = None
+    if comm.rank == 0:
+        try:
+            _write_run(run, out_dir, frame_steps, note, overwrite, provenance, durable, time_series_only)
+        except ResultWriteError as exc:  # disk full, not writable
+            failure = ("write", exc.problem)
+        except InputError as exc:  # a result there already
+            failure = ("input", exc.problem)
+        except OSError as exc:
+            failure = ("input", f"cannot write the result directory: {exc}")
+        except Exception as exc:
+            failure = ("solver", f"writing the result directory failed: {exc}")
+    failure = comm.bcast(failure, root=0)
+    if failure is not None:
+        if failure[0] == "write":
+            raise ResultWriteError(failure[1], file=str(out_dir), expected="free space and a writable directory (--out)")
+        if failure[0] == "input":
+            raise InputError(failure[1], file=str(out_dir), expected="a writable directory (--out)")
+        raise SolverError(failure[1])
+    return Path(out_dir)
+
+
+def _write_run(run: RunOutput, out_dir: str | Path, frame_steps: Sequence[int] | None, note: str | None, overwrite: bool,
+               provenance: Provenance | None, durable: bool, time_series_only: bool) -> Path:
+    data = run.summary()
+    if note is not None:
+        data["frames"] = note
+    if time_series_only:
+        frames, fixed, fixed_frames = [], None, []
+    else:
+        frames, fixed_frames = run.frames(frame_steps), run.fixed_frames(frame_steps)
+        fixed = SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles, {}, run.scene.fixed_cell_data())
+    return write_result_dir(out_dir, data, run.timeseries_rows(), frames, fixed, fixed_frames=fixed_frames,
+                            opensim_sto=run.opensim_sto and not time_series_only, overwrite=overwrite, provenance=provenance, durable=durable)
 
 
 def _write_series(out: Path, prefix: str, frames: Sequence[Frame], collection: str) -> None:

@@ -1,91 +1,167 @@
-"""A DEM/EDEM run as a result directory (:mod:`edem.resultdir` owns the format)."""
+"""A DEM/EDEM run's result: the state of each time point and the result contract it writes
+(:class:`edem.resultdir.RunOutput`: summary, time series rows, frames; :mod:`edem.resultdir` owns
+the format and its one writer, :func:`edem.resultdir.write_run`)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, ClassVar
 
 import numpy as np
 
 from edem.loads import JointKinematics
 from edem.opensim_model import BodyPoses
-from edem.resultdir import TIMESERIES_COLUMNS, Frame, Provenance, SurfaceFrame, timeseries_row, write_pvd, write_result_dir
-from edem.solver import RunResult, StepResult
+from edem.resultdir import TIMESERIES_COLUMNS, Frame, Provenance, SurfaceFrame, timeseries_row, write_pvd, write_run
+from edem.scene import Scene
+from edem.springs import Placement
 from edem.thickness import thickness_summary
 
-__all__ = ["TIMESERIES_COLUMNS", "summary", "timeseries_rows", "pressure_frame", "write_pvd", "write_results"]
+__all__ = ["TIMESERIES_COLUMNS", "RunResult", "StepResult", "write_pvd", "write_results"]
 
 
-def summary(run: RunResult) -> dict:
-    """The summary.json content (the common keys, plus the law and the moment residual)."""
-    steps = run.steps
-    last = steps[-1]
-    return {
-        "scene": run.scene.name,
-        "method": run.method,
-        "steps": len(steps),
-        "n_springs": run.n_springs,
-        "wall_time_s": run.wall_time_s,
-        "peak_pressure_mpa": max(s.peak_pressure_mpa for s in steps),
-        "max_contact_area_mm2": max(s.contact_area_mm2 for s in steps),
-        "final_displacement_mm": [float(x) for x in last.displacement_mm],
-        "final_rotation_rad": [float(x) for x in last.rotation_rad],
-        "max_force_residual_n": max(s.force_residual_n for s in steps),
-        "max_moment_residual_nmm": max(s.moment_residual_nmm for s in steps),
-        "law": run.scene.cartilage.law,
-        "warnings": list(run.scene.warnings) + list(run.warnings),
-        **thickness_summary(run.scene.cartilage.layers),  # measured thickness only
-    }
+@dataclass
+class StepResult:
+    """One time point: the state every output file is written from (docs/result-format.md)."""
+
+    step: int
+    time_s: float
+    force_n: np.ndarray  # applied load (3,)
+    moment_nmm: np.ndarray
+    displacement_mm: np.ndarray  # of G from its initial pose (EDEM: accumulated; DEM: this point)
+    rotation_rad: np.ndarray  # rotation vector of M from its initial pose
+    pressure_mpa: np.ndarray  # (n_springs,) normal contact pressure (elastic + viscous), 0 out of contact
+    viscous_pressure_mpa: np.ndarray  # (n_springs,) the dashpots' share of it (0 without [viscoelastic])
+    spring_length_mm: np.ndarray  # (n_springs,) at the start of the step, +inf where no hit
+    in_contact: np.ndarray  # (n_springs,) bool
+    ligament_force_n: np.ndarray  # (n_ligaments,) tension
+    iterations: int
+    force_residual_n: float
+    moment_residual_nmm: float
+    mobile_placement: Placement  # pose of M after the step (for the pressure maps)
+    fixed_placement: Placement
+    area_mm2: np.ndarray  # (n_springs,) spring areas
+    # DEM: the load fraction the springs measured again at the solved pose leave unbalanced (None: EDEM)
+    remeasured_imbalance: float | None = None
+    # sum of p A n over the springs (N), its moment about G (N mm) and the centre of pressure (mm),
+    # springs where the solve measured them (so they balance the load with ligaments and constraints)
+    contact_force_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    contact_moment_nmm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    centre_of_pressure_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def contact_area_mm2(self) -> float:
+        return float(self.area_mm2[self.in_contact].sum())
+
+    @property
+    def peak_pressure_mpa(self) -> float:
+        return float(self.pressure_mpa.max(initial=0.0))
+
+    @property
+    def mean_pressure_mpa(self) -> float:
+        """Total normal contact force over the contact area."""
+        area = self.contact_area_mm2
+        return float((self.pressure_mpa * self.area_mm2).sum() / area) if area > 0 else 0.0
 
 
-def timeseries_rows(run: RunResult) -> list[dict[str, float]]:
-    """One timeseries.csv row per time point of the run: the common columns, then the joint's
-    pose (joint_angle_deg, or coord_<name> of an OpenSim model in rad or m), the contact resultant
-    sum p A n (N) and its moment about G (N mm), the centre of pressure (mm; G when nothing is in
-    contact) and each ligament's tension (N); DEM adds remeasured_imbalance (edem.consistency).
-    n points from M to F: the resultant is the load the contact carries, which balances the
-    applied load with the ligaments and the constraints."""
-    rows = []
-    kinematics = run.scene.kinematics
-    for s in run.steps:
-        row = timeseries_row(s.step, s.time_s, s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa, s.contact_area_mm2,
-                             s.displacement_mm, s.rotation_rad, s.iterations, s.force_residual_n)
-        if isinstance(kinematics, JointKinematics):
-            row["joint_angle_deg"] = float(np.degrees(kinematics.angle_rad[s.step]))
-        elif isinstance(kinematics, BodyPoses):
-            row.update({f"coord_{name}": float(values[s.step]) for name, values in kinematics.coordinates.items()})
-        row.update(zip(("contact_force_x_n", "contact_force_y_n", "contact_force_z_n"), s.contact_force_n))
-        row.update(zip(("contact_moment_x_nmm", "contact_moment_y_nmm", "contact_moment_z_nmm"), s.contact_moment_nmm))
-        row.update(zip(("cop_x_mm", "cop_y_mm", "cop_z_mm"), s.centre_of_pressure_mm))
-        row.update({f"ligament_{lig.name}_n": float(f) for lig, f in zip(run.scene.ligaments, np.maximum(s.ligament_force_n, 0.0))})
-        if s.remeasured_imbalance is not None:
-            row["remeasured_imbalance"] = float(s.remeasured_imbalance)
-        rows.append(row)
-    return rows
+@dataclass
+class RunResult:
+    """Every time point of a DEM/EDEM run, and its result directory's content (the contract of
+    :class:`edem.resultdir.RunOutput`)."""
 
+    #: the time series is also written as timeseries.sto (OpenSim)
+    opensim_sto: ClassVar[bool] = True
 
-def pressure_frame(run: RunResult, s: StepResult) -> Frame:
-    """The mobile surface at the step's pose with cell data pressure_mpa, spring_length_mm (0
-    where the ray found nothing: see ray_hit), in_contact and ray_hit (0/1), and with measured
-    thickness thickness_mm (M's layer). Degenerate triangles carry no spring: 0 everywhere."""
-    scene = run.scene
-    spring_triangle = scene.spring_triangle
-    n_tri = scene.mobile.triangles.shape[0]
-    pressure = np.zeros(n_tri)
-    pressure[spring_triangle] = s.pressure_mpa
-    hit = np.isfinite(s.spring_length_mm)
-    length = np.zeros(n_tri)
-    length[spring_triangle] = np.where(hit, s.spring_length_mm, 0.0)
-    ray_hit = np.zeros(n_tri, np.int8)
-    ray_hit[spring_triangle] = hit
-    contact = np.zeros(n_tri, np.int8)
-    contact[spring_triangle] = s.in_contact
-    points = s.mobile_placement.points(scene.mobile.vertices_mm)
-    cells = {"pressure_mpa": pressure, "spring_length_mm": length, "in_contact": contact, "ray_hit": ray_hit}
-    layers = scene.cartilage.layers
-    if layers is not None:  # measured thickness: M's own layer per triangle
-        cells["thickness_mm"] = np.zeros(n_tri)
-        cells["thickness_mm"][spring_triangle] = layers.mobile.thickness_mm
-    return Frame(s.step, s.time_s, SurfaceFrame(points, scene.mobile.triangles, {}, cells))
+    scene: Scene
+    method: str
+    steps: list[StepResult]
+    wall_time_s: float
+    warnings: list[str]
+    seconds: dict[str, float]  # wall time of the geometry stage (ray casting) and of the solves
+
+    @property
+    def n_springs(self) -> int:
+        return int(self.scene.spring_area_mm2.shape[0])
+
+    def summary(self) -> dict[str, Any]:
+        """The summary.json content (the common keys, plus the law and the moment residual)."""
+        steps = self.steps
+        last = steps[-1]
+        return {
+            "scene": self.scene.name,
+            "method": self.method,
+            "steps": len(steps),
+            "n_springs": self.n_springs,
+            "wall_time_s": self.wall_time_s,
+            "peak_pressure_mpa": max(s.peak_pressure_mpa for s in steps),
+            "max_contact_area_mm2": max(s.contact_area_mm2 for s in steps),
+            "final_displacement_mm": [float(x) for x in last.displacement_mm],
+            "final_rotation_rad": [float(x) for x in last.rotation_rad],
+            "max_force_residual_n": max(s.force_residual_n for s in steps),
+            "max_moment_residual_nmm": max(s.moment_residual_nmm for s in steps),
+            "law": self.scene.cartilage.law,
+            "warnings": list(self.scene.warnings) + list(self.warnings),
+            **thickness_summary(self.scene.cartilage.layers),  # measured thickness only
+        }
+
+    def timeseries_rows(self) -> list[dict[str, float]]:
+        """One timeseries.csv row per time point of the run: the common columns, then the joint's
+        pose (joint_angle_deg, or coord_<name> of an OpenSim model in rad or m), the contact resultant
+        sum p A n (N) and its moment about G (N mm), the centre of pressure (mm; G when nothing is in
+        contact) and each ligament's tension (N); DEM adds remeasured_imbalance (edem.consistency).
+        n points from M to F: the resultant is the load the contact carries, which balances the
+        applied load with the ligaments and the constraints."""
+        rows = []
+        kinematics = self.scene.kinematics
+        for s in self.steps:
+            row = timeseries_row(s.step, s.time_s, s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa, s.contact_area_mm2,
+                                 s.displacement_mm, s.rotation_rad, s.iterations, s.force_residual_n)
+            if isinstance(kinematics, JointKinematics):
+                row["joint_angle_deg"] = float(np.degrees(kinematics.angle_rad[s.step]))
+            elif isinstance(kinematics, BodyPoses):
+                row.update({f"coord_{name}": float(values[s.step]) for name, values in kinematics.coordinates.items()})
+            row.update(zip(("contact_force_x_n", "contact_force_y_n", "contact_force_z_n"), s.contact_force_n))
+            row.update(zip(("contact_moment_x_nmm", "contact_moment_y_nmm", "contact_moment_z_nmm"), s.contact_moment_nmm))
+            row.update(zip(("cop_x_mm", "cop_y_mm", "cop_z_mm"), s.centre_of_pressure_mm))
+            row.update({f"ligament_{lig.name}_n": float(f) for lig, f in zip(self.scene.ligaments, np.maximum(s.ligament_force_n, 0.0))})
+            if s.remeasured_imbalance is not None:
+                row["remeasured_imbalance"] = float(s.remeasured_imbalance)
+            rows.append(row)
+        return rows
+
+    def frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
+        """The pressure maps of the steps at ``positions`` in ``steps`` (default: all): the mobile
+        surface at the step's pose with cell data pressure_mpa, spring_length_mm (0 where the ray
+        found nothing: see ray_hit), in_contact and ray_hit (0/1), and with measured thickness
+        thickness_mm (M's layer). Degenerate triangles carry no spring: 0 everywhere."""
+        scene = self.scene
+        spring_triangle = scene.spring_triangle
+        n_tri = scene.mobile.triangles.shape[0]
+        frames = []
+        for s in self.steps if positions is None else [self.steps[k] for k in positions]:
+            pressure = np.zeros(n_tri)
+            pressure[spring_triangle] = s.pressure_mpa
+            hit = np.isfinite(s.spring_length_mm)
+            length = np.zeros(n_tri)
+            length[spring_triangle] = np.where(hit, s.spring_length_mm, 0.0)
+            ray_hit = np.zeros(n_tri, np.int8)
+            ray_hit[spring_triangle] = hit
+            contact = np.zeros(n_tri, np.int8)
+            contact[spring_triangle] = s.in_contact
+            points = s.mobile_placement.points(scene.mobile.vertices_mm)
+            cells = {"pressure_mpa": pressure, "spring_length_mm": length, "in_contact": contact, "ray_hit": ray_hit}
+            if scene.cartilage.layers is not None:  # measured thickness: M's own layer per triangle
+                cells["thickness_mm"] = np.zeros(n_tri)
+                cells["thickness_mm"][spring_triangle] = scene.cartilage.layers.mobile.thickness_mm
+            frames.append(Frame(s.step, s.time_s, SurfaceFrame(points, scene.mobile.triangles, {}, cells)))
+        return frames
+
+    def fixed_frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
+        """The fixed body placed where each step's kinematics put it (scene axes, mm)."""
+        fixed = self.scene.fixed
+        return [Frame(s.step, s.time_s, SurfaceFrame(s.fixed_placement.points(fixed.vertices_mm), fixed.triangles, {}, self.scene.fixed_cell_data()))
+                for s in (self.steps if positions is None else [self.steps[k] for k in positions])]
 
 
 def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int] | None = None, note: str | None = None,
@@ -133,24 +209,5 @@ def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int]
         When ``out_dir`` holds a result already (without ``overwrite``) or is not a result
         directory; ResultWriteError (an InputError) when the disk is full or not writable.
     """
-    data = summary(run)
-    if note is not None:
-        data["frames"] = note
-    chosen = [] if time_series_only else range(len(run.steps)) if frame_steps is None else frame_steps
-    frames = [pressure_frame(run, run.steps[k]) for k in chosen]
-    fixed = None if time_series_only else SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles, {}, _fixed_cells(run))
-    return write_result_dir(out_dir, data, timeseries_rows(run), frames, fixed,
-                            fixed_frames=[fixed_frame(run, run.steps[k]) for k in chosen], opensim_sto=not time_series_only,
-                            overwrite=overwrite, provenance=provenance, durable=durable)
-
-
-def fixed_frame(run: RunResult, s: StepResult) -> Frame:
-    """The fixed body placed where the step's kinematics put it (scene axes, mm)."""
-    fixed = run.scene.fixed
-    return Frame(s.step, s.time_s, SurfaceFrame(s.fixed_placement.points(fixed.vertices_mm), fixed.triangles, {}, _fixed_cells(run)))
-
-
-def _fixed_cells(run: RunResult) -> dict[str, np.ndarray]:
-    """The fixed body's cell data: with measured thickness, F's layer per triangle (thickness_mm)."""
-    layers = run.scene.cartilage.layers
-    return {} if layers is None else {"thickness_mm": layers.fixed.thickness_mm}
+    return write_run(run, out_dir, frame_steps=frame_steps, note=note, overwrite=overwrite, provenance=provenance, durable=durable,
+                     time_series_only=time_series_only)

@@ -17,13 +17,16 @@ from typing import Any
 
 import numpy as np
 
+from edem.beds import BEDS, IndependentSprings
 from edem.errors import InputError
+from edem.joint_reaction import transfer_moment
 from edem.laws import LAWS
 from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, load_series_from_table
-from edem.mechanics import DOF_NAMES
+from edem.mechanics import DOF_NAMES, rotation_matrix
+from edem.opensim_model import BodyPoses
 from edem.plausibility import scene_warnings
-from edem.springs import Cartilage, Ligament
-from edem.thin_layer import LAYER_SYMBOLS, taylor_coefficients
+from edem.springs import Cartilage, Ligament, Placement
+from edem.thin_layer import LAYER_SYMBOLS
 from edem.thickness import CARTILAGE_KEYS, GEOMETRY_KEYS, array_layers, scene_layers, uses_layers
 from edem.tables import SceneTable, not_utf8
 from geometries.builders import build_geometry
@@ -55,7 +58,6 @@ SECTIONS = {
     "opensim": None,  # checked by edem.opensim_model
 }
 FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm", *GEOMETRY_KEYS}
-COUPLINGS = ("none", "thin-layer")
 
 
 @dataclass(frozen=True)
@@ -111,6 +113,46 @@ class Scene:
     def spring_area_mm2(self) -> np.ndarray:
         return _read_only(self.mobile.areas_mm2[self.spring_triangle])
 
+    # What a time point means: where F is and what load acts on M (the DEM/EDEM run, the FE
+    # reference and the renders all ask the scene).
+    def fixed_placement(self, step: int) -> Placement:
+        """Pose of F at time point ``step``: the joint angle about the scene's axis (docs/method.md#2-edem-the-time-dependent-incremental-method
+        step 1), the pose an OpenSim model gives it at the motion's coordinates, or the identity
+        without kinematics."""
+        kin = self.kinematics
+        if kin is None:
+            return Placement.identity()
+        if isinstance(kin, BodyPoses):  # F's full pose from an OpenSim model
+            return Placement(kin.rotation[step], kin.translation_mm[step], np.zeros(3))
+        rotation = rotation_matrix(kin.axis_direction * kin.angle_rad[step])
+        return Placement(rotation, np.zeros(3), kin.axis_point_mm)
+
+    def applied_loads(self) -> np.ndarray:
+        """(n_times, 6) force (N) and moment about G (N mm) on M per time point, in global axes
+        (turned with F for ``load.frame = "fixed"``).
+
+        A moment given about another point (``load.point_mm``, e.g. a JointReaction's joint centre,
+        placed with F for frame = "fixed") is moved to G: M_G = M_P + (P - G) x F.
+        """
+        load = self.load
+        force, moment, point = load.force_n, load.moment_nmm, load.point_mm
+        if load.frame == "fixed" and self.kinematics is not None:
+            placements = [self.fixed_placement(k) for k in range(len(load.time_s))]
+            rotations = [p.rotation for p in placements]
+            force = np.einsum("kij,kj->ki", rotations, force)
+            moment = np.einsum("kij,kj->ki", rotations, moment)
+            if point is not None:
+                point = np.array([p.points(x[None])[0] for p, x in zip(placements, point)])
+        if point is not None:
+            moment = transfer_moment(moment, force, point, self.reference_point_mm)
+        return np.hstack([force, moment])
+
+    def fixed_cell_data(self) -> dict[str, np.ndarray]:
+        """Cell data of the fixed body in the result directory: with measured thickness, F's
+        layer per triangle (``thickness_mm``, mm); otherwise none."""
+        layers = self.cartilage.layers
+        return {} if layers is None else {"thickness_mm": layers.fixed.thickness_mm}
+
     @classmethod
     def from_arrays(
         cls,
@@ -129,6 +171,8 @@ class Scene:
         max_spring_length_mm: float | None = None,
         thickness_mm: float | None = None,
         shear_modulus_mpa: float = 0.0,
+        coupling: str = IndependentSprings.coupling,
+        thin_layer_symbol: str | None = None,
         fixed_dofs: tuple[str, ...] = (),
         reference_point_mm: np.ndarray | None = None,
         kinematics: JointKinematics | None = None,
@@ -170,6 +214,12 @@ class Scene:
             Undeformed combined cartilage thickness (the gap laws need it).
         shear_modulus_mpa : float
             Shear spring modulus (0: frictionless).
+        coupling : str
+            The bed, a key of :data:`edem.beds.BEDS` (as ``[cartilage] coupling``): ``"none"``,
+            independent springs, or ``"thin-layer"``, the coupled thin layer.
+        thin_layer_symbol : str, optional
+            With ``coupling="thin-layer"``, the layer's symbol, a name of
+            :data:`edem.thin_layer.LAYER_SYMBOLS` (``"pade"``, the default, or ``"two-pole"``).
         fixed_dofs : tuple of str
             Fixed DOFs of M among tx, ty, tz, rx, ry, rz.
         reference_point_mm : (3,) float, optional
@@ -193,7 +243,8 @@ class Scene:
         Raises
         ------
         InputError
-            A value or shape that does not fit, naming the argument.
+            A value or shape that does not fit, naming the argument (the cartilage arguments are
+            checked as the scene file's ``[cartilage]``, by :func:`cartilage_from_table`).
         """
         source = "<arrays>"
 
@@ -208,21 +259,14 @@ class Scene:
 
         mobile = surface(mobile_vertices_mm, mobile_triangles, "mobile")
         fixed = surface(fixed_vertices_mm, fixed_triangles, "fixed")
-        if law not in LAWS:
-            raise InputError(f"unknown contact law {law!r}", file=source, key="law", expected="one of " + ", ".join(LAWS))
-        spring_law = LAWS[law]
+        given = {
+            "youngs_modulus_mpa": youngs_modulus_mpa, "poissons_ratio": poissons_ratio, "law": law, "max_spring_length_mm": max_spring_length_mm,
+            "thickness_mm": thickness_mm, "shear_modulus_mpa": shear_modulus_mpa, "coupling": coupling, "thin_layer_symbol": thin_layer_symbol,
+        }
+        # numpy scalars as the plain numbers a TOML table holds; None: not given
         bones, uniform = {"mobile": mobile_bone, "fixed": fixed_bone}, {"mobile": mobile_thickness_mm, "fixed": fixed_thickness_mm}
         layered = any(v is not None for v in (*bones.values(), *uniform.values()))
-        if layered and (thickness_mm is not None or (spring_law.needs_thickness and max_spring_length_mm is None)):
-            raise InputError("per-side layers replace thickness_mm, and the window cannot default to twice it", file=source,
-                             key="thickness_mm" if thickness_mm is not None else "max_spring_length_mm",
-                             expected="no thickness_mm, and max_spring_length_mm in mm")
-        if spring_law.needs_thickness and thickness_mm is None and not layered:
-            raise InputError(f"the '{law}' law needs the undeformed thickness", file=source, key="thickness_mm", expected="a thickness in mm > 0")
-        window = spring_law.default_window_mm(thickness_mm) if max_spring_length_mm is None else float(max_spring_length_mm)
-        if not -1.0 < poissons_ratio < 0.5 or youngs_modulus_mpa <= 0 or window <= 0:
-            raise InputError("the cartilage is out of range", file=source, key="youngs_modulus_mpa, poissons_ratio, max_spring_length_mm",
-                             expected="E > 0, -1 < nu < 0.5, h_max > 0")
+        cartilage = cartilage_from_table({k: v.item() if isinstance(v, np.generic) else v for k, v in given.items() if v is not None}, source, "", layered)
         unknown = [d for d in fixed_dofs if d not in DOF_NAMES]
         if unknown:
             raise InputError(f"unknown DOF(s) {', '.join(unknown)}", file=source, key="fixed_dofs", expected="a subset of " + ", ".join(DOF_NAMES))
@@ -237,7 +281,9 @@ class Scene:
             areas = mobile.areas_mm2
             reference_point_mm = (mobile.centroids_mm * areas[:, None]).sum(axis=0) / areas.sum()
         notes: list[str] = []
-        layers = array_layers(mobile, fixed, np.flatnonzero(mobile.areas_mm2 > 0.0), bones, uniform, window, notes) if layered else None
+        if layered:
+            layers = array_layers(mobile, fixed, np.flatnonzero(mobile.areas_mm2 > 0.0), bones, uniform, cartilage.max_spring_length_mm, notes)
+            cartilage = replace(cartilage, layers=layers)
         return cls(
             name=name,
             description=description,
@@ -245,7 +291,7 @@ class Scene:
             mobile=mobile,
             fixed=fixed,
             reference_point_mm=np.asarray(reference_point_mm, dtype=np.float64),
-            cartilage=Cartilage(float(youngs_modulus_mpa), float(poissons_ratio), law, window, thickness_mm, float(shear_modulus_mpa), layers=layers),
+            cartilage=cartilage,
             load=load,
             kinematics=kinematics,
             fixed_dofs=tuple(fixed_dofs),
@@ -254,6 +300,66 @@ class Scene:
             method=method,
             warnings=tuple(notes),
         )
+
+
+def cartilage_from_table(table: dict[str, Any], file: str | Path, section: str = "cartilage", layered: bool = False) -> Cartilage:
+    """The cartilage, checked: the one validator of ``[cartilage]`` (:func:`load_scene`) and of
+    :meth:`Scene.from_arrays`'s cartilage arguments.
+
+    Parameters
+    ----------
+    table : dict
+        The keys of ``SECTIONS["cartilage"]`` (README.md#scene-files) to TOML values.
+    file : str or Path
+        The scene file (or ``"<arrays>"``), named in the errors.
+    section : str
+        Prefix of the keys named in the errors (``"cartilage"``; ``""``: the bare argument names).
+    layered : bool
+        The scene gives per-side layers (:mod:`edem.thickness`): they replace ``thickness_mm``,
+        and the gap laws' window has no default.
+
+    Returns
+    -------
+    Cartilage
+        With the law's default ray window h_max (mm) where none is given; ``coupling`` picks the
+        bed (:data:`edem.beds.BEDS`), which refuses what it cannot take (:meth:`edem.beds.Bed.check`).
+
+    Raises
+    ------
+    InputError
+        Naming the file, the key and what was expected.
+    """
+    cart = SceneTable(table, file, section, SECTIONS["cartilage"])
+    law = cart.string("law", "threshold", tuple(LAWS))
+    spring_law = LAWS[law]
+    thickness = cart.optional_number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
+    if layered and thickness is not None:
+        raise cart.error("thickness_mm", "per-side layers replace thickness_mm", "no thickness_mm with a bone mesh or a per-side thickness")
+    if spring_law.needs_thickness and thickness is None and not layered:
+        raise cart.error("thickness_mm", f"the '{law}' law needs the undeformed thickness", "a thickness in mm > 0")
+    # Beyond a kilometre the ray window is no longer a length on a joint (and its float32 reach overflows).
+    window = cart.number("max_spring_length_mm", None if layered and spring_law.needs_thickness else spring_law.default_window_mm(thickness),
+                         positive=True, high=MAX_COORDINATE_MM, what=f"h_max in mm (> 0 and < {MAX_COORDINATE_MM:g})"
+                         + ("; with per-side layers it has no default" if layered else ""))
+    if spring_law.needs_thickness and thickness is not None and window < thickness:
+        raise cart.error(
+            "max_spring_length_mm",
+            f"the ray window h_max = {window:g} mm is shorter than the thickness {thickness:g} mm",
+            f"h_max >= thickness_mm for the {law} law (springs beyond h_max are not seen)",
+        )
+    coupling = cart.string("coupling", IndependentSprings.coupling, tuple(BEDS))
+    cartilage = Cartilage(
+        coupling=coupling,
+        thin_layer_symbol=cart.string("thin_layer_symbol", "pade", tuple(LAYER_SYMBOLS)),
+        youngs_modulus_mpa=cart.number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
+        poissons_ratio=cart.number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
+        law=law,
+        max_spring_length_mm=window,
+        thickness_mm=thickness,
+        shear_modulus_mpa=cart.number("shear_modulus_mpa", 0.0, nonnegative=True, what="a shear modulus in MPa (>= 0)"),
+    )
+    BEDS[coupling].check(cartilage, cart)
+    return cartilage
 
 
 @lru_cache(maxsize=8)
@@ -367,65 +473,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
     name = meta.string("name", path.stem)
     description = meta.string("description") if meta.has("description") else ""
 
-    cart = SceneTable(data["cartilage"], file, "cartilage", SECTIONS["cartilage"])
-    law = cart.string("law", "threshold", tuple(LAWS))
-    spring_law = LAWS[law]
-    thickness = cart.optional_number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
-    layered = uses_layers(data)  # per-side layers (edem.thickness) replace thickness_mm
-    if spring_law.needs_thickness and thickness is None and not layered:
-        raise InputError(f"the '{law}' law needs the undeformed thickness", file=file, key="cartilage.thickness_mm", expected="a thickness in mm > 0")
-    # Beyond a kilometre the ray window is no longer a length on a joint (and its float32 reach overflows).
-    window = cart.number("max_spring_length_mm", None if layered and thickness is None and spring_law.needs_thickness else spring_law.default_window_mm(thickness),
-                         positive=True, high=MAX_COORDINATE_MM, what=f"h_max in mm (> 0 and < {MAX_COORDINATE_MM:g})"
-                         + ("; with per-side layers it has no default" if layered else ""))
-    if spring_law.needs_thickness and thickness is not None and window < thickness:
-        raise InputError(
-            f"the ray window h_max = {window:g} mm is shorter than the thickness {thickness:g} mm",
-            file=file,
-            key="cartilage.max_spring_length_mm",
-            expected=f"h_max >= thickness_mm for the {law} law (springs beyond h_max are not seen)",
-        )
-    coupling = cart.string("coupling", "none", COUPLINGS)
-    if coupling == "thin-layer" and spring_law.thin_layer is None:
-        coupled_laws = " or ".join(f'"{name}"' for name, each in LAWS.items() if each.thin_layer is not None)
-        raise InputError(
-            f"the {law} law has no thin-layer form",
-            file=file,
-            key="cartilage.coupling",
-            expected=f'law = {coupled_laws} with coupling = "thin-layer", or coupling = "none"',
-        )
-    symbol = cart.string("thin_layer_symbol", "pade", tuple(LAYER_SYMBOLS))
-    if cart.has("thin_layer_symbol") and coupling != "thin-layer":
-        raise InputError(
-            "thin_layer_symbol only applies to the coupled thin layer",
-            file=file,
-            key="cartilage.thin_layer_symbol",
-            expected='coupling = "thin-layer" with it, or no thin_layer_symbol',
-        )
-    cartilage = Cartilage(
-        coupling=coupling,
-        thin_layer_symbol=symbol,
-        youngs_modulus_mpa=cart.number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
-        poissons_ratio=cart.number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
-        law=law,
-        max_spring_length_mm=window,
-        thickness_mm=thickness,
-        shear_modulus_mpa=cart.number("shear_modulus_mpa", 0.0, nonnegative=True, what="a shear modulus in MPa (>= 0)"),
-    )
-    if coupling == "thin-layer" and spring_law.nonlinear:
-        # Linearised at a force f, a nonlinear column takes up to (G/E') h/(G A) off the local
-        # compliance (ContactLaw.column_excess_mm: t/(A E') (1 - exp(-f/(A E')))), which must stay
-        # positive for every f: the symbol's local part must be at least G/E' (up to round-off).
-        local, confined = LAYER_SYMBOLS[symbol](cartilage.poissons_ratio).local, taylor_coefficients(cartilage.poissons_ratio)[0]
-        if local < confined * (1.0 - 1e-12):
-            raise InputError(
-                f"the {law} law's columns cannot be linearised on the {symbol} symbol at Poisson's ratio "
-                f"{cartilage.poissons_ratio:g}: its local compliance, {local:.3g} h/G, is below the column's G/E' = {confined:.3g} h/G",
-                file=file,
-                key="cartilage.thin_layer_symbol" if cart.has("thin_layer_symbol") else "cartilage.law",
-                expected=f'law = "gap" with the coupling, or coupling = "none" with law = "{law}" '
-                         "(the Pade symbol takes it at nu = 0, 1/4 and above)",
-            )
+    cartilage = cartilage_from_table(data["cartilage"], file, layered=uses_layers(data))
     load = load_series_from_table(data["load"], path)
     if from_model:
         from edem.opensim_model import model_geometry
@@ -445,7 +493,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             file=mobile.source or file, key="geometry.mobile" if mobile.source else "geometry",
             expected="a surface mesh whose triangles have distinct corners",
         )
-    layers = scene_layers(data, path, mobile, fixed, np.flatnonzero(mobile.areas_mm2 > 0.0), window, notes)
+    layers = scene_layers(data, path, mobile, fixed, np.flatnonzero(mobile.areas_mm2 > 0.0), cartilage.max_spring_length_mm, notes)
     if layers is not None:
         cartilage = replace(cartilage, layers=layers)
 

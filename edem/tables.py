@@ -33,7 +33,8 @@ def not_utf8(exc: UnicodeDecodeError) -> str:
 
 
 class SceneTable:
-    """A TOML table of a scene file; keys are reported as `section.key`."""
+    """A TOML table of a scene file; keys are reported as `section.key` (as `key` for the section
+    "": the keyword arguments of a function, e.g. :meth:`edem.scene.Scene.from_arrays`)."""
 
     def __init__(self, table: Any, scene_file: str | Path, section: str, allowed: Iterable[str] | None) -> None:
         self.scene_file = Path(scene_file)
@@ -48,7 +49,7 @@ class SceneTable:
                 raise self.error(unknown[0], f"unknown key(s) {', '.join(map(repr, unknown))} in [{section}]", "one of " + ", ".join(allowed))
 
     def key(self, key: str) -> str:
-        return f"{self.section}.{key}"
+        return f"{self.section}.{key}" if self.section else key
 
     def error(self, key: str, problem: str, expected: str | None = None) -> InputError:
         return InputError(problem, file=self.scene_file, key=self.key(key), expected=expected)

@@ -8,7 +8,7 @@ Models (docs/method.md#6-the-fe-reference-and-its-discrete-twins): :data:`fem_re
 law, and ``layer``, the twin of the ``gap`` laws), built with :mod:`geometries.fe_solids`.
 
 The obstacle is F's triangulation at the time point's pose (:class:`RigidSurface`); the load is
-:func:`edem.solver.applied_loads` of that time point; the free rigid motions of the bone are the
+:meth:`edem.scene.Scene.applied_loads` of that time point; the free rigid motions of the bone are the
 scene's free DOFs (``[constraints] fixed_dofs``), rotations about G = ``reference_point_mm``
 (small rotations: ``q x (x - G)``). Frictionless contact cannot resist a free motion along which
 every contact normal is perpendicular (a bone sliding along a flat tibia): such a motion is fixed
@@ -52,16 +52,14 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from edem.atomic_dirs import ResultWriteError
 from edem.mechanics import DOF_NAMES
 from edem.raycast import RayCaster
-from edem.resultdir import Frame, Provenance, SurfaceFrame, timeseries_row, write_result_dir
-from edem.solver import applied_loads, fixed_placement
+from edem.resultdir import Frame, Provenance, SurfaceFrame, timeseries_row, write_run
 from fem_reference.contact import _fe_modules, solve_contact
 from fem_reference.models import FE_MODELS, FEGeometry, contact_surface
 from fem_reference.problem import (
@@ -126,7 +124,10 @@ class FEStepResult:
 
 @dataclass
 class FERunResult:
-    """All solved time points of one scene."""
+    """All solved time points of one scene, and its result directory's content (the contract of
+    :class:`edem.resultdir.RunOutput`; the FE writes no fixed.pvd and no timeseries.sto)."""
+
+    opensim_sto: ClassVar[bool] = False
 
     scene: Any
     settings: FESettings
@@ -185,6 +186,23 @@ class FERunResult:
             "n_time_points": int(self.n_time_points),
         }
 
+    def timeseries_rows(self) -> list[dict[str, float]]:
+        """timeseries.csv: the common columns (``iterations`` = Newton iterations) per solved time point."""
+        return [timeseries_row(s.step, s.time_s, s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa, s.contact_area_mm2,
+                               s.displacement_mm, s.rotation_rad, s.iterations, s.force_residual_n)
+                for s in self.steps]
+
+    def frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
+        """pressure_NNNN.vtp of the solved time points at ``positions`` (default: all): the FE contact
+        surface in the reference configuration of that time point, point data pressure_mpa,
+        spring_length_mm, in_contact, gap_mm, pressure_on_mobile_mpa, mobile_point_mm; cell data
+        pressure_mpa, spring_length_mm, in_contact, pressure_on_mobile_mpa (module docstring)."""
+        return [Frame(s.step, s.time_s, SurfaceFrame(s.points_mm, s.triangles, s.point_data, s.cell_data))
+                for s in (self.steps if positions is None else [self.steps[k] for k in positions])]
+
+    def fixed_frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
+        return []
+
 
 def _selected_steps(steps: Sequence[int] | None, n: int) -> list[int]:
     """Sorted unique time point indices (None: all; negative ones count from the end)."""
@@ -213,7 +231,7 @@ def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: S
 
     if not selected:
         return None
-    mask, thickness = FE_MODELS[settings.model].sizing_surface(scene, caster, fixed_placement(scene, selected[0]))
+    mask, thickness = FE_MODELS[settings.model].sizing_surface(scene, caster, scene.fixed_placement(selected[0]))
     if not mask.any():
         return None  # the model refuses this with its own message
     edge = _mean_edge(scene.mobile.vertices_mm, scene.mobile.triangles[mask])
@@ -225,7 +243,7 @@ def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: S
 
 def _build_geometry(scene: Any, settings: FESettings, k: int, caster: RayCaster, solid_cache: dict) -> FEGeometry:
     """The model's solid and F's triangulation (the obstacle) at time point k."""
-    f_pose = fixed_placement(scene, k)
+    f_pose = scene.fixed_placement(k)
     rotation, translation = f_pose.affine()
     obstacle = RigidSurface(f_pose.points(scene.fixed.vertices_mm), scene.fixed.triangles, candidates=16)
     pose_key = (np.round(rotation, 14).tobytes(), np.round(translation, 12).tobytes())
@@ -390,7 +408,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     comm = MPI.COMM_WORLD if comm is None else comm
 
     caster = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles)
-    loads = applied_loads(scene)
+    loads = scene.applied_loads()
     warnings: list[str] = list(scene.warnings)
     if scene.ligaments:
         warnings.append(f"the FE reference does not model ligaments: the scene's "
@@ -514,26 +532,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
                       _merge_warnings(warnings, step_log), n_times, None, comm.rank)
     if out_dir is not None:
         run.out_dir = Path(out_dir)
-        failure = None
-        if comm.rank == 0:  # rank 0 writes; every rank learns whether it worked (no hang)
-            try:
-                write_fe_results(run, run.out_dir, overwrite=overwrite, provenance=provenance)
-            except ResultWriteError as exc:  # disk full, not writable
-                failure = ("write", exc.problem)
-            except InputError as exc:  # a result there already
-                failure = ("input", exc.problem)
-            except OSError as exc:
-                failure = ("input", f"cannot write the result directory: {exc}")
-            except Exception as exc:
-                failure = ("solver", f"writing the result directory failed: {exc}")
-        failure = comm.bcast(failure, root=0)
-        if failure is not None:
-            if failure[0] == "write":
-                raise ResultWriteError(failure[1], file=str(out_dir), expected="free space and a writable directory (--out)")
-            if failure[0] == "input":
-                raise InputError(failure[1], file=str(out_dir),
-                                   expected="a writable directory (--out)")
-            raise SolverError(failure[1])
+        write_run(run, run.out_dir, overwrite=overwrite, provenance=provenance, comm=comm)  # rank 0 writes
     return run
 
 
@@ -717,24 +716,3 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
                    "in_contact": (p_cell > tol).astype(np.int8),
                    "pressure_on_mobile_mpa": p_cell * ratio_cell},
         mean_edge_mm=_mean_edge(pts, tris), layers=int(geom.solid.layer.max()))
-
-
-# --------------------------------------------------------------------------------------------
-# the result directory (docs/result-format.md)
-# --------------------------------------------------------------------------------------------
-
-
-def write_fe_results(run: FERunResult, out_dir: str | Path, *, overwrite: bool = False,
-                     provenance: Provenance | None = None) -> Path:
-    """The result directory (:mod:`edem.resultdir`): summary.json, timeseries.csv
-    (``iterations`` = Newton iterations), pressure.pvd with one pressure_NNNN.vtp per solved time
-    point (the FE contact surface in the reference configuration of that time point: point data
-    pressure_mpa, spring_length_mm, in_contact, gap_mm, pressure_on_mobile_mpa, mobile_point_mm;
-    cell data pressure_mpa, spring_length_mm, in_contact, pressure_on_mobile_mpa) and fixed.vtp
-    (see the module docstring). Atomic and sealed; ``overwrite`` replaces an existing result."""
-    rows = [timeseries_row(s.step, s.time_s, s.force_n, s.peak_pressure_mpa, s.mean_pressure_mpa, s.contact_area_mm2,
-                           s.displacement_mm, s.rotation_rad, s.iterations, s.force_residual_n)
-            for s in run.steps]
-    frames = [Frame(s.step, s.time_s, SurfaceFrame(s.points_mm, s.triangles, s.point_data, s.cell_data)) for s in run.steps]
-    fixed = SurfaceFrame(run.scene.fixed.vertices_mm, run.scene.fixed.triangles)
-    return write_result_dir(out_dir, run.summary(), rows, frames, fixed, overwrite=overwrite, provenance=provenance)

@@ -10,7 +10,6 @@ import numpy as np
 
 from edem.raycast import RayCaster
 from edem.scene import load_scene, resolve_scene_path
-from edem.solver import fixed_placement
 from geometries.builders import build_geometry
 from geometries.render import render_geometry_png
 
@@ -26,7 +25,7 @@ def render_scene_pngs(names: list[str], target: str | Path) -> list[Path]:
         table = tomllib.loads(resolve_scene_path(name).read_text(encoding="utf-8"))["geometry"]
         built = build_geometry(table["builtin"], {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm")})
         scene = load_scene(name)
-        rotation, translation = fixed_placement(scene, 0).affine()
+        rotation, translation = scene.fixed_placement(0).affine()
         hits = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles).cast(
             scene.mobile.centroids_mm, scene.mobile.unit_normals, scene.cartilage.max_spring_length_mm, rotation, translation
         )

@@ -88,3 +88,23 @@ def test_no_module_imports_a_higher_layer_outside_the_command_line():
 
 def test_no_two_files_import_each_other_even_through_others():
     assert cycles(import_graph()) == []
+
+
+def reaches(graph: dict[str, set[str]], start: str) -> set[str]:
+    """Every module ``start`` imports, directly or through others."""
+    seen: set[str] = set()
+    todo = [start]
+    while todo:
+        for target in graph.get(todo.pop(), ()):
+            if target not in seen:
+                seen.add(target)
+                todo.append(target)
+    return seen
+
+
+def test_the_fe_reference_and_the_scene_renders_ask_the_scene_what_a_time_point_means():
+    """F's placement and the applied loads per time point belong to the scene (edem.scene.Scene):
+    the FE reference and the scene renders do not reach the discrete run (edem.solver)."""
+    graph = import_graph()
+    clients = [m for m in graph if m.split(".")[0] == "fem_reference"] + ["reports.scene_renders"]
+    assert {m: reaches(graph, m) & {"edem.solver"} for m in clients} == {m: set() for m in clients}

@@ -237,3 +237,31 @@ def test_ctrl_c_during_edem_run_leaves_a_whole_result_or_none(tmp_path):
             assert run_.returncode in (130, -signal.SIGINT) and "interrupted" in err and not out.exists(), (run_.returncode, err)
             stopped += 1
     assert stopped >= 1 and leftovers(tmp_path) == []
+
+
+class Rank:
+    """A stand-in MPI communicator: ``bcast`` hands every rank what rank 0 sent (``sent``)."""
+
+    def __init__(self, rank: int, sent=None):
+        self.rank, self.sent = rank, sent
+
+    def bcast(self, value, root=0):
+        if self.rank == root:
+            self.sent = value
+        return self.sent
+
+
+def test_under_mpi_only_rank_zero_writes_and_every_rank_raises_its_failure(tmp_path, plates_run):
+    """The one writer's rank-0 rule (edem.resultdir.write_run): rank 1 writes nothing; rank 0
+    writes; a failure on rank 0 (a result there already) reaches every rank as the same exit-2
+    error, so no rank waits for ever on one that failed."""
+    out = tmp_path / "r"
+    assert resultdir.write_run(plates_run, out, comm=Rank(1)) == out and not out.exists()
+    zero = Rank(0)
+    resultdir.write_run(plates_run, out, comm=zero)
+    assert zero.sent is None and verify_manifest(out) == run_id(out)
+    with pytest.raises(InputError) as on_zero:
+        resultdir.write_run(plates_run, out, comm=zero)
+    with pytest.raises(InputError) as on_one:
+        resultdir.write_run(plates_run, out, comm=Rank(1, sent=zero.sent))
+    assert str(on_zero.value) == str(on_one.value) and "a result exists here already" in str(on_one.value)

@@ -8,7 +8,7 @@ import pytest
 from support import grid_plate, make_scene, plane
 
 from edem.loads import JointKinematics, LoadSeries
-from edem.solver import applied_loads, run
+from edem.solver import run
 
 
 def plates_with_load(load: LoadSeries, fixed_dofs=("tx", "ty", "rz"), **extra):
@@ -23,7 +23,7 @@ def test_force_through_the_joint_centre_puts_the_centre_of_pressure_there():
     p = np.array([[3.0, -2.0, 5.0]])
     load = LoadSeries(np.zeros(1), np.array([[0.0, 0.0, 400.0]]), np.zeros((1, 3)), point_mm=p)
     scene = plates_with_load(load, reference_point_mm=np.zeros(3))
-    np.testing.assert_allclose(applied_loads(scene)[0, 3:], np.cross(p[0], [0.0, 0.0, 400.0]), rtol=1e-12)
+    np.testing.assert_allclose(scene.applied_loads()[0, 3:], np.cross(p[0], [0.0, 0.0, 400.0]), rtol=1e-12)
     step = run(scene, "dem").steps[0]
     force = step.pressure_mpa * step.area_mm2
     centroids = scene.spring_centroid_mm
@@ -43,7 +43,7 @@ def test_joint_centre_given_in_the_fixed_frame_turns_with_the_fixed_body():
     r = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
     p_global = r @ (p - [1.0, 0, 0]) + [1.0, 0, 0]
     expected = np.concatenate([r @ f, r @ m + np.cross(p_global, r @ f)])
-    np.testing.assert_allclose(applied_loads(scene)[0], expected, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(scene.applied_loads()[0], expected, rtol=1e-12, atol=1e-9)
 
 
 def test_moment_on_fixed_rotations_is_warned_not_dropped_silently():

@@ -24,7 +24,6 @@ from opensim_fixtures import (  # noqa: E402
 from edem.cli import main  # noqa: E402
 from edem.errors import InputError  # noqa: E402
 from edem.scene import load_scene  # noqa: E402
-from edem.solver import applied_loads, fixed_placement  # noqa: E402
 
 pytestmark = pytest.mark.opensim
 TIME_S = [0.0, 0.5, 1.0]
@@ -74,7 +73,7 @@ def test_fixed_body_pose_comes_from_every_coordinate_of_the_motion(model_dir):
     scene = load_scene(write_scene(model_dir, INLINE_LOAD))
     for k, (angle, slide) in enumerate(zip(ANGLE_DEG, SLIDE_M)):
         rotation, translation = tibia_pose_in_talus_mm(angle, slide)
-        placement = fixed_placement(scene, k)
+        placement = scene.fixed_placement(k)
         np.testing.assert_allclose(placement.rotation, rotation, atol=1e-12)
         np.testing.assert_allclose(placement.points(np.zeros((1, 3)))[0], translation, atol=1e-9)
     assert np.allclose(scene.kinematics.coordinates["ankle_angle"], np.radians(ANGLE_DEG))
@@ -90,9 +89,9 @@ def test_meshes_are_found_scaled_and_placed_in_their_body_frames(model_dir):
     np.testing.assert_allclose(plate[:, 1], 1000.0 * (JOINT_CENTRE_IN_TIBIA_M[1] + PLATE_ABOVE_DOME_M), atol=1e-9)
     assert np.ptp(plate[:, 0]) == pytest.approx(40.0, rel=1e-9) and np.ptp(plate[:, 2]) == pytest.approx(40.0, rel=1e-9)
     # placed at the first time point, the plate faces the dome 1.5 mm above its top
-    placed = fixed_placement(scene, 0).points(plate)
+    placed = scene.fixed_placement(0).points(plate)
     np.testing.assert_allclose(placed[:, 1], 1.5, atol=1e-9)
-    assert np.all(fixed_placement(scene, 0).vectors(scene.fixed.unit_normals)[:, 1] < -0.99)
+    assert np.all(scene.fixed_placement(0).vectors(scene.fixed.unit_normals)[:, 1] < -0.99)
 
 
 def test_missing_mesh_file_names_where_it_was_looked_for(model_dir, tmp_path):
@@ -129,10 +128,10 @@ def test_jointreaction_in_ground_equals_the_same_load_in_the_welded_tibia_frame(
     keys = 'axes = "same"\nmobile_body = "talus"\nfixed_body = "tibia"'
     ground = load_scene(write_scene(model_dir, f'file = "jr_ground.sto"\n{keys}', name="g.toml"))
     tibia = load_scene(write_scene(model_dir, f'file = "jr_tibia.sto"\n{keys}', name="t.toml"))
-    np.testing.assert_allclose(applied_loads(ground), applied_loads(tibia), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(ground.applied_loads(), tibia.applied_loads(), rtol=1e-9, atol=1e-9)
     # at the last time point the tibia turned by -8 deg in the talus frame: the force with it
     rotation, _ = tibia_pose_in_talus_mm(ANGLE_DEG[-1], SLIDE_M[-1])
-    np.testing.assert_allclose(applied_loads(tibia)[-1, :3], -rotation @ f, rtol=1e-12)  # on the talus: negated
+    np.testing.assert_allclose(tibia.applied_loads()[-1, :3], -rotation @ f, rtol=1e-12)  # on the talus: negated
 
 
 def test_opensim_model_and_motion_drive_edem_run_end_to_end(model_dir, capsys):

@@ -17,7 +17,6 @@ import pytest
 
 from edem.errors import InputError
 from edem.mechanics import confined_modulus_mpa
-from edem.results import summary
 from edem.scene import load_scene
 from edem.solver import solve
 from geometries.mesh_io import write_surface
@@ -142,7 +141,7 @@ def test_scene_file_bone_gives_the_series_closed_form_and_the_thickness_distribu
     run = solve(scene, method="dem")
     # p = 1 MPa through both layers in series; round-off only (exact plates, ascii STL is lossless)
     assert run.steps[0].displacement_mm[2] == pytest.approx((T_M + T_F) / E_CONF, abs=1e-9)
-    report = json.loads(json.dumps(summary(run)))["cartilage_thickness"]
+    report = json.loads(json.dumps(run.summary()))["cartilage_thickness"]
     assert report["mobile"]["source"] == "bone" and report["fixed"]["source"] == "uniform"
     for key in ("min_mm", "median_mm", "max_mm"):
         assert report["mobile"][key] == pytest.approx(T_M, abs=1e-9)

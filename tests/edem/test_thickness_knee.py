@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from edem.results import summary
 from edem.scene import load_scene
 from edem.solver import solve
 
@@ -74,6 +73,6 @@ def test_knee_contact_area_grows_with_load_and_does_not_depend_on_h_max(tmp_path
     np.testing.assert_allclose(peak[10.0], peak[8.0], rtol=1e-9)
     # the bone lies under most of the cartilage (misses: the rims beyond the bone mesh), JAM's 3 mm
     # lumped layer is within the measured range
-    report = summary(runs[8.0])["cartilage_thickness"]
+    report = runs[8.0].summary()["cartilage_thickness"]
     assert report["mobile"]["source"] == "bone" and 0.5 < report["mobile"]["measured_area_share"] < 1.0
     assert report["mobile"]["min_mm"] < 3.0 < report["mobile"]["max_mm"]

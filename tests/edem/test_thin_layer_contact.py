@@ -14,7 +14,7 @@ from edem.laws import LinearElements
 from edem.mechanics import confined_modulus_mpa, generalised_directions
 from edem.raycast import RayCaster
 from edem.scene import Viscoelastic, load_scene
-from edem.solver import fixed_placement, run
+from edem.solver import run
 from edem.springs import Ligament, Placement, spring_geometry
 from edem.thin_layer import pade_symbol, taylor_coefficients, two_pole_symbol
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
@@ -93,7 +93,7 @@ def test_gap_log_on_the_coupled_layer_is_the_gap_law_at_small_strain_and_stiffer
             assert strain > 0.05 and ratio < 1.0  # excess(f) <= 0: every column is stiffer
     scene = coupled(make_scene(cylinder, tibia, [0, 0, 1500.0], law="gap-log", **common))
     geometry = spring_geometry(scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2, Placement.identity(scene.reference_point_mm),
-                               RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles), fixed_placement(scene, 0), scene.cartilage)
+                               RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles), scene.fixed_placement(0), scene.cartilage)
     cand = geometry.candidate_index
     rows = generalised_directions(scene.spring_centroid_mm[cand], scene.spring_normal[cand], scene.reference_point_mm)
     step = CoupledStep.build(coupled_layer_mesh(scene), geometry, scene.cartilage, np.zeros(cand.size), rows, np.zeros((0, 6)),
@@ -231,7 +231,7 @@ def test_coupled_cylinder_satisfies_kkt_with_the_bulge_outside_contact(nu, symbo
     assert np.abs(residual[[1, 2]]).max() <= 1e-10 * 333.0  # the free DOFs ty, tz
     geometry = spring_geometry(scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2,
                                Placement.identity(scene.reference_point_mm), RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles),
-                               fixed_placement(scene, 0), scene.cartilage)
+                               scene.fixed_placement(0), scene.cartilage)
     cand = geometry.candidate
     rows = generalised_directions(geometry.centroid_mm[cand], geometry.normal[cand], scene.reference_point_mm)
     step_model = CoupledStep.build(coupled_layer_mesh(scene), geometry, scene.cartilage, np.zeros(cand.sum()), rows,
