@@ -1,4 +1,4 @@
-"""Tests of geometries/mesh_io.py: mesh import, cleaning and orientation (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#8-built-in-geometries).
+"""Tests of geometries/mesh_files/ and geometries/repair.py: mesh import, cleaning and orientation (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#8-built-in-geometries).
 
 Every test names the invariant it checks. Meshes are built here with numpy; coordinates are
 rounded to float32 so that every format (including binary STL, which stores float32) must
@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from edem.errors import InputError
-from geometries.mesh_io import (
-    MeshWarning,
+from geometries.errors import MeshWarning
+from geometries.mesh_files import read_surface, write_surface, write_vtp
+from geometries.repair import (
     check_manifold,
     check_pair_distance,
     check_units,
@@ -28,10 +29,7 @@ from geometries.mesh_io import (
     orient_towards,
     prepare_pair,
     prepare_surface,
-    read_surface,
     signed_volume_mm3,
-    write_surface,
-    write_vtp,
 )
 from geometries.surface import TriangleSurface
 
