@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from geometries.errors import MeshWarning
-from geometries.mesh_files.common import Cells, MeshCells, block, cells_of, unreadable
+from geometries.mesh_files.child import run_in_child
+from geometries.mesh_files.common import SUPPORTED_FORMATS, Cells, MeshCells, block, cells_of, unreadable
 from geometries.mesh_files.meshio_family import write_meshio
 from geometries.surface import TriangleSurface
 
@@ -130,6 +131,20 @@ def triangulate(points: np.ndarray, polys: list[Cells], strips: list[Cells]) -> 
 _MAX_XML_COUNT = 10**9
 
 
+def _check_header(path: Path, key: str | None) -> None:
+    """Refuse what VTK's readers were seen to crash on, with a message that says what is wrong
+    (the child process would only tell that the reader crashed)."""
+    if path.suffix.lower() in (".vtp", ".vtu"):
+        _check_xml_counts(path, key)
+    else:
+        # VTK reads a version line it cannot parse as an older layout (a warning only) and then
+        # crashes on a 5.1 file's cell arrays (found by a mesh fuzz).
+        with path.open("rb") as stream:
+            first = stream.readline(256)
+        if not re.fullmatch(rb"# vtk DataFile Version \d+\.\d+\s*", first):
+            raise unreadable(f"its first line is {first[:60]!r}, not '# vtk DataFile Version <major>.<minor>'", str(path), key)
+
+
 def _check_xml_counts(path: Path, key: str | None) -> None:
     """Refuse a VTK XML file whose declared sizes (``NumberOfPoints``, ``NumberOfCells``,
     ``NumberOfComponents``...) are not whole numbers in range: VTK's XML readers resize their
@@ -177,15 +192,7 @@ def _read_vtk(path: Path, key: str | None):
         obj.AddObserver("ErrorEvent", on_error)
         return obj
 
-    if path.suffix.lower() in (".vtp", ".vtu"):
-        _check_xml_counts(path, key)
     if path.suffix.lower() == ".vtk":
-        # VTK reads a version line it cannot parse as an older layout (a warning only) and then
-        # crashes the process on a 5.1 file's cell arrays (found by a mesh fuzz): refused here.
-        with path.open("rb") as stream:
-            first = stream.readline(256)
-        if not re.fullmatch(rb"# vtk DataFile Version \d+\.\d+\s*", first):
-            raise unreadable(f"its first line is {first[:60]!r}, not '# vtk DataFile Version <major>.<minor>'", file, key)
         # the generic legacy reader names the dataset type; that type's own reader reads it
         # (the generic one would swallow its delegate's errors)
         sniffer = watched(vtkGenericDataObjectReader())
@@ -296,7 +303,24 @@ def _vtk_cells(data, file: str, key: str | None) -> MeshCells:
 
 
 def read(path: Path, key: str | None) -> MeshCells:
-    """Points, polygons, triangle strips and cell type names of a .vtk, .vtp or .vtu file."""
+    """Points, polygons, triangle strips and cell type names of a .vtk, .vtp or .vtu file, read
+    so that no damage in the file can crash this process.
+
+    VTK's own readers read the file in a forked child process (:func:`.child.run_in_child`):
+    they trust their input, and a crash there ends the child, which is an InputError naming the
+    file. meshio's Python readers (legacy VTK, VTU) cannot crash the process but do not check
+    cell arrays against cell types: they read a damaged "triangle" of two points as (1, 0, 1),
+    wrapping a negative index, and skip unknown cell types with a console message, so they are
+    not used for these formats.
+    """
+    _check_header(path, key)
+    load_vtk()  # imported once in this process; every child inherits the modules
+    return run_in_child(_read_with_vtk, path, key, file=str(path), key=key,
+                        expected=f"a valid {SUPPORTED_FORMATS} file")
+
+
+def _read_with_vtk(path: Path, key: str | None) -> MeshCells:
+    """:func:`read` by VTK's own readers (run in a child process)."""
     return _vtk_cells(_read_vtk(path, key), str(path), key)
 
 
