@@ -314,7 +314,7 @@ def write_surface_frame(
     cell_data: dict[str, np.ndarray] | None = None,
 ) -> Path:
     """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only)."""
-    from geometries.mesh_files import write_vtp  # VTK (and the mesh module) only once a .vtp is written
+    from geometries.mesh_files import write_vtp
 
     write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data)
     return Path(path)
@@ -403,7 +403,7 @@ def read_surface_frame(path: str | Path) -> SurfaceFrame:
     """Points, triangles and the point/cell arrays of a .vtp (polygons fan-triangulated by VTK)."""
     from geometries.mesh_files.vtk_family import load_vtk
 
-    load_vtk()
+    load_vtk("reading a result's pressure maps (.vtp)")
     from vtkmodules.util.numpy_support import vtk_to_numpy
     from vtkmodules.vtkFiltersCore import vtkTriangleFilter
     from vtkmodules.vtkIOXML import vtkXMLPolyDataReader

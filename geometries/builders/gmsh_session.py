@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from geometries.extras import import_extra
+
 _MODEL_COUNTER = itertools.count()
 
 
@@ -23,9 +25,10 @@ def gmsh_model(name: str) -> Iterator[Any]:
 
     Works whether or not gmsh is already initialised by the caller: an existing session is left
     as it was (its current model and the options set here are restored); otherwise gmsh is
-    initialised (quietly, without touching the SIGINT handler) and finalised on exit.
+    initialised (quietly, without touching the SIGINT handler) and finalised on exit. Without
+    gmsh (the ``gmsh`` extra) raises :class:`~geometries.extras.MissingExtra`.
     """
-    import gmsh
+    gmsh = import_extra("gmsh", "meshing a curved geometry (the ideal and subject-like ankles, the FE solids)")
 
     owns = not gmsh.isInitialized()
     if owns:

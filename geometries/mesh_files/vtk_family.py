@@ -5,6 +5,8 @@ every family's polygons, lives here too."""
 
 from __future__ import annotations
 
+import base64
+import html
 import importlib
 import os
 import re
@@ -12,11 +14,13 @@ import signal
 import sys
 import threading
 import warnings
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 from geometries.errors import MeshWarning
+from geometries.extras import MissingExtra, extra_of
 from geometries.mesh_files.child import run_in_child
 from geometries.mesh_files.common import SUPPORTED_FORMATS, Cells, MeshCells, block, cells_of, unreadable
 from geometries.mesh_files.meshio_family import write_meshio
@@ -45,7 +49,7 @@ VTK_MODULES = (
 )
 
 
-def load_vtk() -> None:
+def load_vtk(purpose: str = "reading VTK files") -> None:
     """Import :data:`VTK_MODULES` with Ctrl-C held back until they are loaded.
 
     A KeyboardInterrupt inside the import of a VTK extension module leaves it half initialised:
@@ -53,24 +57,35 @@ def load_vtk() -> None:
     registry. Blocking the signal is not enough (Python's handler runs for a signal any thread
     receives), so the Python-level handler is swapped for one that only records the interrupt,
     which is then handed to the previous handler once the modules are in.
+
+    Without VTK (the ``vtk`` extra) raises :class:`~geometries.extras.MissingExtra`, saying
+    that ``purpose`` needs it.
     """
     if all(name in sys.modules for name in VTK_MODULES):
         return
     if threading.current_thread() is not threading.main_thread():  # handlers belong to the main thread
-        for name in VTK_MODULES:
-            importlib.import_module(name)
+        _import_vtk(purpose)
         return
     pending: list[int] = []
     previous = signal.signal(signal.SIGINT, lambda signum, frame: pending.append(signum))
     try:
-        for name in VTK_MODULES:
-            importlib.import_module(name)
+        _import_vtk(purpose)
     finally:
         signal.signal(signal.SIGINT, previous)
     if pending and callable(previous):
         previous(signal.SIGINT, None)
     elif pending and previous == signal.SIG_DFL:
         os.kill(os.getpid(), signal.SIGINT)
+
+
+def _import_vtk(purpose: str) -> None:
+    try:
+        for name in VTK_MODULES:
+            importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        if extra_of(exc) != "vtk":
+            raise
+        raise MissingExtra("vtk", "vtk", purpose) from None
 
 
 def _vtk_polydata(points: np.ndarray, polys: Cells, strips: Cells | None = None):
@@ -103,7 +118,7 @@ def triangulate(points: np.ndarray, polys: list[Cells], strips: list[Cells]) -> 
     Triangles pass unchanged; larger polygons are triangulated keeping their winding (quads
     along the shorter diagonal); strips are unrolled with VTK's alternating-winding rule.
     """
-    load_vtk()
+    load_vtk("a mesh of quads, polygons or triangle strips (VTK triangulates them)")
     from vtkmodules.util.numpy_support import vtk_to_numpy
     from vtkmodules.vtkFiltersCore import vtkTriangleFilter
 
@@ -324,42 +339,87 @@ def _read_with_vtk(path: Path, key: str | None) -> MeshCells:
     return _vtk_cells(_read_vtk(path, key), str(path), key)
 
 
+#: VTK XML type names of the numpy types written (bool as UInt8: VTK's Bit is not byte-sized)
+_VTK_XML_TYPES = {
+    "float32": "Float32", "float64": "Float64", "int8": "Int8", "uint8": "UInt8", "int16": "Int16",
+    "uint16": "UInt16", "int32": "Int32", "uint32": "UInt32", "int64": "Int64", "uint64": "UInt64",
+}
+
+
+#: bytes per zlib block, as VTK's own writer cuts them
+_BLOCK_BYTES = 1 << 15
+
+
+def _xml_data_array(values: np.ndarray, name: str | None = None) -> str:
+    """One ``<DataArray>`` in VTK XML's inline binary format, zlib-compressed as VTK writes it:
+    the base64 of a UInt64 header (number of blocks, block size, size of the last block, the
+    compressed size of each block), then the base64 of the compressed blocks of the
+    little-endian values, row by row."""
+    values = np.asarray(values)
+    if values.dtype == np.bool_:
+        values = values.astype(np.uint8)
+    if values.dtype.name not in _VTK_XML_TYPES or values.ndim not in (1, 2):
+        raise ValueError(f"write_vtp: array {name!r} of {values.dtype} and shape {values.shape} "
+                         "(expected (n,) or (n, k) numbers)")
+    data = np.ascontiguousarray(values, dtype=values.dtype.newbyteorder("<")).tobytes()
+    blocks = [zlib.compress(data[start:start + _BLOCK_BYTES]) for start in range(0, len(data), _BLOCK_BYTES)]
+    last = len(data) - (len(blocks) - 1) * _BLOCK_BYTES if blocks else 0
+    header = np.array([len(blocks), _BLOCK_BYTES, last, *map(len, blocks)], dtype="<u8").tobytes()
+    encoded = (base64.b64encode(header) + base64.b64encode(b"".join(blocks))).decode("ascii")
+    attributes = f'type="{_VTK_XML_TYPES[values.dtype.name]}"'
+    if name is not None:
+        attributes += f' Name="{html.escape(name, quote=True)}"'
+    components = 1 if values.ndim == 1 else values.shape[1]
+    return f'<DataArray {attributes} NumberOfComponents="{components}" format="binary">{encoded}</DataArray>'
+
+
 def write_vtp(
     path: str | Path, points_mm: np.ndarray, triangles: np.ndarray,
     cell_data: dict[str, np.ndarray] | None = None,
     point_data: dict[str, np.ndarray] | None = None,
 ) -> None:
     """Write a triangulated surface, with optional per-triangle and per-vertex arrays, as VTK
-    XML PolyData.
+    XML PolyData (docs/result-format.md).
 
-    VTK's own vtkXMLPolyDataWriter, binary: float64 points and int64 connectivity, so a
-    round trip is exact (docs/method.md#8-built-in-geometries). Every result directory's pressure maps use it (docs/result-format.md: the
-    discrete runs write cell data, the FE runs nodal and facet data). VTK renders the file
-    in memory and Python writes it: VTK's own file output crashed (SIGSEGV) on a full disk,
-    Python raises OSError (ENOSPC) instead.
+    Parameters
+    ----------
+    path : str or Path
+        The .vtp file.
+    points_mm : (n_points, 3) array
+        Vertex coordinates, mm; written as float64, so a round trip is exact.
+    triangles : (n_triangles, 3) int array
+        Vertex indices; written as int64 connectivity with int64 offsets.
+    cell_data, point_data : dict of (n_triangles,) / (n_points,) or (n, k) arrays, optional
+        Named arrays, written in their own numeric type (bool as UInt8).
+
+    Every result directory's pressure maps are written here (the discrete runs write cell data,
+    the FE runs nodal and facet data). The file is VTK XML's inline binary format (base64,
+    zlib-compressed, UInt64 headers), which VTK, ParaView and pyvista read; it is written in
+    Python, not by VTK, so that a run needs no VTK (the ``vtk`` extra) to write its results.
+    A full disk is an OSError (ENOSPC): VTK's own file output crashed (SIGSEGV) there.
     """
-    load_vtk()
-    from vtkmodules.util.numpy_support import numpy_to_vtk
-    from vtkmodules.vtkIOXML import vtkXMLPolyDataWriter
+    points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
+    connectivity = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    offsets = 3 * np.arange(1, len(connectivity) + 1, dtype=np.int64)
 
-    poly = _vtk_polydata(points_mm, block(np.asarray(triangles).reshape(-1, 3)))
-    for target, arrays in ((poly.GetCellData(), cell_data), (poly.GetPointData(), point_data)):
-        for name, values in (arrays or {}).items():
-            array = numpy_to_vtk(np.ascontiguousarray(values), deep=True)
-            array.SetName(name)
-            target.AddArray(array)
-    writer = vtkXMLPolyDataWriter()
-    writer.WriteToOutputStringOn()
-    writer.SetInputData(poly)
-    writer.SetDataModeToBinary()  # inline base64: the output string is plain ASCII
-    if not writer.Write():
-        raise OSError(f"VTK could not render {path}")
+    def data_section(tag: str, arrays: dict[str, np.ndarray] | None) -> str:
+        return f"<{tag}>" + "".join(_xml_data_array(values, name) for name, values in (arrays or {}).items()) + f"</{tag}>"
+
+    text = ('<?xml version="1.0"?>\n'
+            '<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" header_type="UInt64" '
+            'compressor="vtkZLibDataCompressor">\n<PolyData>\n'
+            f'<Piece NumberOfPoints="{len(points)}" NumberOfVerts="0" NumberOfLines="0" NumberOfStrips="0" '
+            f'NumberOfPolys="{len(connectivity)}">\n'
+            + data_section("PointData", point_data) + "\n" + data_section("CellData", cell_data) + "\n"
+            + "<Points>" + _xml_data_array(points, "Points") + "</Points>\n"
+            + "<Polys>" + _xml_data_array(connectivity.ravel(), "connectivity") + _xml_data_array(offsets, "offsets")
+            + "</Polys>\n</Piece>\n</PolyData>\n</VTKFile>\n")
     with open(path, "w", encoding="ascii") as f:
-        f.write(writer.GetOutputString())
+        f.write(text)
 
 
 def write(path: Path, surface: TriangleSurface, binary: bool | None) -> None:
-    """Write the triangles: .vtp through :func:`write_vtp` (VTK, binary float64), .vtk and .vtu
+    """Write the triangles: .vtp through :func:`write_vtp` (binary float64), .vtk and .vtu
     through meshio (``binary=None``: binary, float64)."""
     if path.suffix.lower() == ".vtp":
         write_vtp(path, surface.vertices_mm, surface.triangles)

@@ -449,6 +449,31 @@ def test_write_vtp_keeps_cell_data(tmp_path):
     np.testing.assert_array_equal(vtk_to_numpy(cells.GetArray("in_contact")), contact)
 
 
+def test_write_vtp_point_arrays_keep_their_type_components_and_values_in_vtk(tmp_path):
+    """Invariant: the .vtp writer (Python, no VTK) gives VTK's own reader every point array with
+    its numeric type, its number of components and its values exactly (the FE maps write
+    (n, 3) mobile points and int8 flags); a bool array reads as 0/1."""
+    vtk = pytest.importorskip("vtk")
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    s = cylinder_patch()
+    n = len(s.vertices_mm)
+    arrays = {"mobile_point_mm": s.vertices_mm[::-1] * 1.5, "in_contact": (np.arange(n) % 3 == 0).astype(np.int8),
+              "touched": np.arange(n) % 2 == 0, "count": np.arange(n, dtype=np.uint32)}
+    path = tmp_path / "p.vtp"
+    write_vtp(path, s.vertices_mm, s.triangles, point_data=arrays)
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    points = reader.GetOutput().GetPointData()
+    for name, values in arrays.items():
+        read = points.GetArray(name)
+        assert read.GetNumberOfComponents() == (3 if values.ndim == 2 else 1), name
+        expected = values.astype(np.uint8) if values.dtype == bool else values
+        assert vtk_to_numpy(read).dtype == expected.dtype, name
+        np.testing.assert_array_equal(vtk_to_numpy(read), expected)
+
+
 # ------------------------------------------------------------------------------------------
 # bad meshes, one class per test
 # ------------------------------------------------------------------------------------------
