@@ -14,7 +14,6 @@ from geometries.errors import InputError
 from geometries.surface import TriangleSurface
 
 
-
 # --------------------------------------------------------------------------------------------
 # result types
 # --------------------------------------------------------------------------------------------
@@ -164,7 +163,6 @@ def validate_parameters(builder: str, specs: dict[str, Param], given: dict[str, 
             expected="one of " + ", ".join(specs),
         )
     return {k: _check_value(builder, k, specs[k], v) for k, v in given.items()}
-
 
 
 # --------------------------------------------------------------------------------------------

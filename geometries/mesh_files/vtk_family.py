@@ -1,7 +1,8 @@
-"""Legacy VTK (.vtk), VTK XML PolyData (.vtp) and UnstructuredGrid (.vtu): read through VTK's
-own readers and written through VTK (.vtp) or meshio (.vtk, .vtu), both ways here
-(docs/method.md#8-built-in-geometries). VTK's polygon triangulation (vtkTriangleFilter), used for
-every family's polygons, lives here too."""
+"""Legacy VTK (.vtk), VTK XML PolyData (.vtp) and UnstructuredGrid (.vtu), both ways
+(docs/method.md#8-built-in-geometries): read by VTK's own readers in a forked child process (a
+crash there is an InputError naming the file), written in Python (.vtp, :func:`write_vtp`) or
+through meshio (.vtk, .vtu). VTK's polygon triangulation (vtkTriangleFilter), used for every
+family's quads and polygons, lives here too; VTK itself is the ``vtk`` extra."""
 
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ _CORNERS.update(dict.fromkeys((23, 28, 30, 70, 77), (0, 1, 2, 3)))
 _LINEAR_2D = (5, 6, 7, 8, 9)
 
 
-#: The VTK modules this project reads and writes through (mesh import, pressure maps).
+#: The VTK modules this project reads through (mesh import, triangulation, result pressure maps).
 VTK_MODULES = (
     "vtkmodules.util.numpy_support", "vtkmodules.util.vtkConstants", "vtkmodules.util.misc",
     "vtkmodules.vtkCommonCore", "vtkmodules.vtkCommonDataModel", "vtkmodules.vtkFiltersCore",
@@ -314,7 +315,6 @@ def _vtk_cells(data, file: str, key: str | None) -> MeshCells:
     if dropped:
         warnings.warn(f"{file}: non-triangle 2D cells dropped ({', '.join(sorted(dropped))})", MeshWarning, stacklevel=2)
     return points, polys, strips, types
-
 
 
 def read(path: Path, key: str | None) -> MeshCells:
