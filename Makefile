@@ -14,7 +14,7 @@ $(PY):
 
 $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[fe,opensim,dev]'
+	$(PY) -m pip install --quiet -e '.[all,dev]'
 	@touch $(STAMP)
 
 install: $(STAMP)
@@ -31,6 +31,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_raycast.py
 	$(PY) benchmarks/bench_thin_layer.py
 	$(PY) benchmarks/bench_step_vs_cast.py --floor
+	$(PY) benchmarks/bench_vtk_read.py
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

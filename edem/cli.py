@@ -10,6 +10,7 @@ import textwrap
 from pathlib import Path
 
 from edem.errors import InputError, SolverError
+from geometries.extras import MissingExtra, extra_of
 
 #: Default outputs go under ./results, whatever the scene's name (edem.atomic_dirs.default_out_dir).
 RESULTS_ROOT = Path("results")
@@ -29,11 +30,7 @@ def _run(args: argparse.Namespace) -> int:
     out = _out_dir(args, scene.name, method, overrides=overrides)
     record = provenance(args.scene, overrides, method=method)
     n = len(scene.load.time_s)
-    bar = None
-    if n > 1 and sys.stderr.isatty():
-        from tqdm import tqdm
-
-        bar = tqdm(total=n, desc=f"{scene.name} ({method})", unit="step", file=sys.stderr)
+    bar = _step_bar(n, f"{scene.name} ({method})") if n > 1 and sys.stderr.isatty() else None
     try:
         result = run(scene, method, progress=None if bar is None else (lambda k: bar.update(1)))
     finally:
@@ -52,6 +49,16 @@ def _run(args: argparse.Namespace) -> int:
         f"  results: {out}/ (summary.json, timeseries.csv and .sto, pressure.pvd, fixed.pvd, manifest.json)"
     )
     return 0
+
+
+def _step_bar(total: int, description: str):
+    """A tqdm progress bar of the time points on stderr, or None without tqdm (the `campaigns`
+    extra): the bar is a convenience, the run does not need it."""
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=total, desc=description, unit="step", file=sys.stderr)
 
 
 def _print_fe_size(size) -> None:
@@ -108,9 +115,7 @@ def _fe(args: argparse.Namespace) -> int:
         record = provenance(args.scene, overrides, {"model": settings.model, "mesh_size_mm": settings.mesh_size_mm, "degree": settings.degree})
         n_solves = len(scene.load.time_s) if steps is None else len(steps)
         if rank == 0 and n_solves > 1 and sys.stderr.isatty():
-            from tqdm import tqdm
-
-            bar = tqdm(total=n_solves, desc=f"{scene.name} ({settings.method})", unit="step", file=sys.stderr)
+            bar = _step_bar(n_solves, f"{scene.name} ({settings.method})")
         result = run_scene(scene, model=settings.model, mesh_size_mm=args.mesh_size, degree=args.degree, steps=steps, out_dir=out,
                            overwrite=args.overwrite, provenance=record, progress=None if bar is None else (lambda k: bar.update(1)),
                            on_size=_print_fe_size if rank == 0 else None,
@@ -367,6 +372,10 @@ def main(argv: list[str] | None = None) -> int:
         if ctrl_c.fired:
             print(f"edem {args.command}: interrupted", file=sys.stderr)
             return 130
+        if isinstance(exc, ImportError) and extra_of(exc) is not None:  # an optional part not installed
+            print(f"edem {args.command}: bad input: {MissingExtra(exc.name.split('.')[0], extra_of(exc), f'edem {args.command}')}",
+                  file=sys.stderr)
+            return 2
         if isinstance(exc, OSError):  # disk full or not writable where no finer message was given
             print(f"edem {args.command}: cannot write: {exc}", file=sys.stderr)
             return 2

@@ -28,6 +28,7 @@ import numpy as np
 from edem.errors import SolverError
 from edem.laws import ElementLaw
 from edem.rowwise import rows_times
+from geometries.triangle_kernels import cross_rows
 
 DOF_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
 
@@ -63,15 +64,6 @@ def rotation_vector(rotation: np.ndarray) -> np.ndarray:
     if angle < 1e-8:
         return 0.5 * axial
     return angle / (2.0 * np.sin(angle)) * axial
-
-
-def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise a x b of (n, 3) arrays (np.cross is several times slower on small arrays)."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
 
 
 def generalised_directions(points_mm: np.ndarray, directions: np.ndarray, reference_point_mm: np.ndarray) -> np.ndarray:

@@ -35,7 +35,7 @@ import numpy as np
 from edem.errors import InputError
 from edem.plausibility import check_load_bodies, check_motion_units
 from edem.tables import SceneTable
-from geometries.mesh_io import MAX_COORDINATE_MM
+from geometries.mesh_files import MAX_COORDINATE_MM
 from geometries.surface import TriangleSurface
 
 if TYPE_CHECKING:
@@ -111,7 +111,8 @@ def find_geometry_file(name: str, model_file: Path, search_path: list[Path]) -> 
 
 def body_surface(osim, model, body_name: str, model_file: Path, search_path: list[Path], only: list[str] | None, key: str) -> TriangleSurface:
     """Every mesh attached to a body (or to frames fixed on it), scaled and placed in its frame, in mm, merged."""
-    from geometries.mesh_io import check_units, clean_surface, read_surface
+    from geometries.mesh_files import read_surface
+    from geometries.repair import check_units, clean_surface
 
     meshes = []
     for component in model.getComponentsList():
@@ -296,7 +297,7 @@ def model_geometry(
     """
     import warnings
 
-    from geometries.mesh_io import check_pair_distance, orient_pair
+    from geometries.repair import check_pair_distance, orient_pair
 
     file = str(scene_file)
     check_load_bodies(data["load"], data["opensim"], file)

@@ -52,6 +52,7 @@ from typing import Literal
 import numpy as np
 
 from edem.rowwise import add_rows, min_rows, row_dot, rows_times
+from geometries.triangle_kernels import cross_rows
 
 Backend = Literal["embree", "numpy"]
 
@@ -145,11 +146,6 @@ def _moller_trumbore(
         v = (dx * qx + dy * qy + dz * qz) * inv
         t = (e2x * qx + e2y * qy + e2z * qz) * inv
     return t, u, v, det
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product (np.cross is slow on small arrays)."""
-    return np.stack([a[:, 1] * b[..., 2] - a[:, 2] * b[..., 1], a[:, 2] * b[..., 0] - a[:, 0] * b[..., 2], a[:, 0] * b[..., 1] - a[:, 1] * b[..., 0]], axis=1)
 
 
 def _inside(u: np.ndarray, v: np.ndarray, slack: float) -> np.ndarray:
@@ -608,11 +604,11 @@ class RayCaster:
         missed, s0 = missed[keep], s0[keep]
         o, d = np.take(origins, missed, axis=0), np.take(dirs, missed, axis=0)
         # A sideways direction that never lines up with a mesh's axes or diagonals.
-        side = _cross(d, np.array([0.5377, 0.8326, 0.1329]))
+        side = cross_rows(d, np.array([0.5377, 0.8326, 0.1329]))
         size = row_dot(side, side)
         small = np.flatnonzero(size < 0.09)  # d nearly along that direction: another one
         if small.size:
-            side[small] = _cross(d[small], np.array([0.1329, -0.5377, 0.8326]))
+            side[small] = cross_rows(d[small], np.array([0.1329, -0.5377, 0.8326]))
             size[small] = row_dot(side[small], side[small])
         side /= np.sqrt(size)[:, None]
         probe = o + s0[:, None] * d + self._probe_shift_mm * side

@@ -31,7 +31,7 @@ Layout of ``OUT/``:
     without pressure maps (a campaign of hundreds of runs that needs only the time series)
     lists none, and its summary says ``"pressure_maps": 0``; only then may the list be empty.
 ``pressure_NNNN.vtp``
-    VTK XML PolyData (:func:`geometries.mesh_io.write_vtp`): a triangulated surface in mm with
+    VTK XML PolyData (:func:`geometries.mesh_files.write_vtp`): a triangulated surface in mm with
     cell and/or point arrays. Discrete runs and closed forms: the mobile surface at its pose,
     cell data ``pressure_mpa``, ``spring_length_mm``, ``in_contact``, ``ray_hit``. FE runs: the
     FE contact surface with point and cell data ``pressure_mpa`` (and more, see
@@ -407,7 +407,7 @@ def write_surface_frame(
     cell_data: dict[str, np.ndarray] | None = None,
 ) -> Path:
     """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only)."""
-    from geometries.mesh_io import write_vtp  # VTK (and the mesh module) only once a .vtp is written
+    from geometries.mesh_files import write_vtp
 
     write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data)
     return Path(path)
@@ -494,9 +494,9 @@ def read_timeseries_csv(path: str | Path) -> dict[str, np.ndarray]:
 
 def read_surface_frame(path: str | Path) -> SurfaceFrame:
     """Points, triangles and the point/cell arrays of a .vtp (polygons fan-triangulated by VTK)."""
-    from geometries.mesh_io import load_vtk
+    from geometries.mesh_files.vtk_family import load_vtk
 
-    load_vtk()
+    load_vtk("reading a result's pressure maps (.vtp)")
     from vtkmodules.util.numpy_support import vtk_to_numpy
     from vtkmodules.vtkFiltersCore import vtkTriangleFilter
     from vtkmodules.vtkIOXML import vtkXMLPolyDataReader

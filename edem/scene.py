@@ -30,7 +30,7 @@ from edem.thin_layer import LAYER_SYMBOLS
 from edem.thickness import CARTILAGE_KEYS, GEOMETRY_KEYS, array_layers, scene_layers, uses_layers
 from edem.tables import SceneTable, not_utf8
 from geometries.builders import build_geometry
-from geometries.mesh_io import MAX_COORDINATE_MM
+from geometries.mesh_files import MAX_COORDINATE_MM
 from geometries.surface import TriangleSurface
 
 
@@ -581,7 +581,7 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if "builtin" in table:
-            from geometries.mesh_io import check_pair_distance
+            from geometries.repair import check_pair_distance
 
             if not isinstance(table["builtin"], str):
                 raise InputError(f"{table['builtin']!r} is not a builder name", file=file, key="geometry.builtin", expected="a string")
@@ -593,7 +593,7 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
             attachments = {lig.name: (lig.mobile_point_mm, lig.fixed_point_mm) for lig in built.ligaments}
             description = built.description
         else:
-            from geometries.mesh_io import prepare_pair
+            from geometries.repair import prepare_pair
 
             r = SceneTable(table, file, "geometry", FILE_GEOMETRY_KEYS)
             units = r.string("units", "mm", ("mm", "m"))

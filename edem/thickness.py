@@ -114,7 +114,7 @@ def measure_layer(
 def orient_bone(bone: TriangleSurface, articular: TriangleSurface, key: str) -> TriangleSurface:
     """The bone's normals turned to face its articular surface (the rays into the body then meet
     its front faces, :mod:`edem.raycast`)."""
-    from geometries.mesh_io import orient_towards
+    from geometries.repair import orient_towards
 
     return orient_towards(bone, articular.vertices_mm, key=key, near_mm=BONE_SEARCH_MM)
 
@@ -223,7 +223,7 @@ def scene_layers(
         if f"{side}_bone" not in geometry:
             bones[side] = None
             continue
-        from geometries.mesh_io import prepare_surface
+        from geometries.repair import prepare_surface
 
         name = SceneTable(geometry, file, "geometry", None).string(f"{side}_bone")
         bones[side] = orient_bone(prepare_surface(path.parent / name, units=units, key=key, name=f"{side}_bone", refuse_units=True), articular, key)

@@ -25,6 +25,7 @@ import numpy as np
 
 from geometries.errors import SolverError
 from geometries.fe_solids import BONDED_TAG, CONTACT_TAG
+from geometries.triangle_kernels import closest_points_on_triangles
 
 
 ElementName = Literal["auto", "P1", "P2", "TH"]
@@ -177,7 +178,7 @@ class RigidSurface:
         best_tri = np.zeros(len(x), dtype=np.int64)
         for j in range(k):
             tri = idx[:, j]
-            d2 = point_triangle_distance2(x, v[t[tri, 0]], v[t[tri, 1]], v[t[tri, 2]])
+            d2, _ = closest_points_on_triangles(x, v[t[tri, 0]], v[t[tri, 1]], v[t[tri, 2]])
             better = d2 < best - 1e-15
             best[better] = d2[better]
             best_tri[better] = tri[better]
@@ -187,50 +188,6 @@ class RigidSurface:
 
 
 Obstacle = RigidPlane | RigidCylinder | RigidSurface
-
-
-def point_triangle_distance2(p: np.ndarray, a: np.ndarray, b: np.ndarray,
-                             c: np.ndarray) -> np.ndarray:
-    """Squared Euclidean distance from points p (n, 3) to triangles (a, b, c) (n, 3 each).
-
-    Closest point by Voronoi regions of the triangle (vertex, edge, face), vectorised.
-    """
-    ab, ac, ap = b - a, c - a, p - a
-    d1 = np.einsum("ij,ij->i", ab, ap)
-    d2 = np.einsum("ij,ij->i", ac, ap)
-    bp = p - b
-    d3 = np.einsum("ij,ij->i", ab, bp)
-    d4 = np.einsum("ij,ij->i", ac, bp)
-    cp = p - c
-    d5 = np.einsum("ij,ij->i", ab, cp)
-    d6 = np.einsum("ij,ij->i", ac, cp)
-    va = d3 * d6 - d5 * d4
-    vb = d5 * d2 - d1 * d6
-    vc = d1 * d4 - d3 * d2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        denom = va + vb + vc
-        v_face = vb / denom
-        w_face = vc / denom
-        q = a + ab * v_face[:, None] + ac * w_face[:, None]  # interior (face region)
-        t_ab = d1 / (d1 - d3)
-        t_ac = d2 / (d2 - d6)
-        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-    # edge regions
-    m = (vc <= 0) & (d1 >= 0) & (d3 <= 0)
-    q[m] = a[m] + ab[m] * t_ab[m, None]
-    m2 = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
-    q[m2] = a[m2] + ac[m2] * t_ac[m2, None]
-    m3 = (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0)
-    q[m3] = b[m3] + (c[m3] - b[m3]) * t_bc[m3, None]
-    # vertex regions (take precedence over edges)
-    ma = (d1 <= 0) & (d2 <= 0)
-    q[ma] = a[ma]
-    mb = (d3 >= 0) & (d4 <= d3)
-    q[mb] = b[mb]
-    mc = (d6 >= 0) & (d5 <= d6)
-    q[mc] = c[mc]
-    r = p - q
-    return np.einsum("ij,ij->i", r, r)
 
 
 # --------------------------------------------------------------------------------------------

@@ -40,5 +40,9 @@ class InputError(ValueError):
         return text
 
 
+class MeshWarning(UserWarning):
+    """A repair or suspicion about an input mesh (flipped, dropped triangles, units...)."""
+
+
 class SolverError(Exception):
     """A solve that cannot reach equilibrium; the message says why (no contact, singular system...)."""

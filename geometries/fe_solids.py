@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from geometries.builders import gmsh_model
+from geometries.builders.gmsh_session import gmsh_model
 from geometries.surface import TriangleSurface, midpoint_subdivision
 
 

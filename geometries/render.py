@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from geometries.builders import BuiltGeometry
+from geometries.extras import import_extra
 from geometries.surface import TriangleSurface
 
 __all__ = ["render_geometry_png", "quiet_offscreen_vtk", "add_orientation_triad", "colour_bar_args", "place_bar_title"]
@@ -26,7 +27,7 @@ def quiet_offscreen_vtk() -> None:
     The notice is a vtkLogger WARN printed when no DISPLAY is set, before VTK falls back to an
     off-screen context; errors still reach stderr.
     """
-    import pyvista as pv
+    pv = import_extra("pyvista", "rendering")
     from vtkmodules.vtkCommonCore import vtkLogger
 
     vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)
@@ -65,7 +66,7 @@ def add_orientation_triad(plotter, anatomical: bool, viewport: tuple[float, floa
 
 
 def _polydata(surface: TriangleSurface):  # -> pyvista.PolyData
-    import pyvista as pv
+    pv = import_extra("pyvista", "rendering")
 
     tri = np.asarray(surface.triangles, dtype=np.int64)
     faces = np.hstack([np.full((len(tri), 1), 3, dtype=np.int64), tri]).ravel()
@@ -86,7 +87,7 @@ def render_geometry_png(
     candidate springs (0 < h <= ``max_spring_length_mm``) on the talus as cell data; other
     triangles are drawn grey. Without it the talus is drawn in a plain bone colour.
     """
-    import pyvista as pv
+    pv = import_extra("pyvista", "rendering")
 
     quiet_offscreen_vtk()
     path = Path(path)

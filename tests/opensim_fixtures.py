@@ -36,7 +36,7 @@ def plate_in_opensim_axes() -> TriangleSurface:
 
 def build_model(folder: Path) -> Path:
     from edem.opensim_model import import_opensim
-    from geometries.mesh_io import write_surface
+    from geometries.mesh_files import write_surface
 
     osim = import_opensim()
 

@@ -18,7 +18,7 @@ from edem.cli import main
 from edem.results import TIMESERIES_COLUMNS
 from edem.scene import load_scene
 from edem.scene import builtin_scene_names, load_scene
-from geometries.mesh_io import write_surface
+from geometries.mesh_files import write_surface
 
 SUMMARY_KEYS = {
     "scene",

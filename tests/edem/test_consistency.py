@@ -17,7 +17,7 @@ from edem.loads import JointKinematics
 from edem.solver import run
 from edem.springs import Cartilage, Ligament
 from geometries.builders import build_geometry
-from geometries.mesh_io import write_surface
+from geometries.mesh_files import write_surface
 
 ROTATIONS = ("rx", "ry", "rz")
 

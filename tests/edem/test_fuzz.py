@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from edem.cli import main
-from geometries.mesh_io import read_surface, write_surface
+from geometries.mesh_files import read_surface, write_surface
 
 ROOT = Path(__file__).resolve().parents[2]
 N_CASES = 300  # ~0.1 s each in-process on the CI machine: well under a minute

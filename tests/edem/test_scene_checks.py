@@ -9,7 +9,7 @@ from support import grid_plate, make_scene, plane
 
 from edem.cli import main
 from edem.solver import run
-from geometries.mesh_io import write_surface
+from geometries.mesh_files import write_surface
 from geometries.surface import TriangleSurface
 
 SCENE = """[geometry]

@@ -19,7 +19,7 @@ from edem.errors import InputError
 from edem.mechanics import confined_modulus_mpa
 from edem.scene import load_scene
 from edem.solver import solve
-from geometries.mesh_io import write_surface
+from geometries.mesh_files import write_surface
 from geometries.surface import TriangleSurface
 from support import grid_plate, make_scene, plane
 

@@ -12,7 +12,7 @@ import pytest
 
 from fem_reference import FEContactProblem, RigidCylinder, RigidPlane, RigidSurface, Roller
 from fem_reference import closed_forms as cf
-from fem_reference.problem import point_triangle_distance2, resolve_free_directions
+from fem_reference.problem import resolve_free_directions
 
 pytestmark = pytest.mark.fe
 
@@ -64,22 +64,6 @@ def test_observed_order():
     assert cf.observed_order(vals) == pytest.approx(2.0)
     assert cf.richardson_extrapolate(vals) == pytest.approx(1.0)
     assert np.allclose(cf.observed_order_vs_exact(vals - 1.0), 2.0)
-
-
-def test_point_triangle_distance_matches_sampling():
-    """Exact point-triangle distance equals a dense barycentric sampling minimum."""
-    rng = np.random.default_rng(1)
-    a, b, c = rng.normal(size=(3, 3))
-    pts = rng.normal(scale=2.0, size=(40, 3))
-    d2 = point_triangle_distance2(pts, np.tile(a, (40, 1)), np.tile(b, (40, 1)),
-                                  np.tile(c, (40, 1)))
-    s = np.linspace(0, 1, 301)
-    S, T = np.meshgrid(s, s)
-    m = (S + T) <= 1
-    samples = a + np.outer(S[m], b - a) + np.outer(T[m], c - a)
-    brute = ((pts[:, None, :] - samples[None]) ** 2).sum(-1).min(1)
-    assert np.all(d2 <= brute + 1e-12)
-    assert np.allclose(np.sqrt(d2), np.sqrt(brute), atol=0.02)
 
 
 def test_obstacle_gaps():

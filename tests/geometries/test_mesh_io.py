@@ -1,4 +1,4 @@
-"""Tests of geometries/mesh_io.py: mesh import, cleaning and orientation (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#8-built-in-geometries).
+"""Tests of geometries/mesh_files/ and geometries/repair.py: mesh import, cleaning and orientation (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs, docs/method.md#8-built-in-geometries).
 
 Every test names the invariant it checks. Meshes are built here with numpy; coordinates are
 rounded to float32 so that every format (including binary STL, which stores float32) must
@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from edem.errors import InputError
-from geometries.mesh_io import (
-    MeshWarning,
+from geometries.errors import MeshWarning
+from geometries.mesh_files import read_surface, write_surface, write_vtp
+from geometries.repair import (
     check_manifold,
     check_pair_distance,
     check_units,
@@ -28,10 +29,7 @@ from geometries.mesh_io import (
     orient_towards,
     prepare_pair,
     prepare_surface,
-    read_surface,
     signed_volume_mm3,
-    write_surface,
-    write_vtp,
 )
 from geometries.surface import TriangleSurface
 
@@ -449,6 +447,31 @@ def test_write_vtp_keeps_cell_data(tmp_path):
     cells = out.GetCellData()
     np.testing.assert_array_equal(vtk_to_numpy(cells.GetArray("pressure_mpa")), pressure)
     np.testing.assert_array_equal(vtk_to_numpy(cells.GetArray("in_contact")), contact)
+
+
+def test_write_vtp_point_arrays_keep_their_type_components_and_values_in_vtk(tmp_path):
+    """Invariant: the .vtp writer (Python, no VTK) gives VTK's own reader every point array with
+    its numeric type, its number of components and its values exactly (the FE maps write
+    (n, 3) mobile points and int8 flags); a bool array reads as 0/1."""
+    vtk = pytest.importorskip("vtk")
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    s = cylinder_patch()
+    n = len(s.vertices_mm)
+    arrays = {"mobile_point_mm": s.vertices_mm[::-1] * 1.5, "in_contact": (np.arange(n) % 3 == 0).astype(np.int8),
+              "touched": np.arange(n) % 2 == 0, "count": np.arange(n, dtype=np.uint32)}
+    path = tmp_path / "p.vtp"
+    write_vtp(path, s.vertices_mm, s.triangles, point_data=arrays)
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    points = reader.GetOutput().GetPointData()
+    for name, values in arrays.items():
+        read = points.GetArray(name)
+        assert read.GetNumberOfComponents() == (3 if values.ndim == 2 else 1), name
+        expected = values.astype(np.uint8) if values.dtype == bool else values
+        assert vtk_to_numpy(read).dtype == expected.dtype, name
+        np.testing.assert_array_equal(vtk_to_numpy(read), expected)
 
 
 # ------------------------------------------------------------------------------------------

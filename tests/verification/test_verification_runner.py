@@ -97,7 +97,7 @@ def test_cache_counts_executions_and_tolerance_changes_need_no_rerun(tmp_path, m
 
 
 def test_case_key_follows_scene_file_and_mesh_contents(tmp_path):
-    from geometries.mesh_io import write_surface
+    from geometries.mesh_files import write_surface
     from support import grid_plate, plane
 
     write_surface(tmp_path / "talus.stl", grid_plate(10, 10, 4))
