@@ -32,6 +32,7 @@ def summary(run: RunResult) -> dict:
         "max_moment_residual_nmm": max(s.moment_residual_nmm for s in steps),
         "law": run.scene.cartilage.law,
         "warnings": list(run.scene.warnings) + list(run.warnings),
+        **({} if run.preflight is None else {"preflight": run.preflight.as_dict()}),
     }
 
 

@@ -51,7 +51,7 @@ SECTIONS = {
     "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness"},
     "opensim": None,  # checked by edem.opensim_model
 }
-FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm"}
+FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm", "spring_spacing_mm"}
 COUPLINGS = ("none", "thin-layer")
 
 
@@ -134,6 +134,7 @@ class Scene:
         method: str = "edem",
         name: str = "scene",
         description: str = "",
+        spring_spacing_mm: float | None = None,
     ) -> Scene:
         """A scene from meshes and loads already in memory (no TOML file, no mesh cleaning).
 
@@ -171,6 +172,9 @@ class Scene:
         kinematics, ligaments, viscoelastic, method, name, description
             As the scene file's ``[kinematics]``, ``[[ligaments]]``, ``[viscoelastic]``,
             ``[solver] method`` and ``[scene]``.
+        spring_spacing_mm : float, optional
+            Resample M so that no spring triangle has an edge longer than this (mm), as
+            ``[geometry] spring_spacing_mm``; default: one spring per given triangle.
 
         Returns
         -------
@@ -194,6 +198,12 @@ class Scene:
 
         mobile = surface(mobile_vertices_mm, mobile_triangles, "mobile")
         fixed = surface(fixed_vertices_mm, fixed_triangles, "fixed")
+        if spring_spacing_mm is not None:
+            if not spring_spacing_mm > 0:
+                raise InputError(f"{spring_spacing_mm!r}", file=source, key="spring_spacing_mm", expected="a spacing in mm > 0")
+            from geometries.vtk_ops import subdivide_to_spacing
+
+            mobile = subdivide_to_spacing(mobile, float(spring_spacing_mm), key="spring_spacing_mm")
         if law not in LAWS:
             raise InputError(f"unknown contact law {law!r}", file=source, key="law", expected="one of " + ", ".join(LAWS))
         spring_law = LAWS[law]
@@ -413,6 +423,12 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         if "kinematics" in data:
             kinematics = angle_series_from_table(data["kinematics"], path, load.time_s)
     description = description or geo_description
+    spacing = SceneTable(data["geometry"], file, "geometry", None).optional_number(
+        "spring_spacing_mm", positive=True, what="the longest spring triangle edge in mm (> 0)")
+    if spacing is not None:
+        from geometries.vtk_ops import subdivide_to_spacing
+
+        mobile = subdivide_to_spacing(mobile, spacing, key="geometry.spring_spacing_mm")
     if not np.any(mobile.areas_mm2 > 0.0):
         raise InputError(
             f"the mobile surface has no triangle of non-zero area ({len(mobile.triangles)} triangles), so it carries no spring",
@@ -508,7 +524,7 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
 
             if not isinstance(table["builtin"], str):
                 raise InputError(f"{table['builtin']!r} is not a builder name", file=file, key="geometry.builtin", expected="a string")
-            params = {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm")}
+            params = {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm", "spring_spacing_mm")}
             built = build_geometry(table["builtin"], params, file=file)
             mobile, fixed = built.mobile, built.fixed
             check_pair_distance(mobile, fixed, cartilage.max_spring_length_mm, key="geometry")

@@ -25,6 +25,7 @@ from edem.mechanics import (
     unrestrained_dofs,
 )
 from edem.opensim_model import BodyPoses
+from edem.preflight import Preflight, patch_resolution_warning, preflight
 from edem.raycast import RayCaster
 from edem.rowwise import row_dot
 from edem.scene import Scene, Viscoelastic
@@ -89,6 +90,7 @@ class RunResult:
     wall_time_s: float
     warnings: list[str]
     seconds: dict[str, float]  # wall time of the geometry stage (ray casting) and of the solves
+    preflight: Preflight | None = None  # what the springs saw before the first solve (edem.preflight)
 
     @property
     def n_springs(self) -> int:
@@ -248,6 +250,7 @@ def run(
     ligaments = ligament_table(scene.ligaments)
     reference_rows = generalised_directions(spring_centroid, spring_normal, g0)
     rays = caster.prepare(spring_centroid, spring_normal)  # checked once, cast at every time point
+    report = preflight(scene, loads, lambda k: fixed_placement(scene, k), caster, rays)
     seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
         clock = time.perf_counter()
@@ -413,7 +416,8 @@ def run(
     if unbalanced:
         worst = max(unbalanced, key=lambda item: item[1])
         warnings.append(remeasured_warning(len(unbalanced), worst[0], worst[1]))
-    return RunResult(scene, method, steps, time.perf_counter() - started, warnings, seconds)
+    warnings += patch_resolution_warning(steps)
+    return RunResult(scene, method, steps, time.perf_counter() - started, warnings, seconds, report)
 
 
 def solve(scene: Scene, method: str | None = None, *, progress: Callable[[int], None] | None = None) -> RunResult:
