@@ -1,5 +1,5 @@
 """Surface operations done by VTK (imported only inside these functions): subdividing a surface
-to a spring spacing, and the closest distance between two surfaces (docs/method.md#8-geometry-pre-flight-and-spring-resolution)."""
+to a spring spacing, and the closest distance between two surfaces (docs/method.md#9-geometry-pre-flight-and-spring-resolution)."""
 
 from __future__ import annotations
 
