@@ -289,7 +289,8 @@ def _refuse_out_of_reach(
                 high = mid
             else:
                 low = mid + 1
-        enough = (_two_digits(max(float(length_mm[order[low]]), 0.0) * 1.05), low + 1)
+        needed = _two_digits(max(float(length_mm[order[low]]), 0.0) * 1.05)  # (5 % beyond the last spring it needs)
+        enough = (needed, int(np.count_nonzero(length_mm <= needed)))
     if enough is None and report.n_in_window:
         return  # not a matter of reach: the solver says why (constraints, load direction)
     window, law = report.window_mm, scene.cartilage.law
@@ -297,10 +298,12 @@ def _refuse_out_of_reach(
     if report.shortest_ray_mm is not None:
         gap += f" ({report.shortest_ray_mm:.3g} mm along the springs' normals)"
     where = f"time point {report.time_point} (t = {report.time_s:g} s)"
-    head = (
-        f"{where}: {report.n_in_window} of {report.n_springs} springs ({100 * report.share_in_window:.2g} % of the spring-bearing "
-        f"area) reach the fixed body within the ray window max_spring_length_mm = {window:g} mm, too few to {problem}; {gap}"
-    )
+    if report.n_in_window:
+        reach = (f"{report.n_in_window} of {report.n_springs} springs ({100 * report.share_in_window:.2g} % of the spring-bearing area) "
+                 f"reach the fixed body within the ray window max_spring_length_mm = {window:g} mm, too few to {problem}")
+    else:
+        reach = f"no spring is a candidate: none of the {report.n_springs} springs reaches the fixed body within the ray window max_spring_length_mm = {window:g} mm"
+    head = f"{where}: {reach}; {gap}"
     if enough is None:
         raise SolverError(
             f"{head}. No spring of the mobile body would hold this load at any reach: check the load's direction and sign, "
@@ -314,6 +317,7 @@ def _refuse_out_of_reach(
         + (f" with thickness_mm = {thickness:g} (the gap along the springs)" if thickness else "")
         + f" and max_spring_length_mm = {max(new_window, thickness or 0.0):g}"
         + (" (the threshold law's area is set by the window, not by the load)" if law == "threshold" else "")
+        + ", with [geometry] spring_spacing_mm to put enough springs in the contact patch"
         + f". Articular (cartilage) surfaces already? Set max_spring_length_mm = {new_window:g}, or check the pose that puts them apart"
     )
     raise SolverError(head + advice)

@@ -25,8 +25,8 @@ def half_covered_plates(**options):
     mobile = grid_plate(20, 20, 10)
     cover = grid_plate(10, 24, 5, z_mm=2.0, facing_up=False)
     fixed = TriangleSurface(cover.vertices_mm + [5.0, 0.0, 0.0], cover.triangles)
-    return make_scene(mobile, fixed, [0.0, 0.0, 100.0], law="gap", thickness_mm=2.5, max_spring_length_mm=3.5,
-                      fixed_dofs=("tx", "ty", "rx", "ry", "rz"), method="dem", **options)
+    settings = {"law": "gap", "thickness_mm": 2.5, "max_spring_length_mm": 3.5, **options}
+    return make_scene(mobile, fixed, [0.0, 0.0, 100.0], fixed_dofs=("tx", "ty", "rx", "ry", "rz"), method="dem", **settings)
 
 
 def test_preflight_measures_the_gap_and_the_covered_share_of_the_springs(tmp_path):
@@ -73,6 +73,15 @@ def test_springs_out_of_reach_are_refused_with_the_gap_and_the_window_to_set():
     advised = float(message.split("A window of ")[1].split(" mm")[0])
     solved = run(out_of_reach_scene(window_mm=advised))
     assert solved.steps[0].force_residual_n < 1e-6 * 100.0
+
+
+def test_no_spring_in_reach_is_refused_with_the_gap():
+    """h_max = 1 mm under a plate 2 mm away: no candidate, and the message says how far the bodies are."""
+    with pytest.raises(SolverError) as refused:
+        run(half_covered_plates(max_spring_length_mm=1.0, thickness_mm=None, law="threshold"))
+    message = str(refused.value)
+    assert "no spring is a candidate" in message and "2 mm apart at their closest" in message
+    assert "A window of 2.1 mm would reach 100 springs" in message  # the covered half, 5 % beyond the 2 mm gap
 
 
 def test_dofs_no_spring_could_restrain_still_name_the_constraints():
@@ -122,3 +131,31 @@ force_n = [[0, 700, 0], [0, 700, 0]]
     assert "1.7 mm apart at their closest" in message
     assert 'law = "gap" with thickness_mm' in message and "max_spring_length_mm = " in message
     assert "fix these DOFs" not in message
+
+
+def test_edem_run_prints_the_preflight_and_writes_it(tmp_path, capsys):
+    """`edem run` prints the pre-flight's figures and summary.json holds the same."""
+    from geometries.mesh_io import write_surface
+
+    write_surface(tmp_path / "plate.stl", grid_plate(20, 20, 10))
+    write_surface(tmp_path / "cover.stl", grid_plate(24, 24, 6, z_mm=2.0, facing_up=False))
+    (tmp_path / "plates.toml").write_text(
+        """[geometry]
+mobile = "plate.stl"
+fixed = "cover.stl"
+[cartilage]
+youngs_modulus_mpa = 10.35
+poissons_ratio = 0.42
+[load]
+force_n = [0.0, 0.0, 400.0]
+[constraints]
+fixed_dofs = ["tx", "ty", "rz"]
+""",
+        encoding="utf-8",
+    )
+    assert main(["run", str(tmp_path / "plates.toml"), "--out", str(tmp_path / "out")]) == 0
+    printed = capsys.readouterr().out
+    assert "closest distance between the surfaces 2 mm" in printed
+    assert "200 of 200 springs, 100 % of the spring-bearing area" in printed
+    written = json.loads((tmp_path / "out" / "summary.json").read_text())["preflight"]
+    assert (written["n_in_window"], written["closest_distance_mm"]) == (200, pytest.approx(2.0, abs=1e-9))
