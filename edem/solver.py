@@ -438,14 +438,16 @@ def solve(scene: Scene, method: str | None = None, *, progress: Callable[[int], 
     RunResult
         ``steps[k]`` per time point: ``displacement_mm`` (3,) and ``rotation_rad`` (3,) of M,
         ``pressure_mpa`` (n_springs,), ``in_contact`` (n_springs,), ``contact_area_mm2``,
-        ``peak_pressure_mpa``, residuals; ``warnings``; wall time.
+        ``peak_pressure_mpa``, residuals; ``warnings``; wall time; ``preflight``, what the springs
+        saw before the first solve (:class:`edem.preflight.Preflight`).
 
     Raises
     ------
     InputError
         An unknown method.
     SolverError
-        A time point without equilibrium (the message names it and says why).
+        A time point without equilibrium (the message names it and says why), or a scene the
+        pre-flight refuses (springs out of reach, a load the constraints carry entirely).
     """
     return run(scene, method, progress=progress)
 
