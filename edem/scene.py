@@ -200,7 +200,7 @@ class Scene:
         fixed = surface(fixed_vertices_mm, fixed_triangles, "fixed")
         if spring_spacing_mm is not None:
             if not spring_spacing_mm > 0:
-                raise InputError(f"{spring_spacing_mm!r}", file=source, key="spring_spacing_mm", expected="a spacing in mm > 0")
+                raise InputError(f"spring_spacing_mm = {spring_spacing_mm!r}", file=source, key="spring_spacing_mm", expected="a spacing in mm > 0")
             from geometries.vtk_ops import subdivide_to_spacing
 
             mobile = subdivide_to_spacing(mobile, float(spring_spacing_mm), key="spring_spacing_mm")
