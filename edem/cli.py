@@ -40,6 +40,7 @@ def _run(args: argparse.Namespace) -> int:
     for warning in result.warnings:
         print(f"edem run: warning: {warning}", file=sys.stderr)
     last = result.steps[-1]
+    print("\n".join(result.preflight.lines()))
     print(
         f"{scene.name}: {method.upper()}, {len(result.steps)} time point(s), {result.n_springs} springs, "
         f"{result.wall_time_s:.3f} s\n"

@@ -214,7 +214,7 @@ def assemble_stiffness(directions: np.ndarray, stiffness_n_per_mm: np.ndarray, a
     return k
 
 
-def _balanceable(directions: np.ndarray, load: np.ndarray, free: np.ndarray, to_newton: np.ndarray) -> bool:
+def balanceable(directions: np.ndarray, load: np.ndarray, free: np.ndarray, to_newton: np.ndarray) -> bool:
     """Whether T = sum_j lambda_j g_j has a solution with every lambda_j >= 0 (non-negative least squares)."""
     from scipy.optimize import nnls
 
@@ -375,7 +375,7 @@ def solve_unilateral(
         active = new_active
         grad = residual
     else:
-        if not _balanceable(directions, load, free, to_newton):
+        if not balanceable(directions, load, free, to_newton):
             raise SolverError(
                 "no equilibrium: compression-only springs cannot balance this load (its line of "
                 "action passes outside the region where the bodies can touch, or it pulls them apart)"

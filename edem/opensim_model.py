@@ -304,7 +304,7 @@ def model_geometry(
     if "kinematics" in data:
         raise InputError("[kinematics] and [opensim] both place the fixed body", file=file, key="kinematics",
                          expected="one of them: [opensim] takes every coordinate from its motion")
-    geometry = SceneTable(data["geometry"], file, "geometry", {"reference_point_mm"})
+    geometry = SceneTable(data["geometry"], file, "geometry", {"reference_point_mm", "spring_spacing_mm"})
     axes = data["load"].get("axes", "same")
     if axes not in ("same", ["x", "y", "z"]):
         raise InputError(f"axes = {axes!r} in a scene built from an OpenSim model", file=file, key="load.axes",

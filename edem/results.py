@@ -15,6 +15,7 @@ from edem.loads import JointKinematics
 from edem.opensim_model import BodyPoses
 from edem.resultdir import TIMESERIES_COLUMNS, Frame, Provenance, SurfaceFrame, timeseries_row, write_pvd, write_run
 from edem.scene import Scene
+from edem.preflight import Preflight
 from edem.springs import Placement
 from edem.thickness import thickness_summary
 
@@ -79,6 +80,7 @@ class RunResult:
     wall_time_s: float
     warnings: list[str]
     seconds: dict[str, float]  # wall time of the geometry stage (ray casting) and of the solves
+    preflight: Preflight | None = None  # what the springs saw before the first solve (edem.preflight)
 
     @property
     def n_springs(self) -> int:
@@ -103,6 +105,7 @@ class RunResult:
             "law": self.scene.cartilage.law,
             "warnings": list(self.scene.warnings) + list(self.warnings),
             **thickness_summary(self.scene.cartilage.layers),  # measured thickness only
+            **({} if self.preflight is None else {"preflight": self.preflight.as_dict()}),
         }
 
     def timeseries_rows(self) -> list[dict[str, float]]:

@@ -57,7 +57,7 @@ SECTIONS = {
     "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness"},
     "opensim": None,  # checked by edem.opensim_model
 }
-FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm", *GEOMETRY_KEYS}
+FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm", "spring_spacing_mm", *GEOMETRY_KEYS}
 
 
 @dataclass(frozen=True)
@@ -185,6 +185,7 @@ class Scene:
         fixed_bone: tuple[np.ndarray, np.ndarray] | None = None,
         mobile_thickness_mm: float | None = None,
         fixed_thickness_mm: float | None = None,
+        spring_spacing_mm: float | None = None,
     ) -> Scene:
         """A scene from meshes and loads already in memory (no TOML file, no mesh cleaning).
 
@@ -235,6 +236,9 @@ class Scene:
         mobile_thickness_mm, fixed_thickness_mm : float, optional
             Uniform layer of a side without a bone (its surface is then its bone), or where the
             bone is not found below a side with one.
+        spring_spacing_mm : float, optional
+            Resample M so that no spring triangle has an edge longer than this (mm), as
+            ``[geometry] spring_spacing_mm``; default: one spring per given triangle.
 
         Returns
         -------
@@ -259,6 +263,12 @@ class Scene:
 
         mobile = surface(mobile_vertices_mm, mobile_triangles, "mobile")
         fixed = surface(fixed_vertices_mm, fixed_triangles, "fixed")
+        if spring_spacing_mm is not None:
+            if not spring_spacing_mm > 0:
+                raise InputError(f"spring_spacing_mm = {spring_spacing_mm!r}", file=source, key="spring_spacing_mm", expected="a spacing in mm > 0")
+            from geometries.vtk_ops import subdivide_to_spacing
+
+            mobile = subdivide_to_spacing(mobile, float(spring_spacing_mm), key="spring_spacing_mm")
         given = {
             "youngs_modulus_mpa": youngs_modulus_mpa, "poissons_ratio": poissons_ratio, "law": law, "max_spring_length_mm": max_spring_length_mm,
             "thickness_mm": thickness_mm, "shear_modulus_mpa": shear_modulus_mpa, "coupling": coupling, "thin_layer_symbol": thin_layer_symbol,
@@ -486,6 +496,12 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         if "kinematics" in data:
             kinematics = angle_series_from_table(data["kinematics"], path, load.time_s, load.given_time_s)
     description = description or geo_description
+    spacing = SceneTable(data["geometry"], file, "geometry", None).optional_number(
+        "spring_spacing_mm", positive=True, what="the longest spring triangle edge in mm (> 0)")
+    if spacing is not None:
+        from geometries.vtk_ops import subdivide_to_spacing
+
+        mobile = subdivide_to_spacing(mobile, spacing, key="geometry.spring_spacing_mm")
     notes += scene_warnings(cartilage.youngs_modulus_mpa, load, data["load"], mobile)
     if not np.any(mobile.areas_mm2 > 0.0):
         raise InputError(
@@ -585,7 +601,7 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
 
             if not isinstance(table["builtin"], str):
                 raise InputError(f"{table['builtin']!r} is not a builder name", file=file, key="geometry.builtin", expected="a string")
-            params = {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm")}
+            params = {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm", "spring_spacing_mm")}
             built = build_geometry(table["builtin"], params, file=file)
             mobile, fixed = built.mobile, built.fixed
             check_pair_distance(mobile, fixed, cartilage.max_spring_length_mm, key="geometry")

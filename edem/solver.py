@@ -13,6 +13,7 @@ from edem.errors import InputError, SolverError
 from edem.laws import stack_elements
 from edem.mechanics import DOF_NAMES, generalised_directions, rotation_matrix, rotation_vector, turn_rows
 from edem.plausibility import emit, merge_repeated
+from edem.preflight import patch_resolution_warning, preflight
 from edem.raycast import RayCaster
 from edem.results import RunResult, StepResult
 from edem.rowwise import row_dot
@@ -115,6 +116,7 @@ def run(
     ligaments = ligament_table(scene.ligaments)
     reference_rows = generalised_directions(spring_centroid, spring_normal, g0)
     rays = caster.prepare(spring_centroid, spring_normal)  # checked once, cast at every time point
+    report = preflight(scene, loads, scene.fixed_placement, caster, rays)
     seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
         clock = time.perf_counter()
@@ -259,7 +261,8 @@ def run(
     if unbalanced:
         worst = max(unbalanced, key=lambda item: item[1])
         warnings.append(remeasured_warning(len(unbalanced), worst[0], worst[1]))
-    return RunResult(scene, method, steps, time.perf_counter() - started, merge_repeated(warnings), seconds)
+    warnings += patch_resolution_warning(steps)
+    return RunResult(scene, method, steps, time.perf_counter() - started, merge_repeated(warnings), seconds, report)
 
 
 def solve(scene: Scene, method: str | None = None, *, progress: Callable[[int], None] | None = None) -> RunResult:
@@ -280,14 +283,16 @@ def solve(scene: Scene, method: str | None = None, *, progress: Callable[[int], 
     RunResult
         ``steps[k]`` per time point: ``displacement_mm`` (3,) and ``rotation_rad`` (3,) of M,
         ``pressure_mpa`` (n_springs,), ``in_contact`` (n_springs,), ``contact_area_mm2``,
-        ``peak_pressure_mpa``, residuals; ``warnings``; wall time.
+        ``peak_pressure_mpa``, residuals; ``warnings``; wall time; ``preflight``, what the springs
+        saw before the first solve (:class:`edem.preflight.Preflight`).
 
     Raises
     ------
     InputError
         An unknown method.
     SolverError
-        A time point without equilibrium (the message names it and says why).
+        A time point without equilibrium (the message names it and says why), or a scene the
+        pre-flight refuses (springs out of reach, a load the constraints carry entirely).
 
     Warns
     -----

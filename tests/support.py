@@ -29,6 +29,18 @@ def plane(z_of_xy, size_mm: float = 200.0) -> TriangleSurface:
     return TriangleSurface(vertices, np.array([[0, 2, 1], [0, 3, 2]]))
 
 
+def paraboloid(radius_mm: float, apex_mm, half_width_mm: float, n: int) -> TriangleSurface:
+    """z = apex_z + ((x - x0)^2 + (y - y0)^2) / (2 R) on an n x n grid around the apex (a vertex),
+    triangles facing down (-z)."""
+    x0, y0, z0 = apex_mm
+    u = np.linspace(-half_width_mm, half_width_mm, n + 1)
+    xx, yy = np.meshgrid(u + x0, u + y0, indexing="ij")
+    z = z0 + ((xx - x0) ** 2 + (yy - y0) ** 2) / (2.0 * radius_mm)
+    idx = np.arange(xx.size).reshape(xx.shape)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    return TriangleSurface(np.column_stack([xx.ravel(), yy.ravel(), z.ravel()]), np.vstack([np.column_stack([a, c, b]), np.column_stack([a, d, c])]))
+
+
 def cylinder_patch(radius_mm: float, width_mm: float, arc_deg: float, n_arc: int, n_width: int) -> TriangleSurface:
     """Cylinder patch, axis along x through (0, 0, -R), arc centred on the top (z = 0); normals outward."""
     theta = np.radians(np.linspace(-arc_deg / 2, arc_deg / 2, n_arc + 1))
