@@ -33,7 +33,7 @@ Expected numbers (checked by tests/test_examples.py)
   round-off).
 
 The constraints hold the rest: frictionless layers on a flat plafond carry only the load normal
-to it, so the reaction's antero-posterior shear in the tibia (up to about 200 N) goes to the
+to it, so the reaction's antero-posterior shear in the tibia (up to about 220 N) goes to the
 ``ty`` constraint, its component along the dome's axis to ``tx``, and its moments to the fixed
 rotations (``edem`` warns about these). The script also prints the peak contact area and peak
 pressure (about 400 mm^2 and 15 MPa near 80 % stance: reported, not asserted; a flat plafond
