@@ -19,10 +19,10 @@ Cartilage: a talar layer of 1.2 mm and a tibial layer of 1.2 mm (``[cartilage]
 mobile_thickness_mm``, ``fixed_thickness_mm``; the talar dome and the plafond are the bones),
 the linear gap law, E 10.35 MPa, nu 0.42 (the thesis's values). The plafond is placed 2.4 mm above
 the dome, untilted, so the two articular surfaces just touch at the neutral pose and at every
-ankle angle (the tibia turns about the dome's axis). The script prints the spring size, the
-square root of the mean spring area (0.60 mm on the built-in 3046-triangle dome).
-``SPRING_SPACING_MM`` below is the place for the spring resampling of ``[geometry]
-spring_spacing_mm`` (not wired yet: ``None`` keeps the mesh's own triangles).
+ankle angle (the tibia turns about the dome's axis). The springs are resampled to edges of at
+most ``SPRING_SPACING_MM`` = 0.5 mm (``[geometry] spring_spacing_mm``), and the script prints the
+spring size, the square root of the mean spring area (0.60 mm on the built-in 3046-triangle dome
+before resampling), and the pre-flight's count of springs in the expected contact patch.
 
 Expected numbers (checked by tests/test_examples.py)
 ----------------------------------------------------
@@ -72,8 +72,8 @@ STANCE_S = (0.62, 1.40)  # right heel strike to right toe off in subject01_walk1
 LOWPASS_HZ = 6.0  # the IK low-pass filter of OpenSim's gait tutorials
 TALAR_CARTILAGE_MM = 1.2
 TIBIAL_CARTILAGE_MM = 1.2
-#: [geometry] spring_spacing_mm: where the spring resampling goes once it exists (None: the mesh's triangles)
-SPRING_SPACING_MM: float | None = None
+#: [geometry] spring_spacing_mm (mm): the longest spring triangle edge (None: the mesh's own triangles)
+SPRING_SPACING_MM: float | None = 0.5
 LOADED_N = 1000.0
 EXPECTED_PEAK_REACTION_N = 4000.0
 PELVIS_COORDINATES = ("pelvis_tx", "pelvis_ty", "pelvis_tz", "pelvis_tilt", "pelvis_list", "pelvis_rotation")
@@ -266,6 +266,7 @@ def main(argv: list[str] | None = None) -> dict:
         "peak_pressure_mpa": float(peak.max()),
         "spring_size_mm": spring_size_mm(scene),
         "springs": int(scene.spring_area_mm2.shape[0]),
+        "springs_in_patch": run.preflight.patch_springs,
         "cartilage_mm": [TALAR_CARTILAGE_MM, TIBIAL_CARTILAGE_MM],
         "opensim_s": opensim_s,
         "edem_s": edem_s,
@@ -274,7 +275,8 @@ def main(argv: list[str] | None = None) -> dict:
     plot(args.out / "stance.png", stance_pct, reaction_n, contact_n, area, peak)
     (args.out / "numbers.json").write_text(json.dumps(numbers, indent=2), encoding="utf-8")
     print(f"cartilage: talar {TALAR_CARTILAGE_MM} mm + tibial {TIBIAL_CARTILAGE_MM} mm; {numbers['springs']} springs, "
-          f"spring size {numbers['spring_size_mm']:.2f} mm (spring_spacing_mm: {SPRING_SPACING_MM})")
+          f"spring size {numbers['spring_size_mm']:.2f} mm (spring_spacing_mm: {SPRING_SPACING_MM}), "
+          f"about {numbers['springs_in_patch'] or 0:.0f} springs in the pre-flight's expected contact patch")
     print(f"reaction peak {numbers['peak_reaction_n']:.0f} N; {numbers['loaded_rows_in_contact']} of {numbers['loaded_rows']} "
           f"instants over {LOADED_N:.0f} N in contact; contact - (-reaction) on tz: {numbers['max_balance_error_n']:.2e} N "
           f"(the constraints hold up to {numbers['max_shear_to_constraint_n']:.0f} N of antero-posterior shear)")
