@@ -95,9 +95,9 @@ FIXED_COLLECTION_FILE = "fixed.pvd"
 STO_FILE = "timeseries.sto"
 #: summary key of a result written without pressure maps (value 0)
 MAPS_KEY = "pressure_maps"
-#: summary key of the regularised peak pressure (edem.pressure_metrics), the largest over the
-#: written pressure maps, filled in by write_result_dir; "regularised_peak_pressure_definition" says what it is
-REGULARISED_PEAK_KEY = "regularised_peak_pressure_mpa"
+#: summary keys of the regularised peak pressure (edem.pressure_metrics), the largest over the
+#: written pressure maps, and of what it is, filled in by write_result_dir
+REGULARISED_PEAK_KEY, REGULARISED_PEAK_DEFINITION_KEY = "regularised_peak_pressure_mpa", "regularised_peak_pressure_definition"
 
 TIMESERIES_COLUMNS = (
     "step",
@@ -206,7 +206,7 @@ def write_result_dir(
     elif REGULARISED_PEAK_KEY not in summary:
         peaks = [surface_regularised_peak_mpa(f.surface) for f in frames if has_pressure(f.surface)]
         if peaks:
-            summary = {**summary, REGULARISED_PEAK_KEY: max(peaks), REGULARISED_PEAK_KEY.replace("_mpa", "_definition"): REGULARISED_PEAK_DEFINITION}
+            summary = {**summary, REGULARISED_PEAK_KEY: max(peaks), REGULARISED_PEAK_DEFINITION_KEY: REGULARISED_PEAK_DEFINITION}
     check_finite_summary(summary, out / SUMMARY_FILE)
     columns = list(TIMESERIES_COLUMNS)
     if timeseries:
