@@ -279,7 +279,7 @@ def _wall_time_figure(rows: list[dict[str, Any]], path: Path) -> None:
     ax.set_yticks(np.arange(len(rows)), names, fontsize=7)
     ax.invert_yaxis()
     ax.set_xscale("log")
-    ax.set_xlabel("wall time of the case (s; green passed, red failed)")
+    ax.set_xlabel("wall time of the case (s; coloured by its verdict, as in the legend)")
     ax.grid(alpha=0.3, axis="x", which="both")
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -2,8 +2,10 @@
 
 It opens with the ankle answer: DEM against the FE reference on the ideal ankle standing (and the
 subject-like ankle), where they agree and where the independent-spring bed breaks (Poisson's
-ratio, cartilage thickness, low loads, the rim of the contact patch), judged against a declared
-model band (:data:`MODEL_BAND_REL`). Then every closed-form case, a few stability cases, ideal
+ratio, cartilage thickness, low loads, the rim of the contact patch), each of the design card's
+three quantities (:data:`BAND_METRICS`: pressure as the regularised peak and the field, contact
+area, displacement) judged against the declared model band (:data:`MODEL_BAND_REL`); verified
+needs all of them inside. Then every closed-form case, a few stability cases, ideal
 standing EDEM vs DEM and one cheap FE verification case. The FE here is coarse (P2 at 1.0 mm,
 Taylor-Hood from nu = 0.49) to keep the job short; ``cylinder-plane`` and ``subject`` have the
 full sweeps.
