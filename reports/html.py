@@ -51,6 +51,14 @@ def _fmt(v: Any) -> str:
     return f"{x:.4g}"
 
 
+def _fmt_metric(metric: str, v: Any) -> str:
+    """A metric's value; a signed relative error with its sign (+0.13, -0.43: the L2 error is a norm)."""
+    signed = metric.endswith("_rel_error") and metric != "pressure_l2_rel_error"
+    if signed and isinstance(v, (int, float)) and math.isfinite(v):
+        return f"{float(v):+.4g}"
+    return _fmt(v)
+
+
 def _matplotlib():
     import matplotlib
 
@@ -138,7 +146,10 @@ def _lines_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
     for metric, marker in zip(spec["y"], "osd^v"):
         ys = np.array([_value(rows[n]["metrics"].get(metric)) for n in names]) * 100.0
         ok = np.isfinite(xs) & np.isfinite(ys)
-        ax.plot(xs[ok], ys[ok], marker + "-", label=axis_label(metric).split(":")[0])
+        label = axis_label(metric).split(":")[0]
+        if names and all((rows[n].get("verdicts") or {}).get(metric, {}).get("kind") == "by-construction" for n in names):
+            label += " (set by the law by construction: not judged)"
+        ax.plot(xs[ok], ys[ok], marker + ("--" if "not judged" in label else "-"), label=label)
     band = (spec.get("exact") or {}).get("band")
     if band is not None:
         ax.axhline(100.0 * band, color="grey", ls="--", label=f"declared band ±{100 * band:.0f} %")
@@ -465,14 +476,14 @@ def _metrics_cell(row: dict[str, Any]) -> str:
     for metric, value in row["metrics"].items():
         verdict = row["verdicts"].get(metric)
         if verdict is None or verdict["verdict"] == NOT_JUDGED:
-            parts.append(f'<span class="na">{h(metric)} = {_fmt(value)} (reported, not judged)</span>')
+            parts.append(f'<span class="na">{h(metric)} = {_fmt_metric(metric, value)} (reported, not judged)</span>')
             continue
         if verdict["verdict"] == FE_TOO_COARSE:
-            parts.append(f'<span class="fecoarse">{h(metric)} = {_fmt(value)}: {h(FE_TOO_COARSE)} (band {_fmt(verdict["tolerance"])} '
+            parts.append(f'<span class="fecoarse">{h(metric)} = {_fmt_metric(metric, value)}: {h(FE_TOO_COARSE)} (band {_fmt(verdict["tolerance"])} '
                          f'&le; the FE\'s estimated error {_fmt(verdict.get("fe_error"))})</span>')
             continue
         cls, mark = marks.get(verdict["verdict"], ("na", "vs"))
-        parts.append(f'<span class="{cls}">{h(metric)} = {_fmt(value)} {mark} {_fmt(verdict["tolerance"])}</span>')
+        parts.append(f'<span class="{cls}">{h(metric)} = {_fmt_metric(metric, value)} {mark} {_fmt(verdict["tolerance"])}</span>')
     for metric, verdict in row["verdicts"].items():
         if metric not in row["metrics"]:
             cls = "na" if verdict["verdict"] == "n/a" else "fail"

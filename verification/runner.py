@@ -719,7 +719,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         for row in flagged:
             for metric, verdict in row["verdicts"].items():
                 if verdict["verdict"] == "outside band":
-                    lines.append(f"  {row['name']:32s} {metric:26s} {verdict['value']:12.4g} > band {verdict['tolerance']:.4g}")
+                    lines.append(f"  {row['name']:32s} {metric:26s} {verdict['value']:+12.4g} outside ±{verdict['tolerance']:.4g}")
     unavailable = [r for r in summary["cases"] if r["status"] == UNAVAILABLE]
     for row in unavailable:
         message = next(s["message"] for s in row["sides"] if s["status"] == UNAVAILABLE)

@@ -179,3 +179,21 @@ def test_a_signed_error_on_a_log_panel_is_drawn_by_its_magnitude(tmp_path, monke
     (panel,) = drawn["fig"].axes
     assert list(panel.get_lines()[0].get_ydata()) == pytest.approx([0.059, 0.118])
     assert panel.get_ylabel() == "displacement: |relative error|" and panel.get_xlabel() == "Poisson's ratio"
+
+
+def test_case_metrics_keep_their_sign_and_grey_what_is_not_judged(tmp_path):
+    """-43 % outside the band reads -0.43 (flagged colour); a met sanity bound and a metric set by
+    construction are grey "reported, not judged", never green; an FE too coarse has its own class."""
+    verdicts = {
+        "displacement_rel_error": {"value": -0.43, "tolerance": 0.25, "kind": "model-band", "reason": "band", "verdict": "outside band"},
+        "peak_pressure_rel_error": {"value": -0.3, "tolerance": 10.0, "kind": "sanity", "reason": "broken runs", "verdict": "reported, not judged"},
+        "contact_area_rel_error": {"value": 0.13, "tolerance": "inf", "kind": "by-construction", "reason": "463 mm^2", "verdict": "reported, not judged"},
+        "pressure_l2_rel_error": {"value": 0.2, "tolerance": 0.25, "kind": "model-band", "reason": "band", "verdict": "FE not converged enough to judge", "fe_error": 0.3},
+    }
+    row = {**_row("slab", "flagged"), "metrics": {m: v["value"] for m, v in verdicts.items()}, "verdicts": verdicts}
+    text = write_campaign_report(_summary(cases=[row]), tmp_path).read_text(encoding="utf-8")
+    assert '<span class="flagged">displacement_rel_error = -0.43 |·| &gt; band 0.25</span>' in text
+    assert '<span class="na">peak_pressure_rel_error = -0.3 (reported, not judged)</span>' in text
+    assert '<span class="na">contact_area_rel_error = +0.13 (reported, not judged)</span>' in text
+    assert '<span class="fecoarse">pressure_l2_rel_error = 0.2: FE not converged enough to judge' in text
+    assert 'class="pass"' not in text
