@@ -268,11 +268,14 @@ def _stability_metrics(case: Case, a: dict[str, Any], wanted: set[str]) -> dict[
 def _series_metrics(wanted: set[str], a: dict[str, Any], b: dict[str, Any] | None) -> dict[str, float]:
     """a_* / b_* summaries of each side's time series, and a_at_b_* of a's at b's time points."""
     regularised = any(m.endswith("regularised_peak_pressure_mpa") for m in wanted)  # it reads every map: only when asked
+    read: dict[int, dict[str, Any]] = {}
 
     def series(side: dict[str, Any]) -> dict[str, Any]:
-        result = read_result_dir(side["result_dir"])
-        values = reference_series(read_result_dir(a["result_dir"]), result)[0] if side is b and a["status"] == OK else result.timeseries
-        return with_regularised_peak(values, result) if regularised else values  # b as the comparison sees it (on M against springs)
+        if id(side) not in read:  # each side's directory read (and verified) once
+            result = read_result_dir(side["result_dir"])
+            values = reference_series(read_result_dir(a["result_dir"]), result)[0] if side is b and a["status"] == OK else result.timeseries
+            read[id(side)] = with_regularised_peak(values, result) if regularised else values  # b as the comparison sees it (on M against springs)
+        return read[id(side)]
 
     out: dict[str, float] = {}
     if wanted & set(COP_METRICS) and a["status"] == OK:
