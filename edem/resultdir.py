@@ -16,7 +16,11 @@ Layout of ``OUT/``:
     ``fe-slab``, ``fe-layer``, ``closed-form:<name>``, ``fe-problem:<name>``...), ``steps``
     (time points written), ``wall_time_s``, ``peak_pressure_mpa`` (max over the time points),
     ``max_contact_area_mm2``, ``final_displacement_mm`` (3 floats, of the reference point G),
-    ``max_force_residual_n`` and ``warnings`` (list of strings). Usually also
+    ``max_force_residual_n`` and ``warnings`` (list of strings). Written by :func:`write_result_dir`
+    from the pressure maps: ``regularised_peak_pressure_mpa`` (the largest over the maps of the
+    peak of the pressure averaged over 1 mm^2, :mod:`edem.pressure_metrics`, the judged pressure
+    metric; ``peak_pressure_mpa`` is the raw peak, reported only) and its
+    ``regularised_peak_pressure_definition``. Usually also
     ``n_springs`` (discrete) or ``n_dofs`` (FE), ``final_rotation_rad``,
     ``max_moment_residual_nmm`` and ``law``; producers add their own keys (FE: element, mesh
     size, strains...; closed forms: ``closed_form``). Every number is finite.
@@ -83,6 +87,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from edem.atomic_dirs import ResultWriteError, atomic_result_dir, verify_manifest
+from edem.pressure_metrics import REGULARISED_PEAK_DEFINITION, has_pressure, surface_regularised_peak_mpa
 from geometries.errors import InputError, SolverError
 
 SUMMARY_FILE = "summary.json"
@@ -93,6 +98,9 @@ FIXED_COLLECTION_FILE = "fixed.pvd"
 STO_FILE = "timeseries.sto"
 #: summary key of a result written without pressure maps (value 0)
 MAPS_KEY = "pressure_maps"
+#: summary keys of the regularised peak pressure (edem.pressure_metrics), the largest over the
+#: written pressure maps, and of what it is, filled in by write_result_dir
+REGULARISED_PEAK_KEY, REGULARISED_PEAK_DEFINITION_KEY = "regularised_peak_pressure_mpa", "regularised_peak_pressure_definition"
 
 TIMESERIES_COLUMNS = (
     "step",
@@ -198,6 +206,10 @@ def write_result_dir(
         summary = {**summary, **provenance.summary_keys}
     if not frames:
         summary = {**summary, MAPS_KEY: 0}
+    elif REGULARISED_PEAK_KEY not in summary:
+        peaks = [surface_regularised_peak_mpa(f.surface) for f in frames if has_pressure(f.surface)]
+        if peaks:
+            summary = {**summary, REGULARISED_PEAK_KEY: max(peaks), REGULARISED_PEAK_DEFINITION_KEY: REGULARISED_PEAK_DEFINITION}
     check_finite_summary(summary, out / SUMMARY_FILE)
     columns = list(TIMESERIES_COLUMNS)
     if timeseries:

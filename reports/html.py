@@ -20,15 +20,17 @@ import numpy as np
 
 from edem.resultdir import read_timeseries_csv
 from reports.maps import render_pressure_maps
-from reports.plots import plot_timeseries
+from reports.plots import axis_label, plot_timeseries
 from verification.analyses import grid_of
 from verification.campaigns import instant_indices
 from verification.status import Status
-from verification.verdicts import CASE_VERDICTS, VERDICT_MEANINGS, headline
+from verification.verdicts import CASE_VERDICTS, FE_TOO_COARSE, NOT_JUDGED, VERDICT_MEANINGS, headline
 
 #: case verdicts (verification.verdicts) and analysis statuses
-STATUS_COLOURS = {Status.VERIFIED: "#1b7f3a", Status.FLAGGED: "#c05600", Status.REFUSED_AS_DECLARED: "#1b5e9a", Status.RAN: "#555555",
-                  Status.REPORTED: "#555555", Status.FAILED: "#b3261e", Status.ERROR: "#b3261e", Status.UNAVAILABLE: "#8a6d00"}
+STATUS_COLOURS = {Status.VERIFIED: "#1b7f3a", Status.FLAGGED: "#c05600", Status.FE_NOT_CONVERGED: "#6a3d9a", Status.REFUSED_AS_DECLARED: "#1b5e9a",
+                  Status.RAN: "#555555", Status.REPORTED: "#555555", Status.FAILED: "#b3261e", Status.ERROR: "#b3261e", Status.UNAVAILABLE: "#8a6d00"}
+#: a table longer than this many rows is folded (<details>) below the figures and analyses
+LONG_TABLE_ROWS = 12
 
 
 def _value(v: Any) -> float:
@@ -47,6 +49,14 @@ def _fmt(v: Any) -> str:
     if math.isinf(x):
         return "inf" if x > 0 else "-inf"
     return f"{x:.4g}"
+
+
+def _fmt_metric(metric: str, v: Any) -> str:
+    """A metric's value; a signed relative error with its sign (+0.13, -0.43: the L2 error is a norm)."""
+    signed = metric.endswith("_rel_error") and metric != "pressure_l2_rel_error"
+    if signed and isinstance(v, (int, float)) and math.isfinite(v):
+        return f"{float(v):+.4g}"
+    return _fmt(v)
 
 
 def _matplotlib():
@@ -77,7 +87,7 @@ def _histogram_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], pat
             lo, mid, hi = np.percentile(ys, [5, 50, 95])
             ax.axvline(mid, color="k", label=f"median {mid:.3g}")
             ax.axvspan(lo, hi, color="grey", alpha=0.2, label=f"5-95 %: {lo:.3g} to {hi:.3g}")
-        _finish_panel(ax, False, False, metric.replace("_", " "), f"cases (of {len(names)})")
+        _finish_panel(ax, False, False, axis_label(metric), f"cases (of {len(names)})")
     _save(plt, fig, spec["title"], path)
 
 
@@ -97,18 +107,21 @@ def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
         for label, group in series:
             gx = np.array([_value(rows[n]["params"].get(spec["x"])) for n in group])
             ys = np.array([_value(rows[n]["metrics"].get(metric)) for n in group])
+            ys = np.abs(ys) if log else ys  # signed errors: their magnitude on a log axis
             ok = np.isfinite(gx) & np.isfinite(ys) & ((ys > 0) if log else True)
             if spec["kind"] == "scatter":
-                ax.plot(gx[ok], ys[ok], "o", markersize=3, alpha=0.6, label=label or metric.replace("_", " "))
+                ax.plot(gx[ok], ys[ok], "o", markersize=3, alpha=0.6, label=label or axis_label(metric, magnitude=log))
             else:
-                ax.plot(gx[ok], ys[ok], "o-", label=label or metric.replace("_", " "))
+                ax.plot(gx[ok], ys[ok], "o-", label=label or axis_label(metric, magnitude=log))
         # A sanity bound (1000 %, it catches a broken run) makes no accuracy claim: not drawn
         # beside the errors as if it were their tolerance.
         tols = [(x, rows[n]["tolerance"].get(metric)) for x, n in zip(xs, names)
                 if (rows[n].get("verdicts") or {}).get(metric, {}).get("kind") != "sanity"]
-        tols = [(x, t) for x, t in tols if t is not None]
-        if tols:
+        tols = [(x, t) for x, t in tols if t is not None and math.isfinite(t)]
+        if tols:  # a tolerance bounds |error|: drawn at +-t on a linear axis
             ax.plot([x for x, _ in tols], [t for _, t in tols], "k_", markersize=14, mew=2, label="tolerance")
+            if not log and metric.endswith("_rel_error") and metric != "pressure_l2_rel_error":
+                ax.plot([x for x, _ in tols], [-t for _, t in tols], "k_", markersize=14, mew=2)
         if metric in exact:
             ax.axhline(exact[metric], color="grey", ls=":", label=f"exact {exact[metric]:g}")
         for line_metric, value, text in spec.get("lines") or ():
@@ -119,7 +132,7 @@ def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
             x0, y0 = gx[ok][0], ys[ok][0]
             xr = np.array([gx[ok].min(), gx[ok].max()])
             ax.plot(xr, y0 * (xr / x0) ** slope, ":", color="grey", label=f"slope {slope:g}")
-        _finish_panel(ax, spec["logx"], log, spec["x"].replace("_", " "), metric)
+        _finish_panel(ax, spec["logx"], log, axis_label(spec["x"]), axis_label(metric, magnitude=log))
     _save(plt, fig, spec["title"], path)
 
 
@@ -133,12 +146,17 @@ def _lines_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
     for metric, marker in zip(spec["y"], "osd^v"):
         ys = np.array([_value(rows[n]["metrics"].get(metric)) for n in names]) * 100.0
         ok = np.isfinite(xs) & np.isfinite(ys)
-        ax.plot(xs[ok], ys[ok], marker + "-", label=metric.replace("_rel_error", "").replace("_", " "))
+        label = axis_label(metric).split(":")[0]
+        if names and all((rows[n].get("verdicts") or {}).get(metric, {}).get("kind") == "by-construction" for n in names):
+            label += " (set by the law by construction: not judged)"
+        ax.plot(xs[ok], ys[ok], marker + ("--" if "not judged" in label else "-"), label=label)
     band = (spec.get("exact") or {}).get("band")
     if band is not None:
-        ax.axhline(100.0 * band, color="grey", ls="--", label=f"declared band {100 * band:.0f} % (peak, area)")
-    ax.set_xlabel(spec["x"].replace("_", " "))
-    ax.set_ylabel("relative error (%)")
+        ax.axhline(100.0 * band, color="grey", ls="--", label=f"declared band ±{100 * band:.0f} %")
+        ax.axhline(-100.0 * band, color="grey", ls="--")
+    ax.axhline(0.0, color="black", lw=0.6)
+    ax.set_xlabel(axis_label(spec["x"]))
+    ax.set_ylabel("relative error (a − b)/|b| (%); L2 ≥ 0")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     fig.savefig(path, dpi=110)  # small, with its title as the caption below it
@@ -158,6 +176,7 @@ def _error_time_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], pa
         points = []
         for n in names:
             t, e = _value(rows[n]["sides"][0].get("wall_time_s")), _value(rows[n]["metrics"].get(metric))
+            e = abs(e) if spec["logy"] else e  # signed errors: their magnitude on a log axis
             if math.isfinite(t) and math.isfinite(e) and t > 0 and (e > 0 or not spec["logy"]):
                 truth = rows[n]["sides"][1].get("side", "") if len(rows[n]["sides"]) > 1 else ""
                 points.append((n.rsplit("-", 1)[0], n, t, e, truth))
@@ -171,17 +190,17 @@ def _error_time_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], pa
             front = sorted((p for p in group if not any(q[2] <= p[2] and q[3] <= p[3] and (q[2] < p[2] or q[3] < p[3]) for q in group)), key=lambda p: p[2])
             if front:
                 ax.plot([p[2] for p in front], [p[3] for p in front], "--", color=f"{0.2 * k:.1f}", lw=1, label=f"Pareto front vs {truth or 'b'}")
-        _finish_panel(ax, spec["logx"], spec["logy"], "wall time of side a (s)", metric)
+        _finish_panel(ax, spec["logx"], spec["logy"], "wall time of side a (s)", axis_label(metric, magnitude=spec["logy"]))
     _save(plt, fig, spec["title"], path)
 
 
-def _finish_panel(ax: Any, logx: bool, logy: bool, xlabel: str, metric: str) -> None:
+def _finish_panel(ax: Any, logx: bool, logy: bool, xlabel: str, ylabel: str) -> None:
     if logx:
         ax.set_xscale("log")
     if logy:
         ax.set_yscale("log")
     ax.set_xlabel(xlabel)
-    ax.set_ylabel(metric.replace("_", " "))
+    ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
 
@@ -214,7 +233,7 @@ def _grid_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Pa
     xs, ys, z = grid_of(rows, tuple(spec["cases"]), spec["x"], spec["param2"], metric)
     if not np.isfinite(z).any():
         raise ValueError("no case of the grid has a value")
-    label_x, label_y, label_z = (v.replace("_", " ") for v in (spec["x"], spec["param2"], metric))
+    label_x, label_y, label_z = (axis_label(v) for v in (spec["x"], spec["param2"], metric))
     if spec["kind"] == "heatmap":
         fig, ax = plt.subplots(figsize=(6.8, 5.2), constrained_layout=True)
         mesh = ax.pcolormesh(xs, ys, z.T, shading="nearest", cmap="viridis")
@@ -271,7 +290,7 @@ def _wall_time_figure(rows: list[dict[str, Any]], path: Path) -> None:
     ax.set_yticks(np.arange(len(rows)), names, fontsize=7)
     ax.invert_yaxis()
     ax.set_xscale("log")
-    ax.set_xlabel("wall time of the case (s; green passed, red failed)")
+    ax.set_xlabel("wall time of the case (s; coloured by its verdict, as in the legend)")
     ax.grid(alpha=0.3, axis="x", which="both")
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -387,7 +406,7 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; }
 code { font-size: 0.95em; } .small { font-size: 0.8em; color: #555; }
 td.metrics { min-width: 24em; font-size: 0.95em; } td.links { font-size: 0.9em; }
 tr.flag td { background: #fff3e0; } .analysis-status { font-weight: bold; }
-.flagged { color: #c05600; font-weight: bold; } .why { font-size: 0.85em; color: #555; }
+.flagged { color: #c05600; font-weight: bold; } .fecoarse { color: #6a3d9a; font-weight: bold; } .why { font-size: 0.85em; color: #555; }
 #trust-summary { background: #f7f9fc; border: 1px solid #d8e0ea; padding: 0.2em 1em 0.8em; }
 #trust-summary li { margin: 0.3em 0; } figure.small-figure img { max-width: 620px; }
 table.legend { margin: 0.5em 0; }
@@ -405,15 +424,23 @@ def _analyses_html(analyses: list[dict[str, Any]]) -> list[str]:
     return parts
 
 
+def _folded(parts: list[str], n_rows: int, what: str) -> list[str]:
+    """``parts`` (a table's HTML) folded in a <details> when it has more than LONG_TABLE_ROWS rows."""
+    if n_rows <= LONG_TABLE_ROWS:
+        return parts
+    return [f"<details><summary>{html.escape(what)} ({n_rows} rows): show</summary>", *parts, "</details>"]
+
+
 def _analysis_table(result: dict[str, Any]) -> list[str]:
     h = html.escape
     parts = []
     if result.get("columns"):
-        parts.append("<table><tr>" + "".join(f"<th>{h(str(c))}</th>" for c in result["columns"]) + "</tr>")
+        table = ["<table><tr>" + "".join(f"<th>{h(str(c))}</th>" for c in result["columns"]) + "</tr>"]
         for row in result["rows"]:
             cls = ' class="flag"' if row.get("flag") else ""
-            parts.append(f"<tr{cls}>" + "".join(f"<td>{h(str(c))}</td>" for c in row["cells"]) + "</tr>")
-        parts.append("</table>")
+            table.append(f"<tr{cls}>" + "".join(f"<td>{h(str(c))}</td>" for c in row["cells"]) + "</tr>")
+        table.append("</table>")
+        parts += _folded(table, len(result["rows"]), "the table")
     for note in result.get("notes", []):
         parts.append(f'<p class="small">{h(str(note))}</p>')
     return parts
@@ -443,14 +470,20 @@ def _metrics_cell(row: dict[str, Any]) -> str:
     """Each metric; a judged one with its tolerance, and every tolerance's reason (its basis) below."""
     h = html.escape
     parts, reasons = [], {}
-    marks = {"met": ("pass", "&le;"), "fail": ("fail", "&gt;"), "outside band": ("flagged", "&gt; band")}
+    # |value| against the tolerance (errors are signed); a metric with no verdict, a sanity bound or
+    # a metric set by construction is grey ("reported, not judged"), never green
+    marks = {"met": ("pass", "|·| &le;"), "fail": ("fail", "|·| &gt;"), "outside band": ("flagged", "|·| &gt; band")}
     for metric, value in row["metrics"].items():
         verdict = row["verdicts"].get(metric)
-        if verdict is None:
-            parts.append(f'<span class="na">{h(metric)} = {_fmt(value)}</span>')
+        if verdict is None or verdict["verdict"] == NOT_JUDGED:
+            parts.append(f'<span class="na">{h(metric)} = {_fmt_metric(metric, value)} (reported, not judged)</span>')
+            continue
+        if verdict["verdict"] == FE_TOO_COARSE:
+            parts.append(f'<span class="fecoarse">{h(metric)} = {_fmt_metric(metric, value)}: {h(FE_TOO_COARSE)} (band {_fmt(verdict["tolerance"])} '
+                         f'&le; the FE\'s estimated error {_fmt(verdict.get("fe_error"))})</span>')
             continue
         cls, mark = marks.get(verdict["verdict"], ("na", "vs"))
-        parts.append(f'<span class="{cls}">{h(metric)} = {_fmt(value)} {mark} {_fmt(verdict["tolerance"])}</span>')
+        parts.append(f'<span class="{cls}">{h(metric)} = {_fmt_metric(metric, value)} {mark} {_fmt(verdict["tolerance"])}</span>')
     for metric, verdict in row["verdicts"].items():
         if metric not in row["metrics"]:
             cls = "na" if verdict["verdict"] == "n/a" else "fail"
@@ -480,9 +513,10 @@ def _links_cell(row: dict[str, Any]) -> str:
 def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
     """Write ``out_dir/report.html`` (and its figures) for a campaign summary; returns its path.
 
-    Order: the trust summary when the campaign has one (analysis kind "trust"), the verdict
-    counts with what each verdict means, the other analyses, the cases (every tolerance with its
-    reason), figures, scenes, software.
+    The page opens with its answer: the trust summary when the campaign has one (analysis kind
+    "trust"), the verdict counts with what each verdict means, the figures, the other analyses;
+    then the cases (every tolerance with its reason; folded when longer than LONG_TABLE_ROWS,
+    as are long analysis tables), scenes, software.
     """
     out = Path(out_dir)
     figures = _make_figures(summary, out)
@@ -518,15 +552,24 @@ def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
         + "An FE run shared by several cases (the same FE inputs) counts in the case that computed it; the cases that reused it show its time beside the side, marked reused. "
         + (f"Dask scheduler {h(str(summary['scheduler']))}." if summary.get("scheduler") else f"{summary.get('jobs')} worker process(es).")
         + ' Campaign data: <a href="metrics.json">metrics.json</a>.</p>',
-        *_analyses_html(others),
-        "<h2>Cases</h2>",
-        "<table><tr><th>case</th><th>sides (a vs reference b)</th><th>verdict</th><th>outcome (declared)</th>"
-        "<th>metrics (value vs tolerance, and why)</th><th>wall time (s)</th><th>results</th></tr>",
     ]
+    shown_in_trust = {r.get("values", {}).get("figure") for r in trust}
+    parts.append("<h2>Figures</h2>")
+    for fig in (f for f in figures if f.get("name") not in shown_in_trust):
+        if fig.get("unavailable"):
+            parts.append(f"<p><b>{h(fig['title'])}</b>: {h(fig['error'])}</p>")
+        elif fig["error"]:
+            parts.append(f"<p><b>{h(fig['title'])}</b>: not drawn ({h(fig['error'])})</p>")
+        else:
+            parts.append(f'<figure><img src="{h(fig["file"])}" alt="{h(fig["title"])}"><figcaption>{h(fig["title"])}</figcaption></figure>')
+    parts += _analyses_html(others)
+    parts.append("<h2>Cases</h2>")
+    cases = ["<table><tr><th>case</th><th>sides (a vs reference b)</th><th>verdict</th><th>outcome (declared)</th>"
+             "<th>metrics (value vs tolerance, and why)</th><th>wall time (s)</th><th>results</th></tr>"]
     for row in summary["cases"]:
         declared = f" ({h(row['expected_outcome'])})" if row.get("expected_outcome") else ""
         side_times = ", ".join(f"{h(s['side'])} {s['wall_time_s']:.3g}" + (" (shared run, reused)" if s.get("reused") else "") for s in row["sides"])
-        parts.append(
+        cases.append(
             "<tr>"
             f"<td><b>{h(row['name'])}</b><br><span class=\"small\">{h(row['description'])}</span></td>"
             f"<td>{h(' vs '.join(s['side'] for s in row['sides']))}</td>"
@@ -537,18 +580,8 @@ def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
             + _links_cell(row)
             + "</tr>"
         )
-    parts.append("</table>")
-
-    shown_in_trust = {r.get("values", {}).get("figure") for r in trust}
-    figures = [f for f in figures if f.get("name") not in shown_in_trust]
-    parts.append("<h2>Figures</h2>")
-    for fig in figures:
-        if fig.get("unavailable"):
-            parts.append(f"<p><b>{h(fig['title'])}</b>: {h(fig['error'])}</p>")
-        elif fig["error"]:
-            parts.append(f"<p><b>{h(fig['title'])}</b>: not drawn ({h(fig['error'])})</p>")
-        else:
-            parts.append(f'<figure><img src="{h(fig["file"])}" alt="{h(fig["title"])}"><figcaption>{h(fig["title"])}</figcaption></figure>')
+    cases.append("</table>")
+    parts += _folded(cases, len(summary["cases"]), "every case with its metrics, verdicts and results")
 
     parts.append("<h2>Scenes</h2><table><tr><th>scene</th><th>description</th><th>cases (overrides)</th></tr>")
     scenes: dict[str, list[dict[str, Any]]] = {}

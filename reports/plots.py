@@ -11,6 +11,39 @@ from edem.resultdir import read_result_dir
 
 DERIVED = {"disp_norm_mm": ("disp_x_mm", "disp_y_mm", "disp_z_mm")}
 
+#: unit suffixes of column and metric names (longest first) and how an axis shows them
+UNIT_SUFFIXES = (("_percent", "%"), ("_nmm", "N mm"), ("_mm2", "mm²"), ("_mpa", "MPa"), ("_deg", "deg"), ("_rad", "rad"), ("_mm", "mm"), ("_n", "N"), ("_s", "s"))
+#: name prefixes of a campaign's per-side metrics (verification.campaign_model.METRICS)
+SIDE_PREFIXES = (("a_at_b_", "a at b's time points"), ("a_", "side a"), ("b_", "side b"))
+#: words a name does not spell
+WORDS = {"poissons": "Poisson's", "disp": "displacement", "l2": "L2", "cop": "centre of pressure", "edem": "EDEM", "dem": "DEM", "fe": "FE"}
+
+
+def axis_label(name: str, *, magnitude: bool = False) -> str:
+    """Words with units for a column, metric or parameter name: "a_peak_pressure_mpa" -> "peak
+    pressure, side a (MPa)", "poissons_ratio" -> "Poisson's ratio", "contact_area_rel_error" ->
+    "contact area: relative error (a - b)/|b|" (``magnitude``: its absolute value, for a log axis;
+    the L2 error is a norm either way)."""
+    side = ""
+    for prefix, words in SIDE_PREFIXES:
+        if name.startswith(prefix):
+            name, side = name[len(prefix):], words
+            break
+    if name.endswith("_rel_error"):
+        quantity = " ".join(WORDS.get(w, w) for w in name[: -len("_rel_error")].split("_"))
+        if quantity.startswith("pressure L2"):
+            return "pressure field: L2 relative error"
+        return f"{quantity}: |relative error|" if magnitude else f"{quantity}: relative error (a − b)/|b|"
+    unit = ""
+    for suffix, words in UNIT_SUFFIXES:
+        if name.endswith(suffix):
+            name, unit = name[: -len(suffix)], words
+            break
+    text = " ".join(WORDS.get(w, w) for w in name.split("_"))
+    if side:
+        text += f", {side}"
+    return f"{text} ({unit})" if unit else text
+
 
 def read_timeseries(result_dir: str | Path) -> dict[str, np.ndarray]:
     """Columns of a result directory's timeseries.csv as float arrays, plus the derived
@@ -49,7 +82,7 @@ def plot_timeseries(result_dirs: list[str | Path], column: str, out_png: str | P
         single = len(series["time_s"]) == 1
         ax.plot(series["time_s"], series[column], "o" if single else "-", markersize=8, label=label + (" (one time point)" if single else ""))
     ax.set_xlabel("time (s)")
-    ax.set_ylabel(column.replace("_", " "))
+    ax.set_ylabel(axis_label(column))
     ax.grid(alpha=0.3)
     ax.legend()
     out = Path(out_png) if out_png else default_plot_path(result_dirs, column)

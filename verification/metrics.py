@@ -1,8 +1,10 @@
 """Comparison metrics of docs/method.md#7-comparison-metrics and the surface sampling they need (pure numpy/scipy on arrays).
 
 For one comparison of a side ``a`` (EDEM/DEM) against a reference ``b`` (FE or a closed form) at
-the same load: relative errors of peak pressure, mean pressure, contact area and bone
-displacement (norm of the difference over the norm of the reference), and the L2 relative error
+the same load: signed relative errors (a - b) / |b| of the regularised peak pressure
+(:mod:`edem.pressure_metrics`, the judged pressure), the raw peak (reported only), the mean
+pressure and the contact area, the bone displacement's |u_a - u_b| / |u_b| signed by whether a
+moves more or less than b, and the L2 relative error
 of the pressure field on common points: b's pressure is sampled at a's springs (centroids; far
 ends when b is another surface such as an FE slab's contact face) by projecting each point onto
 b's triangulated surface (:func:`sample_onto` for nodal fields,
@@ -20,12 +22,15 @@ from typing import Any
 import numpy as np
 
 from edem.errors import InputError
+from edem.pressure_metrics import PRESSURE_ON_MOBILE, surface_regularised_peak_mpa
 from edem.resultdir import read_result_dir
 from geometries.triangle_kernels import closest_points_on_triangles
 
 
-#: docs/method.md#7-comparison-metrics metric names (each a relative error, 0 = identical) in the order they are printed.
+#: docs/method.md#7-comparison-metrics metric names (each a relative error, 0 = identical; signed:
+#: negative when a is below b, except the L2 error, a norm) in the order they are printed.
 COMPARISON_METRICS = (
+    "regularised_peak_pressure_rel_error",
     "peak_pressure_rel_error",
     "mean_pressure_rel_error",
     "contact_area_rel_error",
@@ -52,24 +57,43 @@ def relative_error(value: float | np.ndarray, reference: float | np.ndarray) -> 
     return diff / ref
 
 
+def signed_relative_error(value: float, reference: float) -> float:
+    """(value - reference) / |reference|: negative when the value is below the reference
+    (docs/method.md#7-comparison-metrics). A zero reference gives 0 when the value is zero too
+    and +-inf otherwise (never NaN)."""
+    diff = float(value) - float(reference)
+    if float(reference) == 0.0:
+        return 0.0 if diff == 0.0 else math.copysign(math.inf, diff)
+    return diff / abs(float(reference))
+
+
 def peak_pressure_error(peak_mpa: float, reference_peak_mpa: float) -> float:
-    """Relative error of the peak contact pressure (docs/method.md#7-comparison-metrics)."""
-    return relative_error(peak_mpa, reference_peak_mpa)
+    """Signed relative error of a peak contact pressure, raw or regularised (docs/method.md#7-comparison-metrics)."""
+    return signed_relative_error(peak_mpa, reference_peak_mpa)
 
 
 def mean_pressure_error(mean_mpa: float, reference_mean_mpa: float) -> float:
-    """Relative error of the mean contact pressure (contact force over contact area, docs/method.md#7-comparison-metrics)."""
-    return relative_error(mean_mpa, reference_mean_mpa)
+    """Signed relative error of the mean contact pressure (contact force over contact area, docs/method.md#7-comparison-metrics)."""
+    return signed_relative_error(mean_mpa, reference_mean_mpa)
 
 
 def contact_area_error(area_mm2: float, reference_area_mm2: float) -> float:
-    """Relative error of the contact area (docs/method.md#7-comparison-metrics)."""
-    return relative_error(area_mm2, reference_area_mm2)
+    """Signed relative error of the contact area (docs/method.md#7-comparison-metrics)."""
+    return signed_relative_error(area_mm2, reference_area_mm2)
 
 
 def displacement_error(displacement_mm: np.ndarray, reference_displacement_mm: np.ndarray) -> float:
-    """|u - u_ref| / |u_ref| of the bone displacement vectors (docs/method.md#7-comparison-metrics)."""
-    return relative_error(displacement_mm, reference_displacement_mm)
+    """|u - u_ref| / |u_ref| of the bone displacement vectors, negative when |u| < |u_ref| (the
+    bone moves less than in the reference; docs/method.md#7-comparison-metrics)."""
+    magnitude = relative_error(displacement_mm, reference_displacement_mm)
+    shorter = np.linalg.norm(displacement_mm) < np.linalg.norm(reference_displacement_mm)
+    return -magnitude if shorter else magnitude
+
+
+def largest_magnitude(values) -> float:
+    """The value of largest magnitude, its sign kept (the worst of a signed error over time points)."""
+    values = [float(v) for v in values]
+    return max(values, key=abs)
 
 
 def l2_relative_error(values: np.ndarray, reference: np.ndarray, weights: np.ndarray | None = None) -> float:
@@ -207,8 +231,6 @@ def _scalars(series: dict[str, np.ndarray], k: int) -> dict[str, Any]:
 #: summary.json key of a result whose surface is not M but is mapped onto it (the FE contact face of
 #: fem_reference.scene_run, bonded to M): its contact area measured on M, one value per time point
 AREA_ON_MOBILE_KEY = "contact_area_on_mobile_mm2"
-#: point data of such a result: the pressure as force per area of M (its columns' area ratio applied)
-PRESSURE_ON_MOBILE = "pressure_on_mobile_mpa"
 
 
 def measured_on_mobile(result) -> bool:
@@ -347,10 +369,15 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
     per_time = []
     for ka, kb in pairs:
         sa, sb = _scalars(a.timeseries, ka), _scalars(series_b, kb)
+        frame_a, frame_b = a.frame(frame_index(a, ka)), b.frame(frame_index(b, kb))
+        reg_a, reg_b = surface_regularised_peak_mpa(frame_a), surface_regularised_peak_mpa(frame_b)
         entry: dict[str, Any] = {
             "time_a_s": float(ta[ka]),
             "time_b_s": float(tb[kb]),
             "load_n": sb["load"],
+            "regularised_peak_pressure_a_mpa": reg_a,
+            "regularised_peak_pressure_b_mpa": reg_b,
+            "regularised_peak_pressure_rel_error": peak_pressure_error(reg_a, reg_b),
             "peak_pressure_a_mpa": sa["peak"],
             "peak_pressure_b_mpa": sb["peak"],
             "mean_pressure_a_mpa": sa["mean"],
@@ -364,10 +391,10 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
             "contact_area_rel_error": contact_area_error(sa["area"], sb["area"]),
             "displacement_rel_error": displacement_error(sa["disp"], sb["disp"]),
         }
-        entry.update(field_error(a.frame(frame_index(a, ka)), b.frame(frame_index(b, kb)), max_distance_mm,
+        entry.update(field_error(frame_a, frame_b, max_distance_mm,
                                  PRESSURE_ON_MOBILE if on_mobile else "pressure_mpa"))
         per_time.append(entry)
-    metrics = {name: max(float(e[name]) for e in per_time) for name in COMPARISON_METRICS}
+    metrics = {name: largest_magnitude(e[name] for e in per_time) for name in COMPARISON_METRICS}
     return {
         "a": str(a.path),
         "b": str(b.path),
@@ -448,6 +475,7 @@ def frame_index(result, k: int) -> int:
 
 #: summary values of one side's time series, reported with the prefix a_ or b_ (verification.campaigns.METRICS)
 SERIES_METRICS = (
+    "regularised_peak_pressure_mpa",
     "peak_pressure_mpa",
     "mean_contact_area_mm2",
     "max_superior_displacement_mm",
@@ -472,10 +500,31 @@ def cop_metrics(series: dict[str, np.ndarray]) -> dict[str, float]:
     return {f"a_cop_{x}_mm": float(np.average(np.asarray(series[f"cop_{x}_mm"], float), weights=weight)) for x in "xy"}
 
 
+#: the series column :func:`with_regularised_peak` adds (not a timeseries.csv column: computed from the maps)
+REGULARISED_PEAK_COLUMN = "regularised_peak_pressure_mpa"
+
+
+def with_regularised_peak(series: dict[str, np.ndarray], result) -> dict[str, np.ndarray]:
+    """``series`` (a result's time series, e.g. :func:`reference_series`) with the column
+    REGULARISED_PEAK_COLUMN: the regularised peak of each time point's pressure map
+    (:func:`edem.pressure_metrics.surface_regularised_peak_mpa`, as summary.json's
+    regularised_peak_pressure_mpa), when every time point has one; unchanged otherwise."""
+    n = len(series["time_s"])
+    if len(result.frames) != n or len(result.time_s) != n:
+        return series
+    try:
+        peaks = np.array([surface_regularised_peak_mpa(result.frame(k)) for k in range(n)])
+    except ValueError:  # maps without pressure
+        return series
+    return {**series, REGULARISED_PEAK_COLUMN: peaks}
+
+
 def series_metrics(series: dict[str, np.ndarray], prefix: str = "") -> dict[str, float]:
     """Summary values of a time series (timeseries.csv columns), keys prefixed with ``prefix``.
 
-    peak_pressure_mpa: the largest peak pressure over the time points; mean_contact_area_mm2:
+    peak_pressure_mpa: the largest raw peak pressure over the time points;
+    regularised_peak_pressure_mpa: the largest regularised peak (when the series has the column
+    of :func:`with_regularised_peak`); mean_contact_area_mm2:
     the mean contact area over them; max_superior_displacement_mm: the largest displacement of G
     along +z (superior in the scene's axes) and ..._percent: when, in % of the time span (0 for a
     single time point); displacement_norm_mm: |u| of G at the last time point.
@@ -487,6 +536,7 @@ def series_metrics(series: dict[str, np.ndarray], prefix: str = "") -> dict[str,
     last = np.array([series[f"disp_{x}_mm"][-1] for x in "xyz"], dtype=np.float64)
     values = {
         "peak_pressure_mpa": float(np.max(series["peak_pressure_mpa"])),
+        **({"regularised_peak_pressure_mpa": float(np.max(series[REGULARISED_PEAK_COLUMN]))} if REGULARISED_PEAK_COLUMN in series else {}),
         "mean_contact_area_mm2": float(np.mean(series["contact_area_mm2"])),
         "max_superior_displacement_mm": float(z[k]),
         "max_superior_displacement_percent": 100.0 * float(time[k] - time[0]) / span if span > 0 else 0.0,
@@ -500,7 +550,8 @@ def format_metrics_table(comparison: dict[str, Any]) -> str:
     per_time = comparison["per_time"]
     last = per_time[comparison.get("peak_load_index", len(per_time) - 1)]  # the headline instant: the peak load
     rows = [
-        ("peak pressure (MPa)", last["peak_pressure_a_mpa"], last["peak_pressure_b_mpa"], "peak_pressure_rel_error"),
+        ("regularised peak (MPa)", last["regularised_peak_pressure_a_mpa"], last["regularised_peak_pressure_b_mpa"], "regularised_peak_pressure_rel_error"),
+        ("raw peak (MPa)", last["peak_pressure_a_mpa"], last["peak_pressure_b_mpa"], "peak_pressure_rel_error"),
         ("mean pressure (MPa)", last["mean_pressure_a_mpa"], last["mean_pressure_b_mpa"], "mean_pressure_rel_error"),
         ("contact area (mm^2)", last["contact_area_a_mm2"], last["contact_area_b_mm2"], "contact_area_rel_error"),
         (
@@ -512,7 +563,7 @@ def format_metrics_table(comparison: dict[str, Any]) -> str:
         ("pressure field (L2)", None, None, "pressure_l2_rel_error"),
     ]
     many = len(comparison["per_time"]) > 1
-    head = f"{'quantity':24s} {'a':>12s} {'b':>12s} {'rel. error':>12s}" + (f" {'max over t':>12s}" if many else "")
+    head = f"{'quantity':24s} {'a':>12s} {'b':>12s} {'rel. error':>12s}" + (f" {'worst over t':>12s}" if many else "")
     lines = [
         f"a: {comparison['a']} ({comparison['a_method']}, {comparison['wall_time_a_s']:.3g} s)",
         f"b: {comparison['b']} ({comparison['b_method']}, {comparison['wall_time_b_s']:.3g} s), the reference",
@@ -524,9 +575,10 @@ def format_metrics_table(comparison: dict[str, Any]) -> str:
     for label, va, vb, key in rows:
         fa = f"{va:12.5g}" if va is not None else f"{'':12s}"
         fb = f"{vb:12.5g}" if vb is not None else f"{'':12s}"
-        line = f"{label:24s} {fa} {fb} {last[key]:12.4g}"
+        sign = "" if key == "pressure_l2_rel_error" else "+"  # the L2 error is a norm; the others are signed
+        line = f"{label:24s} {fa} {fb} {last[key]:{sign}12.4g}"
         if many:
-            line += f" {comparison['metrics'][key]:12.4g}"
+            line += f" {comparison['metrics'][key]:{sign}12.4g}"
         lines.append(line)
     lines.append(
         f"pressure compared at {comparison['n_common_points']} spring centroids of a "

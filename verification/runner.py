@@ -69,7 +69,7 @@ import numpy as np
 
 from edem.atomic_dirs import manifest_problems
 from edem.errors import InputError
-from edem.resultdir import non_finite_count, read_result_dir, read_timeseries_csv
+from edem.resultdir import non_finite_count, read_result_dir
 from edem.scene import apply_overrides, read_scene_toml, resolve_scene_path
 from verification import sources
 from verification.analyses import format_analysis, run_analysis
@@ -85,6 +85,7 @@ from verification.metrics import (
     matching_time_points,
     reference_series,
     series_metrics,
+    with_regularised_peak,
 )
 from verification.sides import is_shared_side, run_side, side_inputs, side_modules
 from verification.status import ERROR, FAILED, FLAGGED, OK, REFUSED, UNAVAILABLE
@@ -266,10 +267,15 @@ def _stability_metrics(case: Case, a: dict[str, Any], wanted: set[str]) -> dict[
 
 def _series_metrics(wanted: set[str], a: dict[str, Any], b: dict[str, Any] | None) -> dict[str, float]:
     """a_* / b_* summaries of each side's time series, and a_at_b_* of a's at b's time points."""
+    regularised = any(m.endswith("regularised_peak_pressure_mpa") for m in wanted)  # it reads every map: only when asked
+    read: dict[int, dict[str, Any]] = {}
+
     def series(side: dict[str, Any]) -> dict[str, Any]:
-        if side is b and a["status"] == OK:  # b as the comparison sees it (on M against springs)
-            return reference_series(read_result_dir(a["result_dir"]), read_result_dir(b["result_dir"]))[0]
-        return read_timeseries_csv(Path(side["result_dir"]) / "timeseries.csv")
+        if id(side) not in read:  # each side's directory read (and verified) once
+            result = read_result_dir(side["result_dir"])
+            values = reference_series(read_result_dir(a["result_dir"]), result)[0] if side is b and a["status"] == OK else result.timeseries
+            read[id(side)] = with_regularised_peak(values, result) if regularised else values  # b as the comparison sees it (on M against springs)
+        return read[id(side)]
 
     out: dict[str, float] = {}
     if wanted & set(COP_METRICS) and a["status"] == OK:
@@ -415,15 +421,18 @@ def execute_case(case: Case, case_dir: str, key: str, side_keys: tuple[str | Non
 # Verdicts
 
 
-def judge(case: Case, record: dict[str, Any]) -> tuple[str, dict[str, dict[str, Any]]]:
+def judge(case: Case, record: dict[str, Any], fe_errors: dict[str, float] | None = None) -> tuple[str, dict[str, dict[str, Any]]]:
     """The case's verdict (one of verification.verdicts.CASE_VERDICTS) and, per tolerance, its
-    value, tolerance, basis (kind and reason) and "met" / "fail" / "outside band" / "missing" / "n/a"."""
+    value, tolerance, basis (kind and reason) and verdict (verification.verdicts.tolerance_verdicts).
+    ``fe_errors``: the FE reference's estimated relative error per metric (default: the case's
+    ``fe_errors``; none known when both are empty)."""
     statuses = [s["status"] for s in record["sides"]]
     refused_as_declared = case.expect is not None and case.expect.outcome == "refused" and record["metrics"].get("outcome_mismatch") == 0.0
     if any(s == UNAVAILABLE for s in statuses):
         return UNAVAILABLE, {}
     metrics = {m: as_float(v) for m, v in record["metrics"].items() if m in case.tolerance}
-    verdicts = tolerance_verdicts(metrics, case.tolerance, case.bases(), not_applicable=refused_as_declared)
+    verdicts = tolerance_verdicts(metrics, case.tolerance, case.bases(), not_applicable=refused_as_declared,
+                                  fe_errors=fe_errors if fe_errors is not None else (case.fe_errors or None))
     expected = None if case.expect is None else case.expect.outcome
     return case_verdict(statuses, verdicts, expected, refused_as_declared), verdicts
 
@@ -713,7 +722,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         for row in flagged:
             for metric, verdict in row["verdicts"].items():
                 if verdict["verdict"] == "outside band":
-                    lines.append(f"  {row['name']:32s} {metric:26s} {verdict['value']:12.4g} > band {verdict['tolerance']:.4g}")
+                    lines.append(f"  {row['name']:32s} {metric:26s} {verdict['value']:+12.4g} outside ±{verdict['tolerance']:.4g}")
     unavailable = [r for r in summary["cases"] if r["status"] == UNAVAILABLE]
     for row in unavailable:
         message = next(s["message"] for s in row["sides"] if s["status"] == UNAVAILABLE)

@@ -14,14 +14,26 @@ where its value comes from. The kinds:
   band marks where the model stops being a good approximation, not a bug.
 * ``invariant``: what every run must satisfy (equilibrium to round-off, finite outputs, the run
   solved): necessary, but it verifies no accuracy claim on its own.
+* ``by-construction``: a metric the discrete model fixes by construction (the threshold law's
+  contact area on the ideal ankle is the candidate springs' area, 463 mm^2 at every load and nu):
+  always "reported, not judged", whatever its value (its tolerance is +inf);
 * ``sanity``: generous bounds that only catch a broken run (an error of 1000 %); meeting them
-  verifies nothing.
+  verifies nothing: a met sanity bound is "reported, not judged" (grey in the report, never green).
+
+Per tolerance the verdict is "met", "outside band" (a model band exceeded), "fail", "missing",
+"n/a" (a case refused as declared), "reported, not judged" (a sanity bound met) or "FE not
+converged enough to judge": when the FE reference carries an estimated relative error for the
+metric (``fe_errors`` of :func:`tolerance_verdicts`, metric -> relative error, e.g. a Richardson
+estimate from its mesh study) and the model band is not larger than that error, the band can judge
+nothing. Errors are signed ((a - b) / |b|); a band bounds their magnitude.
 
 A case ends as exactly one of :data:`CASE_VERDICTS`:
 
 * ``verified``: every tolerance met, at least one of kind closed-form, fe-convergence,
   declared-outcome (converges) or model-band;
 * ``flagged``: everything else met, but a model-band tolerance exceeded;
+* ``FE not converged enough to judge``: nothing outside a band, but a model band no wider than
+  the FE reference's own estimated error (it needs a finer FE to be judged);
 * ``refused as declared``: declared to be refused, and refused with the declared message;
 * ``ran``: ran and met its invariants and sanity bounds, but no tolerance makes an accuracy claim
   (its numbers are reported, with no verdict);
@@ -38,22 +50,26 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from verification.status import ERROR, FAILED, FLAGGED, RAN, REFUSED_AS_DECLARED, UNAVAILABLE, VERIFIED
+from verification.status import ERROR, FAILED, FE_NOT_CONVERGED, FLAGGED, RAN, REFUSED_AS_DECLARED, UNAVAILABLE, VERIFIED
 
-CLOSED_FORM, FE_CONVERGENCE, DECLARED_OUTCOME, MODEL_BAND, INVARIANT, SANITY = (
-    "closed-form", "fe-convergence", "declared-outcome", "model-band", "invariant", "sanity",
+CLOSED_FORM, FE_CONVERGENCE, DECLARED_OUTCOME, MODEL_BAND, INVARIANT, SANITY, BY_CONSTRUCTION = (
+    "closed-form", "fe-convergence", "declared-outcome", "model-band", "invariant", "sanity", "by-construction",
 )
-BASIS_KINDS = (CLOSED_FORM, FE_CONVERGENCE, DECLARED_OUTCOME, MODEL_BAND, INVARIANT, SANITY)
+BASIS_KINDS = (CLOSED_FORM, FE_CONVERGENCE, DECLARED_OUTCOME, MODEL_BAND, INVARIANT, SANITY, BY_CONSTRUCTION)
 #: kinds whose tolerance, once met, makes an accuracy or robustness claim
 CLAIM_KINDS = (CLOSED_FORM, FE_CONVERGENCE, DECLARED_OUTCOME, MODEL_BAND)
 
 
 #: every case verdict, in the order the headline counts them
-CASE_VERDICTS = (VERIFIED, FLAGGED, REFUSED_AS_DECLARED, RAN, FAILED, ERROR, UNAVAILABLE)
+CASE_VERDICTS = (VERIFIED, FLAGGED, FE_NOT_CONVERGED, REFUSED_AS_DECLARED, RAN, FAILED, ERROR, UNAVAILABLE)
+#: per-tolerance verdicts beyond "met", "outside band", "fail", "missing" and "n/a"
+NOT_JUDGED = "reported, not judged"
+FE_TOO_COARSE = str(FE_NOT_CONVERGED)
 #: what each verdict means, for the report's legend
 VERDICT_MEANINGS = {
     VERIFIED: "met every tolerance, including one whose origin is a closed form's discretisation error, an FE mesh-convergence estimate, a declared outcome or a stated model band",
     FLAGGED: "outside a declared model band (against the FE reference or the thesis): a limit of the model, reported",
+    FE_NOT_CONVERGED: "a declared model band no wider than the FE reference's own estimated error for that metric: the reference cannot judge it",
     REFUSED_AS_DECLARED: "declared to be refused (input outside the model) and refused with the declared message",
     RAN: "ran to equilibrium; its numbers are reported with no accuracy verdict",
     FAILED: "missed a tolerance that is not a model band: a bug or a broken run",
@@ -104,17 +120,34 @@ def bases_for(tolerance: Mapping[str, float], given: Mapping[str, Basis] | None 
 
 
 def tolerance_verdicts(metrics: Mapping[str, Any], tolerance: Mapping[str, float], bases: Mapping[str, Basis],
-                       not_applicable: bool = False) -> dict[str, dict[str, Any]]:
-    """Per tolerance: value, tolerance, basis kind and reason, and "met" / "fail" / "outside band" /
-    "missing" (or "n/a" when ``not_applicable``: a case refused as declared has no values)."""
+                       not_applicable: bool = False, fe_errors: Mapping[str, float] | None = None) -> dict[str, dict[str, Any]]:
+    """Per tolerance: value, tolerance, basis kind and reason, and its verdict (module docstring).
+
+    A value is judged by its magnitude (errors are signed). ``not_applicable``: a case refused as
+    declared has no values ("n/a"). ``fe_errors``: the FE reference's estimated relative error
+    per metric (metric -> error >= 0, e.g. ``{"contact_area_rel_error": 0.07}`` from a Richardson
+    estimate of its mesh study; default None: none known); a model band not larger than it gives
+    "FE not converged enough to judge" for that metric, whatever the value (its
+    ``fe_error`` is recorded).
+    """
     out = {}
+    fe_errors = dict(fe_errors or {})
     for metric, tol in tolerance.items():
         basis = bases[metric]
         entry = {"value": None, "tolerance": tol, "kind": basis.kind, "reason": basis.reason}
+        if basis.kind == MODEL_BAND and fe_errors.get(metric) is not None:
+            entry["fe_error"] = float(fe_errors[metric])
         if metric in metrics and metrics[metric] is not None:
             value = float(metrics[metric])
             entry["value"] = value
-            entry["verdict"] = "met" if value <= tol else ("outside band" if basis.kind == MODEL_BAND else "fail")
+            if basis.kind == BY_CONSTRUCTION:
+                entry["verdict"] = NOT_JUDGED
+            elif "fe_error" in entry and tol <= entry["fe_error"]:
+                entry["verdict"] = FE_TOO_COARSE
+            elif abs(value) <= tol:
+                entry["verdict"] = NOT_JUDGED if basis.kind == SANITY else "met"
+            else:
+                entry["verdict"] = "outside band" if basis.kind == MODEL_BAND else "fail"
         else:
             entry["verdict"] = "n/a" if not_applicable else "missing"
         out[metric] = entry
@@ -135,6 +168,8 @@ def case_verdict(side_statuses: list[str], verdicts: Mapping[str, Mapping[str, A
         return REFUSED_AS_DECLARED
     if any(v["verdict"] == "outside band" for v in verdicts.values()):
         return FLAGGED
+    if any(v["verdict"] == FE_TOO_COARSE for v in verdicts.values()):
+        return FE_NOT_CONVERGED
     if any(v["verdict"] == "met" and v["kind"] in CLAIM_KINDS for v in verdicts.values()):
         return VERIFIED
     return RAN
@@ -147,6 +182,6 @@ def count_verdicts(verdicts: list[str]) -> dict[str, int]:
 
 def headline(counts: Mapping[str, int]) -> str:
     """"12 verified, 3 flagged, ..." in CASE_VERDICTS order, leaving out zero counts (but never empty)."""
-    words = {ERROR: "crashed"}
+    words = {ERROR: "crashed", FE_NOT_CONVERGED: "not judged (FE not converged enough)"}
     parts = [f"{counts.get(v, 0)} {words.get(v, v)}" for v in CASE_VERDICTS if counts.get(v, 0)]
     return ", ".join(parts) if parts else "no cases"

@@ -309,6 +309,16 @@ def test_ideal_standing_coarse_runs_and_balances_the_load(tmp_path, model):
         assert np.allclose(np.hypot(on_m[:, 1], on_m[:, 2] + 20.0), 20.0, rtol=1e-6)
         # columns fan out: the force per area of M exceeds the traction on F
         assert np.all(f.point_data["pressure_on_mobile_mpa"] >= f.point_data["pressure_mpa"])
+        # one FE solution, one judged peak: summary.json's regularised peak is the campaigns' (b's
+        # force per area of M on M, edem.pressure_metrics); the raw peak on M is the campaigns'
+        # b_peak_pressure_mpa, named apart from the contact face's raw peak
+        from edem.pressure_metrics import regularised_peak_pressure_mpa
+        from edem.resultdir import read_result_dir
+        from verification.metrics import series_on_mobile
+        assert s["regularised_peak_pressure_mpa"] == regularised_peak_pressure_mpa(
+            on_m, f.triangles, f.point_data["pressure_on_mobile_mpa"], at_points=True)
+        assert s["peak_pressure_on_mobile_mpa"] == float(series_on_mobile(read_result_dir(out))["peak_pressure_mpa"][0])
+        assert s["peak_pressure_on_mobile_mpa"] > s["peak_pressure_mpa"]
     else:
         assert any("nominal strain" in w for w in s["warnings"])
 

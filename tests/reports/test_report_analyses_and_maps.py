@@ -138,3 +138,62 @@ def test_a_sweep_draws_accuracy_tolerances_but_not_sanity_bounds(tmp_path, monke
     assert "tolerance" not in {line.get_label() for line in panel_a.get_lines()}
     tolerance = [line for line in panel_b.get_lines() if line.get_label() == "tolerance"]
     assert len(tolerance) == 1 and list(tolerance[0].get_ydata()) == [0.5, 0.5]
+
+
+def test_the_report_opens_with_its_figures_and_folds_a_long_case_table(tmp_path, monkeypatch):
+    """Analyses and figures first, the case table after them, folded when long: the population
+    report put 1000 case rows before its distributions."""
+    import reports.html as report
+
+    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path: fig.savefig(path, dpi=20))
+    rows = [{**_row(f"c{i}", result_dirs=[f"cases/c{i}/a-dem"]), "params": {"nu": 0.1 * i}, "metrics": {"peak_pressure_mpa": 1.0 + i}} for i in range(30)]
+    figure = {"name": "spread", "title": "peak over the population", "kind": "histogram", "cases": [r["name"] for r in rows], "y": ["peak_pressure_mpa"]}
+    analysis = {"name": "t", "title": "A long analysis", "kind": "table", "status": "reported", "columns": ["case"],
+                "rows": [{"cells": [r["name"]]} for r in rows], "notes": [], "values": {}}
+    text = write_campaign_report(_summary(cases=rows, figures=[figure], analyses=[analysis]), tmp_path).read_text(encoding="utf-8")
+    first_figure, cases = text.index('<img src="figures/spread.png"'), text.index("<h2>Cases</h2>")
+    assert first_figure < text.index("A long analysis") < cases
+    assert text.index("<details>", cases) < text.index("<b>c0</b>")  # 30 rows > LONG_TABLE_ROWS: folded
+    assert text.count("<details>") == 2  # the analysis's 30-row table too
+
+
+def test_axis_labels_are_words_with_units():
+    from reports.plots import axis_label
+
+    assert axis_label("a_peak_pressure_mpa") == "peak pressure, side a (MPa)"
+    assert axis_label("b_mean_contact_area_mm2") == "mean contact area, side b (mm²)"
+    assert axis_label("poissons_ratio") == "Poisson's ratio"
+    assert axis_label("displacement_rel_error") == "displacement: relative error (a − b)/|b|"
+    assert axis_label("displacement_rel_error", magnitude=True) == "displacement: |relative error|"
+
+
+def test_a_signed_error_on_a_log_panel_is_drawn_by_its_magnitude(tmp_path, monkeypatch):
+    """-59 % is drawn at 0.59 on a log axis (it vanished as a non-positive value), labelled |error|."""
+    import reports.html as report
+
+    drawn = {}
+    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path: drawn.update(fig=fig))
+    rows = {f"c{nu}": {"params": {"poissons_ratio": nu}, "metrics": {"displacement_rel_error": -0.59 * nu}, "tolerance": {}} for nu in (0.1, 0.2)}
+    spec = {"name": "s", "title": "s", "kind": "sweep", "cases": list(rows), "x": "poissons_ratio", "y": ["displacement_rel_error"], "logx": False, "logy": True}
+    report._sweep_figure(spec, rows, tmp_path / "s.png")
+    (panel,) = drawn["fig"].axes
+    assert list(panel.get_lines()[0].get_ydata()) == pytest.approx([0.059, 0.118])
+    assert panel.get_ylabel() == "displacement: |relative error|" and panel.get_xlabel() == "Poisson's ratio"
+
+
+def test_case_metrics_keep_their_sign_and_grey_what_is_not_judged(tmp_path):
+    """-43 % outside the band reads -0.43 (flagged colour); a met sanity bound and a metric set by
+    construction are grey "reported, not judged", never green; an FE too coarse has its own class."""
+    verdicts = {
+        "displacement_rel_error": {"value": -0.43, "tolerance": 0.25, "kind": "model-band", "reason": "band", "verdict": "outside band"},
+        "peak_pressure_rel_error": {"value": -0.3, "tolerance": 10.0, "kind": "sanity", "reason": "broken runs", "verdict": "reported, not judged"},
+        "contact_area_rel_error": {"value": 0.13, "tolerance": "inf", "kind": "by-construction", "reason": "463 mm^2", "verdict": "reported, not judged"},
+        "pressure_l2_rel_error": {"value": 0.2, "tolerance": 0.25, "kind": "model-band", "reason": "band", "verdict": "FE not converged enough to judge", "fe_error": 0.3},
+    }
+    row = {**_row("slab", "flagged"), "metrics": {m: v["value"] for m, v in verdicts.items()}, "verdicts": verdicts}
+    text = write_campaign_report(_summary(cases=[row]), tmp_path).read_text(encoding="utf-8")
+    assert '<span class="flagged">displacement_rel_error = -0.43 |·| &gt; band 0.25</span>' in text
+    assert '<span class="na">peak_pressure_rel_error = -0.3 (reported, not judged)</span>' in text
+    assert '<span class="na">contact_area_rel_error = +0.13 (reported, not judged)</span>' in text
+    assert '<span class="fecoarse">pressure_l2_rel_error = 0.2: FE not converged enough to judge' in text
+    assert 'class="pass"' not in text

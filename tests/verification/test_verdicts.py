@@ -74,3 +74,83 @@ def test_headline_counts_each_verdict():
     counts = count_verdicts(["verified", "flagged", "verified", "ran"])
     assert counts["verified"] == 2 and counts["flagged"] == 1 and counts["ran"] == 1 and counts["failed"] == 0
     assert headline(counts) == "2 verified, 1 flagged, 1 ran"
+
+
+# ---------------------------------------------------------------------------------------------
+# The design card's three metrics, signed errors, the FE's own error, metrics set by construction
+
+
+def _quick_case(name):
+    from verification.campaigns import get_campaign
+
+    return get_campaign("quick").case(name)
+
+
+def test_a_quick_ankle_case_with_displacement_minus_43_percent_is_not_verified():
+    """slab-F333-nu0.45 was "verified" at displacement -43 % (checked against a 1000 % sanity bound
+    only): displacement, the regularised peak and the pressure field are judged against the band now."""
+    case = _quick_case("slab-F333-nu0.45")
+    inside = {"regularised_peak_pressure_rel_error": -0.05, "pressure_l2_rel_error": 0.1, "contact_area_rel_error": 0.02,
+              "peak_pressure_rel_error": -0.3, "mean_pressure_rel_error": 0.0, "force_residual_rel": 0.0, "non_finite_outputs": 0.0}
+    verdicts = tolerance_verdicts({**inside, "displacement_rel_error": -0.43}, case.tolerance, case.bases())
+    assert verdicts["displacement_rel_error"]["verdict"] == "outside band"
+    assert case_verdict(["ok", "ok"], verdicts, None, False) == "flagged"
+    verdicts = tolerance_verdicts({**inside, "displacement_rel_error": -0.05}, case.tolerance, case.bases())
+    assert case_verdict(["ok", "ok"], verdicts, None, False) == "verified"
+
+
+@pytest.mark.parametrize("metric", ["regularised_peak_pressure_rel_error", "pressure_l2_rel_error", "displacement_rel_error"])
+def test_each_card_metric_outside_the_band_stops_verified(metric):
+    case = _quick_case("layer-F333-nu0.42-t2")
+    values = {m: 0.0 for m in case.tolerance}
+    values[metric] = -0.3 if metric != "pressure_l2_rel_error" else 0.3  # beyond the +-25 % band
+    assert case_verdict(["ok", "ok"], tolerance_verdicts(values, case.tolerance, case.bases()), None, False) == "flagged"
+
+
+def test_a_band_bounds_the_magnitude_of_a_signed_error():
+    assert _verdict({"e": -0.3}, {"e": 0.25}, {"e": BAND}) == "flagged"
+    assert _verdict({"e": -0.2}, {"e": 0.25}, {"e": BAND}) == "verified"
+    assert _verdict({"e": -2e-9}, {"e": 1e-9}, {"e": EXACT}) == "failed"
+
+
+def test_a_met_sanity_bound_is_reported_not_judged():
+    verdicts = tolerance_verdicts({"e": 0.43}, {"e": 10.0}, {"e": BROKEN})
+    assert verdicts["e"]["verdict"] == "reported, not judged"
+    assert case_verdict(["ok", "ok"], verdicts, None, False) == "ran"
+
+
+def test_a_band_not_larger_than_the_fe_error_judges_nothing():
+    """The FE reference's estimated error (fe_errors, metric -> relative error) of 25 % or more
+    leaves a 25 % band unable to judge: its own verdict, whatever the value; a smaller error
+    leaves the band judging."""
+    tolerance, bases = {"e": 0.25, "x": 1e-9}, {"e": BAND, "x": EXACT}
+    for value in (0.01, -0.6):
+        verdicts = tolerance_verdicts({"e": value, "x": 0.0}, tolerance, bases, fe_errors={"e": 0.25})
+        assert verdicts["e"]["verdict"] == "FE not converged enough to judge" and verdicts["e"]["fe_error"] == 0.25
+        assert case_verdict(["ok", "ok"], verdicts, None, False) == "FE not converged enough to judge"
+    verdicts = tolerance_verdicts({"e": -0.6, "x": 0.0}, tolerance, bases, fe_errors={"e": 0.05})
+    assert verdicts["e"]["verdict"] == "outside band" and case_verdict(["ok", "ok"], verdicts, None, False) == "flagged"
+    assert tolerance_verdicts({"e": 0.1}, {"e": 0.25}, {"e": BAND}, fe_errors=None)["e"]["verdict"] == "met"
+
+
+def test_the_runner_passes_a_cases_fe_errors_to_its_verdicts():
+    import dataclasses
+
+    from verification.runner import judge
+
+    case = dataclasses.replace(_quick_case("layer-F333-nu0.42-t2"), fe_errors={"contact_area_rel_error": 0.3})
+    record = {"sides": [{"status": "ok"}, {"status": "ok"}], "metrics": {m: 0.0 for m in case.tolerance}}
+    status, verdicts = judge(case, record)
+    assert status == "FE not converged enough to judge" and verdicts["contact_area_rel_error"]["fe_error"] == 0.3
+    assert judge(case, record, fe_errors={})[0] == "verified"
+
+
+def test_the_threshold_laws_area_on_the_ideal_ankle_is_reported_not_judged():
+    """463 mm^2 at every load and nu by construction: even +500 % neither flags nor verifies."""
+    case = _quick_case("slab-F333-nu0.42")
+    values = {m: 0.0 for m in case.tolerance}
+    values["contact_area_rel_error"] = 5.0
+    verdicts = tolerance_verdicts(values, case.tolerance, case.bases())
+    assert verdicts["contact_area_rel_error"]["verdict"] == "reported, not judged"
+    assert "by construction" in verdicts["contact_area_rel_error"]["reason"]
+    assert case_verdict(["ok", "ok"], verdicts, None, False) == "verified"

@@ -58,9 +58,26 @@ def test_goal_misses_name_each_criterion_with_the_limit_of_its_nu():
     settings = {"strict": 0.05, "strict_nu": 0.42, "loose": 0.10, "ratio": 0.5}
     errors = {"displacement_rel_error": 0.06, "peak_pressure_rel_error": 0.04, "contact_area_rel_error": 0.099}
     # 6 % displacement misses the 5 % of nu <= 0.42, meets the 10 % beyond; the area meets both
-    assert goal_misses(0.42, errors, 0.5, settings) == ["displacement 6.0 % > 5 %", "contact area 9.9 % > 5 %"]
+    assert goal_misses(0.42, errors, 0.5, settings) == ["displacement +6.0 % outside ±5 %", "contact area +9.9 % outside ±5 %"]
     assert goal_misses(0.45, errors, 0.5, settings) == []
     assert goal_misses(0.49, {**errors, "peak_pressure_rel_error": None}, 0.51, settings) == ["peak pressure missing", "L2 0.51 x the baseline's > 0.5"]
+    # an error below the reference misses by its magnitude and keeps its sign
+    assert goal_misses(0.45, {**errors, "peak_pressure_rel_error": -0.59}, 0.5, settings) == ["peak pressure -59.0 % outside ±10 %"]
+
+
+def test_goal_table_prints_a_bed_59_percent_low_as_minus_59_percent():
+    """The coupled bed's subject peak read "+59 %" while it was 59 % low: errors keep their sign."""
+    from verification.analyses import goal_analysis
+    from verification.campaign_model import Analysis
+
+    settings = {"pairs": [["model-nu0.42", "base-nu0.42"]], "metrics": ["regularised_peak_pressure_rel_error"], "strict": 0.05, "strict_nu": 0.42,
+                "loose": 0.1, "ratio_metric": "pressure_l2_rel_error", "ratio": 0.5}
+    rows = {name: {"status": "flagged", "params": {"poissons_ratio": 0.42},
+                   "metrics": {"regularised_peak_pressure_rel_error": error, "pressure_l2_rel_error": 0.2}}
+            for name, error in (("model-nu0.42", -0.59), ("base-nu0.42", -0.47))}
+    result = goal_analysis(Analysis("goal", "goal", "goal", tuple(rows), settings), rows)
+    cells = result["rows"][0]["cells"]
+    assert cells[2] == "-59 %" and "regularised peak pressure -59.0 % outside ±5 %" in cells[-1]
 
 
 @pytest.mark.slow

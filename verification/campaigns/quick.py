@@ -2,8 +2,10 @@
 
 It opens with the ankle answer: DEM against the FE reference on the ideal ankle standing (and the
 subject-like ankle), where they agree and where the independent-spring bed breaks (Poisson's
-ratio, cartilage thickness, low loads, the rim of the contact patch), judged against a declared
-model band (:data:`MODEL_BAND_REL`). Then every closed-form case, a few stability cases, ideal
+ratio, cartilage thickness, low loads, the rim of the contact patch), each of the design card's
+three quantities (:data:`BAND_METRICS`: pressure as the regularised peak and the field, contact
+area, displacement) judged against the declared model band (:data:`MODEL_BAND_REL`); verified
+needs all of them inside. Then every closed-form case, a few stability cases, ideal
 standing EDEM vs DEM and one cheap FE verification case. The FE here is coarse (P2 at 1.0 mm,
 Taylor-Hood from nu = 0.49) to keep the job short; ``cylinder-plane`` and ``subject`` have the
 full sweeps.
@@ -12,6 +14,7 @@ full sweeps.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 from verification.campaign_model import Analysis, Campaign, Case, Figure, uniform_basis, uniform_tolerance
 from verification.campaigns.cylinder_plane import campaign as cylinder_plane_campaign
@@ -20,10 +23,17 @@ from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, _fe_analytic_c
 from verification.campaigns.stability import _stability_cases
 from verification.campaigns.subject import campaign as subject_campaign
 from verification.metrics import COMPARISON_METRICS
-from verification.verdicts import INVARIANT, MODEL_BAND, MODEL_BAND_REASON, MODEL_BAND_REL, Basis
+from verification.verdicts import BY_CONSTRUCTION, INVARIANT, MODEL_BAND, MODEL_BAND_REASON, MODEL_BAND_REL, Basis
 
-BAND_METRICS = ("peak_pressure_rel_error", "contact_area_rel_error")
+#: the design card's three quantities, each judged against the declared model band: pressure (the
+#: regularised peak and the field's L2 error), contact area and talus displacement; "verified"
+#: needs every one inside (the raw peak and the mean pressure are reported only)
+BAND_METRICS = ("regularised_peak_pressure_rel_error", "pressure_l2_rel_error", "contact_area_rel_error", "displacement_rel_error")
 BAND_BASIS = Basis(MODEL_BAND, MODEL_BAND_REASON)
+#: the threshold law's contact area on the ideal ankle is its candidate springs' area (463 mm^2 at
+#: every load and nu): set by construction, so reported, not judged
+THRESHOLD_AREA_BASIS = Basis(BY_CONSTRUCTION, "the threshold law puts every candidate spring (within h_max of F) in contact on the ideal ankle: its "
+                                              "contact area is 463 mm^2 at every load and Poisson's ratio by construction, so the area is reported, not judged")
 TRUST_NUS = (0.0, 0.3, 0.42, 0.45, 0.49)
 TRUST_THICKNESS_MM = (1.0, 2.0, 3.0)
 TRUST_LOW_LOAD_N = 100.0
@@ -39,13 +49,19 @@ FE_P1 = {"mesh_size_mm": 1.0, "degree": 1}
 EXPECTED_TIME_S = 220.0
 
 
-def _banded(case: Case) -> Case:
-    """A DEM-vs-FE case judged against the model band on peak pressure and contact area; its other
-    errors reported (sanity bounds only)."""
+def _banded(case: Case, area_by_construction: bool = False) -> Case:
+    """A DEM-vs-FE case judged against the model band on the regularised peak, the pressure
+    field (L2), the contact area and the displacement; the raw peak and mean pressure reported
+    (sanity bounds only). ``area_by_construction``: the law fixes the area (reported, not judged)."""
     tolerance = {**case.tolerance, **{m: MODEL_BAND_REL for m in BAND_METRICS}}
+    basis = {**case.basis, **{m: BAND_BASIS for m in BAND_METRICS}}
+    judged = "regularised peak pressure, pressure field (L2), contact area and displacement"
+    if area_by_construction:
+        tolerance["contact_area_rel_error"], basis["contact_area_rel_error"] = math.inf, THRESHOLD_AREA_BASIS
+        judged = "regularised peak pressure, pressure field (L2) and displacement (the threshold law fixes the area: reported, not judged)"
     description = case.description.replace("Generous tolerances (measured, not judged)", "").replace(". Generous tolerances", "").rstrip(" ;.")
-    description += f"; peak pressure and contact area judged against the declared +-{MODEL_BAND_REL:.0%} model band, the rest reported"
-    return dataclasses.replace(case, tolerance=tolerance, basis={**case.basis, **{m: BAND_BASIS for m in BAND_METRICS}}, description=description)
+    description += f"; {judged} judged against the declared +-{MODEL_BAND_REL:.0%} model band, the raw peak and mean pressure reported"
+    return dataclasses.replace(case, tolerance=tolerance, basis=basis, description=description)
 
 
 def trust_cases() -> list[Case]:
@@ -59,7 +75,8 @@ def trust_cases() -> list[Case]:
         case = cp[n]
         p1 = n.startswith("slab") and case.params["poissons_ratio"] <= 0.42
         description = case.description.replace("FE P2 at 1.0 mm", "FE P1 at 1.0 mm") if p1 else case.description
-        cases.append(_banded(dataclasses.replace(case, maps=n == "slab-F333-nu0.42", options=dict(FE_P1) if p1 else case.options, description=description)))
+        cases.append(_banded(dataclasses.replace(case, maps=n == "slab-F333-nu0.42", options=dict(FE_P1) if p1 else case.options, description=description),
+                             area_by_construction=n.startswith("slab")))
     sub = {c.name: c for c in subject_campaign().cases}
     standing = sub["subject-standing-dem-vs-fe"]
     cases.append(_banded(dataclasses.replace(standing, options=dict(FE_P1), description=standing.description.replace("(P2, 1.0 mm)", "(P1, 1.0 mm)"))))
@@ -113,7 +130,7 @@ def campaign() -> Campaign:
     trust = trust_cases()
     figure = Figure(TRUST_FIGURE, "DEM against the FE slab on the ideal ankle (333 N): relative errors against Poisson's ratio", "lines",
                     tuple(f"slab-F333-nu{nu:g}" for nu in TRUST_NUS), x="poissons_ratio",
-                    y=("peak_pressure_rel_error", "contact_area_rel_error", "displacement_rel_error", "pressure_l2_rel_error"), exact={"band": MODEL_BAND_REL})
+                    y=("regularised_peak_pressure_rel_error", "contact_area_rel_error", "displacement_rel_error", "pressure_l2_rel_error"), exact={"band": MODEL_BAND_REL})
     return Campaign(
         "quick",
         "The main job: first the ankle answer (DEM against the FE reference on the ideal and subject-like ankles: where it agrees, where it breaks), then every "
