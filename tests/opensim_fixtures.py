@@ -4,7 +4,7 @@ the project (a cylindrical talar dome under a plate), and a motion."""
 
 from __future__ import annotations
 
-import math
+import importlib.util
 import os
 from pathlib import Path
 
@@ -152,17 +152,6 @@ def run_joint_reaction(model_file: Path, motion_file: Path, joint: str, on_body:
     return written
 
 
-def run_static_optimization(model_file: Path, motion_file: Path, results_dir: Path, time_range_s: tuple[float, float],
-                            external_loads: Path, lowpass_hz: float) -> Path:
-    """OpenSim's StaticOptimization over a motion: the actuator forces .sto it wrote."""
-    from edem.opensim_model import import_opensim
-
-    osim = import_opensim()
-    _analyze(osim, "edem_so", osim.StaticOptimization(), model_file, motion_file, results_dir, time_range_s, external_loads, lowpass_hz)
-    (written,) = results_dir.glob("edem_so_StaticOptimization_force.sto")
-    return written
-
-
 def _analyze(osim, name: str, analysis, model_file: Path, motion_file: Path, results_dir: Path,
              time_range_s: tuple[float, float], external_loads: Path | None, lowpass_hz: float) -> None:
     tool = osim.AnalyzeTool()
@@ -188,28 +177,13 @@ def _analyze(osim, name: str, analysis, model_file: Path, motion_file: Path, res
 #: EDEM_SHARED_DATA points elsewhere (a git worktree is not beside it).
 SHARED_DATA = Path(os.environ.get("EDEM_SHARED_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data"))
 GAIT2392 = SHARED_DATA / "opensim-gait2392"
-PELVIS_COORDINATES = ("pelvis_tx", "pelvis_ty", "pelvis_tz", "pelvis_tilt", "pelvis_list", "pelvis_rotation")
 
 
-def gait2392_ankle_reaction(folder: Path, time_range_s: tuple[float, float] = (0.62, 1.40)) -> Path:
+def gait2392_ankle_reaction(folder: Path) -> Path:
     """Static optimisation then JointReaction of ``ankle_r`` on the talus, in the tibia, over the
-    right stance of subject01's walk (about 10 s): the scaled subject01 model with residual
-    actuators on the six pelvis coordinates (it carries none), the IK motion low-pass filtered at
-    6 Hz and the ground reaction forces of subject01_walk1_grf.xml, as the gait2392 README there says."""
-    from edem.opensim_model import import_opensim
-
-    osim = import_opensim()
-    model = osim.Model(str(GAIT2392 / "subject01_simbody.osim"))
-    for name in PELVIS_COORDINATES:
-        actuator = osim.CoordinateActuator(name)
-        actuator.setName(f"residual_{name}")
-        actuator.setOptimalForce(1.0)
-        actuator.setMinControl(-math.inf)
-        actuator.setMaxControl(math.inf)
-        model.addForce(actuator)
-    model.finalizeConnections()
-    folder.mkdir(parents=True, exist_ok=True)
-    model.printToXML(str(folder / "subject01_residuals.osim"))
-    motion, grf = GAIT2392 / "subject01_walk1_ik.mot", GAIT2392 / "subject01_walk1_grf.xml"
-    forces = run_static_optimization(folder / "subject01_residuals.osim", motion, folder, time_range_s, grf, 6.0)
-    return run_joint_reaction(folder / "subject01_residuals.osim", motion, "ankle_r", "child", "parent", folder, time_range_s, grf, forces, 6.0)
+    right stance of subject01's walk (about 15 s): the worked example's own OpenSim pipeline
+    (docs/examples/gait2392_ankle.py, ``ankle_reaction``), so the test and the example run the same analysis."""
+    spec = importlib.util.spec_from_file_location("gait2392_ankle", Path(__file__).resolve().parents[1] / "docs" / "examples" / "gait2392_ankle.py")
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    return example.ankle_reaction(GAIT2392, folder)
