@@ -327,7 +327,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output directory (default results/verify/<campaign>); finished cases are cached there")
     p.add_argument("--jobs", type=int, help="worker processes (default: the CPU count; 1 runs in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on a Dask distributed cluster, e.g. tcp://host:8786")
-    p.add_argument("--data", metavar="FOLDER", help="the public data a campaign runs on (real-knee: the Lenhart knee folder, docs/campaigns.md#real-knee)")
+    p.add_argument("--data", metavar="FOLDER", help="the public data a campaign runs on (real-knee: the Lenhart knee folder, docs/campaigns.md#real-knee-dem-against-the-fe-on-a-real-knee)")
     p.set_defaults(func=_verify)
     p = sub.add_parser("check", help="regression gate: rerun EDEM on stored references, exit 1 with a table when something drifted")
     p.add_argument("--refresh", action="store_true", help="recompute the stored references (FE values too when the FE reference is available)")

@@ -216,7 +216,7 @@ class LayerModel(FEModel):
 
     def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
         if "solid" not in cache:
-            cache["solid"], cache["solid_notes"] = _build_solid("layer", lambda: _layer_solid(scene, mesh_size_mm, layers))
+            cache["solid"], cache["solid_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers))
         warnings: list[str] = cache.pop("solid_notes", [])  # the construction's notes, given once
         pts, _, _ = contact_surface(cache["solid"])
         gap, _ = obstacle.gap_and_normal(pts)
@@ -249,7 +249,7 @@ def _largest_thickness_mm(scene: Any) -> float:
     return float(scene.cartilage.thickness_mm) if layers is None else float(layers.mobile.thickness_mm.max())
 
 
-def _layer_solid(scene: Any, mesh_size_mm: float, n_layers: int | None) -> Any:
+def scene_layer_solid(scene: Any, mesh_size_mm: float, n_layers: int | None) -> Any:
     """The layer model's solid: a uniform ``thickness_mm`` layer on M, or with per-side layers
     (:mod:`edem.thickness`) M's own: measured to its bone per vertex, as the springs measure it
     per triangle (:func:`edem.thickness.measure_layer`: along minus the vertex normal, up to

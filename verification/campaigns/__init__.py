@@ -110,7 +110,8 @@ def describe_campaigns(name: str | None = None) -> str:
         lines = [f"{c.name:{width}s} {len(c.cases):4d} cases  {expected_time_text(c.expected_time_s):>18s}  {c.description}" for c in known]
         lines.append("(expected wall time with 2 jobs on 2 cores, nothing cached; `edem verify --list CAMPAIGN` lists its cases)")
         return "\n".join(lines) + "\n"
-    campaign = get_campaign(name)
+    known = campaigns()
+    campaign = known[name] if name in known else get_campaign(name)  # (a data campaign: its cases, listed without the data)
     lines = [f"{campaign.name} ({len(campaign.cases)} cases, {expected_time_text(campaign.expected_time_s)} on 2 cores): {campaign.description}"]
     for case in campaign.cases:
         lines.append(f"  {case.name:32s} [{' vs '.join(case.sides)}] {case.description}")
