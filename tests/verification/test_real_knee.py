@@ -91,3 +91,31 @@ def test_real_knee_fe_layer_stands_on_the_measured_bone(tmp_path):
     femur = prepare_surface(KNEE / DATA_FILES["femur_bone"], units="m")
     gap, _ = RigidSurface(femur.vertices_mm, femur.triangles).gap_and_normal(scene.fixed.vertices_mm)
     assert np.median(np.abs(gap)) == pytest.approx(FEMORAL_LAYER_MM, rel=0.02)
+
+
+def _row(a: float, b: float) -> dict:
+    return {"status": "ran", "params": {}, "sides": [], "metrics": {"a_at_b_peak_pressure_mpa": a, "b_peak_pressure_mpa": b}}
+
+
+@pytest.mark.parametrize("fe, discrete, verdict", [
+    # FE 10 -> 10.2 (through the thickness), 10.3 (in the plane): f = 10.5, error 0.5 / 10.5 = 4.8 %
+    ((10.0, 10.2, 10.3), 11.0, "within"),  # +4.8 %
+    ((10.0, 10.2, 10.3), 13.0, "outside"),  # +23.8 %
+    # an FE that moves 20 % under refinement judges nothing, however close the discrete value
+    ((10.0, 12.0, 10.0), 12.0, "not judged"),
+])
+def test_fe_band_judges_only_where_the_fe_error_is_below_the_goal(fe, discrete, verdict):
+    from verification.analyses import run_analysis
+    from verification.campaign_model import Analysis
+
+    rows = {f"c{k}": _row(discrete, value) for k, value in enumerate(fe)}
+    analysis = Analysis("band", "t", "fe-band", tuple(rows), {
+        "points": (("p", tuple(rows)),), "quantities": (("peak", "a_at_b_peak_pressure_mpa", "b_peak_pressure_mpa"),), "goal": 0.15})
+    result = run_analysis(analysis, rows)
+    entry = result["values"]["rows"][0]
+    reference = fe[0] + sum(v - fe[0] for v in fe[1:])
+    assert entry["fe_reference"] == pytest.approx(reference, rel=1e-15)
+    assert entry["fe_error"] == pytest.approx(sum(abs(v - fe[0]) for v in fe[1:]) / reference, rel=1e-15)
+    assert entry["difference"] == pytest.approx((discrete - reference) / reference, rel=1e-15)
+    assert entry["verdict"].startswith(verdict)
+    assert result["status"] == ("flagged" if verdict == "outside" else "reported")
