@@ -251,11 +251,12 @@ def _largest_thickness_mm(scene: Any) -> float:
 
 def scene_layer_solid(scene: Any, mesh_size_mm: float, n_layers: int | None) -> Any:
     """The layer model's solid: a uniform ``thickness_mm`` layer on M, or with per-side layers
-    (:mod:`edem.thickness`) M's own: measured to its bone per vertex, as the springs measure it
-    per triangle (:func:`edem.thickness.measure_layer`: along minus the vertex normal, up to
-    :data:`edem.thickness.BONE_SEARCH_MM`; where no bone lies below, the same fallback as the
-    springs', the smallest of M's unmeasured spring thicknesses), or M's uniform layer. F is rigid
-    (:func:`fem_reference.settings.resolve_settings` refuses a fixed layer)."""
+    (:mod:`edem.thickness`) M's own: with a bone mesh the cartilage between M's articular surface
+    and its bone (:func:`geometries.cartilage_solids.measured_layer_solid`), each vertex measured
+    by the ray cast the springs' triangles are measured by (:func:`edem.thickness.measure_layer`,
+    up to :data:`edem.thickness.BONE_SEARCH_MM`; where no bone lies below, the value M's unmeasured
+    springs carry), or M's uniform layer. F is rigid (:func:`fem_reference.settings.resolve_settings`
+    refuses a layer on it). The construction's repairs are issued as warnings (the run's notes)."""
     layers = scene.cartilage.layers
     if layers is None:
         return fe_solids.layer_solid(scene.mobile, float(scene.cartilage.thickness_mm), mesh_size_mm, n_layers)
@@ -272,9 +273,9 @@ def scene_layer_solid(scene: Any, mesh_size_mm: float, n_layers: int | None) -> 
         depth, measured = measure_layer(vertices_mm, -inward, mobile.bone)
         return np.where(measured, depth, fallback)
 
-    solid, notes = measured_layer_solid(scene.mobile, scene.mobile.areas_mm2 > 0, thickness_at, mesh_size_mm, n_layers)
     import warnings as python_warnings
 
+    solid, notes = measured_layer_solid(scene.mobile, scene.mobile.areas_mm2 > 0, thickness_at, mesh_size_mm, n_layers)
     for note in notes:  # collected by _build_solid as the construction's notes
         python_warnings.warn(note, stacklevel=2)
     return solid

@@ -2,17 +2,19 @@
 
 A segmented joint gives a body's articular surface and, beneath it, its subchondral bone
 (``[geometry] mobile_bone``): the cartilage is the solid between them. :func:`measured_layer_solid`
-builds it as prisms from the articular surface down its vertex normals (smoothed over
-:data:`DIRECTION_SMOOTHING_MM`) by each vertex's thickness measured along them (the caller measures, :mod:`fem_reference.models`), three tetrahedra per prism as
-:mod:`geometries.fe_solids` splits them: the bonded face (tag 1) is the bone side, the contact
-face (tag 2) is the articular surface itself, so the FE contact starts exactly where the springs'
-does. :func:`offset_surface` moves a surface along its vertex normals (a bone plus a uniform
-cartilage layer taken as rigid).
+builds it as prisms from the articular surface down its vertex normals, smoothed over
+:data:`DIRECTION_SMOOTHING_MM` (:func:`smooth_directions`), by each vertex's thickness measured
+along them (the caller measures: :mod:`fem_reference.models`), three tetrahedra per prism split
+as in :mod:`geometries.fe_solids` (whose extrusion helpers it uses): the bonded face (tag 1) is
+the bone side, the contact face (tag 2) the articular surface itself, so the FE contact starts
+exactly where the springs' does. :func:`offset_surface` moves a surface along its vertex normals
+(a bone plus a uniform cartilage layer taken as rigid).
 
 Segmented surfaces end in slivers: rim triangles whose vertex normals lean far from their own,
 and a thickness that jumps from vertex to vertex. Their prisms would turn inside out; instead of
-refusing, the solid repairs them (:func:`measured_layer_solid`): the thickness field is smoothed
-where prisms invert, and rim triangles that still invert are dropped, both stated in the notes.
+refusing, the solid repairs them (:func:`measured_layer_solid`): thickness and direction are
+smoothed where prisms invert, and rim triangles that still invert are dropped, both stated in the
+notes; only an interior prism that no smoothing rights is refused (ValueError naming where).
 """
 
 from __future__ import annotations
