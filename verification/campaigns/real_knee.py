@@ -28,6 +28,7 @@ error (the changes of its refinements) is below it.
 from __future__ import annotations
 
 from pathlib import Path
+
 import numpy as np
 
 from geometries.errors import InputError
@@ -165,7 +166,7 @@ def campaign(scene: str = SCENE_NAME) -> Campaign:
                     f"Lenhart knee, {what}, {load:g} N up the tibia; FE layer (measured tibial cartilage, rigid femur + 2 mm) "
                     f"P2 at {options['mesh_size_mm']:g} mm, {options['layers_through_thickness']} element(s) through the cartilage",
                     scene, ("dem", "fe-layer"), overrides={"load.force_n": [0.0, load, 0.0], **overrides}, options=options,
-                    params={"load_n": load}, maps=(load == LOADS_N[-1] and level == FE_LEVELS[-1][0]),
+                    params={"load_n": load}, maps=(load == LOADS_N[-1] and level == "L1"),
                 ))
     points = tuple((f"{bed} {load:g} N", tuple(case_name(bed, load, level) for level, _ in FE_LEVELS)) for bed in BEDS for load in LOADS_N)
     analyses = (
