@@ -247,7 +247,9 @@ def _verify(args: argparse.Namespace) -> int:
     if args.campaign in DATA_CAMPAIGNS:
         DATA_CAMPAIGNS[args.campaign].data_files(args.data)
     else:
-        campaign = get_campaign(args.campaign, args.data)
+        campaign = get_campaign(args.campaign)
+        if args.data is not None:
+            get_campaign(args.campaign, args.data)  # refused: this campaign takes no data folder
     out = check_out_dir(Path(args.out) if args.out else RESULTS_ROOT / "verify" / args.campaign, reuse_if=("cases", ".lock"))
     if args.campaign in DATA_CAMPAIGNS:
         campaign = get_campaign(args.campaign, args.data, out / "inputs")
