@@ -247,8 +247,18 @@ def _verify(args: argparse.Namespace) -> int:
     from reports.html import write_campaign_report
     from verification.runner import format_summary, run_campaign
 
-    campaign = get_campaign(args.campaign)
-    out = check_out_dir(Path(args.out) if args.out else RESULTS_ROOT / "verify" / campaign.name, reuse_if=("cases", ".lock"))
+    from verification.campaigns import DATA_CAMPAIGNS
+
+    # refused (exit 2: an unknown name, --data missing, wrong or not wanted) before the output is made
+    if args.campaign in DATA_CAMPAIGNS:
+        DATA_CAMPAIGNS[args.campaign].data_files(args.data)
+    else:
+        campaign = get_campaign(args.campaign)
+        if args.data is not None:
+            get_campaign(args.campaign, args.data)  # refused: this campaign takes no data folder
+    out = check_out_dir(Path(args.out) if args.out else RESULTS_ROOT / "verify" / args.campaign, reuse_if=("cases", ".lock"))
+    if args.campaign in DATA_CAMPAIGNS:
+        campaign = get_campaign(args.campaign, args.data, out / "inputs")
     summary = run_campaign(campaign, out, jobs=args.jobs, scheduler=args.scheduler, report=write_campaign_report)
     print(format_summary(summary))
     print(f"report: {summary['report']}")
@@ -325,6 +335,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output directory (default results/verify/<campaign>); finished cases are cached there")
     p.add_argument("--jobs", type=int, help="worker processes (default: the CPU count; 1 runs in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on a Dask distributed cluster, e.g. tcp://host:8786")
+    p.add_argument("--data", metavar="FOLDER", help="the public data a campaign runs on (real-knee: the Lenhart knee folder, docs/campaigns.md#real-knee-dem-against-the-fe-on-a-real-knee)")
     p.set_defaults(func=_verify)
     p = sub.add_parser("check", help="regression gate: rerun EDEM on stored references, exit 1 with a table when something drifted")
     p.add_argument("--refresh", action="store_true", help="recompute the stored references (FE values too when the FE reference is available)")

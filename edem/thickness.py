@@ -52,6 +52,7 @@ class SideLayer:
     measured: np.ndarray  # (k,) bool: measured to the bone (False: the side's uniform or fallback value)
     area_mm2: np.ndarray  # (k,) of the triangles (for area shares)
     has_bone: bool  # the scene surface is the articular surface (a bone mesh under it); False: it is the bone
+    bone: TriangleSurface | None = None  # the bone mesh (facing the articular surface), for the FE layer's per-vertex thickness
 
 
 @dataclass(frozen=True)
@@ -141,7 +142,7 @@ def side_layer(
             f"{what} cartilage: {100 * missed:.1f} % of the articular area has no bone within {BONE_SEARCH_MM:g} mm below it; "
             f"it takes {fallback:.3g} mm ({'the median measured thickness' if uniform_mm is None else f'{what}_thickness_mm'})"
         )
-    return SideLayer(np.where(measured, thickness, fallback), measured, area_mm2, True)
+    return SideLayer(np.where(measured, thickness, fallback), measured, area_mm2, True, bone)
 
 
 def uses_layers(data: dict[str, Any]) -> bool:

@@ -216,8 +216,7 @@ class LayerModel(FEModel):
 
     def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
         if "solid" not in cache:
-            cache["solid"], cache["solid_notes"] = _build_solid(
-                "layer", lambda: fe_solids.layer_solid(scene.mobile, float(scene.cartilage.thickness_mm), mesh_size_mm, layers))
+            cache["solid"], cache["solid_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers))
         warnings: list[str] = cache.pop("solid_notes", [])  # the construction's notes, given once
         pts, _, _ = contact_surface(cache["solid"])
         gap, _ = obstacle.gap_and_normal(pts)
@@ -229,18 +228,57 @@ class LayerModel(FEModel):
         return FEGeometry(cache["solid"], obstacle, ("layer", pose_key), warnings)
 
     def reach(self, scene, gap_mm, facing):
-        t = float(scene.cartilage.thickness_mm)
+        t = _largest_thickness_mm(scene)
         g0 = float(gap_mm[facing].min()) if facing.any() else 0.0
         return facing & (gap_mm <= max(g0, 0.0) + 0.5 * t)
 
     def thickness_mm(self, scene, solid, used, points_mm):
-        return np.full(len(points_mm), float(scene.cartilage.thickness_mm))
+        # the column under each contact point (uniform: t; measured: the vertex's thickness)
+        return np.linalg.norm(points_mm - solid.points_mm[solid.bottom_vertex[used]], axis=1)
 
     def sizing_surface(self, scene, caster, f_pose):
-        return scene.mobile.areas_mm2 > 0, float(scene.cartilage.thickness_mm)
+        return scene.mobile.areas_mm2 > 0, _largest_thickness_mm(scene)
 
     def spring_length_mm(self, thickness_mm, gap_mm):
         return thickness_mm + gap_mm
+
+
+def _largest_thickness_mm(scene: Any) -> float:
+    """The layer model's largest cartilage thickness: ``thickness_mm``, or M's measured/uniform layer."""
+    layers = scene.cartilage.layers
+    return float(scene.cartilage.thickness_mm) if layers is None else float(layers.mobile.thickness_mm.max())
+
+
+def scene_layer_solid(scene: Any, mesh_size_mm: float, n_layers: int | None) -> Any:
+    """The layer model's solid: a uniform ``thickness_mm`` layer on M, or with per-side layers
+    (:mod:`edem.thickness`) M's own: with a bone mesh the cartilage between M's articular surface
+    and its bone (:func:`geometries.cartilage_solids.measured_layer_solid`), each vertex measured
+    by the ray cast the springs' triangles are measured by (:func:`edem.thickness.measure_layer`,
+    up to :data:`edem.thickness.BONE_SEARCH_MM`; where no bone lies below, the value M's unmeasured
+    springs carry), or M's uniform layer. F is rigid (:func:`fem_reference.settings.resolve_settings`
+    refuses a layer on it). The construction's repairs are issued as warnings (the run's notes)."""
+    layers = scene.cartilage.layers
+    if layers is None:
+        return fe_solids.layer_solid(scene.mobile, float(scene.cartilage.thickness_mm), mesh_size_mm, n_layers)
+    mobile = layers.mobile
+    if not mobile.has_bone:
+        return fe_solids.layer_solid(scene.mobile, float(mobile.thickness_mm.max()), mesh_size_mm, n_layers)
+    from edem.thickness import measure_layer
+    from geometries.cartilage_solids import measured_layer_solid
+
+    unmeasured = mobile.thickness_mm[~mobile.measured]
+    fallback = float(unmeasured.min()) if unmeasured.size else float(np.median(mobile.thickness_mm))
+
+    def thickness_at(vertices_mm: np.ndarray, inward: np.ndarray) -> np.ndarray:
+        depth, measured = measure_layer(vertices_mm, -inward, mobile.bone)
+        return np.where(measured, depth, fallback)
+
+    import warnings as python_warnings
+
+    solid, notes = measured_layer_solid(scene.mobile, scene.mobile.areas_mm2 > 0, thickness_at, mesh_size_mm, n_layers)
+    for note in notes:  # collected by _build_solid as the construction's notes
+        python_warnings.warn(note, stacklevel=2)
+    return solid
 
 
 #: every FE model by name (``[fe] model``, ``edem fe --model``)

@@ -239,7 +239,7 @@ def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: S
     mask, thickness = FE_MODELS[settings.model].sizing_surface(scene, caster, scene.fixed_placement(selected[0]))
     if not mask.any():
         return None  # the model refuses this with its own message
-    edge = _mean_edge(scene.mobile.vertices_mm, scene.mobile.triangles[mask])
+    edge = mean_edge(scene.mobile.vertices_mm, scene.mobile.triangles[mask])
     cells, vertices = solid_size(int(mask.sum()), edge, thickness, settings.mesh_size_mm, settings.layers_through_thickness)
     size = estimate(cells, vertices, settings.element)
     check_fits(size, settings.mesh_size_mm, file=scene.source, key="mesh_size_mm (--mesh-size, or [fe] in the scene)")
@@ -256,7 +256,7 @@ def _build_geometry(scene: Any, settings: FESettings, k: int, caster: RayCaster,
                                            caster, f_pose, obstacle, pose_key, solid_cache)
 
 
-def _mean_edge(points: np.ndarray, tris: np.ndarray) -> float:
+def mean_edge(points: np.ndarray, tris: np.ndarray) -> float:
     e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
     return float(np.mean(np.linalg.norm(points[e[:, 0]] - points[e[:, 1]], axis=1)))
 
@@ -623,7 +623,7 @@ def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FE
                     "mobile_point_mm": _mobile_mapping(geom.solid)[0]},
         cell_data={"pressure_mpa": zc, "spring_length_mm": zc.copy(),
                    "in_contact": zc.astype(np.int8), "pressure_on_mobile_mpa": zc.copy()},
-        mean_edge_mm=_mean_edge(pts, tris), layers=int(geom.solid.layer.max()))
+        mean_edge_mm=mean_edge(pts, tris), layers=int(geom.solid.layer.max()))
 
 
 def _area_on_mobile(res: Any, solid: Any) -> float:
@@ -720,4 +720,4 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
         cell_data={"pressure_mpa": p_cell, "spring_length_mm": length_cell,
                    "in_contact": (p_cell > tol).astype(np.int8),
                    "pressure_on_mobile_mpa": p_cell * ratio_cell},
-        mean_edge_mm=_mean_edge(pts, tris), layers=int(geom.solid.layer.max()))
+        mean_edge_mm=mean_edge(pts, tris), layers=int(geom.solid.layer.max()))

@@ -105,13 +105,19 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
                                or layers < 1):
         raise InputError(f"{layers!r} is not a number of layers", file=file, key=layers_key,
                          expected="an integer >= 1")
-    if scene.cartilage.layers is not None:
-        # (measured thickness, edem.thickness): the slab fills the gap and the layer is uniform, so
-        # either would silently model another cartilage than the springs'
+    layered = scene.cartilage.layers
+    if layered is not None and fe_model.name != "layer":
+        # (measured thickness, edem.thickness): the slab fills the gap, whatever the bone says
         raise InputError(f"the FE {fe_model.name} model does not take measured or per-side cartilage thickness",
                          file=file, key="geometry.mobile_bone, geometry.fixed_bone, cartilage.mobile_thickness_mm, cartilage.fixed_thickness_mm",
-                         expected="a scene with one combined thickness_mm for the FE reference")
-    if fe_model.needs_thickness and scene.cartilage.thickness_mm is None:
+                         expected="the layer model (--model layer), or one combined thickness_mm")
+    if layered is not None and (layered.fixed.has_bone or float(layered.fixed.thickness_mm.max()) > 0.0):
+        # the FE bonds M's cartilage to M and takes F rigid: a layer on F would be left out
+        raise InputError("the FE layer model takes the fixed body rigid: it has no cartilage on it",
+                         file=file, key="geometry.fixed_bone" if layered.fixed.has_bone else "cartilage.fixed_thickness_mm",
+                         expected="fixed_thickness_mm = 0 and no fixed_bone (give F's articular surface as [geometry] fixed, "
+                                  "e.g. its bone offset by its layer; the springs then model the same rigid F)")
+    if fe_model.needs_thickness and scene.cartilage.thickness_mm is None and layered is None:
         raise InputError(f"the FE {fe_model.name} model needs the undeformed cartilage thickness",
                          file=file, key="cartilage.thickness_mm",
                          expected="a thickness in mm > 0 (or the slab model)")

@@ -165,7 +165,7 @@ class FESolid:
 # --------------------------------------------------------------------------------------------
 
 
-def _submesh(surface: TriangleSurface, mask: np.ndarray,
+def submesh(surface: TriangleSurface, mask: np.ndarray,
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     tris = np.asarray(surface.triangles, dtype=np.int64)[mask]
     used = np.unique(tris)
@@ -236,7 +236,7 @@ def _vertex_values(vertices: np.ndarray, triangles: np.ndarray, values: np.ndarr
     return out
 
 
-def _inverted_prisms(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray,
+def inverted_prisms(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray,
                      thickness: np.ndarray) -> np.ndarray:
     """(n_tri,) bool: the triangles whose one-layer prism along the vertex normals has a
     tetrahedron of non-positive volume (the extrusion turns inside out there)."""
@@ -253,7 +253,7 @@ def _inverted_prisms(vertices: np.ndarray, triangles: np.ndarray, normals: np.nd
     return bad
 
 
-def _rim_triangles(triangles: np.ndarray) -> np.ndarray:
+def rim_triangles(triangles: np.ndarray) -> np.ndarray:
     """(n_tri,) bool: triangles with an edge no other triangle shares (the surface's rim)."""
     edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
     _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
@@ -287,14 +287,14 @@ def _trim_inverting_rim(name: str, surface: TriangleSurface, mask: np.ndarray, t
     worst = 0.0
     keep = mask.copy()
     for _ in range(max_rounds + 1):
-        verts, tris, tri_index = _submesh(surface, keep)
+        verts, tris, tri_index = submesh(surface, keep)
         normals = vertex_normals(verts, tris)
         thickness = thickness_of(verts, tris, tri_index, normals)
-        bad = _inverted_prisms(verts, tris, normals, thickness)
+        bad = inverted_prisms(verts, tris, normals, thickness)
         if not bad.any():
             break
         lean = _lean_deg(verts, tris, normals)
-        rim = bad & _rim_triangles(tris)  # dropped first: their neighbours' normals change with them
+        rim = bad & rim_triangles(tris)  # dropped first: their neighbours' normals change with them
         if not rim.any() or len(dropped) == max_rounds:
             which = tri_index[bad]
             raise ValueError(
@@ -318,7 +318,7 @@ def _trim_inverting_rim(name: str, surface: TriangleSurface, mask: np.ndarray, t
     return verts, tris, tri_index, normals, thickness
 
 
-def _extrude(name: str, bottom: np.ndarray, triangles: np.ndarray, normals: np.ndarray,
+def extrude(name: str, bottom: np.ndarray, triangles: np.ndarray, normals: np.ndarray,
              thickness: np.ndarray, layers: int) -> FESolid:
     """Prisms from ``bottom + k/layers * thickness * normal``, 3 tetrahedra each."""
     nv = len(bottom)
@@ -378,7 +378,7 @@ def _extrude(name: str, bottom: np.ndarray, triangles: np.ndarray, normals: np.n
     )
 
 
-def _refine(vertices: np.ndarray, triangles: np.ndarray, vertex_fields: list[np.ndarray],
+def refine(vertices: np.ndarray, triangles: np.ndarray, vertex_fields: list[np.ndarray],
             levels: int) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Midpoint subdivision (1 -> 4), fields interpolated linearly; vector fields renormalised
     when they are unit normals (shape (n, 3))."""
@@ -395,19 +395,19 @@ def _refine(vertices: np.ndarray, triangles: np.ndarray, vertex_fields: list[np.
     return vertices, triangles, vertex_fields
 
 
-def _mean_edge(vertices: np.ndarray, triangles: np.ndarray) -> float:
+def mean_edge(vertices: np.ndarray, triangles: np.ndarray) -> float:
     e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
     return float(np.mean(np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)))
 
 
-def _levels_for(size: float | None, vertices: np.ndarray, triangles: np.ndarray) -> int:
+def levels_for(size: float | None, vertices: np.ndarray, triangles: np.ndarray) -> int:
     if size is None:
         return 0
-    h = _mean_edge(vertices, triangles)
+    h = mean_edge(vertices, triangles)
     return max(0, int(math.ceil(math.log2(h / size) - 1e-9))) if h > size else 0
 
 
-def _layers_for(layers: int | None, max_thickness: float, size: float) -> int:
+def layers_for(layers: int | None, max_thickness: float, size: float) -> int:
     if layers is not None:
         if int(layers) < 1:
             raise ValueError("layers_through_thickness must be >= 1")
@@ -453,11 +453,11 @@ def slab_solid(
         return np.maximum(hv, 0.25 * float(np.min(h[tri_index])))
 
     verts, tris, tri_index, normals, hv = _trim_inverting_rim("slab", mobile, mask, thickness_of)
-    size = mesh_size_mm if mesh_size_mm is not None else _mean_edge(verts, tris)
-    levels = _levels_for(mesh_size_mm, verts, tris)
-    verts, tris, (normals, hv) = _refine(verts, tris, [normals, hv], levels)
-    nl = _layers_for(layers_through_thickness, float(hv.max()), size)
-    return _extrude("slab", verts, tris, normals, hv, nl)
+    size = mesh_size_mm if mesh_size_mm is not None else mean_edge(verts, tris)
+    levels = levels_for(mesh_size_mm, verts, tris)
+    verts, tris, (normals, hv) = refine(verts, tris, [normals, hv], levels)
+    nl = layers_for(layers_through_thickness, float(hv.max()), size)
+    return extrude("slab", verts, tris, normals, hv, nl)
 
 
 def layer_solid(
@@ -477,8 +477,8 @@ def layer_solid(
         raise ValueError("layer_solid: thickness_mm must be a positive number")
     mask = mobile.areas_mm2 > 0
     verts, tris, _, normals, _ = _trim_inverting_rim("layer", mobile, mask, lambda v, *_: np.full(len(v), t))
-    size = mesh_size_mm if mesh_size_mm is not None else _mean_edge(verts, tris)
-    levels = _levels_for(mesh_size_mm, verts, tris)
-    verts, tris, (normals,) = _refine(verts, tris, [normals], levels)
-    nl = _layers_for(layers_through_thickness, t, size)
-    return _extrude("layer", verts, tris, normals, np.full(len(verts), t), nl)
+    size = mesh_size_mm if mesh_size_mm is not None else mean_edge(verts, tris)
+    levels = levels_for(mesh_size_mm, verts, tris)
+    verts, tris, (normals,) = refine(verts, tris, [normals], levels)
+    nl = layers_for(layers_through_thickness, t, size)
+    return extrude("layer", verts, tris, normals, np.full(len(verts), t), nl)

@@ -24,6 +24,9 @@ its declared band (the thesis's figures) and "unavailable" when their cases coul
   same reference): each of ``metrics`` of the model within ``strict`` up to ``strict_nu`` and
   within ``loose`` beyond, and its ``ratio_metric`` at most ``ratio`` times the baseline's. Rows
   that miss it are flagged with what they miss, and the notes say where in sentences.
+* ``fe-band``: a discrete model against the FE on a base mesh and its refinements: the FE's mesh
+  error beside the difference, judged against a goal only where the FE's error is below it
+  (:func:`fe_band_analysis`).
 * ``trust``: the main job's opening answer in plain sentences with figures: DEM against the FE
   reference on the ideal ankle (where it agrees), over Poisson's ratio, cartilage thickness and a
   low load (where it breaks), and on the subject-like ankle.
@@ -502,6 +505,67 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def fe_band_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """A discrete model against the FE on several meshes, judged only where the FE is converged
+    enough to judge (docs/campaigns.md#real-knee-dem-against-the-fe-on-a-real-knee).
+
+    ``settings``: ``points`` ((label, (case on the base FE mesh, case refined in one direction,
+    case refined in another, ...)), ...), ``quantities`` ((name, discrete metric, FE metric), ...)
+    and ``goal`` (relative). Each refinement halves the elements along one direction (through the
+    thickness, in the plane), so their discretisation errors add: the FE reference is
+    f = f_0 + sum_k (f_k - f_0) and its error is estimated by sum_k |f_k - f_0| / |f| (each
+    refinement's change bounds the error it removed for a first-order quantity and overestimates
+    it for a faster one; the extrapolation's own remainder is taken to be below that sum). With one
+    refinement, f is the finer mesh's value and the error its change. Per point and quantity: the
+    discrete value, the FE values, the FE error, the discrete model's relative difference to f, and
+    the verdict: "within" / "outside" the goal, or "not judged" when the FE's error is not below the
+    goal (a band narrower than the reference's error judges nothing). Outside rows are flagged;
+    no verdict fails the campaign (status "reported" / "flagged").
+    """
+    settings = analysis.settings
+    goal = float(settings["goal"])
+    out_rows, values, notes = [], [], []
+    flagged = available = False
+    for label, cases in settings["points"]:
+        case_rows = [rows.get(name) for name in cases]
+        for quantity, a_metric, b_metric in settings["quantities"]:
+            fe = [None if r is None else _metric(r, b_metric) for r in case_rows]
+            discrete = None if case_rows[0] is None else _metric(case_rows[0], a_metric)
+            if discrete is None or any(v is None for v in fe):
+                missing = next((name for name, r in zip(cases, case_rows) if r is None or r.get("status") == UNAVAILABLE or _metric(r, b_metric) is None), cases[0])
+                why = "case not run" if rows.get(missing) is None else _unavailable_message(rows[missing])
+                out_rows.append({"cells": [label, quantity, "–", "–", "–", "–", "–", f"unavailable ({missing}): {why}"]})
+                values.append({"point": label, "quantity": quantity, "verdict": UNAVAILABLE})
+                continue
+            available = True
+            base = float(fe[0])
+            reference = base + sum(float(v) - base for v in fe[1:])
+            fe_error = sum(abs(float(v) - base) for v in fe[1:]) / abs(reference) if reference and len(fe) > 1 else math.inf
+            difference = (float(discrete) - reference) / abs(reference) if reference else math.inf
+            if not fe_error < goal:
+                verdict = f"not judged: FE error {100 * fe_error:.1f} % >= goal {100 * goal:.0f} %"
+            elif abs(difference) <= goal:
+                verdict = "within"
+            else:
+                verdict = "outside"
+            outside = verdict == "outside"
+            flagged |= outside
+            values.append({"point": label, "quantity": quantity, "discrete": float(discrete), "fe": [float(v) for v in fe],
+                           "fe_reference": reference, "fe_error": fe_error, "difference": difference, "verdict": verdict})
+            out_rows.append({"cells": [label, quantity, _fmt(discrete), ", ".join(_fmt(v) for v in fe), _fmt(reference),
+                                       f"{100 * fe_error:.1f} %", f"{100 * difference:+.1f} %", verdict], "flag": outside})
+    notes.append(f"goal: the discrete value within {100 * goal:.0f} % of the FE reference f = f_0 + sum_k (f_k - f_0) (each refinement "
+                 "halves the elements in one direction); its error sum_k |f_k - f_0| / |f|; a point is judged only where that error is "
+                 "below the goal")
+    return {
+        "columns": ["point", "quantity", "discrete", "FE (base, refined...)", "FE reference", "FE error", "discrete - FE", "verdict"],
+        "rows": out_rows,
+        "status": (FLAGGED if flagged else REPORTED) if available else UNAVAILABLE,
+        "notes": notes,
+        "values": {"rows": values},
+    }
+
+
 ANALYSES: dict[str, Callable[[Any, dict[str, dict[str, Any]]], dict[str, Any]]] = {
     "order": order_analysis,
     "thesis": thesis_analysis,
@@ -510,6 +574,7 @@ ANALYSES: dict[str, Callable[[Any, dict[str, dict[str, Any]]], dict[str, Any]]] 
     "pareto": pareto_analysis,
     "goal": goal_analysis,
     "trust": trust_analysis,
+    "fe-band": fe_band_analysis,
 }
 
 

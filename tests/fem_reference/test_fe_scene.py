@@ -335,14 +335,18 @@ def test_layer_without_thickness_exits_2(capsys):
     assert "cartilage.thickness_mm" in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("model", ["slab", "layer"])
-def test_measured_thickness_is_refused_by_the_fe_models(capsys, model):
-    """docs/method.md#measured-cartilage-thickness: neither FE model takes per-side layers (the
-    slab fills the gap, the layer is uniform), so a scene with them exits 2 naming the keys."""
+@pytest.mark.parametrize("model, message, key", [
+    ("slab", "does not take measured or per-side cartilage thickness", "geometry.mobile_bone"),
+    ("layer", "takes the fixed body rigid", "cartilage.fixed_thickness_mm"),
+])
+def test_fe_refuses_per_side_layers_it_cannot_model_naming_the_key(capsys, model, message, key):
+    """docs/method.md#the-fe-layer-on-measured-thickness: the slab fills the gap whatever the
+    layers say, and the layer model bonds M's cartilage to M with F rigid: a layer on F would be
+    left out. Both exit 2 naming the key."""
     sets = ["--set", "cartilage.mobile_thickness_mm=1.0", "--set", "cartilage.fixed_thickness_mm=1.0"]
     assert main(["fe", PLATES, "--model", model, "--out", "/nonexistent/never", *sets]) == 2
     err = capsys.readouterr().err
-    assert "does not take measured or per-side cartilage thickness" in err and "Traceback" not in err
+    assert message in err and key in err and "Traceback" not in err
 
 
 @pytest.mark.parametrize("args, key", [

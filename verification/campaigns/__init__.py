@@ -14,12 +14,14 @@ vs the FE slab at five instants), ``sensitivity`` (h_max x ligament modulus, 20 
 stances, the thesis's fig. 4.3.10), ``quick`` (a subset for CI), and EDEM/DEM against the FE
 reference: ``cylinder-plane``, ``subject``, ``error-vs-runtime``; ``thin-layer`` (the coupled
 thin-layer bed and the independent springs against the FE); ``population`` (1000 seeded
-subject-like ankles over the stance, EDEM).
+subject-like ankles over the stance, EDEM); ``real-knee`` (DEM against the FE on the public Lenhart
+MRI knee, given with ``--data``: :data:`DATA_CAMPAIGNS`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 from geometries.errors import InputError
 from verification.campaign_model import (
@@ -40,6 +42,7 @@ from verification.campaigns import (
     fe_analytic,
     population,
     quick,
+    real_knee,
     sensitivity,
     stability,
     stance,
@@ -59,7 +62,12 @@ from verification.campaigns.stance import (
 )
 
 #: the registered campaign modules, in the order `edem verify --list` shows them
-CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, population)
+CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, population,
+                    real_knee)
+#: campaigns on data the user gives (``edem verify NAME --data FOLDER``): name -> their module, whose
+#: ``data_files(data)`` refuses (InputError naming --data or the missing file) a folder without them and
+#: ``with_data(data, work dir)`` builds the campaign on it
+DATA_CAMPAIGNS = {"real-knee": real_knee}
 
 
 def campaigns() -> dict[str, Campaign]:
@@ -68,11 +76,17 @@ def campaigns() -> dict[str, Campaign]:
     return {campaign.name: campaign for campaign in built}
 
 
-def get_campaign(name: str) -> Campaign:
-    """The named campaign, or InputError listing the known ones."""
+def get_campaign(name: str, data: str | None = None, work: Path | None = None) -> Campaign:
+    """The named campaign, or InputError listing the known ones. A campaign of
+    :data:`DATA_CAMPAIGNS` is built on ``data`` (its inputs prepared in ``work``) and refused
+    without it; ``data`` for another campaign is refused."""
     known = campaigns()
     if name not in known:
         raise InputError(f"unknown campaign '{name}'", key="CAMPAIGN", expected="one of " + ", ".join(known) + " (edem verify --list)")
+    if name in DATA_CAMPAIGNS:
+        return dataclasses.replace(DATA_CAMPAIGNS[name].with_data(data, work), expected_time_s=known[name].expected_time_s)
+    if data is not None:
+        raise InputError(f"campaign '{name}' takes no data folder", key="--data", expected="--data only with " + ", ".join(DATA_CAMPAIGNS))
     return known[name]
 
 
@@ -96,7 +110,8 @@ def describe_campaigns(name: str | None = None) -> str:
         lines = [f"{c.name:{width}s} {len(c.cases):4d} cases  {expected_time_text(c.expected_time_s):>18s}  {c.description}" for c in known]
         lines.append("(expected wall time with 2 jobs on 2 cores, nothing cached; `edem verify --list CAMPAIGN` lists its cases)")
         return "\n".join(lines) + "\n"
-    campaign = get_campaign(name)
+    known = campaigns()
+    campaign = known[name] if name in known else get_campaign(name)  # (a data campaign: its cases, listed without the data)
     lines = [f"{campaign.name} ({len(campaign.cases)} cases, {expected_time_text(campaign.expected_time_s)} on 2 cores): {campaign.description}"]
     for case in campaign.cases:
         lines.append(f"  {case.name:32s} [{' vs '.join(case.sides)}] {case.description}")
@@ -104,7 +119,7 @@ def describe_campaigns(name: str | None = None) -> str:
 
 
 __all__ = [
-    "CAMPAIGN_MODULES", "CONFINED_SIZES_MM", "HERTZ_SIZES_MM", "METRICS", "SCENES_DIR", "SENSITIVITY_HMAX_MM",
+    "CAMPAIGN_MODULES", "CONFINED_SIZES_MM", "DATA_CAMPAIGNS", "HERTZ_SIZES_MM", "METRICS", "SCENES_DIR", "SENSITIVITY_HMAX_MM",
     "SENSITIVITY_MODULUS_MPA", "STANCE_INSTANTS", "STANCE_SCENES", "THESIS_STANCE", "Analysis", "Campaign", "Case",
     "Expect", "Figure", "campaigns", "describe_campaigns", "fe_instant_case_name", "get_campaign", "instant_indices",
     "ramp_overrides", "scene_instants", "sensitivity_campaign", "validate_campaign",
