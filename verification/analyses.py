@@ -480,7 +480,7 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         sentences.append(f"Goal (every card metric of the default bed within {100 * goal:.0f} % of the FE, nu 0.3-0.49): not reached for " + "; ".join(missed)
                          + ". The FE here is the coarse reference of this job (note below), without a mesh-convergence error yet.")
     elif s["beds"]:
-        sentences.append(f"Goal (every card metric of the default bed within {100 * goal:.0f} % of the FE, nu 0.3-0.49): reached on both ankles against this job's coarse FE.")
+        sentences.append(f"Goal (every card metric of the default bed within {100 * goal:.0f} % of the FE, nu 0.3-0.49): reached on every ankle compared, against this job's coarse FE.")
     layers = [(float(ok[n]["params"].get("thickness_mm")), _signed(ok[n], "peak_pressure_mpa")[2], _signed(ok[n], "mean_contact_area_mm2")[2]) for n in s["layer_cases"] if n in ok]
     if layers:
         sentences.append(

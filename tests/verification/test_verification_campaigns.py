@@ -82,10 +82,10 @@ def test_quick_trust_beds_share_one_fe_run_per_ankle_and_nu():
             assert all(case.params["poissons_ratio"] == case.overrides["cartilage.poissons_ratio"] == nu for case in cases)
 
 
-def test_built_in_ankle_scenes_default_to_the_bed_the_trust_summary_calls_default():
+def test_built_in_ankle_scenes_of_one_time_point_default_to_the_bed_the_trust_summary_calls_default():
     """The main job's "default bed" is what `edem run ideal-standing` uses; the thesis's springs stay one --set away."""
     default = TRUST_BEDS["coupled"][1]
-    for scene in ("ideal-standing", "ideal-stance", "ideal-toe-off", "subject-standing", "subject-stance", "subject-toe-off"):
+    for scene in ("ideal-standing", "ideal-toe-off", "subject-standing", "subject-toe-off"):
         cartilage = load_scene(scene).cartilage
         assert (cartilage.coupling, cartilage.thin_layer_symbol) == (default["cartilage.coupling"], default["cartilage.thin_layer_symbol"])
         assert load_scene(scene, THESIS_BED).cartilage.coupling == "none"

@@ -1,12 +1,14 @@
 """``quick``: the main job (``make demo``), well under 5 minutes on 2 cores.
 
-It opens with the ankle answer: DEM against the FE reference on the ideal ankle standing (and the
-subject-like ankle), where they agree and where the independent-spring bed breaks (Poisson's
-ratio, cartilage thickness, low loads, the rim of the contact patch), judged against a declared
-model band (:data:`MODEL_BAND_REL`). Then every closed-form case, a few stability cases, ideal
-standing EDEM vs DEM and one cheap FE verification case. The FE here is coarse (P2 at 1.0 mm,
-Taylor-Hood from nu = 0.49) to keep the job short; ``cylinder-plane`` and ``subject`` have the
-full sweeps.
+It opens with the ankle answer: DEM against the FE reference on the ideal and subject-like ankles
+standing over Poisson's ratio (:data:`TRUST_NUS`), with the default bed of the built-in standing
+scenes (the coupled thin layer, Pade symbol) beside the thesis's independent springs (each bed
+named in the case's overrides; the two share one FE run per ankle and nu), then the layer over
+thickness and at a low load, judged against a declared model band (:data:`MODEL_BAND_REL`); one
+chart per card metric (displacement, peak pressure, contact area) against nu. Then every
+closed-form case, a few stability cases, ideal standing EDEM vs DEM and one cheap FE verification
+case. The FE here is coarse (P1 at 1.0 mm up to nu 0.42, P2 above, Taylor-Hood from nu = 0.49) to
+keep the job short; ``cylinder-plane``, ``subject`` and ``thin-layer`` have the full sweeps.
 """
 
 from __future__ import annotations

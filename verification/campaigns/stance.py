@@ -1,8 +1,7 @@
 """``stance``: EDEM vs DEM over the built-in stance scenes (docs/references.md#the-thesiss-figures, thesis 4.3.4), the thesis's
 figures beside ours, DEM vs the FE slab at five instants ("unavailable" without
-``fem_reference.run_scene``). The EDEM-vs-DEM cases, whose figures are set beside the thesis's, run
-the thesis's bed (independent springs, named in their overrides); the FE instants run the scenes'
-default bed (the coupled thin layer, named too)."""
+``fem_reference.run_scene``). The EDEM-vs-DEM cases, whose figures are set beside the thesis's,
+name the thesis's bed (independent springs) in their overrides, whatever the scenes' default."""
 
 from __future__ import annotations
 
@@ -12,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from edem.scene import resolve_scene_path
-from verification.campaign_model import COUPLED_BED, THESIS_BED, VALUES_AT_REFERENCE_TIMES, Analysis, Campaign, Case, Expect, Figure
+from verification.campaign_model import THESIS_BED, VALUES_AT_REFERENCE_TIMES, Analysis, Campaign, Case, Expect, Figure
 from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import INVARIANT, MODEL_BAND_REL, Basis
 
@@ -84,12 +83,12 @@ def _stance_cases() -> list[Case]:
     # instant, displacement of G from the initial pose of that time point (fem_reference.scene_run).
     for scene in STANCE_SCENES:
         steps = scene_instants(scene)
-        overrides = {**stance_fe_overrides(scene), **COUPLED_BED}
+        overrides = stance_fe_overrides(scene)
         for (label, where), step in zip(STANCE_INSTANTS, steps):
             cases.append(
                 Case(
                     fe_instant_case_name(scene, label),
-                    f"{scene} at {label} ({where}, step {step}): DEM (the coupled thin layer, the scenes' default bed) against the FE slab, both static at that time point, "
+                    f"{scene} at {label} ({where}, step {step}): DEM against the FE slab, both static at that time point, "
                     f"both without ligaments{' and with ' + ', '.join(STANCE_FE_FIXED.get(scene, ())) + ' fixed' if scene in STANCE_FE_FIXED else ''}; no tolerance (reported)",
                     scene,
                     ("dem", "fe-slab"),
