@@ -37,9 +37,9 @@ def test_signed_errors_the_goal_and_an_area_fixed_by_construction():
     springs = next(s for s in sentences if s.startswith("Ideal ankle, springs"))
     assert "displacement -43 %, -43 %, -43 %, -43 %" in springs and "peak pressure -10 %" in springs  # signed, not |e|
     fixed = [s for s in sentences if s.startswith("Fixed by construction")]
-    assert len(fixed) == 1 and "springs" in fixed[0] and "463.4 mm²" in fixed[0]  # the coupled bed's area moves: not said of it
+    assert len(fixed) == 1 and "463.4 mm² on the ideal ankle with the springs," in fixed[0] and "coupled" not in fixed[0]  # its area moves
     goal = next(s for s in sentences if s.startswith("Goal"))
-    assert "not reached" in goal and "contact area on the ideal ankle at nu 0.49" in goal and "displacement" not in goal
+    assert "not reached" in goal and "contact area on the ideal ankle at nu 0.49 (+11 %)" in goal and "displacement" not in goal
 
 
 def test_goal_reached_when_every_card_metric_of_the_default_bed_is_within_it():
