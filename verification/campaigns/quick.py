@@ -72,7 +72,7 @@ def trust_name(ankle: str, bed: str, nu: float) -> str:
 def _with_bed(case: Case, ankle: str, bed: str, nu: float) -> Case:
     """``case`` (independent springs, its bed named in the overrides) on the bed ``bed`` at ``nu``,
     with the FE P1 at 1.0 mm where P1 does not lock (nu <= 0.42)."""
-    suffix, bed_overrides, what = TRUST_BEDS[bed]
+    _suffix, bed_overrides, what = TRUST_BEDS[bed]
     overrides = {k: v for k, v in case.overrides.items() if k not in COUPLED_BED}  # the bed keys
     overrides.update({**bed_overrides, "cartilage.poissons_ratio": nu})
     p1 = nu <= 0.42
@@ -160,7 +160,8 @@ def campaign() -> Campaign:
     trust = trust_cases()
     return Campaign(
         "quick",
-        "The main job: first the ankle answer (DEM against the FE reference on the ideal and subject-like ankles: where it agrees, where it breaks), then every "
+        "The main job: first the ankle answer (DEM with the default bed, the coupled thin layer, and with the independent springs against the FE reference on the ideal "
+        "and subject-like ankles over Poisson's ratio: where each agrees, where it breaks), then every "
         "closed-form case, a few stability cases, ideal standing EDEM vs DEM and one cheap FE verification case (confined compression, coarse).",
         tuple(trust) + tuple(_analytic_cases()) + tuple(stability[n] for n in picks) + (_ideal_standing_case(),) + tuple(fe[n] for n in fe_picks),
         _trust_figures() + _analytic_figures(),
