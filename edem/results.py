@@ -103,6 +103,9 @@ class RunResult:
             "max_force_residual_n": max(s.force_residual_n for s in steps),
             "max_moment_residual_nmm": max(s.moment_residual_nmm for s in steps),
             "law": self.scene.cartilage.law,
+            # the bed (the built-in scenes' defaults differ: the standing and toe-off ones couple, the stances do not)
+            "coupling": self.scene.cartilage.coupling,
+            "thin_layer_symbol": self.scene.cartilage.thin_layer_symbol if self.scene.cartilage.coupling != "none" else None,
             "warnings": list(self.scene.warnings) + list(self.warnings),
             **thickness_summary(self.scene.cartilage.layers),  # measured thickness only
             **({} if self.preflight is None else {"preflight": self.preflight.as_dict()}),

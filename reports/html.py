@@ -447,14 +447,14 @@ def _analysis_table(result: dict[str, Any]) -> list[str]:
 
 
 def _trust_html(result: dict[str, Any], figures: list[dict[str, Any]]) -> list[str]:
-    """The trust summary (analysis kind "trust"): sentences, the error-vs-nu chart, the table."""
+    """The trust summary (analysis kind "trust"): sentences, its charts (``values["figures"]``), the table."""
     h = html.escape
     parts = [f'<section id="trust-summary"><h2>{h(result["title"])}</h2>']
     sentences = result.get("values", {}).get("sentences", [])
     if sentences:
         parts.append("<ul>" + "".join(f"<li>{h(text)}</li>" for text in sentences) + "</ul>")
-    figure = next((f for f in figures if f.get("name") == result.get("values", {}).get("figure") and f.get("file") and not f.get("error")), None)
-    if figure is not None:
+    wanted = result.get("values", {}).get("figures", [])
+    for figure in sorted((f for f in figures if f.get("name") in wanted and f.get("file") and not f.get("error")), key=lambda f: wanted.index(f["name"])):
         parts.append(f'<figure class="small-figure"><img src="{h(figure["file"])}" alt="{h(figure["title"])}"><figcaption>{h(figure["title"])}</figcaption></figure>')
     parts += _analysis_table(result)
     parts.append("</section>")
@@ -553,7 +553,7 @@ def write_campaign_report(summary: dict[str, Any], out_dir: str | Path) -> Path:
         + (f"Dask scheduler {h(str(summary['scheduler']))}." if summary.get("scheduler") else f"{summary.get('jobs')} worker process(es).")
         + ' Campaign data: <a href="metrics.json">metrics.json</a>.</p>',
     ]
-    shown_in_trust = {r.get("values", {}).get("figure") for r in trust}
+    shown_in_trust = {name for r in trust for name in r.get("values", {}).get("figures", [])}
     parts.append("<h2>Figures</h2>")
     for fig in (f for f in figures if f.get("name") not in shown_in_trust):
         if fig.get("unavailable"):

@@ -77,6 +77,12 @@ VALUES_AT_REFERENCE_TIMES = (
 
 METRICS.update(COP_METRICS)
 
+#: the beds a case can pin with its overrides (``[cartilage] coupling``, edem.beds.BEDS). The
+#: built-in ankle scenes default to the coupled thin layer (Pade symbol); a case that compares a
+#: thesis figure, or the independent springs as such, names its bed instead of taking the default.
+THESIS_BED = {"cartilage.coupling": "none"}  # the thesis's independent springs
+COUPLED_BED = {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "pade"}
+
 OUTCOMES = ("converges", "refused")
 
 

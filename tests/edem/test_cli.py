@@ -231,3 +231,18 @@ def test_plot_draws_one_curve_per_result_directory(tmp_path):
     import matplotlib.image
 
     assert matplotlib.image.imread(out).std() > 0
+
+
+def test_summary_and_report_line_name_the_bed_the_run_used(tmp_path, capsys):
+    """The built-in standing scene's default bed is the coupled layer and one --set gives the
+    springs: summary.json and the one-line report say which ran (the two runs differ, so the key is
+    not decoration: the coupled layer carries the same 333 N with a larger displacement)."""
+    runs = {}
+    for name, extra in (("default", []), ("springs", ["--set", "cartilage.coupling=none"])):
+        out = tmp_path / name
+        assert main(["run", "ideal-standing", "--out", str(out), *extra]) == 0
+        runs[name] = (json.loads((out / "summary.json").read_text()), capsys.readouterr().out)
+    (coupled, coupled_line), (springs, springs_line) = runs["default"], runs["springs"]
+    assert (coupled["coupling"], coupled["thin_layer_symbol"]) == ("thin-layer", "pade") and "coupled thin layer (pade)" in coupled_line
+    assert (springs["coupling"], springs["thin_layer_symbol"]) == ("none", None) and "independent springs" in springs_line
+    assert coupled["final_displacement_mm"][2] > springs["final_displacement_mm"][2]

@@ -9,7 +9,10 @@ from edem.cli import main
 from edem.errors import InputError
 from verification.campaigns import METRICS, campaigns, describe_campaigns, get_campaign, validate_campaign
 from verification.runner import run_campaign
-from verification.sides import side_names
+from edem.scene import load_scene
+from verification.campaign_model import THESIS_BED
+from verification.campaigns.quick import TRUST_ANKLES, TRUST_BEDS, TRUST_NUS, trust_name
+from verification.sides import is_shared_side, side_inputs, side_names
 
 
 def test_every_campaign_is_valid_data():
@@ -40,27 +43,64 @@ def test_stability_cases_declare_outcomes_and_cover_the_extremes():
         assert dt > 2 * case.overrides["viscoelastic.relaxation_time_s"]
 
 
-def test_quick_is_a_subset_of_the_other_campaigns_plus_ideal_standing():
+def test_quick_is_a_subset_of_the_other_campaigns_plus_ideal_standing_and_the_trust_beds():
     known = {c.name: c for name in ("edem-analytic", "stability", "fe-analytic", "cylinder-plane", "subject") for c in get_campaign(name).cases}
     quick = get_campaign("quick")
     # the design card's three quantities: pressure (regularised peak and field), area, displacement
     banded = {"regularised_peak_pressure_rel_error", "pressure_l2_rel_error", "contact_area_rel_error", "displacement_rel_error"}
+    trust = {trust_name(ankle, bed, nu) for ankle in TRUST_ANKLES for bed in TRUST_BEDS for nu in TRUST_NUS}
     for case in quick.cases:
-        if case.name == "ideal-standing-edem-vs-dem":
+        if case.name == "ideal-standing-edem-vs-dem" or case.name in trust:
             continue
         twin = known[case.name]
         if any(side.startswith("fe-") for side in case.sides) and case.sides[0] in ("dem", "edem"):
-            # the trust cases: the same runs, every card metric judged against the declared model band,
-            # but the threshold law's area on the ideal ankle (set by construction: reported, not judged)
-            assert (case.scene, case.sides, case.overrides) == (twin.scene, twin.sides, twin.overrides)  # options: a coarser FE
-            by_construction = {"contact_area_rel_error"} if case.name.startswith("slab") else set()
-            assert {m for m, b in case.bases().items() if b.kind == "model-band"} == banded - by_construction
-            assert {m for m, b in case.bases().items() if b.kind == "by-construction"} == by_construction
+            # the layer cases: the same runs, every card metric judged against the declared model band
+            assert (case.scene, case.sides, case.overrides) == (twin.scene, twin.sides, twin.overrides)
+            assert {m for m, b in case.bases().items() if b.kind == "model-band"} == banded
         else:
             assert twin == case
+    # the springs at the base nu are the cylinder-plane and subject campaigns' runs (options: a coarser FE)
+    for name, twin in ((trust_name("slab", "springs", 0.42), known["slab-F333-nu0.42"]), (trust_name("subject", "springs", 0.42), known["subject-standing-dem-vs-fe"])):
+        case = quick.case(name)
+        assert (case.scene, case.sides) == (twin.scene, twin.sides)
+        assert case.overrides == {**twin.overrides, "cartilage.poissons_ratio": 0.42}
+    for name in trust:  # the threshold law's area on the ankles is set by construction: reported, not judged
+        bases = quick.case(name).bases()
+        assert {m for m, b in bases.items() if b.kind == "model-band"} == banded - {"contact_area_rel_error"}
+        assert bases["contact_area_rel_error"].kind == "by-construction"
     assert quick.case("ideal-standing-edem-vs-dem").sides == ("edem", "dem")
-    assert quick.cases[0].name.startswith("slab-F333-nu")  # the ankle answer first
+    assert quick.cases[0].name in trust  # the ankle answer first
     assert [a.kind for a in quick.analyses] == ["trust"]
+
+
+def test_quick_trust_beds_share_one_fe_run_per_ankle_and_nu():
+    """The beds differ only in the keys the FE never reads, so each (ankle, nu) runs one FE (the
+    runner's side store), and each bed is named in the overrides, not taken from the scene."""
+    quick = get_campaign("quick")
+    for ankle in TRUST_ANKLES:
+        for nu in TRUST_NUS:
+            cases = [quick.case(trust_name(ankle, bed, nu)) for bed in TRUST_BEDS]
+            fe_inputs = [side_inputs(case.sides[1], case.overrides, case.options) for case in cases]
+            assert all(inputs == fe_inputs[0] for inputs in fe_inputs)
+            assert all(is_shared_side(case.sides[1]) for case in cases)
+            assert [case.overrides["cartilage.coupling"] for case in cases] == [TRUST_BEDS[bed][1]["cartilage.coupling"] for bed in TRUST_BEDS]
+            assert all(case.params["poissons_ratio"] == case.overrides["cartilage.poissons_ratio"] == nu for case in cases)
+
+
+def test_built_in_ankle_scenes_of_one_time_point_default_to_the_bed_the_trust_summary_calls_default():
+    """The main job's "default bed" is what `edem run ideal-standing` uses; the thesis's springs stay one --set away."""
+    default = TRUST_BEDS["coupled"][1]
+    for scene in ("ideal-standing", "ideal-toe-off", "subject-standing", "subject-toe-off"):
+        cartilage = load_scene(scene).cartilage
+        assert (cartilage.coupling, cartilage.thin_layer_symbol) == (default["cartilage.coupling"], default["cartilage.thin_layer_symbol"])
+        assert load_scene(scene, THESIS_BED).cartilage.coupling == "none"
+
+
+def test_thesis_comparisons_name_the_thesis_bed():
+    """Cases set beside the thesis's figures run its bed whatever the scenes' default."""
+    thesis_cases = [get_campaign("stance").case(f"{scene}-edem-vs-dem") for scene in ("ideal-stance", "subject-stance")]
+    thesis_cases += list(get_campaign("sensitivity").cases)
+    assert all(case.overrides["cartilage.coupling"] == THESIS_BED["cartilage.coupling"] for case in thesis_cases)
 
 
 def test_verify_list_prints_one_line_per_campaign_with_case_count_and_time(capsys):

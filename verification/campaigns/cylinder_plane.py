@@ -1,6 +1,7 @@
 """``cylinder-plane``: the independent-spring bed against the continuum on the idealised ankle,
 one-at-a-time sweeps around a base case: load (100, 333, 1000, 4190 N) and Poisson's ratio
-(0, 0.3, 0.42, 0.45, 0.49, 0.499) on ``ideal-standing`` (threshold law, DEM) vs the FE slab and
+(0, 0.3, 0.42, 0.45, 0.49, 0.499) on ``ideal-standing`` (threshold law, DEM, the independent springs named by the overrides: the scene's default is
+the coupled layer) vs the FE slab and
 on ``cylinder-layer`` (gap law, DEM) vs the FE layer, and the cartilage thickness (1, 2, 3 mm:
 ``geometry.plafond_gap_mm`` and ``cartilage.thickness_mm`` together) on ``cylinder-layer``.
 Every layer point also with the coupled thin layer (``layer-coupled-...``,
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from verification.campaign_model import VALUES_AT_REFERENCE_TIMES, Analysis, Campaign, Case, Figure, uniform_basis
+from verification.campaign_model import THESIS_BED, VALUES_AT_REFERENCE_TIMES, Analysis, Campaign, Case, Figure, uniform_basis
 from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import INVARIANT, SANITY, Basis
 
@@ -59,7 +60,7 @@ def fe_comparison_case(name: str, description: str, scene: str, sides: tuple[str
 
 #: the two models of the ideal ankle: (prefix, scene, sides, what)
 CP_MODELS = (
-    ("slab", "ideal-standing", ("dem", "fe-slab"), "ideal ankle (R 20 mm, 114 deg, plafond 1.5 mm above), threshold-law DEM vs the FE slab"),
+    ("slab", "ideal-standing", ("dem", "fe-slab"), "ideal ankle (R 20 mm, 114 deg, plafond 1.5 mm above), threshold-law DEM (independent springs) vs the FE slab"),
     ("layer", "cylinder-layer", ("dem", "fe-layer"), "cylinder with a bonded layer on a plane, gap-law DEM vs the FE layer"),
 )
 
@@ -88,6 +89,7 @@ def _cp_cases() -> list[Case]:
         overrides: dict[str, Any] = {"load.force_n": [0.0, 0.0, load], "cartilage.poissons_ratio": nu}
         if model == "slab":
             overrides["ligaments"] = []  # the FE models none (slack at the neutral pose anyway)
+            overrides.update(THESIS_BED)  # the campaign measures the independent springs; the scene's default bed is the coupled layer
         else:
             overrides.update({"geometry.plafond_gap_mm": thickness, "cartilage.thickness_mm": thickness})
         element = "Taylor-Hood P2-P1" if nu >= 0.49 else "P2"

@@ -8,7 +8,7 @@ wall time on log axes; analysis: the Pareto front per truth (points no other bea
 
 from __future__ import annotations
 
-from verification.campaign_model import Analysis, Campaign, Case, Figure
+from verification.campaign_model import THESIS_BED, Analysis, Campaign, Case, Figure
 from verification.campaign_model import ramp_overrides
 from verification.campaigns.cylinder_plane import CHECK_METRICS, FE_COMPARE_BASIS, SANITY_BASIS
 from verification.sides import TRUTH_STEPS
@@ -31,7 +31,7 @@ ERT_TRUTH_NOTE = (
 
 
 #: the DEM families: (name prefix, extra overrides, what)
-ERT_DEM_FAMILIES = (("dem", {}, "independent springs"), ("dem-coupled", {"cartilage.coupling": "thin-layer"}, "coupled thin layer"))
+ERT_DEM_FAMILIES = (("dem", THESIS_BED, "independent springs"), ("dem-coupled", {"cartilage.coupling": "thin-layer"}, "coupled thin layer"))
 
 
 def _ert_cases() -> list[Case]:

@@ -1,20 +1,21 @@
 """``subject``: standing and toe-off on the subject-like ankle, DEM and EDEM vs the FE slab (P2,
 1.0 mm), without ligaments (the FE models none), toe-off with ``ty`` fixed on both sides (its
 load has an antero-posterior component the frictionless FE cannot resist otherwise). Each with
-independent springs (``<scene>-<method>-vs-fe``) and with the coupled thin layer
-(``<scene>-<method>-coupled-vs-fe``, ``cartilage.coupling = "thin-layer"``); the four cases of a
+independent springs (``<scene>-<method>-vs-fe``, ``cartilage.coupling = "none"``) and with the coupled
+thin layer (``<scene>-<method>-coupled-vs-fe``, ``cartilage.coupling = "thin-layer"``, the scenes' default), each bed
+named by the overrides; the four cases of a
 scene share one FE run (the FE never reads the coupling: verification.runner's side store)."""
 
 from __future__ import annotations
 
-from verification.campaign_model import Analysis, Campaign
+from verification.campaign_model import COUPLED_BED, THESIS_BED, Analysis, Campaign
 from verification.campaigns.cylinder_plane import FE_COARSE, fe_comparison_case
 
 #: wall time with 2 jobs on 2 cores, nothing cached (measured: 66 s at load 3-5 on the shared 2-core machine, its 8
 #: cases running 2 FE runs; before the coupled cases and the shared FE, 136 s for 4 cases running 4)
 EXPECTED_TIME_S = 66.0
 #: the bed's variants: (name suffix, overrides, what)
-COUPLINGS = (("", {}, "independent springs"), ("-coupled", {"cartilage.coupling": "thin-layer"}, "coupled thin layer"))
+COUPLINGS = (("", THESIS_BED, "independent springs"), ("-coupled", COUPLED_BED, "coupled thin layer"))
 
 
 SUBJECT_SCENES = (

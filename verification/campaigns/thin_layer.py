@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from verification.campaign_model import Analysis, Campaign, Case, Figure
+from verification.campaign_model import THESIS_BED, Analysis, Campaign, Case, Figure
 from verification.campaigns.cylinder_plane import ERROR_PANELS, FE_COARSE, FE_TABLE_COLUMNS, fe_comparison_case
 
 #: the FE layer of the cylinder cases: 0.5 mm in-plane, two elements through the thickness (module docstring)
@@ -54,7 +54,7 @@ BASE_LOAD_N, BASE_THICKNESS_MM = 333.0, 2.0
 VARIANTS = {
     "coupled": ({"cartilage.coupling": "thin-layer"}, "coupled thin layer (Pade symbol)", "coupled, Pade"),
     "two-pole": ({"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole"}, "coupled thin layer (two-pole symbol)", "coupled, two-pole"),
-    "springs": ({}, "independent springs", "independent springs"),
+    "springs": (THESIS_BED, "independent springs", "independent springs"),  # named: the ankle scenes' default is the coupled layer
 }
 COUPLED_VARIANTS = ("coupled", "two-pole")
 #: (model, scene, sides, what)
