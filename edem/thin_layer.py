@@ -521,9 +521,10 @@ class LowRankUpdate:
             return False
         return all(a[:2] == b[:2] and np.array_equal(a[2], b[2]) and np.array_equal(a[3], b[3]) for a, b in zip(key, self.key))
 
-    def updated(self, z: sp.csr_matrix, changed: np.ndarray, delta: np.ndarray):
-        """solve(rhs) with A(w) for the weights changed by ``delta`` (k,) on the springs ``changed`` (k,)."""
-        z_k = z[:, changed].toarray()  # (V, k): each spring's column has its triangle's corners
+    def updated(self, z_t: sp.csr_matrix, changed: np.ndarray, delta: np.ndarray):
+        """solve(rhs) with A(w) for the weights changed by ``delta`` (k,) on the springs ``changed``
+        (k,); ``z_t`` (m, V): Z^T."""
+        z_k = z_t[changed].toarray().T  # (V, k): each spring's column has its triangle's corners
         new = [j for j in changed.tolist() if j not in self.columns]
         if new:
             solved = self.solve(z_k[:, np.searchsorted(changed, new)])
@@ -579,6 +580,11 @@ class LayerCompliance:
         """(V, m): the terms' Z stacked (V the sum of their vertex counts)."""
         return sp.vstack([t.z for t in self.terms]).tocsr() if len(self.terms) > 1 else self.terms[0].z
 
+    @functools.cached_property
+    def z_t(self) -> sp.csr_matrix:
+        """(m, V): Z^T, row-major, built once (a transposed view re-checks its format at each product)."""
+        return self.z.T.tocsr()
+
     def factorise_coupled(self, spring_weight: np.ndarray):
         """Solve with sigma H + Z diag(spring_weight) Z^T (V, V) for weights (m,) in N/mm: solve(rhs).
 
@@ -598,7 +604,7 @@ class LayerCompliance:
             if changed.size == 0:
                 return base.solve
             if changed.size <= LOW_RANK_MAX:
-                return base.updated(self.z, changed, spring_weight[changed] - base.weight[changed])
+                return base.updated(self.z_t, changed, spring_weight[changed] - base.weight[changed])
         solve = self._factorise(spring_weight)
         reuse["base"] = LowRankUpdate(key, spring_weight.copy(), solve)
         return solve

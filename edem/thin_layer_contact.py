@@ -87,7 +87,7 @@ class ActiveSystem:
         forces = lam[:, None] * rhs
         if nonzero.size:
             vertex[:, nonzero] = solve(np.asarray(layer.z @ loads))
-            forces[:, nonzero] -= lam[:, None] * np.asarray(layer.z.T @ vertex[:, nonzero])[active]
+            forces[:, nonzero] -= lam[:, None] * (layer.z_t[active] @ vertex[:, nonzero])
         return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
@@ -99,7 +99,7 @@ class ActiveSystem:
         f[self.active] = self.forces(u)
         w = self.local_mm_per_n * f
         if layer.coupled:
-            w = w + layer.z.T @ (self.vertex0 + self.vertex_per_mm @ u)
+            w = w + layer.z_t @ (self.vertex0 + self.vertex_per_mm @ u)
         return w
 
     def stiffness(self, directions: np.ndarray) -> np.ndarray:
