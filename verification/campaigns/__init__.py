@@ -14,7 +14,8 @@ vs the FE slab at five instants), ``sensitivity`` (h_max x ligament modulus, 20 
 stances, the thesis's fig. 4.3.10), ``quick`` (a subset for CI), and EDEM/DEM against the FE
 reference: ``cylinder-plane``, ``subject``, ``error-vs-runtime``; ``thin-layer`` (the coupled
 thin-layer bed and the independent springs against the FE); ``population`` (1000 seeded
-subject-like ankles over the stance, EDEM).
+subject-like ankles over the stance, EDEM) and ``population-coupled`` (the same on the coupled
+thin layer).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from verification.campaigns import (
     error_vs_runtime,
     fe_analytic,
     population,
+    population_coupled,
     quick,
     sensitivity,
     stability,
@@ -59,7 +61,7 @@ from verification.campaigns.stance import (
 )
 
 #: the registered campaign modules, in the order `edem verify --list` shows them
-CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, population)
+CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, population, population_coupled)
 
 
 def campaigns() -> dict[str, Campaign]:
