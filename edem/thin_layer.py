@@ -330,6 +330,25 @@ class SurfaceMesh:
         return mask
 
     @functools.cached_property
+    def edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """(the edge of each triangle's sides (n, 3) int, the two vertices of each edge (e, 2)),
+        numbered once, so the boundary of a set of triangles is a count (``boundary_of``)."""
+        tri = self.triangles
+        n_vertices = self.free_edge_vertex.shape[0]
+        sides = np.sort(np.stack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=1), axis=2)  # (n, 3, 2)
+        key, side_edge = np.unique(sides[..., 0] * n_vertices + sides[..., 1], return_inverse=True)
+        return side_edge.reshape(tri.shape), np.column_stack([key // n_vertices, key % n_vertices])
+
+    def boundary_of(self, cells: np.ndarray) -> np.ndarray:
+        """(n_vertices,) bool: the vertices on an edge that only one of the triangles ``cells`` has
+        (``boundary_vertices`` of those triangles, without sorting their edges)."""
+        side_edge, edge_vertices = self.edges
+        count = np.bincount(side_edge[cells].ravel(), minlength=edge_vertices.shape[0])
+        out = np.zeros(self.free_edge_vertex.shape[0], bool)
+        out[edge_vertices[count == 1].ravel()] = True
+        return out
+
+    @functools.cached_property
     def incidence_t(self) -> sp.csr_matrix:
         """(n_vertices, n) the incidence transposed, for growing masks ring by ring."""
         return self.incidence.T.tocsr()
@@ -382,7 +401,7 @@ class SurfaceMesh:
         if not dirichlet:
             free = np.zeros(self.free_edge_vertex.shape[0], bool)
         elif edge_at_cells:
-            free = self.free_edge_vertex | boundary_vertices(tri, self.free_edge_vertex.shape[0])
+            free = self.free_edge_vertex | self.boundary_of(cells)
         else:
             free = self.free_edge_vertex
         # Renumber the vertices the cells use, free-edge ones last (dropped below), in O(n).
