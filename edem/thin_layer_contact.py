@@ -415,12 +415,21 @@ class CoupledStep:
 
         ``released_before`` (n_springs,) bool over all of M's springs: the candidates out of
         contact at the previous time point. The first iterate of the active set is every
-        candidate but those (new candidates start in contact, as in a cold start)."""
+        candidate but those (new candidates start in contact, as in a cold start). Where the
+        layer's kept factor was built on the same operators (the gap laws' layer on the whole
+        surface, from one time point to the next), its contact set is the first iterate instead:
+        the first iteration then needs no factorisation, and new candidates that touch enter at
+        the second, as the programme's answer does not depend on the first iterate."""
+        initial = None if released_before is None else ~released_before[self.springs]
+        if self.column is None and initial is not None:
+            factored = self.layer.factored_set()
+            if factored is not None and np.any(factored & (self.overlap_mm > -np.inf)):
+                initial = factored
         return self._to_candidates(
             solve_thin_layer(
                 self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
-                initial_active=None if released_before is None else ~released_before[self.springs], column=self.column,
+                initial_active=initial, column=self.column,
             )
         )
 
