@@ -527,7 +527,8 @@ class LowRankUpdate:
         A(w)^-1 = A0^-1 - Y (I + D Z_k^T Y)^-1 D Z_k^T A0^-1,   Y = A0^-1 Z_k,  D = diag(w - w0)_k,
 
     (the Woodbury identity; the k x k capacitance is nonsingular whenever A(w) is). The columns Y
-    of the springs met so far are kept, so a spring toggling back and forth is solved for once.
+    of the springs met so far are kept (up to 8 LOW_RANK_MAX of them), so a spring toggling back
+    and forth is solved for once.
     """
 
     key: tuple  # LayerCompliance._operator_key() of the factored matrix
@@ -545,6 +546,8 @@ class LowRankUpdate:
         (k,); ``z_t`` (m, V): Z^T."""
         z_k = z_t[changed].toarray().T  # (V, k): each spring's column has its triangle's corners
         new = [j for j in changed.tolist() if j not in self.columns]
+        if len(self.columns) + len(new) > 8 * LOW_RANK_MAX:  # bounded memory: keep the columns in use
+            self.columns = {j: self.columns[j] for j in changed.tolist() if j in self.columns}
         if new:
             solved = self.solve(z_k[:, np.searchsorted(changed, new)])
             self.columns.update(zip(new, solved.T))
