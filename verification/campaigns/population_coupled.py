@@ -12,10 +12,11 @@ from verification.campaign_model import Campaign
 from verification.campaigns.population import POPULATION_SIZE
 from verification.campaigns.population import campaign as population_campaign
 
-#: not measured over the 1000 subjects: 60 subjects took 287 s with --jobs 2 at load 17-18, where
-#: the independent springs' took 67-76 s (3.8-4.3x); the population's 63 s on a quiet machine
+#: not measured over the 1000 subjects: 60 subjects with --jobs 2 took 47.1 s at load 6.6-7.6
+#: where the independent springs' took 15.4 s just before (3.1x; 287 s against 67-76 s at load
+#: 17-18 before the layer's boundary count); the population's 63 s on a quiet machine
 #: (population.py) times that ratio
-EXPECTED_TIME_S = 4.0 * 63.0
+EXPECTED_TIME_S = 3.1 * 63.0
 
 
 def campaign(n: int = POPULATION_SIZE) -> Campaign:
