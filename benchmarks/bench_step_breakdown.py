@@ -95,8 +95,8 @@ def main() -> None:
     args = parser.parse_args()
     for owner, attribute, label in STAGES:
         setattr(owner, attribute, timed(getattr(owner, attribute), label))
-    for name, small, large in CASES:
-        for size in (small,) if args.quick else (small, large):
+    for name, sizes in CASES:
+        for size in sizes[:1] if args.quick else sizes:
             breakdown(name, size, args.rounds)
 
 

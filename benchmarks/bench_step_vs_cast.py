@@ -1,7 +1,7 @@
-"""EDEM step vs a bare Embree cast of the same rays (issue 13: the step should cost <= 3x the cast).
+"""EDEM step vs a bare Embree cast of the same rays (issue 23: <= 3x the cast at >= 10k springs, <= 5x at 3k).
 
-For each built-in stance scene (the idealised ankle and the subject-like ankle) at ~3k and ~30k
-springs, one run measures in the same process, median of several rounds:
+For each built-in stance scene (the idealised ankle and the subject-like ankle) at ~3k, ~10k and
+~30k springs, one run measures in the same process, median of several rounds:
 
 * the EDEM solver alone (``edem.solver.run`` with the Embree scene built beforehand, as a gait
   study would), per time point;
@@ -23,6 +23,7 @@ Absolute times vary 2-3x between runs on a shared machine; the ratio is measured
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -39,9 +40,13 @@ from edem.scene import load_scene  # noqa: E402
 from edem.solver import run  # noqa: E402
 from edem.springs import Placement  # noqa: E402
 
-# (scene, mesh size giving ~3k springs, ~30k springs); sizes measured on the built-in builders.
-CASES = (("ideal-stance", 0.94, 0.3), ("subject-stance", None, 0.3))
-TARGET_RATIO = 3.0
+# (scene, mesh sizes giving ~3k, ~10k and ~30k springs); sizes measured on the built-in builders.
+CASES = (("ideal-stance", (0.94, 0.5, 0.3)), ("subject-stance", (None, 0.45, 0.3)))
+
+
+def target_ratio(n_springs: int) -> float:
+    """Issue 23: per-call overhead, not work, dominates a step below 10k springs."""
+    return 3.0 if n_springs >= 10_000 else 5.0
 
 
 def bare_rays(scene, steps) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -83,11 +88,11 @@ def bench(name: str, mesh_size_mm: float | None, rounds: int) -> tuple[int, floa
         cast_times.append(bare_pass())
     n_steps = len(result.steps)
     step, cast, geometry = (statistics.median(x) / n_steps for x in (step_times, cast_times, geometry_times))
-    ratio = step / cast
+    ratio, target = step / cast, target_ratio(result.n_springs)
     print(
         f"{name:15s} {result.n_springs:7d} springs x {n_steps:3d} steps: EDEM {1e3 * step:7.3f} ms/step "
         f"(geometry {1e3 * geometry:6.3f}), bare Embree {1e3 * cast:6.3f} ms/step, "
-        f"ratio {ratio:5.2f}x (target <= {TARGET_RATIO:g}x: {'met' if ratio <= TARGET_RATIO else 'MISSED'})"
+        f"ratio {ratio:5.2f}x (target <= {target:g}x: {'met' if ratio <= target else 'MISSED'})"
     )
     return result.n_springs, step, cast
 
@@ -161,15 +166,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--quick", action="store_true", help="only the ~3k-spring cases")
+    parser.add_argument("--scenes", default="ideal-stance,subject-stance")
     parser.add_argument("--floor", action="store_true", help="also the skeleton step (module docstring) against the bare cast")
     parser.add_argument("--sweep", action="store_true", help="the ideal ankle over seven spring counts (348-28862), fitted as a fixed plus a per-spring part")
     args = parser.parse_args()
-    print(f"median of {args.rounds} rounds, per time point")
+    print(f"median of {args.rounds} rounds, per time point; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     if args.sweep:
         sweep("ideal-stance", (3.0, 2.0, 1.4, 0.94, 0.6, 0.4, 0.3), args.rounds)
         return
-    for name, small, large in CASES:
-        for size in (small,) if args.quick else (small, large):
+    for name, sizes in CASES:
+        if name not in args.scenes.split(","):
+            continue
+        for size in sizes[:1] if args.quick else sizes:
             bench(name, size, args.rounds)
             if args.floor:
                 floor(name, size, args.rounds)

@@ -100,7 +100,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import cho_solve_banded, cholesky_banded
+from scipy.linalg import cho_solve_banded, cholesky_banded, lu_factor, lu_solve
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 from scipy.sparse.linalg import splu
 
@@ -330,6 +330,25 @@ class SurfaceMesh:
         return mask
 
     @functools.cached_property
+    def edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """(the edge of each triangle's sides (n, 3) int, the two vertices of each edge (e, 2)),
+        numbered once, so the boundary of a set of triangles is a count (``boundary_of``)."""
+        tri = self.triangles
+        n_vertices = self.free_edge_vertex.shape[0]
+        sides = np.sort(np.stack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]], axis=1), axis=2)  # (n, 3, 2)
+        key, side_edge = np.unique(sides[..., 0] * n_vertices + sides[..., 1], return_inverse=True)
+        return side_edge.reshape(tri.shape), np.column_stack([key // n_vertices, key % n_vertices])
+
+    def boundary_of(self, cells: np.ndarray) -> np.ndarray:
+        """(n_vertices,) bool: the vertices on an edge that only one of the triangles ``cells`` has
+        (``boundary_vertices`` of those triangles, without sorting their edges)."""
+        side_edge, edge_vertices = self.edges
+        count = np.bincount(side_edge[cells].ravel(), minlength=edge_vertices.shape[0])
+        out = np.zeros(self.free_edge_vertex.shape[0], bool)
+        out[edge_vertices[count == 1].ravel()] = True
+        return out
+
+    @functools.cached_property
     def incidence_t(self) -> sp.csr_matrix:
         """(n_vertices, n) the incidence transposed, for growing masks ring by ring."""
         return self.incidence.T.tocsr()
@@ -382,7 +401,7 @@ class SurfaceMesh:
         if not dirichlet:
             free = np.zeros(self.free_edge_vertex.shape[0], bool)
         elif edge_at_cells:
-            free = self.free_edge_vertex | boundary_vertices(tri, self.free_edge_vertex.shape[0])
+            free = self.free_edge_vertex | self.boundary_of(cells)
         else:
             free = self.free_edge_vertex
         # Renumber the vertices the cells use, free-edge ones last (dropped below), in O(n).
@@ -494,6 +513,54 @@ class OperatorPattern:
         return solve
 
 
+# Past this many changed spring weights the coupled matrix is refactored rather than corrected by
+# the Woodbury identity: each changed weight costs one solve with the old factor, and on the ankle
+# surfaces (14k vertices, half-bandwidth 156) a banded factorisation cost about 16 single solves
+# (benchmarks/bench_thin_layer.py).
+LOW_RANK_MAX = 8
+
+
+@dataclass
+class LowRankUpdate:
+    """A factor of A(w0) = sigma H + Z diag(w0) Z^T, reused for A(w) with w - w0 nonzero on k springs:
+
+        A(w)^-1 = A0^-1 - Y (I + D Z_k^T Y)^-1 D Z_k^T A0^-1,   Y = A0^-1 Z_k,  D = diag(w - w0)_k,
+
+    (the Woodbury identity; the k x k capacitance is nonsingular whenever A(w) is). The columns Y
+    of the springs met so far are kept (up to 8 LOW_RANK_MAX of them), so a spring toggling back
+    and forth is solved for once.
+    """
+
+    key: tuple  # LayerCompliance._operator_key() of the factored matrix
+    weight: np.ndarray  # (m,) w0
+    solve: object  # A0^-1
+    columns: dict = field(default_factory=dict)  # spring -> its column of Y (V,)
+
+    def matches(self, key: tuple, n_springs: int) -> bool:
+        if self.weight.shape[0] != n_springs or len(key) != len(self.key):
+            return False
+        return all(a[:2] == b[:2] and np.array_equal(a[2], b[2]) and np.array_equal(a[3], b[3]) for a, b in zip(key, self.key))
+
+    def updated(self, z_t: sp.csr_matrix, changed: np.ndarray, delta: np.ndarray):
+        """solve(rhs) with A(w) for the weights changed by ``delta`` (k,) on the springs ``changed``
+        (k,); ``z_t`` (m, V): Z^T."""
+        z_k = z_t[changed].toarray().T  # (V, k): each spring's column has its triangle's corners
+        new = [j for j in changed.tolist() if j not in self.columns]
+        if len(self.columns) + len(new) > 8 * LOW_RANK_MAX:  # bounded memory: keep the columns in use
+            self.columns = {j: self.columns[j] for j in changed.tolist() if j in self.columns}
+        if new:
+            solved = self.solve(z_k[:, np.searchsorted(changed, new)])
+            self.columns.update(zip(new, solved.T))
+        y = np.column_stack([self.columns[j] for j in changed.tolist()])
+        capacitance = lu_factor(np.eye(changed.size) + delta[:, None] * (z_k.T @ y), check_finite=False)
+
+        def solve(rhs: np.ndarray) -> np.ndarray:
+            x = self.solve(rhs)
+            return x - y @ lu_solve(capacitance, delta[:, None] * (z_k.T @ x) if x.ndim > 1 else delta * (z_k.T @ x), check_finite=False)
+
+        return solve
+
+
 @dataclass(frozen=True)
 class SmoothingTerm:
     """One term sigma Z^T H^-1 Z of the compliance (module docstring): Z = Q^T diag(weight)."""
@@ -524,6 +591,7 @@ class LayerCompliance:
 
     local_mm_per_n: np.ndarray  # (m,)
     terms: tuple[SmoothingTerm, ...] = ()
+    reuse: dict | None = field(default=None, compare=False, repr=False)  # the last factor (factorise_coupled)
 
     @property
     def coupled(self) -> bool:
@@ -534,21 +602,71 @@ class LayerCompliance:
         """(V, m): the terms' Z stacked (V the sum of their vertex counts)."""
         return sp.vstack([t.z for t in self.terms]).tocsr() if len(self.terms) > 1 else self.terms[0].z
 
+    @functools.cached_property
+    def _signed_block(self) -> sp.csc_matrix:
+        """diag(sigma_i H_i) (V, V), the part of the coupled matrix that does not depend on the weights."""
+        return sp.block_diag([t.sigma * t.h for t in self.terms], format="csc")
+
+    @functools.cached_property
+    def z_t(self) -> sp.csr_matrix:
+        """(m, V): Z^T, row-major, built once (a transposed view re-checks its format at each product)."""
+        return self.z.T.tocsr()
+
     def factorise_coupled(self, spring_weight: np.ndarray):
-        """Factor of sigma H + Z diag(spring_weight) Z^T (V, V) for weights (m,) in N/mm: solve(rhs).
+        """Solve with sigma H + Z diag(spring_weight) Z^T (V, V) for weights (m,) in N/mm: solve(rhs).
+
+        The active-set iteration and the viscoelastic increment ask for matrices that differ from
+        the last factored one in a few springs' weights only (the springs that changed state), so
+        the last factor is kept (``reuse``, shared by the layers built on the same operators): the
+        same weights reuse it as it is, a few changed weights (at most LOW_RANK_MAX) correct it by
+        the Woodbury identity (``LowRankUpdate``, exact to round-off), and more refactor.
+        """
+        reuse = self.reuse
+        if reuse is None:
+            return self._factorise(spring_weight)
+        base = reuse.get("base")
+        key = self._operator_key()
+        if base is not None and base.matches(key, spring_weight.shape[0]):
+            changed = np.flatnonzero(spring_weight != base.weight)
+            if changed.size == 0:
+                return base.solve
+            if changed.size <= LOW_RANK_MAX:
+                return base.updated(self.z_t, changed, spring_weight[changed] - base.weight[changed])
+        solve = self._factorise(spring_weight)
+        reuse["base"] = LowRankUpdate(key, spring_weight.copy(), solve)
+        return solve
+
+    def factored_set(self) -> np.ndarray | None:
+        """(m,) bool: the springs in contact (positive weight) in the kept factor, if it was
+        built on these operators; None otherwise. A first contact set for the active-set
+        iteration that needs no factorisation."""
+        base = None if self.reuse is None else self.reuse.get("base")
+        if base is None or not base.matches(self._operator_key(), self.local_mm_per_n.shape[0]):
+            return None
+        return base.weight > 0.0
+
+    def _operator_key(self) -> tuple:
+        """What the factored matrix depends on besides the spring weights: each term's sign, its
+        pattern (by identity), H's data and the weights c_nl of Z."""
+        return tuple((t.sigma, id(t.pattern), t.h.data, t.weight) for t in self.terms)
+
+    def _factorise(self, spring_weight: np.ndarray):
+        """Factor of sigma H + Z diag(spring_weight) Z^T: solve(rhs).
 
         One term: sigma (H + sigma Z diag(x) Z^T), SPD (module docstring), by the pattern's
         banded Cholesky. Two: the block matrix is symmetric but indefinite (its blocks' signs
-        differ), so SuperLU factors it (column approximate minimum degree).
+        differ), so SuperLU factors it in its symmetric mode (minimum degree on A + A^T, the
+        diagonal pivot kept unless below a tenth of the column's largest entry): on the 30k-spring
+        ankle 0.6 s against 0.75 s for column approximate minimum degree, with 38 % less fill and
+        the same residual (benchmarks/bench_thin_layer.py).
         """
         if len(self.terms) == 1:
             term = self.terms[0]
             solve = term.pattern.factorise(term.coupled_data(spring_weight))
             return solve if term.sigma > 0 else (lambda rhs: -solve(rhs))
-        coupling = self.z @ sp.diags(spring_weight) @ self.z.T
-        block = sp.block_diag([t.sigma * t.h for t in self.terms]) + coupling
+        block = self._signed_block + self.z @ (self.z_t.multiply(spring_weight[:, None])).tocsc()
         try:
-            return splu(block.tocsc(), permc_spec="COLAMD").solve
+            return splu(block.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve
         except RuntimeError as error:  # SuperLU's "singular matrix"
             raise SolverError(f"the coupled thin-layer matrix is singular ({error})") from None
 
@@ -583,4 +701,4 @@ def layer_compliance(
         c_nl = abs(strength) * h_over_g
         smoothing, pattern = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl, edge_at_cells, dirichlet)
         terms.append(SmoothingTerm(float(np.sign(strength)), (pattern.q.T @ sp.diags(c_nl)).tocsr(), smoothing, np.broadcast_to(c_nl, cells.shape), pattern))
-    return LayerCompliance(model.local * h_over_g / mesh.area_mm2[cells], tuple(terms))
+    return LayerCompliance(model.local * h_over_g / mesh.area_mm2[cells], tuple(terms), mesh.memo.setdefault("factor", {}))

@@ -87,7 +87,7 @@ class ActiveSystem:
         forces = lam[:, None] * rhs
         if nonzero.size:
             vertex[:, nonzero] = solve(np.asarray(layer.z @ loads))
-            forces[:, nonzero] -= lam[:, None] * np.asarray(layer.z.T @ vertex[:, nonzero])[active]
+            forces[:, nonzero] -= lam[:, None] * (layer.z_t[active] @ vertex[:, nonzero])
         return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
@@ -99,7 +99,7 @@ class ActiveSystem:
         f[self.active] = self.forces(u)
         w = self.local_mm_per_n * f
         if layer.coupled:
-            w = w + layer.z.T @ (self.vertex0 + self.vertex_per_mm @ u)
+            w = w + layer.z_t @ (self.vertex0 + self.vertex_per_mm @ u)
         return w
 
     def stiffness(self, directions: np.ndarray) -> np.ndarray:
@@ -417,12 +417,21 @@ class CoupledStep:
 
         ``released_before`` (n_springs,) bool over all of M's springs: the candidates out of
         contact at the previous time point. The first iterate of the active set is every
-        candidate but those (new candidates start in contact, as in a cold start)."""
+        candidate but those (new candidates start in contact, as in a cold start). Where the
+        layer's kept factor was built on the same operators (the gap laws' layer on the whole
+        surface, from one time point to the next), its contact set is the first iterate instead:
+        the first iteration then needs no factorisation, and new candidates that touch enter at
+        the second, as the programme's answer does not depend on the first iterate."""
+        initial = None if released_before is None else ~released_before[self.springs]
+        if self.column is None and initial is not None:
+            factored = self.layer.factored_set()
+            if factored is not None and np.any(factored & (self.overlap_mm > -np.inf)):
+                initial = factored
         return self._to_candidates(
             solve_thin_layer(
                 self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
-                initial_active=None if released_before is None else ~released_before[self.springs], column=self.column,
+                initial_active=initial, column=self.column,
             )
         )
 

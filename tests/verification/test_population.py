@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -55,3 +56,20 @@ def test_population_on_a_dask_cluster_gives_the_same_metrics(tmp_path):
     # Same inputs, same code, same machine: bit-identical numbers whoever runs them.
     assert _metrics(remote) == _metrics(local)
     assert json.loads(Path(tmp_path / "dask" / "metrics.json").read_text())["scheduler"] == cluster.scheduler_address
+
+
+def test_population_coupled_runs_the_same_subjects_on_the_coupled_layer(tmp_path):
+    """The coupled campaign's subjects are the population's (same seeded geometry), every one
+    solves its stance on the coupled layer (the resolved scene says so), and its centre of
+    pressure lies on the talus as a weighted mean of spring centroids must."""
+    from verification.campaigns import population_coupled
+
+    coupled, springs = population_coupled.campaign(2), population.campaign(2)
+    assert [c.params for c in coupled.cases] == [c.params for c in springs.cases]
+    summary = run_campaign(coupled, tmp_path / "pop", jobs=1, report=False)
+    assert summary["exit_status"] == 0
+    for case in coupled.cases:
+        m = _metrics(summary)[case.name]
+        assert m["a_peak_pressure_mpa"] > 0 and abs(m["a_cop_x_mm"]) <= 0.5 * case.params["talar_width_mm"]
+        resolved = tomllib.loads((tmp_path / "pop" / "cases" / case.name / "a-edem" / "scene.toml").read_text())
+        assert resolved["cartilage"]["coupling"] == "thin-layer"

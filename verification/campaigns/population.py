@@ -40,8 +40,10 @@ def population_parameters(n: int = POPULATION_SIZE, seed: int = POPULATION_SEED)
     return [{k: round(float(v), 6) for k, v in zip(names, row)} for row in draws]
 
 
-def _case(index: int, params: dict[str, float]) -> Case:
+def _case(index: int, params: dict[str, float], coupling: str = "none") -> Case:
     overrides = {f"geometry.{k}": v for k, v in params.items()}
+    if coupling != "none":
+        overrides["cartilage.coupling"] = coupling  # the scene's threshold law, its layer the candidates (Pade symbol)
     overrides.update({
         "geometry.mesh_size_mm": POPULATION_MESH_MM,
         "geometry.fixed_mesh_size_mm": POPULATION_MESH_MM,
@@ -49,7 +51,7 @@ def _case(index: int, params: dict[str, float]) -> Case:
     })
     return Case(
         f"subject{index:04d}",
-        f"EDEM stance, subject-like ankle {index} (R {params['talar_radius_mm']:.1f} mm, width "
+        f"EDEM stance{' on the coupled thin layer' if coupling != 'none' else ''}, subject-like ankle {index} (R {params['talar_radius_mm']:.1f} mm, width "
         f"{params['talar_width_mm']:.1f} mm, gap {params['plafond_gap_mm']:.2f} mm, incongruity {params['incongruity']:.2f})",
         POPULATION_SCENE,
         ("edem",),
@@ -61,8 +63,10 @@ def _case(index: int, params: dict[str, float]) -> Case:
     )
 
 
-def campaign(n: int = POPULATION_SIZE) -> Campaign:
-    cases = tuple(_case(i, p) for i, p in enumerate(population_parameters(n)))
+def campaign(n: int = POPULATION_SIZE, coupling: str = "none") -> Campaign:
+    """The population; ``coupling = "thin-layer"``: the same subjects on the coupled layer (the
+    ``population-coupled`` campaign)."""
+    cases = tuple(_case(i, p, coupling) for i, p in enumerate(population_parameters(n)))
     names = tuple(c.name for c in cases)
     metrics = ("a_peak_pressure_mpa", "a_mean_contact_area_mm2", "a_cop_x_mm", "a_cop_y_mm")
     figures = (
@@ -78,10 +82,12 @@ def campaign(n: int = POPULATION_SIZE) -> Campaign:
         )
         for param in PLOTTED_PARAMETERS
     )
+    coupled = coupling != "none"
     return Campaign(
-        "population",
-        f"{n} seeded subject-like ankles (12 geometry parameters uniform in their anatomical ranges) over the stance, EDEM: "
-        "distributions of peak pressure, contact area and centre of pressure against the geometry.",
+        "population-coupled" if coupled else "population",
+        f"{n} seeded subject-like ankles (12 geometry parameters uniform in their anatomical ranges) over the stance, EDEM"
+        + (" on the coupled thin layer (Pade)" if coupled else "")
+        + ": distributions of peak pressure, contact area and centre of pressure against the geometry.",
         cases,
         figures,
         (),
