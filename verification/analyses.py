@@ -24,6 +24,10 @@ its declared band (the thesis's figures) and "unavailable" when their cases coul
   same reference): each of ``metrics`` of the model within ``strict`` up to ``strict_nu`` and
   within ``loose`` beyond, and its ``ratio_metric`` at most ``ratio`` times the baseline's. Rows
   that miss it are flagged with what they miss, and the notes say where in sentences.
+* ``fe-convergence``: per FE point, each compared quantity on three meshes: values, observed
+  order, Richardson extrapolation and each mesh's estimated error, with the meshes' DOFs, wall
+  time and peak memory (:mod:`verification.fe_convergence`); its ``values["entries"]`` are what
+  ``edem verify fe-convergence --refresh-reference`` stores. Reported.
 * ``trust``: the main job's opening answer in plain sentences with figures: DEM against the FE
   reference on the ideal ankle (where it agrees), over Poisson's ratio, cartilage thickness and a
   low load (where it breaks), and on the subject-like ankle.
@@ -500,6 +504,73 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def _size_pct(x: float | None) -> str:
+    """An unsigned error size (an FE error estimate has no sign), in %."""
+    return "–" if x is None or not math.isfinite(x) else f"{100.0 * x:.2f} %"
+
+
+def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Per point and quantity: the three meshes' values, order, extrapolation and errors; the
+    errors keyed for :func:`verification.fe_convergence.fe_relative_error` in ``values["entries"]``."""
+    from verification.fe_convergence import QUANTITIES, fe_key, richardson
+
+    out_rows, entries, points, notes = [], {}, [], []
+    for point in analysis.settings["points"]:
+        level_rows = [rows.get(n) for n in point["levels"]]
+        missing = [n for n, r in zip(point["levels"], level_rows) if r is None or any(s.get("status") != OK for s in r.get("sides", []))]
+        if missing:
+            why = "case not run" if level_rows[point["levels"].index(missing[0])] is None else _unavailable_message(rows[missing[0]])
+            out_rows.append({"cells": [point["point"], "all", "–", "–", "–", "–", "–", "–", "–", f"unavailable: {missing[0]}: {why}"]})
+            points.append({"point": point["point"], "unavailable": why})
+            continue
+        metrics = [r["metrics"] for r in level_rows]
+        dofs = [float(m["fe_n_dofs"]) for m in metrics]
+        sizes = [n ** (-1.0 / 3.0) for n in dofs]  # representative size h ~ N^(-1/3)
+        extra = rows.get(point["extra"]) if point.get("extra") else None
+        extra_ok = extra is not None and all(s.get("status") == OK for s in extra.get("sides", []))
+        level_errors: list[dict[str, float]] = [{} for _ in level_rows]
+        extra_errors: dict[str, float] = {}
+        record = {"point": point["point"], "mesh_sizes_mm": [r["case"]["options"]["mesh_size_mm"] for r in level_rows], "dofs": dofs,
+                  "wall_time_s": [float(m["fe_wall_time_s"]) for m in metrics], "peak_memory_mb": [m.get("fe_peak_memory_mb") for m in metrics], "quantities": {}}
+        for quantity, (value_metric, error_metric) in QUANTITIES.items():
+            values = [float(m[value_metric]) for m in metrics]
+            est = richardson(sizes, values)
+            record["quantities"][quantity] = est.to_dict()
+            for k, e in enumerate(est.errors):
+                level_errors[k][error_metric] = e
+            cells = [point["point"], quantity, ", ".join(_fmt(v, 4) for v in values), _fmt(est.order, 3),
+                     _fmt(est.extrapolated, 4) if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in est.errors)]
+            if extra_ok:
+                v = float(extra["metrics"][value_metric])
+                ref = est.extrapolated if est.asymptotic else values[-1]
+                spread = 0.0 if est.asymptotic else est.errors[-1]
+                extra_errors[error_metric] = abs(v - ref) / abs(ref) + spread
+                record["quantities"][quantity]["p1_value"] = v
+                record["quantities"][quantity]["p1_error"] = extra_errors[error_metric]
+                cells.append(f"{_fmt(v, 4)} ({_size_pct(extra_errors[error_metric])})")
+            else:
+                cells.append("–")
+            cells += [", ".join(f"{d / 1e3:.0f}k" for d in dofs),
+                      ", ".join(f"{t:.0f} s / {_fmt(None if mem is None or not math.isfinite(float(mem)) else float(mem) / 1e3, 2)} GB" for t, mem in zip(record["wall_time_s"], record["peak_memory_mb"]))]
+            out_rows.append({"cells": cells, "flag": not est.asymptotic})
+        for name, row, errors in zip(point["levels"], level_rows, level_errors):
+            entries[fe_key(point["scene"], point["side"], point["overrides"], row["case"]["options"])] = {"case": name, "errors": errors}
+        if extra_ok:
+            entries[fe_key(point["scene"], point["side"], point["overrides"], extra["case"]["options"])] = {"case": point["extra"], "errors": extra_errors}
+        points.append(record)
+    notes.append("Values coarsest mesh first; h ~ N_dofs^(-1/3) represents each mesh (the mesher halves M's triangles and sets ceil(t / size) layers, so the "
+                 "refinement ratios differ); order from f(h) = f0 + C h^p through the three values; error of each mesh |f_i - f0| / |f0|. Not asymptotic (flagged): "
+                 "the differences change sign or the order is outside 0.5-4; each mesh's error is then the largest difference to the other meshes.")
+    notes.append("P1 column: quick's P1 reference at 1.0 mm and its error against the extrapolation (against the finest mesh plus that mesh's error when not asymptotic).")
+    return {
+        "columns": ["point", "quantity", "values (3 meshes)", "order", "extrapolated", "error of each mesh", "P1 1.0 mm (error)", "DOFs", "time / peak memory"],
+        "rows": out_rows,
+        "status": REPORTED if entries else UNAVAILABLE,
+        "notes": notes,
+        "values": {"points": points, "entries": entries},
+    }
+
+
 ANALYSES: dict[str, Callable[[Any, dict[str, dict[str, Any]]], dict[str, Any]]] = {
     "order": order_analysis,
     "thesis": thesis_analysis,
@@ -508,6 +579,7 @@ ANALYSES: dict[str, Callable[[Any, dict[str, dict[str, Any]]], dict[str, Any]]] 
     "pareto": pareto_analysis,
     "goal": goal_analysis,
     "trust": trust_analysis,
+    "fe-convergence": fe_convergence_analysis,
 }
 
 

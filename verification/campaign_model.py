@@ -24,6 +24,7 @@ from typing import Any
 
 from geometries.errors import InputError
 from verification.analyses import ANALYSES
+from verification.fe_convergence import FE_VALUE_DESCRIPTIONS
 from verification.metrics import COMPARISON_METRICS, COP_METRICS, SERIES_METRICS
 from verification.sides import check_side
 from verification.verdicts import Basis, bases_for
@@ -71,6 +72,7 @@ VALUES_AT_REFERENCE_TIMES = (
 )
 
 METRICS.update(COP_METRICS)
+METRICS.update(FE_VALUE_DESCRIPTIONS)
 
 OUTCOMES = ("converges", "refused")
 
