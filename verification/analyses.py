@@ -265,9 +265,16 @@ def sensitivity_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str,
 
 
 def table_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """One row per case, one column per metric (``settings["columns"]``: header, metric, scale);
-    cases that did not run give their reason instead of numbers."""
-    columns = analysis.settings["columns"]
+    """One row per case, one column per metric (``settings["columns"]``: header, metric, scale;
+    or header and ``fe_error``: the FE reference's own estimated error of that comparison metric,
+    verification.fe_convergence, "unknown" when its run is not in the study); cases that did not
+    run give their reason instead of numbers."""
+    from verification.fe_convergence import UNKNOWN_FE_ERROR, fe_relative_error, load_reference
+
+    all_columns = analysis.settings["columns"]
+    columns = [c for c in all_columns if "metric" in c]
+    fe_columns = [c for c in all_columns if "fe_error" in c]
+    reference = load_reference() if fe_columns else None
     out_rows, values = [], []
     for name in analysis.cases:
         row = rows.get(name)
@@ -278,11 +285,14 @@ def table_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         elif any(s.get("status") != OK for s in row.get("sides", [])):
             side = next(s for s in row["sides"] if s.get("status") != OK)
             note = f"{side['side']} {side['status']}: {_unavailable_message(row)}"
-        values.append({"case": name, "values": {c["metric"]: v for c, v in zip(columns, numbers)}, "note": note})
-        out_rows.append({"cells": [name] + [_fmt(v) for v in numbers] + [note]})
+        fe_errors = fe_relative_error(row, reference) if fe_columns and row is not None else None
+        fe_cells = [UNKNOWN_FE_ERROR if fe_errors is None or c["fe_error"] not in fe_errors else _size_pct(fe_errors[c["fe_error"]]) for c in fe_columns]
+        values.append({"case": name, "values": {c["metric"]: v for c, v in zip(columns, numbers)}, "note": note,
+                       **({"fe_error": fe_errors} if fe_columns else {})})
+        out_rows.append({"cells": [name] + [_fmt(v) for v in numbers] + fe_cells + [note]})
     available = any(v is not None for entry in values for v in entry["values"].values())
     return {
-        "columns": ["case"] + [c["header"] for c in columns] + ["note"],
+        "columns": ["case"] + [c["header"] for c in columns] + [c["header"] for c in fe_columns] + ["note"],
         "rows": out_rows,
         "status": REPORTED if available else UNAVAILABLE,
         "notes": [],
@@ -486,6 +496,9 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         )
     elif s["subject"] in rows:
         sentences.append(f"Subject-like ankle: not compared here ({_unavailable_message(rows[s['subject']])}).")
+    from verification.fe_convergence import fe_error_text, fe_relative_error, load_reference
+
+    reference = load_reference()
     table = []
     for name in analysis.cases:
         row = rows.get(name)
@@ -494,9 +507,10 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         p, a, u = _signed(row, "peak_pressure_mpa"), _signed(row, "mean_contact_area_mm2"), _signed(row, "displacement_norm_mm")
         l2_row = _metric(row, "pressure_l2_rel_error")
         table.append({"cells": [name, row["status"], _fmt(p[0], 3), _fmt(p[1], 3), _pct(p[2]), _fmt(a[0], 4), _fmt(a[1], 4), _pct(a[2]), _pct(u[2]),
-                                "–" if l2_row is None else f"{100 * l2_row:.0f} %"], "flag": row["status"] == "flagged"})
+                                "–" if l2_row is None else f"{100 * l2_row:.0f} %", fe_error_text(fe_relative_error(row, reference))], "flag": row["status"] == "flagged"})
     return {
-        "columns": ["case", "verdict", "DEM peak (MPa)", "FE peak (MPa)", "peak diff", "DEM area (mm²)", "FE area (mm²)", "area diff", "displacement diff", "pressure L2"],
+        "columns": ["case", "verdict", "DEM peak (MPa)", "FE peak (MPa)", "peak diff", "DEM area (mm²)", "FE area (mm²)", "area diff", "displacement diff", "pressure L2",
+                    "FE's own error (peak / area / |u|)"],
         "rows": table,
         "status": FLAGGED if any(r["flag"] for r in table) else REPORTED,
         "notes": [s.get("fe_note", "")] if s.get("fe_note") else [],
@@ -530,7 +544,7 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
         extra_ok = extra is not None and all(s.get("status") == OK for s in extra.get("sides", []))
         level_errors: list[dict[str, float]] = [{} for _ in level_rows]
         extra_errors: dict[str, float] = {}
-        record = {"point": point["point"], "mesh_sizes_mm": [r["case"]["options"]["mesh_size_mm"] for r in level_rows], "dofs": dofs,
+        record = {"point": point["point"], "mesh_sizes_mm": [r["options"]["mesh_size_mm"] for r in level_rows], "dofs": dofs,
                   "wall_time_s": [float(m["fe_wall_time_s"]) for m in metrics], "peak_memory_mb": [m.get("fe_peak_memory_mb") for m in metrics], "quantities": {}}
         for quantity, (value_metric, error_metric) in QUANTITIES.items():
             values = [float(m[value_metric]) for m in metrics]
@@ -554,9 +568,9 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
                       ", ".join(f"{t:.0f} s / {_fmt(None if mem is None or not math.isfinite(float(mem)) else float(mem) / 1e3, 2)} GB" for t, mem in zip(record["wall_time_s"], record["peak_memory_mb"]))]
             out_rows.append({"cells": cells, "flag": not est.asymptotic})
         for name, row, errors in zip(point["levels"], level_rows, level_errors):
-            entries[fe_key(point["scene"], point["side"], point["overrides"], row["case"]["options"])] = {"case": name, "errors": errors}
+            entries[fe_key(point["scene"], point["side"], point["overrides"], row["options"])] = {"case": name, "errors": errors}
         if extra_ok:
-            entries[fe_key(point["scene"], point["side"], point["overrides"], extra["case"]["options"])] = {"case": point["extra"], "errors": extra_errors}
+            entries[fe_key(point["scene"], point["side"], point["overrides"], extra["options"])] = {"case": point["extra"], "errors": extra_errors}
         points.append(record)
     notes.append("Values coarsest mesh first; h ~ N_dofs^(-1/3) represents each mesh (the mesher halves M's triangles and sets ceil(t / size) layers, so the "
                  "refinement ratios differ); order from f(h) = f0 + C h^p through the three values; error of each mesh |f_i - f0| / |f0|. Not asymptotic (flagged): "

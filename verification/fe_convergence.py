@@ -208,22 +208,54 @@ def load_reference(path: str | Path | None = None) -> dict[str, Any]:
 
 def fe_relative_error(case: Any, reference: dict[str, Any] | None = None) -> dict[str, float] | None:
     """The estimated relative error of the FE reference side of ``case`` (a
-    verification.campaign_model.Case whose last side is an FE side), per comparison metric
-    (``peak_pressure_rel_error``, ``p98_pressure_rel_error``, ``contact_area_rel_error``,
-    ``displacement_rel_error``): what a band must exceed before it can judge. None when the case
-    has no FE reference or its FE run is not in the stored study (its error is unknown)."""
-    if len(case.sides) < 2 or not case.sides[-1].startswith("fe-"):
+    verification.campaign_model.Case, or a campaign's case row: a dict with "scene", "sides"
+    (names, or the side records of verification.runner), "overrides" and "options", whose last
+    side is an FE side), per comparison metric (``peak_pressure_rel_error``,
+    ``p98_pressure_rel_error``, ``contact_area_rel_error``, ``displacement_rel_error``): what a
+    band must exceed before it can judge. None when the case has no FE reference or its FE run is
+    not in the stored study (its error is unknown)."""
+    d = case if isinstance(case, dict) else case.definition()
+    sides = tuple(s["side"] if isinstance(s, dict) else s for s in d["sides"])
+    if len(sides) < 2 or not sides[-1].startswith("fe-"):
         return None
     data = load_reference() if reference is None else reference
-    entry = data["entries"].get(fe_key(case.scene, case.sides[-1], case.overrides, case.options))
+    entry = data["entries"].get(fe_key(d["scene"], sides[-1], d.get("overrides") or {}, d.get("options") or {}))
     if entry is None:
         return None
     return {metric: float(value) for metric, value in entry["errors"].items()}
 
 
+def write_reference(summary: dict[str, Any], path: str | Path | None = None) -> Path:
+    """Store the errors of an ``fe-convergence`` campaign summary (its analysis's ``entries``)
+    in :data:`REFERENCE_FILE` (or ``path``), with the study's figures beside them. InputError
+    when the summary holds no estimate (every point unavailable)."""
+    import datetime as _dt
+
+    from edem.errors import InputError
+
+    result = next((a for a in summary.get("analyses", []) if a.get("kind") == "fe-convergence"), None)
+    entries = (result or {}).get("values", {}).get("entries") or {}
+    if not entries:
+        raise InputError("the fe-convergence campaign produced no error estimate (its FE runs unavailable or failed)", key="analyses",
+                         expected="the three meshes of at least one point solved")
+    file = Path(path) if path is not None else REFERENCE_FILE
+    data = {
+        "what": "estimated relative discretisation error of FE reference runs (edem verify fe-convergence --refresh-reference; verification.fe_convergence)",
+        "refreshed_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "entries": dict(sorted(entries.items())),
+        "points": result["values"]["points"],
+    }
+    file.write_text(json.dumps(data, indent=1, sort_keys=False) + "\n", encoding="utf-8")
+    return file
+
+
+#: what a table cell says for an FE reference whose error is not in the study
+UNKNOWN_FE_ERROR = "unknown"
+
+
 def fe_error_text(errors: dict[str, float] | None) -> str:
-    """One line for a campaign table: the FE's own estimated errors, or that they are unknown."""
+    """One cell of a campaign table: the FE's own estimated errors (peak / area / |u|), or that
+    they are unknown (the run is not in the fe-convergence study)."""
     if errors is None:
-        return "FE error unknown (not in the fe-convergence study)"
-    short = {"peak_pressure_rel_error": "peak", "p98_pressure_rel_error": "p98", "contact_area_rel_error": "area", "displacement_rel_error": "|u|"}
-    return "FE error " + ", ".join(f"{short.get(m, m)} {v:.1%}" for m, v in errors.items())
+        return UNKNOWN_FE_ERROR
+    return " / ".join(f"{100.0 * errors[m]:.1f} %" if m in errors else "–" for m in ("peak_pressure_rel_error", "contact_area_rel_error", "displacement_rel_error"))

@@ -646,6 +646,7 @@ def _run_campaign_locked(
                 "tolerance": case.tolerance,
                 "verdicts": verdicts,
                 "params": case.params,
+                "options": case.options,
                 "maps": case.maps,
                 "wall_time_s": record["wall_time_s"],
                 "cached": cached[case.name],

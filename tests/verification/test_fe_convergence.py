@@ -89,3 +89,29 @@ def test_a_case_finds_the_error_of_its_own_fe_run_and_only_that():
     assert fe_relative_error(_case({"mesh_size_mm": 1.0, "degree": 1}), reference) is None
     assert fe_relative_error(_case({"mesh_size_mm": 1.0, "degree": 2}, {"cartilage.poissons_ratio": 0.3}), reference) is None
     assert fe_relative_error(_case({}, sides=("edem", "dem")), reference) is None
+
+
+def test_a_campaign_table_shows_the_fe_error_of_a_studied_run_and_says_unknown_otherwise(tmp_path, monkeypatch):
+    """The table analysis's fe_error columns: the stored estimate for a case whose FE run is in
+    the study, "unknown" for one whose run is not (another mesh size)."""
+    import json
+
+    from verification import fe_convergence
+    from verification.analyses import table_analysis
+    from verification.campaign_model import Analysis
+
+    studied = {"mesh_size_mm": 1.0, "degree": 2}
+    key = fe_key("ideal-standing", "fe-slab", {"cartilage.poissons_ratio": 0.42}, studied)
+    file = tmp_path / "fe_convergence.json"
+    file.write_text(json.dumps({"entries": {key: {"case": "x", "errors": {"peak_pressure_rel_error": 0.0312}}}}))
+    monkeypatch.setattr(fe_convergence, "REFERENCE_FILE", file)
+
+    def row(options):
+        return {"scene": "ideal-standing", "sides": [{"side": "dem", "status": "ok"}, {"side": "fe-slab", "status": "ok"}],
+                "overrides": {"cartilage.poissons_ratio": 0.42}, "options": options, "metrics": {"peak_pressure_rel_error": 0.1}, "status": "ran"}
+
+    columns = [{"header": "peak err", "metric": "peak_pressure_rel_error"}, {"header": "FE err", "fe_error": "peak_pressure_rel_error"}]
+    result = table_analysis(Analysis("t", "t", "table", ("a", "b"), {"columns": columns}), {"a": row(studied), "b": row({"mesh_size_mm": 0.7, "degree": 2})})
+    assert result["columns"] == ["case", "peak err", "FE err", "note"]
+    assert result["rows"][0]["cells"][2] == "3.12 %"
+    assert result["rows"][1]["cells"][2] == "unknown"
