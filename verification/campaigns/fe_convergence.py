@@ -20,6 +20,7 @@ and the order is solved for the unequal ratios.
 from __future__ import annotations
 
 from verification.campaign_model import Analysis, Campaign, Case
+from verification.campaigns.cylinder_plane import FE_TABLE_COLUMNS, fe_comparison_case
 from verification.fe_convergence import FE_VALUE_METRICS
 from verification.verdicts import INVARIANT, Basis
 
@@ -31,6 +32,11 @@ LEVELS_MM = (2.0, 1.0, 0.7)
 PRIORITY = ("subject-standing", "slab-F333-nu0.42", "slab-F333-nu0.49", "layer-F333-nu0.42-t2")
 #: wall time with 2 jobs on 2 cores, nothing cached: see docs/campaigns.md (the finest meshes dominate)
 EXPECTED_TIME_S = 3600.0
+#: the beds compared with the finest FE on the subject-like ankle and the ideal ankle (issue 24, item 3):
+#: (suffix, overrides, what); they reuse the finest level's FE run
+BEDS = (("dem", {}, "independent springs"), ("dem-pade", {"cartilage.coupling": "thin-layer"}, "coupled thin layer, Pade"),
+        ("dem-two-pole", {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole"}, "coupled thin layer, two-pole"))
+BED_POINTS = ("subject-standing", "slab-F333-nu0.42")
 CHECK = {"force_residual_rel": 1e-6}
 CHECK_BASIS = {"force_residual_rel": Basis(INVARIANT, "the FE solve balances the load to 1e-6 (fem_reference's force-balance check)")}
 
@@ -71,16 +77,34 @@ def campaign() -> Campaign:
             cases.append(_fe_case(extra, source, dict(source.options), "quick's P1 reference"))
         points.append({"point": point, "levels": names, "extra": extra, "source_case": source.name, "scene": source.scene,
                        "side": source.sides[-1], "overrides": dict(source.overrides), "source_options": dict(source.options)})
-    # the slowest (finest) solves first: two jobs finish together rather than one long tail
+    beds = []
+    for point, source in study_points():
+        if point not in BED_POINTS:
+            continue
+        finest = {"mesh_size_mm": LEVELS_MM[-1], "degree": 2}
+        for suffix, extra_overrides, what in BEDS:
+            beds.append(fe_comparison_case(f"{point}-{suffix}-vs-h{LEVELS_MM[-1]:g}", f"{point}: DEM ({what}) against the finest FE ({LEVELS_MM[-1]:g} mm)",
+                                           source.scene, ("dem", source.sides[-1]), overrides={**source.overrides, **extra_overrides}, options=finest, maps=False))
+    # the points item 3 of issue 24 rests on complete first, then every point's cheap meshes, then
+    # the other points' finest meshes (on 2 shared cores each takes 10-40 min): a campaign cut
+    # short still has whole points
     rank = {p: k for k, p in enumerate(PRIORITY)}
-    cases.sort(key=lambda c: (c.options["mesh_size_mm"] >= 1.0, rank.get(c.name.rsplit("-", 1)[0], len(rank))))
+
+    def order(case: Case) -> tuple:
+        point = case.name.rsplit("-h", 1)[0].removesuffix("-P1")
+        fine = case.options["mesh_size_mm"] < 1.0
+        return (rank.get(point, len(rank)) >= 2, fine, rank.get(point, len(rank)), -case.options["mesh_size_mm"])
+
+    cases.sort(key=order)
     analysis = Analysis("fe-convergence", "FE mesh convergence: observed order and Richardson error of each compared quantity, with each mesh's cost",
                         "fe-convergence", tuple(c.name for c in cases), {"points": points})
+    bed_table = Analysis("beds-vs-finest-fe", "The beds against the finest FE (0.7 mm) on the subject-like and the ideal ankle (issue 24, item 3). Reported, no verdict",
+                         "table", tuple(c.name for c in beds), {"columns": FE_TABLE_COLUMNS})
     return Campaign(
         "fe-convergence",
         "The FE reference's own error: each FE point of quick on three meshes (2.0, 1.0, 0.7 mm), observed order, Richardson error, cost; "
         "--refresh-reference stores the errors for the other campaigns.",
-        tuple(cases),
+        tuple(cases[:8]) + tuple(beds) + tuple(cases[8:]),
         (),
-        (analysis,),
+        (analysis, bed_table),
     )
