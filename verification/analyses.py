@@ -567,11 +567,16 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
             cells += [", ".join(f"{d / 1e3:.0f}k" for d in dofs),
                       ", ".join(f"{t:.0f} s / {_fmt(None if mem is None or not math.isfinite(float(mem)) else float(mem) / 1e3, 2)} GB" for t, mem in zip(record["wall_time_s"], record["peak_memory_mb"]))]
             out_rows.append({"cells": cells, "flag": not est.asymptotic})
+        ratios = [float(m["fe_peak_pressure_mpa"]) / float(m["fe_p98_pressure_mpa"]) if float(m["fe_p98_pressure_mpa"]) > 0 else math.nan for m in metrics]
+        record["peak_over_p98"] = ratios
+        notes.append(f"{point['point']}: raw peak / 98th percentile by area = {', '.join(_fmt(r, 3) for r in ratios)} on the three meshes "
+                     + ("(a few nodes set the raw peak)" if max(ratios) > 1.2 else "(a smooth maximum)"))
         for name, row, errors in zip(point["levels"], level_rows, level_errors):
             entries[fe_key(point["scene"], point["side"], point["overrides"], row["options"])] = {"case": name, "errors": errors}
         if extra_ok:
             entries[fe_key(point["scene"], point["side"], point["overrides"], extra["options"])] = {"case": point["extra"], "errors": extra_errors}
         points.append(record)
+    notes.extend(analysis.settings.get("findings", []))
     notes.append("Values coarsest mesh first; h ~ N_dofs^(-1/3) represents each mesh (the mesher halves M's triangles and sets ceil(t / size) layers, so the "
                  "refinement ratios differ); order from f(h) = f0 + C h^p through the three values; error of each mesh |f_i - f0| / |f0|. Not asymptotic (flagged): "
                  "the differences change sign or the order is outside 0.5-4; each mesh's error is then the largest difference to the other meshes.")

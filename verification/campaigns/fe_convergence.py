@@ -30,7 +30,9 @@ from verification.verdicts import INVARIANT, Basis
 LEVELS_MM = (2.0, 1.0, 0.7)
 #: the finest solves first, the subject and the base point ahead (item 3 of issue 24 rests on them)
 PRIORITY = ("subject-standing", "slab-F333-nu0.42", "slab-F333-nu0.49", "layer-F333-nu0.42-t2")
-#: wall time with 2 jobs on 2 cores, nothing cached: see docs/campaigns.md (the finest meshes dominate)
+#: wall time with 2 jobs on 2 cores, nothing cached: an estimate from the measured cases (docs/campaigns.md):
+#: ten 0.7 mm solves of about 8 min each on a quiet core (error-vs-runtime's P2 at 0.7 mm) over two
+#: jobs, plus 24 meshes of 2.0 and 1.0 mm of 0.5-5 min; at load 9-14 a 0.7 mm solve took over 40 min
 EXPECTED_TIME_S = 3600.0
 #: the beds compared with the finest FE on the subject-like ankle and the ideal ankle (issue 24, item 3):
 #: (suffix, overrides, what); they reuse the finest level's FE run
