@@ -534,7 +534,7 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
         missing = [n for n, r in zip(point["levels"], level_rows) if r is None or any(s.get("status") != OK for s in r.get("sides", []))]
         if missing:
             why = "case not run" if level_rows[point["levels"].index(missing[0])] is None else _unavailable_message(rows[missing[0]])
-            out_rows.append({"cells": [point["point"], "all", "–", "–", "–", "–", "–", "–", "–", f"unavailable: {missing[0]}: {why}"]})
+            out_rows.append({"cells": [point["point"], "all", f"unavailable: {missing[0]}: {why}", "–", "–", "–", "–", "–", "–"]})
             points.append({"point": point["point"], "unavailable": why})
             continue
         metrics = [r["metrics"] for r in level_rows]

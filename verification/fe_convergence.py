@@ -64,7 +64,8 @@ class Richardson:
     errors: tuple[float, ...]  # estimated relative error of each mesh's value
 
     def to_dict(self) -> dict[str, Any]:
-        return {"sizes": list(self.sizes), "values": list(self.values), "order": self.order, "extrapolated": self.extrapolated,
+        order = self.order if math.isfinite(self.order) else None  # JSON has no nan: no observed order
+        return {"sizes": list(self.sizes), "values": list(self.values), "order": order, "extrapolated": self.extrapolated,
                 "asymptotic": self.asymptotic, "errors": list(self.errors)}
 
 
@@ -245,34 +246,12 @@ def write_reference(summary: dict[str, Any], path: str | Path | None = None) -> 
         "entries": dict(sorted(entries.items())),
         "points": result["values"]["points"],
     }
-    file.write_text(json.dumps(data, indent=1, sort_keys=False) + "\n", encoding="utf-8")
+    file.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     return file
 
 
 #: what a table cell says for an FE reference whose error is not in the study
 UNKNOWN_FE_ERROR = "unknown"
-
-
-def summary_from_cached_cases(out_dir: str | Path) -> dict[str, Any]:
-    """An ``fe-convergence`` summary (its analyses) from the finished cases of a campaign
-    directory, without running the others: for a study cut short (each finest mesh takes 10-40
-    min on two shared cores), the points whose three meshes all finished. Cases whose record is
-    missing are "case not run" to the analysis."""
-    from verification.analyses import run_analysis
-    from verification.campaigns import get_campaign
-
-    campaign = get_campaign("fe-convergence")
-    rows = {}
-    for case in campaign.cases:
-        file = Path(out_dir) / "cases" / case.name / "metrics.json"
-        if not file.exists():
-            continue
-        record = json.loads(file.read_text(encoding="utf-8"))
-        if record.get("case", {}).get("options") != json.loads(json.dumps(case.options)):
-            continue  # another definition of the case
-        rows[case.name] = {"name": case.name, "sides": record["sides"], "metrics": record["metrics"], "options": case.options, "scene": case.scene,
-                           "overrides": case.overrides, "params": case.params, "status": record.get("status", "ran")}
-    return {"campaign": campaign.name, "analyses": [run_analysis(a, rows) for a in campaign.analyses]}
 
 
 def fe_error_text(errors: dict[str, float] | None) -> str:
