@@ -9,11 +9,16 @@ can be sized, and refused, before gmsh or dolfinx allocate anything (``edem fe -
 Memory: a fixed cost for the loaded libraries plus a per-DOF cost, calibrated on this project's
 ideal-ankle slab (P2) on the 2-core development machine (peak resident set, ``/usr/bin/time``):
 
-=============  ======  =================
-mesh size      DOFs    peak RSS
-=============  ======  =================
-1.0 mm         71,011  1.06 GB (direct)
-=============  ======  =================
+=============  =======  =================
+mesh size      DOFs     peak RSS
+=============  =======  =================
+1.0 mm         71,011   1.06 GB (direct)
+0.7 mm         401,506  8.5 GB (direct; the estimate: 317k DOFs, 4.9 GB)
+=============  =======  =================
+
+and on the subject-like ankle's slab at 0.7 mm 532k DOFs, 11 GB by LU (estimated 419k, 7.0 GB;
+``fe-convergence``, docs/campaigns.md): past one midpoint refinement the counts run 20-30 % low
+and the memory 1.6-1.7x, which the x2 margin covers.
 
 The direct solver's (MUMPS LU) factor grows like N^(4/3) for 3D meshes (nested dissection), the
 Krylov solver's (GAMG) memory like N; both are scaled from that point and the estimate is
