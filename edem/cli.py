@@ -264,12 +264,18 @@ def _verify(args: argparse.Namespace) -> int:
         campaign = get_campaign(args.campaign)
         if args.data is not None:
             get_campaign(args.campaign, args.data)  # refused: this campaign takes no data folder
+    if args.refresh_reference and args.campaign != "fe-convergence":
+        raise InputError(f"--refresh-reference with campaign '{args.campaign}'", key="--refresh-reference", expected="edem verify fe-convergence --refresh-reference")
     out = check_out_dir(Path(args.out) if args.out else RESULTS_ROOT / "verify" / args.campaign, reuse_if=("cases", ".lock"))
     if args.campaign in DATA_CAMPAIGNS:
         campaign = get_campaign(args.campaign, args.data, out / "inputs")
     summary = run_campaign(campaign, out, jobs=args.jobs, scheduler=args.scheduler, report=write_campaign_report)
     print(format_summary(summary))
     print(f"report: {summary['report']}")
+    if args.refresh_reference:
+        from verification.fe_convergence import write_reference
+
+        print(f"FE errors stored: {write_reference(summary)}")
     return summary["exit_status"]
 
 
@@ -344,6 +350,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, help="worker processes (default: the CPU count; 1 runs in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the cases on a Dask distributed cluster, e.g. tcp://host:8786")
     p.add_argument("--data", metavar="FOLDER", help="the public data a campaign runs on (real-knee: the Lenhart knee folder, docs/campaigns.md#real-knee-dem-against-the-fe-on-a-real-knee)")
+    p.add_argument("--refresh-reference", action="store_true",
+                   help="with fe-convergence: store the FE errors it estimates in verification/references/fe_convergence.json, where the other campaigns' FE references find them")
     p.set_defaults(func=_verify)
     p = sub.add_parser("check", help="regression gate: rerun EDEM on stored references, exit 1 with a table when something drifted")
     p.add_argument("--refresh", action="store_true", help="recompute the stored references (FE values too when the FE reference is available)")

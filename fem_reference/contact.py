@@ -366,14 +366,14 @@ class _Setup:
 
 def _use_iterative(s: "_Setup") -> bool:
     """Whether the inner solve is Krylov + AMG (see :class:`SolverOptions.linear_solver`)."""
-    from fem_reference.sizing import ITERATIVE_FROM_DOFS
+    from fem_reference.sizing import direct_fits
 
     choice = s.problem.solver.linear_solver
     if choice not in ("auto", "direct", "iterative"):
         raise ValueError(f"linear_solver must be 'auto', 'direct' or 'iterative', got {choice!r}")
     if s.element == "TH":  # a saddle point: plain AMG does not apply, keep the LU
         return False
-    return choice == "iterative" or (choice == "auto" and s.n_global > ITERATIVE_FROM_DOFS)
+    return choice == "iterative" or (choice == "auto" and not direct_fits(s.n_global))
 
 
 def _rigid_body_modes(s: "_Setup", like: Any) -> list:

@@ -255,7 +255,8 @@ class SolverOptions:
     petsc_options: tuple[tuple[str, str], ...] = ()  # extra SNES options (without prefix)
     monitor: bool = False  # print the Newton residuals and translations (rank 0)
     # inner linear solve: "direct" (MUMPS LU), "iterative" (Krylov + GAMG with the rigid-body
-    # near-nullspace) or "auto" (iterative past fem_reference.sizing.ITERATIVE_FROM_DOFS, not for TH)
+    # near-nullspace) or "auto" (direct while its memory estimate fits,
+    # fem_reference.sizing.direct_fits; iterative past that, never for TH)
     linear_solver: str = "auto"
 
 

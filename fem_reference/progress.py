@@ -7,7 +7,7 @@ given a :class:`SolveProgress` writes
 * one line per Newton iteration: the iteration, the residual norm (N), the contact nodes (P1
   nodes of the contact surface that carry pressure), how many entered and left the contact
   since the previous iteration, and the seconds since the solve began;
-* on the Krylov path (:data:`fem_reference.sizing.ITERATIVE_FROM_DOFS`), the inner iteration
+* on the Krylov path (when the LU would not fit, :func:`fem_reference.sizing.direct_fits`), the inner iteration
   and its residual at most once every ``krylov_every_s`` seconds (a KSP monitor).
 
 Nothing is written before the solve has run ``quiet_s`` seconds, so a terminal is not flooded by

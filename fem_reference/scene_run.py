@@ -137,6 +137,7 @@ class FERunResult:
     n_time_points: int
     out_dir: Path | None = None
     rank: int = 0
+    peak_memory_bytes: float | None = None  # this rank's peak resident set during the run
 
     @property
     def method(self) -> str:
@@ -157,6 +158,7 @@ class FERunResult:
             "steps": len(steps),
             "n_dofs": self.n_dofs,
             "wall_time_s": float(self.wall_time_s),
+            "peak_memory_mb": None if self.peak_memory_bytes is None else self.peak_memory_bytes / 1e6,
             # the raw nodal peak on the contact face (reported only); peak_pressure_on_mobile_mpa is the
             # same field as force per area of M, as the campaigns compare it (x the columns' area
             # ratio: larger where the columns fan out); both are mesh-dependent at a sharp contact
@@ -399,7 +401,10 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     Raises InputError on bad settings and SolverError (FEConvergenceError for a Newton failure)
     naming the time point when one has no solution.
     """
+    from fem_reference.sizing import peak_memory_bytes, reset_peak_memory
+
     started = time.perf_counter()
+    reset_peak_memory()
     settings = resolve_settings(scene, model=model, mesh_size_mm=mesh_size_mm, degree=degree,
                                 element=element, layers_through_thickness=layers_through_thickness)
     n_times = len(scene.load.time_s)
@@ -534,7 +539,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         if progress is not None:
             progress(k)
     run = FERunResult(scene, settings, results, time.perf_counter() - started,
-                      _merge_warnings(warnings, step_log), n_times, None, comm.rank)
+                      _merge_warnings(warnings, step_log), n_times, None, comm.rank,
+                      peak_memory_bytes())
     if out_dir is not None:
         run.out_dir = Path(out_dir)
         write_run(run, run.out_dir, overwrite=overwrite, provenance=provenance, comm=comm)  # rank 0 writes

@@ -9,11 +9,16 @@ can be sized, and refused, before gmsh or dolfinx allocate anything (``edem fe -
 Memory: a fixed cost for the loaded libraries plus a per-DOF cost, calibrated on this project's
 ideal-ankle slab (P2) on the 2-core development machine (peak resident set, ``/usr/bin/time``):
 
-=============  ======  =================
-mesh size      DOFs    peak RSS
-=============  ======  =================
-1.0 mm         71,011  1.06 GB (direct)
-=============  ======  =================
+=============  =======  =================
+mesh size      DOFs     peak RSS
+=============  =======  =================
+1.0 mm         71,011   1.06 GB (direct)
+0.7 mm         401,506  8.5 GB (direct; the estimate: 317k DOFs, 4.9 GB)
+=============  =======  =================
+
+and on the subject-like ankle's slab at 0.7 mm 532k DOFs, 11 GB by LU (estimated 419k, 7.0 GB;
+``fe-convergence``, docs/campaigns.md): past one midpoint refinement the counts run 20-30 % low
+and the memory 1.6-1.7x, which the x2 margin covers.
 
 The direct solver's (MUMPS LU) factor grows like N^(4/3) for 3D meshes (nested dissection), the
 Krylov solver's (GAMG) memory like N; both are scaled from that point and the estimate is
@@ -30,9 +35,6 @@ import numpy as np
 
 from geometries.errors import InputError
 
-#: past this many DOFs the bordered Newton's inner solve is a Krylov method (CG or GMRES) with
-#: algebraic multigrid (GAMG) and the rigid-body near-nullspace instead of an LU factorisation
-ITERATIVE_FROM_DOFS = 300_000
 #: resident memory of Python with dolfinx, PETSc, gmsh and VTK loaded, bytes (measured ~0.45 GB)
 BASE_BYTES = 450e6
 #: calibration point (see the module docstring): DOFs and the memory above BASE_BYTES, bytes
@@ -64,18 +66,38 @@ def solid_size(n_surface_triangles: int, surface_mean_edge_mm: float, max_thickn
     return 3 * triangles * n_layers, surface_vertices * (n_layers + 1)
 
 
-def estimate(cells: int, vertices: int, element: str) -> FESize:
-    """DOFs of the element on a tetrahedral mesh and the peak memory of the solve.
+def memory_bytes(dofs: int, solver: str) -> float:
+    """Estimated peak resident memory (bytes) of a solve with ``dofs`` unknowns: the calibration
+    point scaled like N^(4/3) for the direct solver (LU fill), like N for the Krylov solver."""
+    ratio = dofs / _CALIBRATION_DOFS
+    return BASE_BYTES + _CALIBRATION_BYTES * (ratio if solver == "iterative" else ratio ** (4.0 / 3.0))
+
+
+def direct_fits(dofs: int, available_bytes: float | None = None) -> bool:
+    """Whether the direct (MUMPS LU) solve of ``dofs`` unknowns fits: its estimate times
+    :data:`SAFETY` within the memory available (default: :func:`available_memory_bytes`).
+
+    The inner linear solve of the bordered Newton is an LU factorisation while this holds and a
+    Krylov method with algebraic multigrid past it (``SolverOptions.linear_solver = "auto"``):
+    the LU is exact and robust on the contact problem, the Krylov path is the fallback for
+    meshes whose factor would not fit."""
+    available = available_memory_bytes() if available_bytes is None else available_bytes
+    return SAFETY * memory_bytes(dofs, "direct") <= available
+
+
+def estimate(cells: int, vertices: int, element: str, available_bytes: float | None = None) -> FESize:
+    """DOFs of the element on a tetrahedral mesh, the solver ``auto`` picks and its peak memory.
 
     Edges of a tetrahedral mesh: about vertices + cells (Euler's formula with two faces per
     cell). P1: 3 per vertex; P2: 3 per vertex and edge; Taylor-Hood: P2 plus 1 per vertex.
+    Solver: direct while :func:`direct_fits` (with ``available_bytes``, default the memory
+    available now), iterative past that; Taylor-Hood (a saddle point) is always direct.
     """
     edges = vertices + cells
     dofs = 3 * vertices if element == "P1" else 3 * (vertices + edges) + (vertices if element == "TH" else 0)
-    iterative = dofs > ITERATIVE_FROM_DOFS and element != "TH"
-    ratio = dofs / _CALIBRATION_DOFS
-    growth = ratio if iterative else ratio ** (4.0 / 3.0)
-    return FESize(cells, vertices, dofs, "iterative" if iterative else "direct", BASE_BYTES + _CALIBRATION_BYTES * growth)
+    iterative = element != "TH" and not direct_fits(dofs, available_bytes)
+    solver = "iterative" if iterative else "direct"
+    return FESize(cells, vertices, dofs, solver, memory_bytes(dofs, solver))
 
 
 def available_memory_bytes() -> float:
@@ -102,6 +124,29 @@ def available_memory_bytes() -> float:
         pages = os.sysconf("SC_AVPHYS_PAGES") if hasattr(os, "sysconf") else 0
         available = float(pages) * os.sysconf("SC_PAGE_SIZE") if pages else math.inf
     return available
+
+
+def reset_peak_memory() -> None:
+    """Reset this process's peak resident set (Linux: ``/proc/self/clear_refs``, value 5), so that
+    :func:`peak_memory_bytes` measures what follows and not an earlier run in the same worker."""
+    try:
+        with open("/proc/self/clear_refs", "w", encoding="ascii") as f:
+            f.write("5")
+    except OSError:
+        pass
+
+
+def peak_memory_bytes() -> float | None:
+    """Peak resident set of this process since the last :func:`reset_peak_memory` (``VmHWM`` of
+    ``/proc/self/status``), bytes; None where the kernel does not tell."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return float(line.split()[1]) * 1024.0
+    except OSError:
+        pass
+    return None
 
 
 def check_fits(size: FESize, mesh_size_mm: float, *, file: str | None, key: str, available_bytes: float | None = None) -> None:

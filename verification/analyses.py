@@ -27,6 +27,10 @@ its declared band (the thesis's figures) and "unavailable" when their cases coul
 * ``fe-band``: a discrete model against the FE on a base mesh and its refinements: the FE's mesh
   error beside the difference, judged against a goal only where the FE's error is below it
   (:func:`fe_band_analysis`).
+* ``fe-convergence``: per FE point, each compared quantity on three meshes: values, observed
+  order, Richardson extrapolation and each mesh's estimated error, with the meshes' DOFs, wall
+  time and peak memory (:mod:`verification.fe_convergence`); its ``values["entries"]`` are what
+  ``edem verify fe-convergence --refresh-reference`` stores. Reported.
 * ``trust``: the main job's opening answer in plain sentences with figures: DEM against the FE
   reference on the ideal and subject-like ankles over Poisson's ratio, the default bed beside
   the independent springs (signed errors of the three card metrics, the goal, a metric fixed by
@@ -265,9 +269,16 @@ def sensitivity_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str,
 
 
 def table_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """One row per case, one column per metric (``settings["columns"]``: header, metric, scale);
-    cases that did not run give their reason instead of numbers."""
-    columns = analysis.settings["columns"]
+    """One row per case, one column per metric (``settings["columns"]``: header, metric, scale;
+    or header and ``fe_error``: the FE reference's own estimated error of that comparison metric,
+    verification.fe_convergence, "unknown" when its run is not in the study); cases that did not
+    run give their reason instead of numbers."""
+    from verification.fe_convergence import UNKNOWN_FE_ERROR, fe_relative_error, load_reference
+
+    all_columns = analysis.settings["columns"]
+    columns = [c for c in all_columns if "metric" in c]
+    fe_columns = [c for c in all_columns if "fe_error" in c]
+    reference = load_reference() if fe_columns else None
     out_rows, values = [], []
     for name in analysis.cases:
         row = rows.get(name)
@@ -278,11 +289,14 @@ def table_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         elif any(s.get("status") != OK for s in row.get("sides", [])):
             side = next(s for s in row["sides"] if s.get("status") != OK)
             note = f"{side['side']} {side['status']}: {_unavailable_message(row)}"
-        values.append({"case": name, "values": {c["metric"]: v for c, v in zip(columns, numbers)}, "note": note})
-        out_rows.append({"cells": [name] + [_fmt(v) for v in numbers] + [note]})
+        fe_errors = fe_relative_error(row, reference) if fe_columns and row is not None else None
+        fe_cells = [UNKNOWN_FE_ERROR if fe_errors is None or c["fe_error"] not in fe_errors else _size_pct(fe_errors[c["fe_error"]]) for c in fe_columns]
+        values.append({"case": name, "values": {c["metric"]: v for c, v in zip(columns, numbers)}, "note": note,
+                       **({"fe_error": fe_errors} if fe_columns else {})})
+        out_rows.append({"cells": [name] + [_fmt(v) for v in numbers] + fe_cells + [note]})
     available = any(v is not None for entry in values for v in entry["values"].values())
     return {
-        "columns": ["case"] + [c["header"] for c in columns] + ["note"],
+        "columns": ["case"] + [c["header"] for c in columns] + [c["header"] for c in fe_columns] + ["note"],
         "rows": out_rows,
         "status": REPORTED if available else UNAVAILABLE,
         "notes": [],
@@ -505,6 +519,9 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
             f"Low loads: at {_fmt(low['params'].get('load_n'))} N the layer's regularised peak-pressure error is {_pct(_signed(low, 'regularised_peak_pressure_mpa')[2])} against "
             f"{_pct(_signed(layer_base, 'regularised_peak_pressure_mpa')[2])} at 333 N: a small patch is mostly rim."
         )
+    from verification.fe_convergence import fe_error_text, fe_relative_error, load_reference
+
+    reference = load_reference()
     table = []
     for name in analysis.cases:
         row = rows.get(name)
@@ -513,10 +530,10 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         p, a, u = _signed(row, "regularised_peak_pressure_mpa"), _signed(row, "mean_contact_area_mm2"), _signed(row, "displacement_norm_mm")
         l2_row = _metric(row, "pressure_l2_rel_error")
         table.append({"cells": [name, row["status"], _fmt(u[0], 3), _fmt(u[1], 3), _pct(u[2]), _fmt(p[0], 3), _fmt(p[1], 3), _pct(p[2]), _fmt(a[0], 4), _fmt(a[1], 4), _pct(a[2]),
-                                "–" if l2_row is None else f"{100 * l2_row:.0f} %"], "flag": row["status"] == "flagged"})
+                                "–" if l2_row is None else f"{100 * l2_row:.0f} %", fe_error_text(fe_relative_error(row, reference))], "flag": row["status"] == "flagged"})
     return {
         "columns": ["case", "verdict", "DEM |u| (mm)", "FE |u| (mm)", "displacement diff", "DEM regularised peak (MPa)", "FE regularised peak (MPa)", "peak diff",
-                    "DEM area (mm²)", "FE area (mm²)", "area diff", "pressure L2"],
+                    "DEM area (mm²)", "FE area (mm²)", "area diff", "pressure L2", "FE's own error (peak / area / |u|)"],
         "rows": table,
         "status": FLAGGED if any(r["flag"] for r in table) else REPORTED,
         "notes": [s.get("fe_note", "")] if s.get("fe_note") else [],
@@ -585,6 +602,78 @@ def fe_band_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any
     }
 
 
+def _size_pct(x: float | None) -> str:
+    """An unsigned error size (an FE error estimate has no sign), in %."""
+    return "–" if x is None or not math.isfinite(x) else f"{100.0 * x:.2f} %"
+
+
+def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Per point and quantity: the three meshes' values, order, extrapolation and errors; the
+    errors keyed for :func:`verification.fe_convergence.fe_relative_error` in ``values["entries"]``."""
+    from verification.fe_convergence import QUANTITIES, fe_key, richardson
+
+    out_rows, entries, points, notes = [], {}, [], []
+    for point in analysis.settings["points"]:
+        level_rows = [rows.get(n) for n in point["levels"]]
+        missing = [n for n, r in zip(point["levels"], level_rows) if r is None or any(s.get("status") != OK for s in r.get("sides", []))]
+        if missing:
+            why = "case not run" if level_rows[point["levels"].index(missing[0])] is None else _unavailable_message(rows[missing[0]])
+            out_rows.append({"cells": [point["point"], "all", f"unavailable: {missing[0]}: {why}", "–", "–", "–", "–", "–", "–"]})
+            points.append({"point": point["point"], "unavailable": why})
+            continue
+        metrics = [r["metrics"] for r in level_rows]
+        dofs = [float(m["fe_n_dofs"]) for m in metrics]
+        sizes = [n ** (-1.0 / 3.0) for n in dofs]  # representative size h ~ N^(-1/3)
+        extra = rows.get(point["extra"]) if point.get("extra") else None
+        extra_ok = extra is not None and all(s.get("status") == OK for s in extra.get("sides", []))
+        level_errors: list[dict[str, float]] = [{} for _ in level_rows]
+        extra_errors: dict[str, float] = {}
+        record = {"point": point["point"], "mesh_sizes_mm": [r["options"]["mesh_size_mm"] for r in level_rows], "dofs": dofs,
+                  "wall_time_s": [float(m["fe_wall_time_s"]) for m in metrics], "peak_memory_mb": [m.get("fe_peak_memory_mb") for m in metrics], "quantities": {}}
+        for quantity, (value_metric, error_metric) in QUANTITIES.items():
+            values = [float(m[value_metric]) for m in metrics]
+            est = richardson(sizes, values)
+            record["quantities"][quantity] = est.to_dict()
+            for k, e in enumerate(est.errors):
+                level_errors[k][error_metric] = e
+            cells = [point["point"], quantity, ", ".join(_fmt(v, 4) for v in values), _fmt(est.order, 3),
+                     _fmt(est.extrapolated, 4) if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in est.errors)]
+            if extra_ok:
+                v = float(extra["metrics"][value_metric])
+                ref = est.extrapolated if est.asymptotic else values[-1]
+                spread = 0.0 if est.asymptotic else est.errors[-1]
+                extra_errors[error_metric] = abs(v - ref) / abs(ref) + spread
+                record["quantities"][quantity]["p1_value"] = v
+                record["quantities"][quantity]["p1_error"] = extra_errors[error_metric]
+                cells.append(f"{_fmt(v, 4)} ({_size_pct(extra_errors[error_metric])})")
+            else:
+                cells.append("–")
+            cells += [", ".join(f"{d / 1e3:.0f}k" for d in dofs),
+                      ", ".join(f"{t:.0f} s / {_fmt(None if mem is None or not math.isfinite(float(mem)) else float(mem) / 1e3, 2)} GB" for t, mem in zip(record["wall_time_s"], record["peak_memory_mb"]))]
+            out_rows.append({"cells": cells, "flag": not est.asymptotic})
+        ratios = [float(m["fe_peak_pressure_mpa"]) / float(m["fe_p98_pressure_mpa"]) if float(m["fe_p98_pressure_mpa"]) > 0 else math.nan for m in metrics]
+        record["peak_over_p98"] = ratios
+        notes.append(f"{point['point']}: raw peak / 98th percentile by area = {', '.join(_fmt(r, 3) for r in ratios)} on the three meshes "
+                     + ("(a few nodes set the raw peak)" if max(ratios) > 1.2 else "(a smooth maximum)"))
+        for name, row, errors in zip(point["levels"], level_rows, level_errors):
+            entries[fe_key(point["scene"], point["side"], point["overrides"], row["options"])] = {"case": name, "errors": errors}
+        if extra_ok:
+            entries[fe_key(point["scene"], point["side"], point["overrides"], extra["options"])] = {"case": point["extra"], "errors": extra_errors}
+        points.append(record)
+    notes.extend(analysis.settings.get("findings", []))
+    notes.append("Values coarsest mesh first; h ~ N_dofs^(-1/3) represents each mesh (the mesher halves M's triangles and sets ceil(t / size) layers, so the "
+                 "refinement ratios differ); order from f(h) = f0 + C h^p through the three values; error of each mesh |f_i - f0| / |f0|. Not asymptotic (flagged): "
+                 "the differences change sign or the order is outside 0.5-4; each mesh's error is then the largest difference to the other meshes.")
+    notes.append("P1 column: quick's P1 reference at 1.0 mm and its error against the extrapolation (against the finest mesh plus that mesh's error when not asymptotic).")
+    return {
+        "columns": ["point", "quantity", "values (3 meshes)", "order", "extrapolated", "error of each mesh", "P1 1.0 mm (error)", "DOFs", "time / peak memory"],
+        "rows": out_rows,
+        "status": REPORTED if entries else UNAVAILABLE,
+        "notes": notes,
+        "values": {"points": points, "entries": entries},
+    }
+
+
 ANALYSES: dict[str, Callable[[Any, dict[str, dict[str, Any]]], dict[str, Any]]] = {
     "order": order_analysis,
     "thesis": thesis_analysis,
@@ -594,6 +683,7 @@ ANALYSES: dict[str, Callable[[Any, dict[str, dict[str, Any]]], dict[str, Any]]] 
     "goal": goal_analysis,
     "trust": trust_analysis,
     "fe-band": fe_band_analysis,
+    "fe-convergence": fe_convergence_analysis,
 }
 
 

@@ -76,6 +76,7 @@ from verification.analyses import format_analysis, run_analysis
 from verification.campaign_model import Campaign, Case, validate_campaign
 from verification.campaign_safety import CampaignInterrupted, campaign_lock, init_worker, sigint_blocked, stop_children
 from verification.fe_analytic import FE_PROBLEMS, half_width_errors
+from verification.fe_convergence import FE_VALUE_METRICS, fe_values
 from verification.metrics import (
     COMPARISON_METRICS,
     COP_METRICS,
@@ -309,6 +310,8 @@ def compute_metrics(case: Case, sides: list[dict[str, Any]]) -> tuple[dict[str, 
     if a["status"] == OK and wanted & {"thickness_mean_mm", "thickness_sd_mm", "thickness_mean_rel_error", "thickness_faceting_ratio"}:
         metrics.update(_thickness_metrics(a["result_dir"], b["result_dir"] if both else None))
     metrics.update(_series_metrics(wanted, a, b))
+    if a["status"] == OK and wanted & set(FE_VALUE_METRICS):
+        metrics.update(fe_values(a["result_dir"]))
     if both and wanted & {"half_width_rel_error", "half_width_fit_rel_error"}:
         metrics.update(half_width_errors(read_result_dir(a["result_dir"]).summary, read_result_dir(b["result_dir"]).summary))
     return {k: v for k, v in metrics.items() if k in wanted}, comparison
@@ -663,6 +666,7 @@ def _run_campaign_locked(
                 "tolerance": case.tolerance,
                 "verdicts": verdicts,
                 "params": case.params,
+                "options": case.options,
                 "maps": case.maps,
                 "wall_time_s": record["wall_time_s"],
                 "cached": cached[case.name],

@@ -143,7 +143,7 @@ def test_summary_is_json_ready(comm):
 ])
 def test_krylov_amg_inner_solve_gives_the_direct_solution(comm, element, nitsche):
     """The iterative inner solve (GMRES, or CG for the symmetric theta = 1 variant, with GAMG and
-    the rigid-body near-nullspace; used past fem_reference.sizing.ITERATIVE_FROM_DOFS) converges to
+    the rigid-body near-nullspace; used when the LU would not fit in memory, fem_reference.sizing.direct_fits) converges to
     the LU solution: same bone displacement and peak pressure. Tolerance 1e-7 relative: Newton
     stops at a residual of 1e-10 of the load and the inner solve at 1e-12, so the two iterates
     agree far below it; a wrong near-nullspace or preconditioner does not converge at all."""

@@ -9,7 +9,7 @@ import pytest
 
 from edem.cli import main
 from edem.scene import load_scene
-from fem_reference.sizing import ITERATIVE_FROM_DOFS, SAFETY, FESize, check_fits, estimate, solid_size
+from fem_reference.sizing import SAFETY, FESize, check_fits, direct_fits, estimate, memory_bytes, solid_size
 from geometries.errors import InputError
 from geometries.fe_solids import layer_solid
 
@@ -36,16 +36,20 @@ def _flat_plates():
     return SCENES_DIR / "flat-plates.toml"
 
 
-def test_dofs_per_element_and_the_iterative_switch():
+def test_dofs_per_element_and_the_direct_solver_while_its_memory_fits():
     """P1: 3 per vertex; P2: 3 per vertex and edge (edges ~ vertices + cells); TH adds a pressure
-    per vertex and keeps the direct solver (a saddle point); past the threshold P2 is iterative."""
-    small = estimate(1000, 300, "P1")
+    per vertex. The LU is used while its estimate times the safety factor fits the memory
+    available, the Krylov solver past that; TH (a saddle point) keeps the LU."""
+    small = estimate(1000, 300, "P1", available_bytes=24e9)
     assert small.dofs == 900 and small.solver == "direct"
     assert estimate(1000, 300, "P2").dofs == 3 * (300 + 1300)
     assert estimate(1000, 300, "TH").dofs == 3 * (300 + 1300) + 300
-    big_cells = ITERATIVE_FROM_DOFS  # 3 (v + v + c) > threshold
-    assert estimate(big_cells, big_cells // 5, "P2").solver == "iterative"
-    assert estimate(big_cells, big_cells // 5, "TH").solver == "direct"
+    cells = 300_000  # about 1.1 M P2 DOFs: the LU's estimate (about 20 GB) fits 100 GB, not 24 GB
+    dofs = estimate(cells, cells // 5, "P2", available_bytes=100e9).dofs
+    need = SAFETY * memory_bytes(dofs, "direct")
+    assert estimate(cells, cells // 5, "P2", available_bytes=need).solver == "direct" and direct_fits(dofs, need)
+    assert estimate(cells, cells // 5, "P2", available_bytes=need * 0.99).solver == "iterative" and not direct_fits(dofs, need * 0.99)
+    assert estimate(cells, cells // 5, "TH", available_bytes=need * 0.99).solver == "direct"
     # memory grows faster than the DOFs for the direct solver (LU fill), linearly for Krylov
     a, b = estimate(10_000, 2_000, "P1"), estimate(80_000, 16_000, "P1")
     assert b.memory_bytes > a.memory_bytes

@@ -37,6 +37,13 @@ FE_COMPARE_TOL = {**{m: 10.0 for m in COMPARISON_METRICS}, "force_residual_rel":
 SANITY_BASIS = uniform_basis(SANITY, "1000 %: catches a broken run (a wrong load, a lost contact), not a model gap; the errors are reported, not judged")
 FE_COMPARE_BASIS = {**SANITY_BASIS, "force_residual_rel": Basis(INVARIANT, "equilibrium of the discrete side, 1e-6 of the load")}
 ERROR_PANELS = ("regularised_peak_pressure_rel_error", "contact_area_rel_error", "displacement_rel_error", "pressure_l2_rel_error")
+#: the FE reference's own estimated error (verification.fe_convergence; "unknown" when its run is
+#: not in the fe-convergence study): a model error below it cannot be told from the reference's
+FE_ERROR_COLUMNS = [
+    {"header": "FE's own err: peak", "fe_error": "peak_pressure_rel_error"},
+    {"header": "area", "fe_error": "contact_area_rel_error"},
+    {"header": "|u|", "fe_error": "displacement_rel_error"},
+]
 #: the table columns of DEM against the FE (values of both sides and the errors)
 FE_TABLE_COLUMNS = [
     {"header": "DEM regularised peak (MPa)", "metric": "a_at_b_regularised_peak_pressure_mpa"},
@@ -50,6 +57,7 @@ FE_TABLE_COLUMNS = [
     {"header": "FE |u| (mm)", "metric": "b_displacement_norm_mm"},
     {"header": "disp err", "metric": "displacement_rel_error"},
     {"header": "L2 err", "metric": "pressure_l2_rel_error"},
+    *FE_ERROR_COLUMNS,
 ]
 def fe_comparison_case(name: str, description: str, scene: str, sides: tuple[str, ...], *, overrides: dict[str, Any],
                        options: dict[str, Any], maps: bool, params: dict[str, float] | None = None) -> Case:

@@ -1,0 +1,117 @@
+"""The FE reference's own error (issue 24, item 1): Richardson's observed order and extrapolation
+against closed-form sequences, the area percentile of the pressure, and the lookup by which a
+campaign's FE reference finds its error."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from verification.campaign_model import Case
+from verification.fe_convergence import fe_key, fe_relative_error, pressure_percentile_by_area, richardson
+
+
+@pytest.mark.parametrize("order", [1.0, 2.0, 3.0])
+@pytest.mark.parametrize("sizes", [(2.0, 1.0, 0.5), (2.0, 1.41, 0.7), (1.9, 1.0, 0.61)])
+def test_richardson_recovers_the_order_and_limit_of_f0_plus_c_h_to_the_p(order, sizes):
+    """f(h) = f0 + C h^p exactly: the observed order is p, the extrapolation f0 and each mesh's
+    error C h^p / f0, also for unequal refinement ratios (the fixed-point order). Tolerance
+    1e-9 relative: the fixed point stops at 1e-12 and the rest is round-off of a few logs."""
+    f0, c = 5.0, -0.3
+    values = [f0 + c * h**order for h in sizes]
+    est = richardson(sizes, values)
+    assert est.asymptotic
+    assert est.order == pytest.approx(order, rel=1e-9)
+    assert est.extrapolated == pytest.approx(f0, rel=1e-9)
+    np.testing.assert_allclose(est.errors, [abs(c) * h**order / f0 for h in sizes], rtol=1e-8)
+
+
+def test_an_oscillating_sequence_is_not_asymptotic_and_its_error_is_the_spread():
+    """Differences of both signs: no order, no extrapolation; each mesh's error is its largest
+    difference to the other meshes over the finest value (what refining was seen to change)."""
+    est = richardson((2.0, 1.0, 0.5), (1.0, 1.1, 1.05))
+    assert not est.asymptotic and est.extrapolated is None and math.isnan(est.order)
+    assert est.errors == pytest.approx((0.1 / 1.05, 0.1 / 1.05, 0.05 / 1.05))
+
+
+def test_an_order_outside_the_believed_range_is_not_extrapolated():
+    """f = 1 + h^6: p = 6 is far above P2's orders, so the meshes are not taken as asymptotic."""
+    sizes = (2.0, 1.0, 0.5)
+    est = richardson(sizes, [1.0 + h**6 for h in sizes])
+    assert est.order == pytest.approx(6.0) and not est.asymptotic and est.extrapolated is None
+
+
+def test_richardson_refuses_meshes_that_are_not_refined():
+    with pytest.raises(ValueError):
+        richardson((1.0, 1.0, 0.5), (1.0, 2.0, 3.0))
+    with pytest.raises(ValueError):
+        richardson((1.0, 0.5), (1.0, 2.0))
+
+
+def _grid(n: int) -> tuple[np.ndarray, np.ndarray]:
+    x, y = np.meshgrid(np.linspace(0.0, 1.0, n + 1), np.linspace(0.0, 1.0, n + 1))
+    vertices = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    k = np.arange(n * (n + 1)).reshape(n, n + 1)[:, :n].ravel()
+    triangles = np.concatenate([np.column_stack([k, k + 1, k + n + 2]), np.column_stack([k, k + n + 2, k + n + 1])])
+    return vertices, triangles
+
+
+def test_one_node_cannot_set_the_area_percentile_but_two_percent_of_the_area_can():
+    """A uniform 1 MPa on a unit square with one interior node at 100 MPa (lumped area 1/400 of
+    the square, under 2 %): the 98th percentile stays 1 while the nodal peak is 100. Raising the
+    pressure on 3 % of the area (more than the 2 % above the 98th) moves it to that pressure."""
+    vertices, triangles = _grid(20)
+    p = np.ones(len(vertices))
+    p[10 * 21 + 10] = 100.0
+    assert p.max() == 100.0
+    assert pressure_percentile_by_area(p, vertices, triangles) == 1.0
+    q = np.where(vertices[:, 0] > 0.96, 7.0, 1.0)  # the strip x > 0.96: 2.5 % of the area by lumping (one column of nodes)
+    assert pressure_percentile_by_area(q, vertices, triangles) == 7.0
+    assert pressure_percentile_by_area(np.zeros(len(vertices)), vertices, triangles) == 0.0
+
+
+def _case(options: dict, overrides: dict | None = None, sides=("dem", "fe-slab")) -> Case:
+    return Case("c", "a case", "ideal-standing", sides, (), overrides=overrides or {"cartilage.poissons_ratio": 0.42}, options=options)
+
+
+def test_a_case_finds_the_error_of_its_own_fe_run_and_only_that():
+    """Keyed by what the FE reads: the same FE run (a bed override the FE ignores) finds the
+    entry; another mesh size, degree, Poisson's ratio or a case without an FE side does not."""
+    run = _case({"mesh_size_mm": 1.0, "degree": 2})
+    errors = {"peak_pressure_rel_error": 0.031, "contact_area_rel_error": 0.012, "displacement_rel_error": 0.004}
+    reference = {"entries": {fe_key(run.scene, "fe-slab", run.overrides, run.options): {"case": "x", "errors": errors}}}
+    assert fe_relative_error(run, reference) == errors
+    coupled = _case({"mesh_size_mm": 1, "degree": 2}, {"cartilage.poissons_ratio": 0.42, "cartilage.coupling": "thin-layer"})
+    assert fe_relative_error(coupled, reference) == errors
+    assert fe_relative_error(_case({"mesh_size_mm": 0.7, "degree": 2}), reference) is None
+    assert fe_relative_error(_case({"mesh_size_mm": 1.0, "degree": 1}), reference) is None
+    assert fe_relative_error(_case({"mesh_size_mm": 1.0, "degree": 2}, {"cartilage.poissons_ratio": 0.3}), reference) is None
+    assert fe_relative_error(_case({}, sides=("edem", "dem")), reference) is None
+
+
+def test_a_campaign_table_shows_the_fe_error_of_a_studied_run_and_says_unknown_otherwise(tmp_path, monkeypatch):
+    """The table analysis's fe_error columns: the stored estimate for a case whose FE run is in
+    the study, "unknown" for one whose run is not (another mesh size)."""
+    import json
+
+    from verification import fe_convergence
+    from verification.analyses import table_analysis
+    from verification.campaign_model import Analysis
+
+    studied = {"mesh_size_mm": 1.0, "degree": 2}
+    key = fe_key("ideal-standing", "fe-slab", {"cartilage.poissons_ratio": 0.42}, studied)
+    file = tmp_path / "fe_convergence.json"
+    file.write_text(json.dumps({"entries": {key: {"case": "x", "errors": {"peak_pressure_rel_error": 0.0312}}}}))
+    monkeypatch.setattr(fe_convergence, "REFERENCE_FILE", file)
+
+    def row(options):
+        return {"scene": "ideal-standing", "sides": [{"side": "dem", "status": "ok"}, {"side": "fe-slab", "status": "ok"}],
+                "overrides": {"cartilage.poissons_ratio": 0.42}, "options": options, "metrics": {"peak_pressure_rel_error": 0.1}, "status": "ran"}
+
+    columns = [{"header": "peak err", "metric": "peak_pressure_rel_error"}, {"header": "FE err", "fe_error": "peak_pressure_rel_error"}]
+    result = table_analysis(Analysis("t", "t", "table", ("a", "b"), {"columns": columns}), {"a": row(studied), "b": row({"mesh_size_mm": 0.7, "degree": 2})})
+    assert result["columns"] == ["case", "peak err", "FE err", "note"]
+    assert result["rows"][0]["cells"][2] == "3.12 %"
+    assert result["rows"][1]["cells"][2] == "unknown"

@@ -1,0 +1,262 @@
+"""The FE reference's own discretisation error (docs/campaigns.md, ``fe-convergence``).
+
+Three meshes of one FE reference, refined by a constant ratio, give an observed order and a
+Richardson extrapolation of each compared quantity; the extrapolated value against each mesh's
+value is that mesh's estimated error (:func:`richardson`). The ``fe-convergence`` campaign runs
+the study at the quick campaign's FE points and stores the estimates in
+:data:`REFERENCE_FILE`, keyed by what the FE side reads (:func:`fe_key`: scene, model, the
+overrides the FE reads, mesh size and degree), so that every campaign case whose reference is
+one of those FE runs finds its error (:func:`fe_relative_error`). A case whose FE run is not in
+the file has no known error, and says so (None).
+
+The quantities are those the comparisons use (verification.metrics, the FE measured on M where
+the springs live): the peak pressure (largest nodal pressure per area of M), the contact area on
+M, |u| of the bone, and the 98th percentile by area of the contact pressure on M
+(:func:`pressure_percentile_by_area`), a peak that one node cannot set.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: the stored study (written by ``edem verify fe-convergence --refresh-reference``)
+REFERENCE_FILE = Path(__file__).resolve().parent / "references" / "fe_convergence.json"
+#: the observed order is believed (the meshes in the asymptotic range) inside these bounds; P2's
+#: nominal orders are 3 (displacement, L2) and 2 (energy, stresses): a quantity converging
+#: faster than 4 or slower than 0.5 is not behaving like its leading error term
+ORDER_RANGE = (0.5, 4.0)
+#: the quantities of the study: name -> (value metric of the FE side, comparison metric whose FE error it is)
+QUANTITIES = {
+    "peak pressure": ("fe_peak_pressure_mpa", "peak_pressure_rel_error"),
+    "p98 pressure": ("fe_p98_pressure_mpa", "p98_pressure_rel_error"),
+    "contact area": ("fe_contact_area_mm2", "contact_area_rel_error"),
+    "displacement": ("fe_displacement_norm_mm", "displacement_rel_error"),
+}
+#: the metrics an FE side reports about itself in this study (:func:`fe_values`)
+FE_VALUE_METRICS = ("fe_peak_pressure_mpa", "fe_p98_pressure_mpa", "fe_contact_area_mm2", "fe_displacement_norm_mm",
+                    "fe_n_dofs", "fe_wall_time_s", "fe_peak_memory_mb")
+FE_VALUE_DESCRIPTIONS = {
+    "fe_peak_pressure_mpa": "FE side: largest nodal pressure per area of M at the last time point (the peak the comparisons use)",
+    "fe_p98_pressure_mpa": "FE side: 98th percentile by area of the contact pressure on M (verification.fe_convergence.pressure_percentile_by_area)",
+    "fe_contact_area_mm2": "FE side: contact area on M at the last time point",
+    "fe_displacement_norm_mm": "FE side: |u| of the bone at the last time point",
+    "fe_n_dofs": "FE side: degrees of freedom of the solve",
+    "fe_wall_time_s": "FE side: wall time of the run (summary.json)",
+    "fe_peak_memory_mb": "FE side: peak resident memory of the run (summary.json peak_memory_mb)",
+}
+
+
+@dataclass(frozen=True)
+class Richardson:
+    """The Richardson estimate of one quantity on three meshes (coarsest first)."""
+
+    sizes: tuple[float, ...]  # mesh sizes, coarsest first
+    values: tuple[float, ...]
+    order: float  # observed order (nan when the differences do not shrink monotonically)
+    extrapolated: float | None  # the h -> 0 value (None outside the asymptotic range)
+    asymptotic: bool  # the order inside ORDER_RANGE and the differences of one sign
+    errors: tuple[float, ...]  # estimated relative error of each mesh's value
+
+    def to_dict(self) -> dict[str, Any]:
+        order = self.order if math.isfinite(self.order) else None  # JSON has no nan: no observed order
+        return {"sizes": list(self.sizes), "values": list(self.values), "order": order, "extrapolated": self.extrapolated,
+                "asymptotic": self.asymptotic, "errors": list(self.errors)}
+
+
+def observed_order(sizes: tuple[float, float, float], values: tuple[float, float, float], *, iterations: int = 200) -> float:
+    """The order p of f(h) = f0 + C h^p through three solutions (sizes coarsest first, any ratios).
+
+    With r21 = h2 / h3 and r32 = h1 / h2 (h3 the finest), e21 = f2 - f3, e32 = f1 - f2:
+    p = |log|e32 / e21| + q(p)| / log r21 with q(p) = log((r21^p - s) / (r32^p - s)) and
+    s = sign(e32 / e21), solved by fixed-point iteration (q = 0 for a constant ratio: one step).
+    nan when a difference is zero or the iteration does not settle.
+    """
+    h1, h2, h3 = sizes
+    f1, f2, f3 = values
+    e21, e32 = f2 - f3, f1 - f2
+    if e21 == 0.0 or e32 == 0.0:
+        return math.nan
+    r21, r32 = h2 / h3, h1 / h2
+    s = 1.0 if e32 / e21 > 0 else -1.0
+    base = math.log(abs(e32 / e21))
+    p = abs(base) / math.log(r21)
+    for _ in range(iterations):
+        try:
+            q = math.log((r21**p - s) / (r32**p - s))
+        except (ValueError, ZeroDivisionError, OverflowError):
+            return math.nan
+        new = abs(base + q) / math.log(r21)
+        if abs(new - p) < 1e-12 * max(1.0, p):
+            return new
+        p = new
+    return math.nan
+
+
+def richardson(sizes: list[float] | tuple[float, ...], values: list[float] | tuple[float, ...]) -> Richardson:
+    """Observed order, extrapolation and per-mesh relative errors of three solutions.
+
+    ``sizes`` h1 > h2 > h3 (the representative element size of each mesh; the ratios need not be
+    equal), ``values`` f1, f2, f3. With f(h) = f0 + C h^p: p by :func:`observed_order` and
+    f0 = f3 + (f3 - f2) / ((h2 / h3)^p - 1); each mesh's error is |f_i - f0| / |f0|. When the
+    two differences differ in sign (oscillation), or p lies outside :data:`ORDER_RANGE`, the
+    meshes are not in the asymptotic range: no extrapolation, and each mesh's error is taken as
+    the largest relative difference between its value and the other meshes' (what refining has
+    been seen to change), stated as such (``asymptotic`` False).
+    """
+    h = tuple(float(x) for x in sizes)
+    f = tuple(float(x) for x in values)
+    if len(h) != 3 or len(f) != 3:
+        raise ValueError("a Richardson estimate needs three meshes")
+    if not h[0] > h[1] > h[2] > 0:
+        raise ValueError(f"mesh sizes {h} are not decreasing")
+    d12, d23 = f[0] - f[1], f[1] - f[2]
+    if d23 == 0.0 and d12 == 0.0:
+        return Richardson(h, f, math.inf, f[2], True, (0.0, 0.0, 0.0))
+    same_sign = d12 * d23 > 0
+    order = observed_order(h, f) if same_sign else math.nan
+    asymptotic = same_sign and math.isfinite(order) and ORDER_RANGE[0] <= order <= ORDER_RANGE[1]
+    if asymptotic:
+        f0 = f[2] + (f[2] - f[1]) / ((h[1] / h[2]) ** order - 1.0)
+        scale = abs(f0) if f0 != 0.0 else max(abs(x) for x in f)
+        return Richardson(h, f, order, f0, True, tuple(abs(x - f0) / scale for x in f))
+    scale = max(abs(f[2]), 1e-300)
+    spread = tuple(max(abs(x - y) for y in f) / scale for x in f)
+    return Richardson(h, f, order, None, False, spread)
+
+
+def pressure_percentile_by_area(pressure_mpa: np.ndarray, vertices_mm: np.ndarray, triangles: np.ndarray, percentile: float = 98.0) -> float:
+    """The pressure below which ``percentile`` % of the contact area lies (MPa).
+
+    ``pressure_mpa`` (n,) nodal values on the triangulated surface (vertices (n, 3) mm, triangles
+    (m, 3)); each node carries a third of the area of its triangles (lumped), and the contact is
+    the nodes with p > 0. Unlike the largest nodal value, one node (a rim, a single element)
+    cannot set it: it moves only when the pressure of ``100 - percentile`` % of the area does.
+    """
+    p = np.asarray(pressure_mpa, dtype=np.float64)
+    tri = np.asarray(triangles)
+    v = np.asarray(vertices_mm, dtype=np.float64)
+    area = 0.5 * np.linalg.norm(np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]]), axis=1)
+    node_area = np.bincount(tri.ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(p))
+    contact = p > 0
+    if not np.any(contact):
+        return 0.0
+    order = np.argsort(p[contact])
+    ps, w = p[contact][order], node_area[contact][order]
+    cumulative = np.cumsum(w) / np.sum(w)
+    return float(ps[min(int(np.searchsorted(cumulative, percentile / 100.0)), len(ps) - 1)])
+
+
+def fe_values(result_dir: str | Path) -> dict[str, float]:
+    """The study's quantities of one FE result directory, at its last time point, measured as the
+    comparisons measure them (on M, verification.metrics.series_on_mobile), and its cost."""
+    from edem.resultdir import read_result_dir
+    from verification.metrics import PRESSURE_ON_MOBILE, frame_index, measured_on_mobile, series_on_mobile
+
+    result = read_result_dir(result_dir)
+    on_mobile = measured_on_mobile(result)
+    series = series_on_mobile(result) if on_mobile else result.timeseries
+    k = len(result.time_s) - 1
+    frame = result.frame(frame_index(result, k))
+    pressure = frame.point_data[PRESSURE_ON_MOBILE if on_mobile else "pressure_mpa"]
+    memory = result.summary.get("peak_memory_mb")
+    return {
+        "fe_peak_pressure_mpa": float(series["peak_pressure_mpa"][k]),
+        "fe_p98_pressure_mpa": pressure_percentile_by_area(pressure, frame.points_mm, frame.triangles),
+        "fe_contact_area_mm2": float(series["contact_area_mm2"][k]),
+        "fe_displacement_norm_mm": float(np.linalg.norm([series[f"disp_{x}_mm"][k] for x in "xyz"])),
+        "fe_n_dofs": float(result.summary.get("n_dofs", math.nan)),
+        "fe_wall_time_s": float(result.summary.get("wall_time_s", math.nan)),
+        "fe_peak_memory_mb": math.nan if memory is None else float(memory),
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# The stored study and its lookup
+
+
+def fe_key(scene: str, side: str, overrides: dict[str, Any], options: dict[str, Any]) -> str:
+    """The key of one FE reference run: scene, side (fe-slab / fe-layer), the overrides and the
+    options the FE side reads (verification.sides.side_inputs), as canonical JSON."""
+    from verification.sides import side_inputs
+
+    kept, read = side_inputs(side, dict(overrides), dict(options))
+    read.pop("steps", None)
+    settings = {k: (float(v) if k == "mesh_size_mm" else v) for k, v in read.items()}
+    return json.dumps({"scene": scene, "side": side, "overrides": kept, "options": settings}, sort_keys=True, separators=(",", ":"))
+
+
+def load_reference(path: str | Path | None = None) -> dict[str, Any]:
+    """The stored study (:data:`REFERENCE_FILE`); an empty one when the file does not exist."""
+    file = Path(path) if path is not None else REFERENCE_FILE
+    if not file.exists():
+        return {"entries": {}}
+    from edem.errors import InputError
+
+    try:
+        data = json.loads(file.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot read the FE convergence reference: {exc}", file=str(file), expected="the JSON that edem verify fe-convergence --refresh-reference writes") from None
+    if not isinstance(data, dict) or not isinstance(data.get("entries"), dict):
+        raise InputError("no 'entries' table", file=str(file), key="entries", expected="FE key -> {errors: {metric: relative error}}")
+    return data
+
+
+def fe_relative_error(case: Any, reference: dict[str, Any] | None = None) -> dict[str, float] | None:
+    """The estimated relative error of the FE reference side of ``case`` (a
+    verification.campaign_model.Case, or a campaign's case row: a dict with "scene", "sides"
+    (names, or the side records of verification.runner), "overrides" and "options", whose last
+    side is an FE side), per comparison metric (``peak_pressure_rel_error``,
+    ``p98_pressure_rel_error``, ``contact_area_rel_error``, ``displacement_rel_error``): what a
+    band must exceed before it can judge. None when the case has no FE reference or its FE run is
+    not in the stored study (its error is unknown)."""
+    d = case if isinstance(case, dict) else case.definition()
+    sides = tuple(s["side"] if isinstance(s, dict) else s for s in d.get("sides", ()))
+    if len(sides) < 2 or not sides[-1].startswith("fe-"):
+        return None
+    data = load_reference() if reference is None else reference
+    entry = data["entries"].get(fe_key(d["scene"], sides[-1], d.get("overrides") or {}, d.get("options") or {}))
+    if entry is None:
+        return None
+    return {metric: float(value) for metric, value in entry["errors"].items()}
+
+
+def write_reference(summary: dict[str, Any], path: str | Path | None = None) -> Path:
+    """Store the errors of an ``fe-convergence`` campaign summary (its analysis's ``entries``)
+    in :data:`REFERENCE_FILE` (or ``path``), with the study's figures beside them. InputError
+    when the summary holds no estimate (every point unavailable)."""
+    import datetime as _dt
+
+    from edem.errors import InputError
+
+    result = next((a for a in summary.get("analyses", []) if a.get("kind") == "fe-convergence"), None)
+    entries = (result or {}).get("values", {}).get("entries") or {}
+    if not entries:
+        raise InputError("the fe-convergence campaign produced no error estimate (its FE runs unavailable or failed)", key="analyses",
+                         expected="the three meshes of at least one point solved")
+    file = Path(path) if path is not None else REFERENCE_FILE
+    data = {
+        "what": "estimated relative discretisation error of FE reference runs (edem verify fe-convergence --refresh-reference; verification.fe_convergence)",
+        "refreshed_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "entries": dict(sorted(entries.items())),
+        "points": result["values"]["points"],
+    }
+    file.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    return file
+
+
+#: what a table cell says for an FE reference whose error is not in the study
+UNKNOWN_FE_ERROR = "unknown"
+
+
+def fe_error_text(errors: dict[str, float] | None) -> str:
+    """One cell of a campaign table: the FE's own estimated errors (peak / area / |u|), or that
+    they are unknown (the run is not in the fe-convergence study)."""
+    if errors is None:
+        return UNKNOWN_FE_ERROR
+    return " / ".join(f"{100.0 * errors[m]:.1f} %" if m in errors else "–" for m in ("peak_pressure_rel_error", "contact_area_rel_error", "displacement_rel_error"))
