@@ -678,7 +678,9 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     else:
         h = ufl.CellDiameter(s.mesh)
     lam, mu = problem.lame()
-    gamma = fem.Constant(s.mesh, float(problem.nitsche.gamma0 * (lam + 2.0 * mu))) / h
+    # A Kelvin-Voigt step (gap_scale c0) constrains u = (v + h) / c0: gamma (u . n - gap) is
+    # (gamma / c0) (v . n - gap'), so a steady state solves the elastic discrete problem exactly
+    gamma = fem.Constant(s.mesh, float(problem.nitsche.gamma0 * (lam + 2.0 * mu) / problem.gap_scale)) / h
     theta = fem.Constant(s.mesh, float(problem.nitsche.theta))
     sn_u = ufl.dot(ufl.dot(sig_u, nu), nu)
     sn_v = ufl.dot(ufl.dot(sig_v, nu), nu)
