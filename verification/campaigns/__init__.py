@@ -13,7 +13,8 @@ against Hertz line contact and confined compression on three meshes each, with o
 vs the FE slab at five instants), ``sensitivity`` (h_max x ligament modulus, 20 x 20 EDEM
 stances, the thesis's fig. 4.3.10), ``quick`` (a subset for CI), and EDEM/DEM against the FE
 reference: ``cylinder-plane``, ``subject``, ``error-vs-runtime``; ``thin-layer`` (the coupled
-thin-layer bed and the independent springs against the FE); ``population`` (1000 seeded
+thin-layer bed and the independent springs against the FE); ``viscoelastic`` (viscoelastic EDEM
+against the Kelvin-Voigt FE twin over time); ``population`` (1000 seeded
 subject-like ankles over the stance, EDEM).
 """
 
@@ -45,6 +46,7 @@ from verification.campaigns import (
     stance,
     subject,
     thin_layer,
+    viscoelastic,
 )
 from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, HERTZ_SIZES_MM
 from verification.campaigns.sensitivity import SENSITIVITY_HMAX_MM, SENSITIVITY_MODULUS_MPA
@@ -59,7 +61,7 @@ from verification.campaigns.stance import (
 )
 
 #: the registered campaign modules, in the order `edem verify --list` shows them
-CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, population)
+CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, viscoelastic, population)
 
 
 def campaigns() -> dict[str, Campaign]:

@@ -19,6 +19,7 @@ from verification.campaigns.edem_analytic import _analytic_cases, _analytic_figu
 from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, _fe_analytic_cases
 from verification.campaigns.stability import _stability_cases
 from verification.campaigns.subject import campaign as subject_campaign
+from verification.campaigns.viscoelastic import campaign as viscoelastic_campaign
 from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import INVARIANT, MODEL_BAND, MODEL_BAND_REASON, MODEL_BAND_REL, Basis
 
@@ -37,6 +38,10 @@ FE_P1 = {"mesh_size_mm": 1.0, "degree": 1}
 #: load 4-8 (120 s of CPU time), 285-333 s at load 8-10; the Taylor-Hood case at nu = 0.49 is the
 #: longest single case
 EXPECTED_TIME_S = 220.0
+
+
+#: the viscoelastic campaign's cheapest case (verification.campaigns.viscoelastic)
+VISCOELASTIC_CASE = "slab-step-dt2-coupled-nu0.42"
 
 
 def _banded(case: Case) -> Case:
@@ -111,14 +116,17 @@ def campaign() -> Campaign:
     # one cheap FE case (a second or two; "unavailable" without dolfinx): the coarsest confined slab
     fe_picks = [f"fe-confined-compression-h{max(CONFINED_SIZES_MM):g}"]
     trust = trust_cases()
+    # one cheap viscoelastic case: coupled EDEM against the Kelvin-Voigt FE twin over a step (7 time points, FE P1)
+    viscous = viscoelastic_campaign().case(VISCOELASTIC_CASE)
     figure = Figure(TRUST_FIGURE, "DEM against the FE slab on the ideal ankle (333 N): relative errors against Poisson's ratio", "lines",
                     tuple(f"slab-F333-nu{nu:g}" for nu in TRUST_NUS), x="poissons_ratio",
                     y=("peak_pressure_rel_error", "contact_area_rel_error", "displacement_rel_error", "pressure_l2_rel_error"), exact={"band": MODEL_BAND_REL})
     return Campaign(
         "quick",
         "The main job: first the ankle answer (DEM against the FE reference on the ideal and subject-like ankles: where it agrees, where it breaks), then every "
-        "closed-form case, a few stability cases, ideal standing EDEM vs DEM and one cheap FE verification case (confined compression, coarse).",
-        tuple(trust) + tuple(_analytic_cases()) + tuple(stability[n] for n in picks) + (_ideal_standing_case(),) + tuple(fe[n] for n in fe_picks),
+        "closed-form case, a few stability cases, ideal standing EDEM vs DEM, one cheap FE verification case (confined compression, coarse) "
+        "and one viscoelastic case (coupled EDEM against the Kelvin-Voigt FE twin over a step held 3 tau).",
+        tuple(trust) + tuple(_analytic_cases()) + tuple(stability[n] for n in picks) + (_ideal_standing_case(),) + tuple(fe[n] for n in fe_picks) + (viscous,),
         (figure,) + _analytic_figures(),
         (_trust_analysis(),),
     )
