@@ -4,11 +4,17 @@ The continuum is sigma = C : (eps(u) + tau eps(du/dt)) = C : eps(v) with v = u +
 elastic tensor and tau the springs' relaxation time. An implicit scheme writes the rate at t_n from
 the displacements it has, so that
 
-    v_n = c0 u_n - h_n,        h_n = sum_j c_j u_{n-j}
+    v_n = c0 u_n - h_n,        h_n = sum_j c_j u_{n-j} + e r_{n-1},   r = v - u = tau du/dt
 
-* backward Euler (first order): c0 = 1 + a, h_n = a u_{n-1}, a = tau / dt_n;
-* BDF2 (second order, variable step, w = dt_n / dt_{n-1}): c0 = 1 + a (1 + 2w) / (1 + w),
-  h_n = a (1 + w) u_{n-1} - a w^2 / (1 + w) u_{n-2}; its first step is backward Euler.
+* trapezoidal (second order, the default): tau (u_n - u_{n-1}) / dt = (r_n + r_{n-1}) / 2, so
+  c0 = 1 + 2a, h_n = 2a u_{n-1} + r_{n-1}, a = tau / dt_n. EDEM reads a load history as linear
+  between time points, so its kinks fall on time points and the rate is smooth within each step:
+  the trapezoid stays second order through them (a ramp over one step, a "step" load);
+* BDF2 (second order for smooth loads, L-stable, variable step, w = dt_n / dt_{n-1}):
+  c0 = 1 + a (1 + 2w) / (1 + w), h_n = a (1 + w) u_{n-1} - a w^2 / (1 + w) u_{n-2}, its first step
+  trapezoidal. Its three-point rate straddles a kink of the load: after a steep one (a load
+  raised in one step) its local error is first order there (2.5 % of the creep at dt = tau/8);
+* backward Euler (first order): c0 = 1 + a, h_n = a u_{n-1}.
 
 Each time point is then an elastic contact problem for v: div(C : eps(v_n)) balances the load at
 t_n, the bonded face moves rigidly with v's rigid motion D_n = c0 d_n - sum_j c_j d_{n-j}, and the
@@ -41,26 +47,29 @@ import numpy as np
 from fem_reference.problem import FEContactProblem, FEContactResult
 
 #: time schemes of the Kelvin-Voigt FE (module docstring); the default is second order
-TIME_SCHEMES = ("bdf2", "backward-euler")
-DEFAULT_TIME_SCHEME = "bdf2"
+TIME_SCHEMES = ("trapezoidal", "bdf2", "backward-euler")
+DEFAULT_TIME_SCHEME = "trapezoidal"
 
 
 def scheme_weights(scheme: str, dt_s: float, previous_dt_s: float | None, relaxation_time_s: float,
-                   ) -> tuple[float, tuple[float, ...]]:
-    """(c0, (c_1, c_2, ...)) of v_n = c0 u_n - sum_j c_j u_{n-j} (module docstring).
+                   ) -> tuple[float, tuple[float, ...], float]:
+    """(c0, (c_1, c_2, ...), e) of v_n = c0 u_n - sum_j c_j u_{n-j} - e r_{n-1} (module docstring).
 
-    ``previous_dt_s`` is None at the first step (BDF2 then takes a backward-Euler step). The
-    weights are consistent (c0 - sum c_j = 1: a body at rest stays at rest).
+    ``previous_dt_s`` is None at the first step (BDF2 then takes a trapezoidal step). The weights
+    are consistent (c0 - sum c_j = 1 and the rate enters only through r: a body at rest stays at
+    rest).
     """
     if scheme not in TIME_SCHEMES:
         raise ValueError(f"unknown time scheme {scheme!r} (expected {' or '.join(TIME_SCHEMES)})")
     if not (dt_s > 0.0):
         raise ValueError(f"the time step must be > 0, got {dt_s!r} s")
     a = relaxation_time_s / dt_s
-    if scheme == "backward-euler" or previous_dt_s is None:
-        return 1.0 + a, (a,)
+    if scheme == "backward-euler":
+        return 1.0 + a, (a,), 0.0
+    if scheme == "trapezoidal" or previous_dt_s is None:
+        return 1.0 + 2.0 * a, (2.0 * a,), 1.0
     w = dt_s / previous_dt_s
-    return 1.0 + a * (1.0 + 2.0 * w) / (1.0 + w), (a * (1.0 + w), -a * w * w / (1.0 + w))
+    return 1.0 + a * (1.0 + 2.0 * w) / (1.0 + w), (a * (1.0 + w), -a * w * w / (1.0 + w)), 0.0
 
 
 def first_load_warning(force_n: np.ndarray) -> list[str]:
@@ -78,6 +87,9 @@ class _State:
     u: Any  # dolfinx Function (vector Lagrange of the displacement degree): u_n
     translation_mm: np.ndarray  # (3,) the bone's, d_n
     rotation_rad: np.ndarray  # (3,) the bone's small rotation about G
+    rate: Any  # r_n = v_n - u_n = tau du/dt (a Function of the same space)
+    rate_translation_mm: np.ndarray  # its rigid parts
+    rate_rotation_rad: np.ndarray
 
 
 @dataclass
@@ -109,23 +121,27 @@ class KelvinVoigtHistory:
 
     def start_at_rest(self, time_s: float) -> None:
         """u = 0 at the first time point (an unloaded body)."""
-        self.states = [_State(time_s, self._function(), np.zeros(3), np.zeros(3))]
+        self.states = [_State(time_s, self._function(), np.zeros(3), np.zeros(3), self._function(), np.zeros(3), np.zeros(3))]
 
-    def weights(self, time_s: float) -> tuple[float, tuple[float, ...]]:
-        """(c0, c_j) of the step to ``time_s`` from the stored states."""
-        dt = time_s - self.states[-1].time_s
-        previous = self.states[-1].time_s - self.states[-2].time_s if len(self.states) > 1 else None
-        return scheme_weights(self.scheme, dt, previous, self.relaxation_time_s)
-
-    def _history(self, coefficients: tuple[float, ...]) -> tuple[Any, np.ndarray, np.ndarray]:
-        """h_n = sum_j c_j u_{n-j} and its rigid parts (translation, rotation)."""
+    def _history(self, time_s: float) -> tuple[float, Any, np.ndarray, np.ndarray]:
+        """(c0, h_n = sum_j c_j u_{n-j} + e r_{n-1}, its rigid translation and rotation) of the
+        step to ``time_s`` from the stored states."""
+        last = self.states[-1]
+        previous = last.time_s - self.states[-2].time_s if len(self.states) > 1 else None
+        c0, coefficients, e = scheme_weights(self.scheme, time_s - last.time_s, previous, self.relaxation_time_s)
         h = self._function()
-        d, q = np.zeros(3), np.zeros(3)
+        h.x.array[:] = e * last.rate.x.array
+        d, q = e * last.rate_translation_mm, e * last.rate_rotation_rad
         for c, state in zip(coefficients, reversed(self.states)):
             h.x.array[:] += c * state.u.x.array
-            d += c * state.translation_mm
-            q += c * state.rotation_rad
-        return h, d, q
+            d = d + c * state.translation_mm
+            q = q + c * state.rotation_rad
+        return c0, h, d, q
+
+    def _push(self, time_s: float, u: Any, d: np.ndarray, q: np.ndarray, v: Any, vd: np.ndarray, vq: np.ndarray) -> None:
+        """Store u_n and its rate r_n = v_n - u_n (v given as a Function and its rigid parts)."""
+        v.x.array[:] -= u.x.array
+        self.states = (self.states + [_State(time_s, u, d, q, v, vd - d, vq - q)])[-2:]
 
     def prepare(self, problem: FEContactProblem, time_s: float) -> tuple[float, np.ndarray, np.ndarray]:
         """Set the shifted gap of the step to ``time_s`` on ``problem`` (and the previous v as its
@@ -135,8 +151,7 @@ class KelvinVoigtHistory:
         if not self.states:
             problem.gap_scale, problem.gap_history = 1.0, None
             return 1.0, np.zeros(3), np.zeros(3)
-        c0, coefficients = self.weights(time_s)
-        h, hd, hq = self._history(coefficients)
+        c0, h, hd, hq = self._history(time_s)
         problem.gap_scale, problem.gap_history = c0, h
         if self.last_v is not None:
             problem.initial_translation_mm = self.last_v["t"]
@@ -148,16 +163,18 @@ class KelvinVoigtHistory:
                problem: FEContactProblem) -> tuple[np.ndarray, np.ndarray]:
         """Store u_n = (v_n + h_n) / c0 from a solve of the prepared problem (``keep_fields``) and
         return the bone's translation and rotation d_n, q_n (the result's are v's)."""
-        v = result.fields["solution"]
+        solution = result.fields["solution"]
+        v = self._function()
+        v.interpolate(solution.sub(0) if result.element == "TH" else solution)
         u = self._function()
-        u.interpolate(v.sub(0) if result.element == "TH" else v)
+        u.x.array[:] = v.x.array
         h = problem.gap_history
         if h is not None:
             u.x.array[:] += h.x.array
         u.x.array[:] /= c0
         d = (result.bone_displacement_mm + hd) / c0
         q = (result.bone_rotation_rad + hq) / c0
-        self.states = (self.states + [_State(time_s, u, d, q)])[-2:]
+        self._push(time_s, u, d, q, v, result.bone_displacement_mm, result.bone_rotation_rad)
         dirs = result.free_directions
         along = dirs.T @ (dirs @ result.applied_force_n)
         if np.linalg.norm(along) > 0:
@@ -173,8 +190,7 @@ class KelvinVoigtHistory:
 
         mods = _fe_modules()
         fem, MPI = mods["fem"], mods["MPI"]
-        c0, coefficients = self.weights(time_s)
-        h, hd, hq = self._history(coefficients)
+        c0, h, hd, hq = self._history(time_s)
         D = np.zeros(3)
         if self.last_direction is not None:
             mesh = self.mesh.mesh
@@ -189,12 +205,12 @@ class KelvinVoigtHistory:
             touch = mesh.comm.allreduce(local, op=MPI.MIN)
             if np.isfinite(touch):
                 D = touch * self.last_direction
+        v = self._function()
+        v.x.array.reshape(-1, 3)[:] = D
         u = self._function()
-        u.x.array[:] = h.x.array
-        u.x.array.reshape(-1, 3)[:] += D
-        u.x.array[:] /= c0
+        u.x.array[:] = (h.x.array + v.x.array) / c0
         d, q = (D + hd) / c0, hq / c0
-        self.states = (self.states + [_State(time_s, u, d, q)])[-2:]
+        self._push(time_s, u, d, q, v, D, np.zeros(3))
         self.last_v = None  # v was rigid: no warm start for the next loaded step
         return d, q
 

@@ -21,11 +21,11 @@ LOAD = 120.0  # N -> p = 1.5 MPa
 COMPLIANCE = H / (LX * LY) / cf.confined_modulus(E, NU)  # mm per N of the confined slab
 
 
-@pytest.mark.parametrize("scheme", ["backward-euler", "bdf2"])
+@pytest.mark.parametrize("scheme", ["trapezoidal", "backward-euler", "bdf2"])
 @pytest.mark.parametrize("ratio", [0.5, 1.0, 3.0])
 def test_scheme_weights_keep_a_body_at_rest(scheme, ratio):
-    """Consistency: c0 - sum c_j = 1, so u_n = u_{n-1} = u_{n-2} = u gives v = u (no rate)."""
-    c0, c = scheme_weights(scheme, 0.1 * ratio, 0.1, TAU)
+    """Consistency: c0 - sum c_j = 1, so u_n = u_{n-1} = u_{n-2} = u with no rate gives v = u."""
+    c0, c, _ = scheme_weights(scheme, 0.1 * ratio, 0.1, TAU)
     assert c0 - sum(c) == pytest.approx(1.0, abs=1e-12)
 
 
@@ -84,33 +84,35 @@ def _trapezoid_run(slab, scheme, dt):
 
 
 def test_confined_creep_under_a_step_load_follows_the_exact_solution(slab):
-    """Step load at t = 0+ held 6 tau (BDF2, dt = tau / 8): u(t) = (F C)(1 - exp(-t/tau)).
-    Tolerance 1 % of the final creep: the error is that of the first step, backward Euler's
-    after the jump, z / (1 + z) against 1 - exp(-z), about z^2 / 2 = 0.78 % at z = dt / tau = 1/8
-    (measured 0.75 %); a wrong rate or history is off by far more; the
+    """A load of 0 at t = 0 and F from t_1 = dt on, held 6 tau (trapezoidal, dt = tau / 8), read
+    as EDEM reads a load history (linear between time points): u(t) from the closed form of that
+    ramp and hold. Tolerance 1 % of the final creep: the trapezoid's error here is O(dt^2), its
+    first step's about z^2 / 12 of the final value (0.13 % at z = dt / tau = 1/8); BDF2, whose
+    rate straddles the kink at t_1, errs by 2.5 % and backward Euler by 8 % at t_1; the
     pressure equals F / area at every instant (the plate carries the load) to the force balance 1e-6."""
-    t = np.arange(0.0, 6.0 + 1e-9, 0.125)
+    dt = 0.125
+    t = np.arange(0.0, 6.0 + 1e-9, dt)
     force = np.zeros((len(t), 3))
     force[1:, 2] = LOAD
-    steps = solve_history(_confined(slab), t, force, TAU, "bdf2")
+    steps = solve_history(_confined(slab), t, force, TAU, "trapezoidal")
     d = _displacement(steps)
-    exact = cf.kelvin_voigt_creep(t, [0.0], [COMPLIANCE * LOAD], TAU)
-    # the scheme sees the load at t_1 on (0, t_1]: a step at 0+ (exact for a ramp would differ at O(dt))
+    exact = cf.kelvin_voigt_creep(t, [0.0, dt], [0.0, COMPLIANCE * LOAD], TAU)
     err = np.abs(d - exact).max() / (COMPLIANCE * LOAD)
-    report("KV confined step creep (BDF2, dt tau/8)", max_rel_err=err, d_end=d[-1], d_inf=COMPLIANCE * LOAD)
+    report("KV confined step creep (trapezoidal, dt tau/8)", max_rel_err=err, d_end=d[-1], d_inf=COMPLIANCE * LOAD)
     assert err < 0.01
     for s in steps[1:]:
         assert s.result.peak_pressure_mpa == pytest.approx(LOAD / (LX * LY), rel=1e-6)
-    assert np.all(np.diff(d[1:]) > 0)  # creep: the displacement grows under a held load
+    assert np.all(np.diff(d[1:]) >= -1e-9 * d[-1])  # creep: the displacement grows under a held load
 
 
-@pytest.mark.parametrize("scheme, order", [("backward-euler", 1.0), ("bdf2", 2.0)])
+@pytest.mark.parametrize("scheme, order", [("backward-euler", 1.0), ("bdf2", 2.0), ("trapezoidal", 2.0)])
 def test_observed_order_in_time_is_the_schemes(slab, scheme, order):
     """Trapezoid load (ramp to 120 N over tau, hold tau, unload over tau, rest tau), dt = tau/8,
     tau/16, tau/32: the max error over the common instants against the exact creep falls with the
-    scheme's order. Band +-0.2: these halvings are near asymptotic (BDF2 measured 1.85 and 2.01;
-    from tau/4 it was 1.55, its backward-Euler first step still showing); a wrong scheme (BDF2
-    falling back to first order at the kinks, a lagged history) misses it by 1."""
+    scheme's order. Band +-0.2: these halvings are near asymptotic (measured: backward Euler
+    0.96 and 0.98, BDF2 with its trapezoidal start 1.96 and 2.05; with a backward-Euler start
+    BDF2 gave 1.55, 1.85, 2.01 from tau/4); a wrong scheme (BDF2 falling back to first order at
+    the kinks, a lagged history) misses it by 1."""
     errors = []
     for dt in (0.125, 0.0625, 0.03125):
         t, d, exact, _ = _trapezoid_run(slab, scheme, dt)
@@ -122,19 +124,19 @@ def test_observed_order_in_time_is_the_schemes(slab, scheme, order):
 
 
 def test_creep_recovery_after_unloading_follows_the_exact_decay_and_returns_to_the_start(slab):
-    """Unloaded after the trapezoid, the slab recovers as u(3) exp(-(t - 3)/tau) (BDF2, dt tau/8,
+    """Unloaded after the trapezoid, the slab recovers as u(3) exp(-(t - 3)/tau) (trapezoidal, dt tau/8,
     within 1 % of the creep's maximum as above); held unloaded for 12 tau it returns to its start
     (|u| below exp(-12) ~ 6e-6 of the maximum, x 10 for the scheme's own decay rate)."""
     dt = 0.125
     t = np.arange(0.0, 15.0 + dt / 2, dt)
     force = np.zeros((len(t), 3))
     force[:, 2] = np.interp(t, *TRAPEZOID)
-    steps = solve_history(_confined(slab), t, force, TAU, "bdf2")
+    steps = solve_history(_confined(slab), t, force, TAU, "trapezoidal")
     d = _displacement(steps)
     exact = cf.kelvin_voigt_creep(t, TRAPEZOID[0], COMPLIANCE * TRAPEZOID[1], TAU)
     after = t > 3.0
     err = float(np.abs(d - exact)[after].max() / d.max())
-    report("KV confined recovery (BDF2, dt tau/8)", max_rel_err_after_unloading=err, d_end=d[-1], d_max=d.max())
+    report("KV confined recovery (trapezoidal, dt tau/8)", max_rel_err_after_unloading=err, d_end=d[-1], d_max=d.max())
     assert err < 0.01
     assert all(s.result is None for s in np.array(steps, dtype=object)[after])  # no force, nothing solved
     assert abs(d[-1]) < 10 * math.exp(-12.0) * d.max()
@@ -188,7 +190,7 @@ def test_curved_contact_creeps_from_a_narrow_contact_to_the_elastic_one(comm):
            peak_first=peak[0], peak_end=peak[-1], peak_elastic=elastic.peak_pressure_mpa, d_end=d[-1],
            d_elastic=elastic.bone_displacement_mm[2])
     assert area[0] < 0.8 * elastic.contact_area_mm2 and peak[0] > 1.2 * elastic.peak_pressure_mpa
-    assert np.all(np.diff(area) >= -1e-9 * area[-1]) and np.all(np.diff(d[1:]) > 0)
+    assert np.all(np.diff(area) >= -1e-9 * area[-1]) and np.all(np.diff(d[1:]) >= -1e-9 * d[-1])
     assert d[-1] == pytest.approx(elastic.bone_displacement_mm[2], rel=2e-3)
     assert peak[-1] == pytest.approx(elastic.peak_pressure_mpa, rel=0.01)
     assert area[-1] == pytest.approx(elastic.contact_area_mm2, rel=0.01)
