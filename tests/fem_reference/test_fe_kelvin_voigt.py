@@ -164,7 +164,7 @@ def test_taylor_hood_creep_is_locking_free_near_incompressibility(slab):
 def test_curved_contact_creeps_from_a_narrow_contact_to_the_elastic_one(comm):
     """A rigid cylinder (R 20 mm) pressed on a free 2 mm slab under a step held 10 tau (BDF2,
     dt tau/4): the contact starts narrow with a high peak (the dashpots stiffen the layer) and
-    widens at every step; the end state is the elastic solution. At a steady state v = u and the
+    widens as it creeps; the end state is the elastic solution. At a steady state v = u and the
     shifted-gap problem is the elastic one except for Nitsche's stress-stress term, weighted
     c0 / gamma instead of 1 / gamma: a discretisation difference that refining removes (measured
     on this coarse mesh: displacement 0.05 %, peak 0.6 %, area 0.2 %), hence 0.2 % on the
@@ -190,7 +190,9 @@ def test_curved_contact_creeps_from_a_narrow_contact_to_the_elastic_one(comm):
            peak_first=peak[0], peak_end=peak[-1], peak_elastic=elastic.peak_pressure_mpa, d_end=d[-1],
            d_elastic=elastic.bone_displacement_mm[2])
     assert area[0] < 0.8 * elastic.contact_area_mm2 and peak[0] > 1.2 * elastic.peak_pressure_mpa
-    assert np.all(np.diff(area) >= -1e-9 * area[-1]) and np.all(np.diff(d[1:]) >= -1e-9 * d[-1])
+    # the area is counted at facet quadrature points (facets of 0.25 mm^2, 6 points each): it may
+    # step back by one point's weight as the front crosses an element (measured once, 0.027 mm^2)
+    assert np.all(np.diff(area) >= -0.05) and np.all(np.diff(d[1:]) >= -1e-9 * d[-1])
     assert d[-1] == pytest.approx(elastic.bone_displacement_mm[2], rel=2e-3)
     assert peak[-1] == pytest.approx(elastic.peak_pressure_mpa, rel=0.01)
     assert area[-1] == pytest.approx(elastic.contact_area_mm2, rel=0.01)
