@@ -16,7 +16,9 @@ in the FE with a warning when the load has no component along it, and the time p
 otherwise. Ligaments are not modelled (warning when the scene has some).
 
 Each time point is independent (the DEM convention: displacement of G from the initial pose of
-that time point). Consecutive time points with the same geometry (no kinematics, or the layer
+that time point), except with ``[viscoelastic]``: the Kelvin-Voigt continuum
+(:mod:`fem_reference.viscoelastic`) solves every time point up to the last selected one, in
+order, on one mesh, and reports the creeping displacement. Consecutive time points with the same geometry (no kinematics, or the layer
 at the same joint angle) reuse the mesh and start Newton from the previous solution scaled to
 the new load (exact for a slab whose contact set does not change: 0 Newton iterations).
 
@@ -434,14 +436,12 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         step_warnings = list(geom.warnings)
         force, moment = loads[k, :3].astype(float), loads[k, 3:].astype(float)
         if not np.any(force):
-            relaxed = (np.zeros(3), np.zeros(3))
             if history is not None:
-                _same_mesh(history, geom, mesh_cache, where, scene)
-                relaxed = history.relax(t, geom.obstacle, CONTACT_TAG)
                 step_warnings.append("no force: the cartilage creeps back, the bone follows it without force (zero pressure)")
             else:
                 rest_time = t
                 step_warnings.append("no force: nothing to solve (zero pressure)")
+            relaxed = _relaxed(history, geom, mesh_cache, where, scene, t)
             results.append(_zero_step(k, t, force, moment, geom, settings, clock, *relaxed))
             results[-1].warnings = step_warnings
             _add(step_log, step_warnings, where)
@@ -456,10 +456,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         step_warnings += mode_warnings
         if np.linalg.norm(trans @ force) == 0.0 and (
                 len(rots) == 0 or np.linalg.norm(rots @ moment) == 0.0):
-            relaxed = (np.zeros(3), np.zeros(3))
-            if history is not None:
-                _same_mesh(history, geom, mesh_cache, where, scene)
-                relaxed = history.relax(t, geom.obstacle, CONTACT_TAG)
+            relaxed = _relaxed(history, geom, mesh_cache, where, scene, t)
             results.append(_zero_step(k, t, force, moment, geom, settings, clock, *relaxed))
             step_warnings.append("the load has no component along the free DOFs: carried by "
                                  "the constraints (zero pressure)")
@@ -637,6 +634,16 @@ def _same_mesh(history: KelvinVoigtHistory, geom: FEGeometry, mesh_cache: dict, 
         raise InputError(f"{where}: the viscoelastic FE needs one mesh at every time point, and the FE slab follows "
                          "the joint angle", file=scene.source, key="kinematics",
                          expected="no [kinematics] with [viscoelastic], or the layer model (--model layer)")
+
+
+def _relaxed(history: KelvinVoigtHistory | None, geom: FEGeometry, mesh_cache: dict, where: str, scene: Any,
+             t: float) -> tuple[np.ndarray, np.ndarray]:
+    """The bone's translation and rotation at a time point without load: at rest before any
+    load, else the Kelvin-Voigt cartilage creeping back (:meth:`KelvinVoigtHistory.relax`)."""
+    if history is None:
+        return np.zeros(3), np.zeros(3)
+    _same_mesh(history, geom, mesh_cache, where, scene)
+    return history.relax(t, geom.obstacle, CONTACT_TAG)
 
 
 def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FEGeometry,
