@@ -17,18 +17,19 @@ the displacements it has, so that
 * backward Euler (first order): c0 = 1 + a, h_n = a u_{n-1}.
 
 Each time point is then an elastic contact problem for v: div(C : eps(v_n)) balances the load at
-t_n, the bonded face moves rigidly with v's rigid motion D_n = c0 d_n - sum_j c_j d_{n-j}, and the
-frictionless contact condition, which acts on u_n = (v_n + h_n) / c0,
+t_n, the bonded face moves rigidly with v's rigid motion D_n = c0 d_n - (h_n's rigid part), and
+the frictionless contact condition, which acts on u_n = (v_n + h_n) / c0,
 
     gap + u_n . nu >= 0   <=>   c0 gap + h_n . nu + v_n . nu >= 0,
 
-is the elastic one with the shifted gap c0 gap + h_n . nu (Nitsche's penalty stays that of the
-elastic v, whose stiffness is C). The contact pressure is the traction of C : eps(v_n), the total
+is the elastic one with the shifted gap c0 gap + h_n . nu, and Nitsche's penalty gamma on u is
+gamma / c0 on v (:func:`fem_reference.contact.solve_contact`), so a steady state solves the elastic
+discrete problem's pressure. The contact pressure is the traction of C : eps(v_n), the total
 (elastic + viscous) stress. :func:`fem_reference.contact.solve_contact` solves it unchanged
 (:class:`fem_reference.problem.FEContactProblem` ``gap_scale`` = c0, ``gap_history`` = h_n).
 
 An unloaded time point has no contact force: v_n is the rigid motion D_n, so the deformation
-u_n - d_n = (h_n - sum_j c_j d_{n-j}) / c0 creeps back freely, and the bone follows the layer,
+u_n - d_n = (h_n - h_n's rigid part) / c0 creeps back freely, and the bone follows the layer,
 touching it with no force (D_n the touch distance of the shifted gap along the last load's
 direction: the limit of a vanishing load).
 
@@ -217,8 +218,8 @@ class KelvinVoigtHistory:
 
 @dataclass
 class KelvinVoigtStep:
-    """One time point of :func:`solve_history`: the bone's motion d_n, q_n and the solve of v_n
-    (None at an unloaded time point; its pressure, area and contact force are those of u_n)."""
+    """One time point of :func:`solve_history`: the bone's motion d_n, q_n and the solve of v_n,
+    whose pressure, area and contact force are the time point's (None at an unloaded one)."""
 
     time_s: float
     translation_mm: np.ndarray
