@@ -332,6 +332,7 @@ def test_layer_without_thickness_exits_2(capsys):
     (["--set", "fe.model=shell"], "fe.model"),
     (["--set", "fe.element=P2", "--degree", "1"], "--degree"),
     (["--mesh-size", "-1"], "--mesh-size"),
+    (["--set", 'fe.time_scheme="rk4"'], "fe.time_scheme"),
 ])
 def test_bad_fe_input_exits_2(capsys, args, key):
     """docs/result-format.md: bad FE settings exit 2 with a message naming the key; nothing is solved."""
