@@ -56,7 +56,7 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     degree 2) when nu >= 0.49 unless the degree is given as 1 (P1 then locks: the core warns).
     mesh_size_mm: default :data:`DEFAULT_MESH_SIZE_MM` of the degree.
     time_scheme: the implicit scheme of a viscoelastic scene (:mod:`fem_reference.viscoelastic`),
-    default trapezoidal.
+    default BDF2.
     argument_keys: how errors name an argument given here (default: its parameter name).
     """
     fe = dict(scene.fe or {})

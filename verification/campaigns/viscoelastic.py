@@ -1,6 +1,6 @@
 """``viscoelastic``: Kelvin-Voigt EDEM against the Kelvin-Voigt FE twin over time (docs/campaigns.md).
 
-The FE twin (:mod:`fem_reference.viscoelastic`, trapezoidal in time) is the continuum whose stress is
+The FE twin (:mod:`fem_reference.viscoelastic`, BDF2 in time) is the continuum whose stress is
 C : (eps + tau d eps/dt), with the springs' tau and the same C. Each case compares one discrete
 run with it at every time point (peak pressure, contact area and displacement at each instant;
 the metrics are the largest over the instants, ``per_time`` in metrics.json keeps them all):
@@ -21,9 +21,9 @@ the metrics are the largest over the instants, ``per_time`` in metrics.json keep
 Poisson's ratio 0.3, 0.42, 0.45 on the cylinder layer under the step and the cycle; 0.42 elsewhere.
 FE: the layer P2 at 2.0 mm (one element through the 2 mm layer), the ankle slab P1 at 1.0 mm
 (P2 at 0.45: P1 locks); the FE time step is the scenes' (tau/4 for the first tau, then coarser),
-whose error is that of the closed-form tests (tests/fem_reference/test_fe_kelvin_voigt.py: the
-trapezoid errs by 0.12 % of the creep at dt = tau/8 after a load raised in one step, second
-order, so about 0.5 % at tau/4). Measured, not judged: the errors are reported against the goal of the
+whose error is that of the closed-form tests (tests/fem_reference/test_fe_kelvin_voigt.py: BDF2
+errs by 2.5 % of the creep at dt = tau/8 just after a load raised in one step, about 5 % at tau/4,
+and by 0.2 % where the load changes smoothly). Measured, not judged: the errors are reported against the goal of the
 issue (10 % at every instant with the coupled layer at nu 0.3-0.45), flagged where missed.
 """
 
@@ -102,6 +102,10 @@ def _overrides(times: list[float], forces: list[Any], nu: float, model: str) -> 
                            "viscoelastic.relaxation_time_s": TAU_S, "viscoelastic.integrator": "exact"}
     if model == "slab":
         out["ligaments"] = []
+    if any(f[1] for f in force):
+        # frictionless FE contact cannot hold the antero-posterior component of the thesis ramp
+        # while the contact is a line at the top of the dome (docs/method.md, section 6): both sides fix ty
+        out["constraints.fixed_dofs"] = ["tx", "ty", "rx", "ry", "rz"]
     return out
 
 
@@ -171,7 +175,7 @@ def campaign() -> Campaign:
         "goal", "The goal: viscoelastic EDEM with the coupled layer within 10 % of the FE twin at every instant (displacement, peak, area) at nu 0.3-0.45. Flagged where not met",
         "goal", tuple(n for pair in pairs for n in pair),
         {**GOAL, "pairs": pairs, "note": "Errors are the largest over the instants of |EDEM - FE| / FE; the ratio column is the coupled bed's pressure-field L2 error over the independent springs'. "
-         "The FE's own time error (trapezoidal at the scenes' steps) is about 0.5 % of the creep (closed-form tests)."}))
+         "The FE's own time error (BDF2 at the scenes' steps) is about 5 % of the creep just after a load raised in one step and 0.2 % where it changes smoothly (closed-form tests)."}))
     return Campaign(
         "viscoelastic",
         "Viscoelastic EDEM (independent springs, coupled thin layer) and DEM against the Kelvin-Voigt FE twin over time: cylinder layer and ideal ankle, "
