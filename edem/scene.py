@@ -54,7 +54,7 @@ SECTIONS = {
     "ligaments": {"name", "mobile_point_mm", "fixed_point_mm", "youngs_modulus_mpa", "area_mm2", "rest_length_mm"},
     "viscoelastic": {"relaxation_time_s", "integrator", "allow_unstable"},
     "solver": {"method"},
-    "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness"},
+    "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness", "time_scheme"},
     "opensim": None,  # checked by edem.opensim_model
 }
 FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm", "spring_spacing_mm", *GEOMETRY_KEYS}

@@ -125,3 +125,32 @@ def richardson_extrapolate(values: np.ndarray, refinement_ratio: float = 2.0) ->
     if not math.isfinite(p) or p <= 0:
         return f3
     return f3 + (f3 - f2) / (refinement_ratio**p - 1.0)
+
+
+def kelvin_voigt_creep(time_s: np.ndarray, load_times_s: np.ndarray, load_values: np.ndarray,
+                       relaxation_time_s: float) -> np.ndarray:
+    """Exact solution of tau du/dt + u = r(t), u(t_0) = 0, for r piecewise linear through
+    (load_times_s, load_values) (constant after the last point), at ``time_s``.
+
+    Superposition: the jump r(t_0) at t_0 responds with r_0 (1 - exp(-s / tau)) and each change
+    of slope m at t_i with m (s - tau (1 - exp(-s / tau))), s = t - t_i >= 0. In confined
+    compression of a Kelvin-Voigt slab of thickness h under pressure p(t), r = p h / E' and u
+    is the plate's displacement: a step's creep u = r (1 - exp(-t/tau)), a ramp's
+    (r/T) (t - tau (1 - exp(-t/tau))), and after unloading at t_1 the recovery
+    u(t_1) exp(-(t - t_1)/tau).
+    """
+    t = np.asarray(time_s, dtype=float)
+    tb = np.asarray(load_times_s, dtype=float)
+    r = np.asarray(load_values, dtype=float)
+    tau = float(relaxation_time_s)
+    slopes = np.append(np.diff(r) / np.diff(tb), 0.0)
+    changes = np.diff(np.concatenate([[0.0], slopes]))
+
+    def ramp(s: np.ndarray) -> np.ndarray:
+        s = np.clip(s, 0.0, None)
+        return s + tau * np.expm1(-s / tau)
+
+    u = r[0] * -np.expm1(-np.clip(t - tb[0], 0.0, None) / tau)
+    for ti, m in zip(tb, changes):
+        u = u + m * ramp(t - ti)
+    return u

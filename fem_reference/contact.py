@@ -232,7 +232,31 @@ class _Setup:
         return dofs, Q.tabulate_dof_coordinates()[dofs], Q
 
     def obstacle_ufl(self) -> tuple[Any, Any]:
-        """(gap, unit obstacle normal) as UFL expressions on the contact surface."""
+        """(gap, unit obstacle normal) as UFL expressions on the contact surface; a Kelvin-Voigt
+        step's shifted gap c0 gap + h . nu (:class:`FEContactProblem` ``gap_scale``, ``gap_history``)."""
+        gap, nu = self._obstacle_ufl()
+        p = self.problem
+        if p.gap_history is None and p.gap_scale == 1.0:
+            return gap, nu
+        ufl = self.m["ufl"]
+        shifted = float(p.gap_scale) * gap
+        return (shifted if p.gap_history is None else shifted + ufl.dot(p.gap_history, nu)), nu
+
+    def shifted_gap(self, dofs: np.ndarray, gap: np.ndarray, normal: np.ndarray,
+                    degree: int | None = None) -> np.ndarray:
+        """The gap of :meth:`obstacle_ufl` at the contact-surface dofs ``dofs`` of
+        :meth:`contact_points` (``degree``; default the displacement's)."""
+        p = self.problem
+        if p.gap_history is None:
+            return float(p.gap_scale) * gap
+        h = p.gap_history
+        if degree is not None and degree != self.degree:
+            h = self.m["fem"].Function(self.m["fem"].functionspace(self.mesh, ("Lagrange", degree, (3,))))
+            h.interpolate(p.gap_history)
+        values = h.x.array.reshape(-1, 3)[dofs]
+        return float(p.gap_scale) * gap + np.einsum("ij,ij->i", values, normal)
+
+    def _obstacle_ufl(self) -> tuple[Any, Any]:
         fem, ufl = self.m["fem"], self.m["ufl"]
         obs = self.problem.obstacle
         x = ufl.SpatialCoordinate(self.mesh)
@@ -274,8 +298,9 @@ class _Setup:
         fem, ufl, MPI = self.m["fem"], self.m["ufl"], self.m["MPI"]
         obs = self.problem.obstacle
         ehat = self.load / np.linalg.norm(self.load)
-        _, pts, _ = self.contact_points(self.degree)
+        dofs, pts, _ = self.contact_points(self.degree)
         g, nrm = obs.gap_and_normal(pts) if len(pts) else (np.zeros(0), np.zeros((0, 3)))
+        g = self.shifted_gap(dofs, g, nrm)
         s = nrm @ ehat
         approaching = s < -1e-9
         t_loc = float(np.min(g[approaching] / -s[approaching])) if approaching.any() else np.inf
@@ -304,6 +329,7 @@ class _Setup:
         own = dofs[dofs < Q.dofmap.index_map.size_local]
         area = self.vector_owned(fem.form(ufl.TestFunction(Q) * self.ds_c))[own]
         g, nrm = self.problem.obstacle.gap_and_normal(Q.tabulate_dof_coordinates()[own])
+        g = self.shifted_gap(own, g, nrm, 1)
         sn = nrm @ ehat
         ok = sn < -1e-9
         ti, wi = g[ok] / -sn[ok], area[ok] * sn[ok] ** 2
@@ -652,7 +678,9 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     else:
         h = ufl.CellDiameter(s.mesh)
     lam, mu = problem.lame()
-    gamma = fem.Constant(s.mesh, float(problem.nitsche.gamma0 * (lam + 2.0 * mu))) / h
+    # A Kelvin-Voigt step (gap_scale c0) constrains u = (v + h) / c0: gamma (u . n - gap) is
+    # (gamma / c0) (v . n - gap'), so a steady state solves the elastic discrete problem exactly
+    gamma = fem.Constant(s.mesh, float(problem.nitsche.gamma0 * (lam + 2.0 * mu) / problem.gap_scale)) / h
     theta = fem.Constant(s.mesh, float(problem.nitsche.theta))
     sn_u = ufl.dot(ufl.dot(sig_u, nu), nu)
     sn_v = ufl.dot(ufl.dot(sig_v, nu), nu)
@@ -910,6 +938,8 @@ def solve_contact_vi(problem: FEContactProblem, comm: Any = None, *, max_outer: 
     obs = problem.obstacle
     if not isinstance(obs, RigidPlane) or obs.axis() is None:
         raise ValueError("the VI path needs a RigidPlane whose normal is a coordinate axis")
+    if problem.gap_history is not None or problem.gap_scale != 1.0:
+        raise ValueError("the VI path solves elastic problems only (no Kelvin-Voigt shifted gap)")
     element = problem.resolved_element() if problem.element != "auto" else "P1"
     if element != "P1":
         raise ValueError("the VI path supports P1 elements only")

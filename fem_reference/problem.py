@@ -305,6 +305,11 @@ class FEContactProblem:
     initial_rotation_rad: Sequence[float] | None = None
     initial_field: Any = None  # owned values of the elastic part u~ (fields["ut_owned"] of a
     # previous solve on the same mesh and element): warm start of the displacement field
+    # A Kelvin-Voigt time step (fem_reference.viscoelastic): the unknown is v = u + tau du/dt and
+    # the contact condition acts on u = (v + h) / c0, i.e. gap' = gap_scale * gap + h . nu with
+    # h = gap_history (a dolfinx Function in the vector Lagrange space of the displacement degree)
+    gap_scale: float = 1.0
+    gap_history: Any = None
 
     def __post_init__(self) -> None:
         e, nu = float(self.youngs_modulus_mpa), float(self.poissons_ratio)

@@ -16,7 +16,9 @@ in the FE with a warning when the load has no component along it, and the time p
 otherwise. Ligaments are not modelled (warning when the scene has some).
 
 Each time point is independent (the DEM convention: displacement of G from the initial pose of
-that time point). Consecutive time points with the same geometry (no kinematics, or the layer
+that time point), except with ``[viscoelastic]``: the Kelvin-Voigt continuum
+(:mod:`fem_reference.viscoelastic`) solves every time point up to the last selected one, in
+order, on one mesh, and reports the creeping displacement. Consecutive time points with the same geometry (no kinematics, or the layer
 at the same joint angle) reuse the mesh and start Newton from the previous solution scaled to
 the new load (exact for a slab whose contact set does not change: 0 Newton iterations).
 
@@ -71,7 +73,9 @@ from fem_reference.problem import (
 )
 from fem_reference.progress import SolveProgress
 from fem_reference.settings import FESettings, resolve_settings
+from fem_reference.viscoelastic import KelvinVoigtHistory, first_load_warning
 from geometries.errors import InputError, SolverError
+from geometries.fe_solids import CONTACT_TAG
 
 #: Free rigid motions whose contact stiffness is below this fraction of the largest are fixed.
 WEAK_MODE_RATIO = 1e-8
@@ -191,6 +195,9 @@ class FERunResult:
             "law": self.scene.cartilage.law,
             "time_points": [int(x.step) for x in steps],
             "n_time_points": int(self.n_time_points),
+            **({} if self.scene.viscoelastic is None else {
+                "relaxation_time_s": float(self.scene.viscoelastic.relaxation_time_s),
+                "time_scheme": s.time_scheme}),
         }
 
     def timeseries_rows(self) -> list[dict[str, float]]:
@@ -423,8 +430,13 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     if scene.ligaments:
         warnings.append(f"the FE reference does not model ligaments: the scene's "
                         f"{len(scene.ligaments)} ligament(s) are left out")
-    if scene.viscoelastic is not None:
-        warnings.append("[viscoelastic] is ignored by the FE reference (static elasticity)")
+    viscous = scene.viscoelastic
+    history: KelvinVoigtHistory | None = None
+    rest_time: float | None = None  # an unloaded first time point: the Kelvin-Voigt body starts at rest there
+    solved = selected
+    if viscous is not None:
+        warnings += first_load_warning(loads[0, :3])
+        solved = list(range(selected[-1] + 1))  # the history needs every time point up to the last asked for
     if scene.cartilage.shear_modulus_mpa:
         warnings.append("cartilage.shear_modulus_mpa is ignored by the FE reference (the "
                         "continuum has its own shear stiffness; the contact is frictionless)")
@@ -440,7 +452,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     mesh_cache: dict = {}
     previous: dict | None = None
     results: list[FEStepResult] = []
-    for k in selected:
+    for k in solved:
         t = float(scene.load.time_s[k])
         where = f"time point {k} (t = {t:g} s)"
         clock = time.perf_counter()
@@ -452,8 +464,13 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         step_warnings = list(geom.warnings)
         force, moment = loads[k, :3].astype(float), loads[k, 3:].astype(float)
         if not np.any(force):
-            results.append(_zero_step(k, t, force, moment, geom, settings, clock))
-            step_warnings.append("no force: nothing to solve (zero pressure)")
+            if history is not None:
+                step_warnings.append("no force: the cartilage creeps back, the bone follows it without force (zero pressure)")
+            else:
+                rest_time = t
+                step_warnings.append("no force: nothing to solve (zero pressure)")
+            relaxed = _relaxed(history, geom, mesh_cache, where, scene, t)
+            results.append(_zero_step(k, t, force, moment, geom, settings, clock, *relaxed))
             results[-1].warnings = step_warnings
             _add(step_log, step_warnings, where)
             if progress is not None:
@@ -467,7 +484,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         step_warnings += mode_warnings
         if np.linalg.norm(trans @ force) == 0.0 and (
                 len(rots) == 0 or np.linalg.norm(rots @ moment) == 0.0):
-            results.append(_zero_step(k, t, force, moment, geom, settings, clock))
+            relaxed = _relaxed(history, geom, mesh_cache, where, scene, t)
+            results.append(_zero_step(k, t, force, moment, geom, settings, clock, *relaxed))
             step_warnings.append("the load has no component along the free DOFs: carried by "
                                  "the constraints (zero pressure)")
             results[-1].warnings = step_warnings
@@ -481,7 +499,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             mesh_cache.clear()
             mesh, cell_tags, facet_tags = geom.solid.to_dolfinx(comm)
             mesh_cache.update(key=mesh_key, mesh=FEMesh(mesh, facet_tags, cell_tags))
-        warm = previous is not None and previous["key"] == geom.key
+        warm = previous is not None and previous["key"] == geom.key and viscous is None
         if warm:  # same mesh and obstacle: start from the previous solution, scaled to the load
             ratio = float(np.linalg.norm(force)) / max(float(np.linalg.norm(previous["force"])),
                                                        1e-300)
@@ -503,6 +521,14 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             strain_warning=STRAIN_WARNING,
         )
 
+        if viscous is not None:
+            if history is None:
+                history = KelvinVoigtHistory(mesh_cache["mesh"], settings.degree, float(viscous.relaxation_time_s),
+                                             settings.time_scheme)
+                if rest_time is not None:
+                    history.start_at_rest(rest_time)
+            _same_mesh(history, geom, mesh_cache, where, scene)
+            step = history.prepare(problem, t)
         inside = None if solve_progress is None else solve_progress.for_solve(where)
         try:
             try:
@@ -525,6 +551,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             raise SolverError(f"{where}: the FE solve failed: {type(exc).__name__}: {exc}"
                                 ) from None
         step_warnings += [w for w in res.warnings if not w.startswith("max nominal strain")]
+        if viscous is not None:  # the solve's unknown was v = u + tau du/dt: report u's motion
+            res.bone_displacement_mm, res.bone_rotation_rad = history.commit(t, res, *step, problem)
         previous = {"key": geom.key, "t": res.bone_displacement_mm.copy(),
                     "q": res.bone_rotation_rad.copy(), "ut": res.fields["ut_owned"],
                     "force": force}
@@ -538,6 +566,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         _add(step_log, step_warnings, where)
         if progress is not None:
             progress(k)
+    results = [r for r in results if r.step in selected]
     run = FERunResult(scene, settings, results, time.perf_counter() - started,
                       _merge_warnings(warnings, step_log), n_times, None, comm.rank,
                       peak_memory_bytes())
@@ -608,15 +637,36 @@ def _mobile_mapping(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return x[solid.bottom_vertex[used]], lumped_top / lumped_bottom, a_top / a_bottom
 
 
+def _same_mesh(history: KelvinVoigtHistory, geom: FEGeometry, mesh_cache: dict, where: str, scene: Any) -> None:
+    """A Kelvin-Voigt history lives on one mesh: refuse a time point that needs another."""
+    fe_model_key = mesh_cache.get("key")
+    if history.mesh is not mesh_cache.get("mesh") or fe_model_key not in (geom.key, geom.key[0]):
+        raise InputError(f"{where}: the viscoelastic FE needs one mesh at every time point, and the FE slab follows "
+                         "the joint angle", file=scene.source, key="kinematics",
+                         expected="no [kinematics] with [viscoelastic], or the layer model (--model layer)")
+
+
+def _relaxed(history: KelvinVoigtHistory | None, geom: FEGeometry, mesh_cache: dict, where: str, scene: Any,
+             t: float) -> tuple[np.ndarray, np.ndarray]:
+    """The bone's translation and rotation at a time point without load: at rest before any
+    load, else the Kelvin-Voigt cartilage creeping back (:meth:`KelvinVoigtHistory.relax`)."""
+    if history is None:
+        return np.zeros(3), np.zeros(3)
+    _same_mesh(history, geom, mesh_cache, where, scene)
+    return history.relax(t, geom.obstacle, CONTACT_TAG)
+
+
 def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FEGeometry,
-               settings: FESettings, clock: float) -> FEStepResult:
+               settings: FESettings, clock: float, displacement_mm: np.ndarray | None = None,
+               rotation_rad: np.ndarray | None = None) -> FEStepResult:
     pts, tris, used = contact_surface(geom.solid)
     z = np.zeros(len(pts))
     zc = np.zeros(len(tris))
     gap, _ = geom.obstacle.gap_and_normal(pts)
     return FEStepResult(
-        step=k, time_s=t, force_n=force, moment_nmm=moment, displacement_mm=np.zeros(3),
-        rotation_rad=np.zeros(3), peak_pressure_mpa=0.0, mean_pressure_mpa=0.0,
+        step=k, time_s=t, force_n=force, moment_nmm=moment,
+        displacement_mm=np.zeros(3) if displacement_mm is None else np.asarray(displacement_mm, float),
+        rotation_rad=np.zeros(3) if rotation_rad is None else np.asarray(rotation_rad, float), peak_pressure_mpa=0.0, mean_pressure_mpa=0.0,
         contact_area_mm2=0.0, contact_area_on_mobile_mm2=0.0, iterations=0,
         force_residual_n=0.0, moment_residual_nmm=0.0,
         n_dofs=0, wall_time_s=time.perf_counter() - clock, max_nominal_strain=0.0,

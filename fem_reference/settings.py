@@ -14,6 +14,7 @@ from typing import Any
 
 from edem.laws import LAWS
 from fem_reference.models import FE_MODELS
+from fem_reference.viscoelastic import DEFAULT_TIME_SCHEME, TIME_SCHEMES
 from geometries.errors import InputError
 
 ELEMENTS = ("auto", "P1", "P2", "TH")
@@ -35,6 +36,8 @@ class FESettings:
     degree: int
     mesh_size_mm: float
     layers_through_thickness: int | None
+    # Kelvin-Voigt scenes ([viscoelastic]): fem_reference.viscoelastic.TIME_SCHEMES
+    time_scheme: str = DEFAULT_TIME_SCHEME
 
     @property
     def method(self) -> str:
@@ -43,7 +46,7 @@ class FESettings:
 
 def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: float | None = None,
                      degree: int | None = None, element: str | None = None,
-                     layers_through_thickness: int | None = None,
+                     layers_through_thickness: int | None = None, time_scheme: str | None = None,
                      argument_keys: Mapping[str, str] | None = None) -> FESettings:
     """Arguments first, then the scene's ``[fe]`` table, then the defaults.
 
@@ -52,6 +55,8 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     element: "auto" (default) is P1 for degree 1 and P2 for degree 2, and Taylor-Hood (P2-P1 u-p,
     degree 2) when nu >= 0.49 unless the degree is given as 1 (P1 then locks: the core warns).
     mesh_size_mm: default :data:`DEFAULT_MESH_SIZE_MM` of the degree.
+    time_scheme: the implicit scheme of a viscoelastic scene (:mod:`fem_reference.viscoelastic`),
+    default BDF2.
     argument_keys: how errors name an argument given here (default: its parameter name).
     """
     fe = dict(scene.fe or {})
@@ -121,4 +126,9 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
         raise InputError(f"the FE {fe_model.name} model needs the undeformed cartilage thickness",
                          file=file, key="cartilage.thickness_mm",
                          expected="a thickness in mm > 0 (or the slab model)")
-    return FESettings(fe_model.name, el, el_degree, float(size), layers)
+    scheme, scheme_key = pick(time_scheme, "time_scheme")
+    scheme = DEFAULT_TIME_SCHEME if scheme is None else scheme
+    if scheme not in TIME_SCHEMES:
+        raise InputError(f"unknown time scheme {scheme!r}", file=file, key=scheme_key,
+                         expected=" or ".join(TIME_SCHEMES) + " (the viscoelastic FE's implicit scheme)")
+    return FESettings(fe_model.name, el, el_degree, float(size), layers, scheme)

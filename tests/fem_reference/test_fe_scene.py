@@ -356,6 +356,7 @@ def test_fe_refuses_per_side_layers_it_cannot_model_naming_the_key(capsys, model
     (["--set", "fe.model=shell"], "fe.model"),
     (["--set", "fe.element=P2", "--degree", "1"], "--degree"),
     (["--mesh-size", "-1"], "--mesh-size"),
+    (["--set", 'fe.time_scheme="rk4"'], "fe.time_scheme"),
 ])
 def test_bad_fe_input_exits_2(capsys, args, key):
     """docs/result-format.md: bad FE settings exit 2 with a message naming the key; nothing is solved."""
@@ -421,3 +422,31 @@ def test_mpirun_two_ranks_writes_the_same_results(tmp_path):
                          timeout=300)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr
     assert bad.stderr.count("cartilage.thickness_mm") == 1
+
+
+def test_viscoelastic_scene_creeps_and_recovers_as_backward_euler_in_uniaxial_strain(tmp_path):
+    """`edem fe` on a scene with [viscoelastic] solves the Kelvin-Voigt continuum: the flat plates
+    at nu = 0 are in uniaxial strain, so each backward-Euler step is exact in space and the
+    displacement is the scheme's own solution, d_n = d_el (1 - (1 + z)^-n) under the step
+    (z = dt / tau) and d_n = d_{n-1} / (1 + z) once unloaded (to round-off and Newton's 1e-10);
+    the pressure is F / A at every instant (the dashpots and springs share it, the plate carries
+    all of it)."""
+    tau, dt = 1.0, 0.5
+    times = [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0]
+    forces = [0.0, 400.0, 400.0, 400.0, 400.0, 0.0, 0.0]
+    scene = plates_scene(tmp_path, time_s=times, forces=forces, nu=0.0,
+                         fe=f'[viscoelastic]\nrelaxation_time_s = {tau}\n[fe]\ntime_scheme = "backward-euler"')
+    out = tmp_path / "fe"
+    s = edem_fe(out, scene, "--degree", "1", "--mesh-size", "2.0")
+    _, rows = timeseries(out)
+    d = np.array([r["disp_z_mm"] for r in rows])
+    d_el = 400.0 / 400.0 * 2.0 / E
+    z = dt / tau
+    expected = [0.0] + [d_el * (1 - (1 + z) ** -n) for n in range(1, 5)]
+    expected += [expected[-1] / (1 + z), expected[-1] / (1 + z) ** 2]
+    report("viscoelastic plates nu=0 (BE)", d=d, expected=expected, peak=[r["peak_pressure_mpa"] for r in rows])
+    assert np.allclose(d, expected, rtol=1e-7, atol=1e-12)
+    for r, f in zip(rows, forces):
+        assert r["peak_pressure_mpa"] == pytest.approx(f / 400.0, rel=1e-7, abs=1e-12)
+    assert s["relaxation_time_s"] == tau and s["time_scheme"] == "backward-euler"
+    assert not any("viscoelastic" in w and "ignored" in w for w in s["warnings"])

@@ -13,11 +13,12 @@ against Hertz line contact and confined compression on three meshes each, with o
 vs the FE slab at five instants), ``sensitivity`` (h_max x ligament modulus, 20 x 20 EDEM
 stances, the thesis's fig. 4.3.10), ``quick`` (a subset for CI), and EDEM/DEM against the FE
 reference: ``cylinder-plane``, ``subject``, ``error-vs-runtime``; ``thin-layer`` (the coupled
-thin-layer bed and the independent springs against the FE); ``fe-convergence`` (the FE
-reference's own mesh-convergence error at quick's FE points); ``population`` (1000 seeded
-subject-like ankles over the stance, EDEM), ``population-coupled`` (the same on the coupled
-thin layer); ``real-knee`` (DEM against the FE on the public Lenhart MRI knee, given with
-``--data``: :data:`DATA_CAMPAIGNS`).
+thin-layer bed and the independent springs against the FE); ``viscoelastic`` (viscoelastic EDEM
+against the Kelvin-Voigt FE twin over time); ``fe-convergence`` (the FE reference's own
+mesh-convergence error at quick's FE points); ``population`` (1000 seeded subject-like ankles
+over the stance, EDEM), ``population-coupled`` (the same on the coupled thin layer);
+``real-knee`` (DEM against the FE on the public Lenhart MRI knee, given with ``--data``:
+:data:`DATA_CAMPAIGNS`).
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from verification.campaigns import (
     stance,
     subject,
     thin_layer,
+    viscoelastic,
 )
 from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, HERTZ_SIZES_MM
 from verification.campaigns.sensitivity import SENSITIVITY_HMAX_MM, SENSITIVITY_MODULUS_MPA
@@ -66,7 +68,7 @@ from verification.campaigns.stance import (
 )
 
 #: the registered campaign modules, in the order `edem verify --list` shows them
-CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, fe_convergence,
+CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, viscoelastic, fe_convergence,
                     population, population_coupled, real_knee)
 #: campaigns on data the user gives (``edem verify NAME --data FOLDER``): name -> their module, whose
 #: ``data_files(data)`` refuses (InputError naming --data or the missing file) a folder without them and

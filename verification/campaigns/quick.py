@@ -25,6 +25,7 @@ from verification.campaigns.edem_analytic import _analytic_cases, _analytic_figu
 from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, _fe_analytic_cases
 from verification.campaigns.stability import _stability_cases
 from verification.campaigns.subject import campaign as subject_campaign
+from verification.campaigns.viscoelastic import campaign as viscoelastic_campaign
 from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import BY_CONSTRUCTION, INVARIANT, MODEL_BAND, MODEL_BAND_REASON, MODEL_BAND_REL, Basis
 
@@ -62,8 +63,13 @@ FE_P1 = {"mesh_size_mm": 1.0, "degree": 1}
 #: wall time with 2 jobs on 2 cores, nothing cached: measured 1030 s on the shared 2-core machine at
 #: load 12-15 (246 s of CPU time), its 48 cases running 13 FE runs (the two beds of an ankle and nu
 #: share one); the two Taylor-Hood runs at nu = 0.49 are the longest (718 s subject, 538 s ideal at
-#: that load). Before the subject-like ankle over nu: 220 s at load 4-8 (120 s of CPU time)
-EXPECTED_TIME_S = 1030.0
+#: that load). Before the subject-like ankle over nu: 220 s at load 4-8 (120 s of CPU time); plus
+#: the viscoelastic case (its FE run, 7 time points of P1, measured 37 s at load 2-7)
+EXPECTED_TIME_S = 1070.0
+
+
+#: the viscoelastic campaign's cheapest case (verification.campaigns.viscoelastic)
+VISCOELASTIC_CASE = "slab-step-dt2-coupled-nu0.42"
 
 
 def _banded(case: Case, area_by_construction: bool = False) -> Case:
@@ -175,12 +181,15 @@ def campaign() -> Campaign:
     # one cheap FE case (a second or two; "unavailable" without dolfinx): the coarsest confined slab
     fe_picks = [f"fe-confined-compression-h{max(CONFINED_SIZES_MM):g}"]
     trust = trust_cases()
+    # one cheap viscoelastic case: coupled EDEM against the Kelvin-Voigt FE twin over a step (7 time points, FE P1)
+    viscous = viscoelastic_campaign().case(VISCOELASTIC_CASE)
     return Campaign(
         "quick",
         "The main job: first the ankle answer (DEM with the default bed, the coupled thin layer, and with the independent springs against the FE reference on the ideal "
         "and subject-like ankles over Poisson's ratio: where each agrees, where it breaks), then every "
-        "closed-form case, a few stability cases, ideal standing EDEM vs DEM and one cheap FE verification case (confined compression, coarse).",
-        tuple(trust) + tuple(_analytic_cases()) + tuple(stability[n] for n in picks) + (_ideal_standing_case(),) + tuple(fe[n] for n in fe_picks),
+        "closed-form case, a few stability cases, ideal standing EDEM vs DEM, one cheap FE verification case (confined compression, coarse) "
+        "and one viscoelastic case (coupled EDEM against the Kelvin-Voigt FE twin over a step held 3 tau).",
+        tuple(trust) + tuple(_analytic_cases()) + tuple(stability[n] for n in picks) + (_ideal_standing_case(),) + tuple(fe[n] for n in fe_picks) + (viscous,),
         _trust_figures() + _analytic_figures(),
         (_trust_analysis(),),
     )

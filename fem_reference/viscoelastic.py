@@ -1,0 +1,263 @@
+"""Kelvin-Voigt FE contact over time: the viscoelastic twin of EDEM's Kelvin-Voigt springs (docs/method.md#6-the-fe-reference-and-its-discrete-twins).
+
+The continuum is sigma = C : (eps(u) + tau eps(du/dt)) = C : eps(v) with v = u + tau du/dt, C the
+elastic tensor and tau the springs' relaxation time. An implicit scheme writes the rate at t_n from
+the displacements it has, so that
+
+    v_n = c0 u_n - h_n,        h_n = sum_j c_j u_{n-j} + e r_{n-1},   r = v - u = tau du/dt
+
+* BDF2 (the default; second order, L-stable, variable step, w = dt_n / dt_{n-1}):
+  c0 = 1 + a (1 + 2w) / (1 + w), h_n = a (1 + w) u_{n-1} - a w^2 / (1 + w) u_{n-2}, its first step
+  trapezoidal. Its three-point rate straddles a kink of the load: after a steep one (a load
+  raised in one step) its local error is first order there (2.5 % of the creep at dt = tau/8);
+* trapezoidal: tau (u_n - u_{n-1}) / dt = (r_n + r_{n-1}) / 2, so c0 = 1 + 2a,
+  h_n = 2a u_{n-1} + r_{n-1}, a = tau / dt_n: second order through the load's kinks (EDEM reads a
+  load history as linear between time points, so its kinks fall on time points), but it does
+  not damp its rate: where the contact set changes the rate r, hence the pressure, oscillates
+  from step to step without decay (the peak alternating 3.4 / 5.2 MPa for 5 tau on the cylinder
+  layer), so it suits contacts whose set does not change (confined compression);
+* backward Euler (first order): c0 = 1 + a, h_n = a u_{n-1}.
+
+Each time point is then an elastic contact problem for v: div(C : eps(v_n)) balances the load at
+t_n, the bonded face moves rigidly with v's rigid motion D_n = c0 d_n - (h_n's rigid part), and
+the frictionless contact condition, which acts on u_n = (v_n + h_n) / c0,
+
+    gap + u_n . nu >= 0   <=>   c0 gap + h_n . nu + v_n . nu >= 0,
+
+is the elastic one with the shifted gap c0 gap + h_n . nu, and Nitsche's penalty gamma on u is
+gamma / c0 on v (:func:`fem_reference.contact.solve_contact`), so a steady state solves the elastic
+discrete problem's pressure. The contact pressure is the traction of C : eps(v_n), the total
+(elastic + viscous) stress. :func:`fem_reference.contact.solve_contact` solves it unchanged
+(:class:`fem_reference.problem.FEContactProblem` ``gap_scale`` = c0, ``gap_history`` = h_n).
+
+An unloaded time point has no contact force: v_n is the rigid motion D_n, so the deformation
+u_n - d_n = (h_n - h_n's rigid part) / c0 creeps back freely, and the bone follows the layer,
+touching it with no force (D_n the touch distance of the shifted gap along the last load's
+direction: the limit of a vanishing load).
+
+The body starts at rest at the first time point. With a load there the FE starts from the elastic
+solution under it (a load held long before t_0), where EDEM starts undeformed with the dashpots
+carrying it: :func:`first_load_warning` says so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fem_reference.problem import FEContactProblem, FEContactResult
+
+#: time schemes of the Kelvin-Voigt FE (module docstring); the default is second order
+TIME_SCHEMES = ("trapezoidal", "bdf2", "backward-euler")
+DEFAULT_TIME_SCHEME = "bdf2"
+
+
+def scheme_weights(scheme: str, dt_s: float, previous_dt_s: float | None, relaxation_time_s: float,
+                   ) -> tuple[float, tuple[float, ...], float]:
+    """(c0, (c_1, c_2, ...), e) of v_n = c0 u_n - sum_j c_j u_{n-j} - e r_{n-1} (module docstring).
+
+    ``previous_dt_s`` is None at the first step (BDF2 then takes a trapezoidal step). The weights
+    are consistent (c0 - sum c_j = 1 and the rate enters only through r: a body at rest stays at
+    rest).
+    """
+    if scheme not in TIME_SCHEMES:
+        raise ValueError(f"unknown time scheme {scheme!r} (expected {' or '.join(TIME_SCHEMES)})")
+    if not (dt_s > 0.0):
+        raise ValueError(f"the time step must be > 0, got {dt_s!r} s")
+    a = relaxation_time_s / dt_s
+    if scheme == "backward-euler":
+        return 1.0 + a, (a,), 0.0
+    if scheme == "trapezoidal" or previous_dt_s is None:
+        return 1.0 + 2.0 * a, (2.0 * a,), 1.0
+    w = dt_s / previous_dt_s
+    return 1.0 + a * (1.0 + 2.0 * w) / (1.0 + w), (a * (1.0 + w), -a * w * w / (1.0 + w)), 0.0
+
+
+def first_load_warning(force_n: np.ndarray) -> list[str]:
+    """The FE and EDEM start differently under a load at the first time point (module docstring)."""
+    if not np.any(force_n):
+        return []
+    return ["the first time point carries a load: the viscoelastic FE starts from the elastic solution under it "
+            "(a load held since long before), EDEM from the undeformed bed with the dashpots carrying it; "
+            "the two differ until that start has crept away (several tau): start the load history at zero to compare them"]
+
+
+@dataclass
+class _State:
+    time_s: float
+    u: Any  # dolfinx Function (vector Lagrange of the displacement degree): u_n
+    translation_mm: np.ndarray  # (3,) the bone's, d_n
+    rotation_rad: np.ndarray  # (3,) the bone's small rotation about G
+    rate: Any  # r_n = v_n - u_n = tau du/dt (a Function of the same space)
+    rate_translation_mm: np.ndarray  # its rigid parts
+    rate_rotation_rad: np.ndarray
+
+
+@dataclass
+class KelvinVoigtHistory:
+    """The displacement history of a Kelvin-Voigt FE run on one mesh (module docstring).
+
+    ``mesh``: the :class:`fem_reference.problem.FEMesh` every time point is solved on; ``degree``:
+    the displacement degree (1 for P1, 2 for P2 and Taylor-Hood).
+    """
+
+    mesh: Any
+    degree: int
+    relaxation_time_s: float
+    scheme: str = DEFAULT_TIME_SCHEME
+    states: list[_State] = field(default_factory=list)
+    last_direction: np.ndarray | None = None  # the last load's direction in the free translations
+    last_v: dict | None = None  # the last solve's v (translation, rotation, ut_owned): warm start
+
+    def __post_init__(self) -> None:
+        from fem_reference.contact import _fe_modules
+
+        if self.scheme not in TIME_SCHEMES:
+            raise ValueError(f"unknown time scheme {self.scheme!r}")
+        self._fem = _fe_modules()["fem"]
+        self._space = self._fem.functionspace(self.mesh.mesh, ("Lagrange", self.degree, (3,)))
+
+    def _function(self) -> Any:
+        return self._fem.Function(self._space)
+
+    def start_at_rest(self, time_s: float) -> None:
+        """u = 0 at the first time point (an unloaded body)."""
+        self.states = [_State(time_s, self._function(), np.zeros(3), np.zeros(3), self._function(), np.zeros(3), np.zeros(3))]
+
+    def _history(self, time_s: float) -> tuple[float, Any, np.ndarray, np.ndarray]:
+        """(c0, h_n = sum_j c_j u_{n-j} + e r_{n-1}, its rigid translation and rotation) of the
+        step to ``time_s`` from the stored states."""
+        last = self.states[-1]
+        previous = last.time_s - self.states[-2].time_s if len(self.states) > 1 else None
+        c0, coefficients, e = scheme_weights(self.scheme, time_s - last.time_s, previous, self.relaxation_time_s)
+        h = self._function()
+        h.x.array[:] = e * last.rate.x.array
+        d, q = e * last.rate_translation_mm, e * last.rate_rotation_rad
+        for c, state in zip(coefficients, reversed(self.states)):
+            h.x.array[:] += c * state.u.x.array
+            d = d + c * state.translation_mm
+            q = q + c * state.rotation_rad
+        return c0, h, d, q
+
+    def _push(self, time_s: float, u: Any, d: np.ndarray, q: np.ndarray, v: Any, vd: np.ndarray, vq: np.ndarray) -> None:
+        """Store u_n and its rate r_n = v_n - u_n (v given as a Function and its rigid parts)."""
+        v.x.array[:] -= u.x.array
+        self.states = (self.states + [_State(time_s, u, d, q, v, vd - d, vq - q)])[-2:]
+
+    def prepare(self, problem: FEContactProblem, time_s: float) -> tuple[float, np.ndarray, np.ndarray]:
+        """Set the shifted gap of the step to ``time_s`` on ``problem`` (and the previous v as its
+        warm start); returns (c0, h's translation, h's rotation) for :meth:`commit`.
+
+        Without a stored state the step is elastic (the first time point under a load)."""
+        if not self.states:
+            problem.gap_scale, problem.gap_history = 1.0, None
+            return 1.0, np.zeros(3), np.zeros(3)
+        c0, h, hd, hq = self._history(time_s)
+        problem.gap_scale, problem.gap_history = c0, h
+        if self.last_v is not None:
+            problem.initial_translation_mm = self.last_v["t"]
+            problem.initial_rotation_rad = self.last_v["q"]
+            problem.initial_field = self.last_v["ut"]
+        return c0, hd, hq
+
+    def commit(self, time_s: float, result: FEContactResult, c0: float, hd: np.ndarray, hq: np.ndarray,
+               problem: FEContactProblem) -> tuple[np.ndarray, np.ndarray]:
+        """Store u_n = (v_n + h_n) / c0 from a solve of the prepared problem (``keep_fields``) and
+        return the bone's translation and rotation d_n, q_n (the result's are v's)."""
+        solution = result.fields["solution"]
+        v = self._function()
+        v.interpolate(solution.sub(0) if result.element == "TH" else solution)
+        u = self._function()
+        u.x.array[:] = v.x.array
+        h = problem.gap_history
+        if h is not None:
+            u.x.array[:] += h.x.array
+        u.x.array[:] /= c0
+        d = (result.bone_displacement_mm + hd) / c0
+        q = (result.bone_rotation_rad + hq) / c0
+        self._push(time_s, u, d, q, v, result.bone_displacement_mm, result.bone_rotation_rad)
+        dirs = result.free_directions
+        along = dirs.T @ (dirs @ result.applied_force_n)
+        if np.linalg.norm(along) > 0:
+            self.last_direction = along / np.linalg.norm(along)
+        self.last_v = {"t": result.bone_displacement_mm.copy(), "q": result.bone_rotation_rad.copy(),
+                       "ut": result.fields["ut_owned"].copy()}
+        return d, q
+
+    def relax(self, time_s: float, obstacle: Any, contact_tag: int) -> tuple[np.ndarray, np.ndarray]:
+        """An unloaded time point (module docstring): the deformation creeps back and the bone
+        follows the layer without force. Returns its translation and rotation."""
+        from fem_reference.contact import _fe_modules
+
+        mods = _fe_modules()
+        fem, MPI = mods["fem"], mods["MPI"]
+        c0, h, hd, hq = self._history(time_s)
+        D = np.zeros(3)
+        if self.last_direction is not None:
+            mesh = self.mesh.mesh
+            fdim = mesh.topology.dim - 1
+            Q = fem.functionspace(mesh, ("Lagrange", self.degree))
+            dofs = fem.locate_dofs_topological(Q, fdim, self.mesh.facet_tags.find(contact_tag))
+            gap, normal = obstacle.gap_and_normal(Q.tabulate_dof_coordinates()[dofs])
+            shifted = c0 * gap + np.einsum("ij,ij->i", h.x.array.reshape(-1, 3)[dofs], normal)
+            s = normal @ self.last_direction
+            approaching = s < -1e-9
+            local = float(np.min(shifted[approaching] / -s[approaching])) if approaching.any() else np.inf
+            touch = mesh.comm.allreduce(local, op=MPI.MIN)
+            if np.isfinite(touch):
+                D = touch * self.last_direction
+        v = self._function()
+        v.x.array.reshape(-1, 3)[:] = D
+        u = self._function()
+        u.x.array[:] = (h.x.array + v.x.array) / c0
+        d, q = (D + hd) / c0, hq / c0
+        self._push(time_s, u, d, q, v, D, np.zeros(3))
+        self.last_v = None  # v was rigid: no warm start for the next loaded step
+        return d, q
+
+
+@dataclass
+class KelvinVoigtStep:
+    """One time point of :func:`solve_history`: the bone's motion d_n, q_n and the solve of v_n,
+    whose pressure, area and contact force are the time point's (None at an unloaded one)."""
+
+    time_s: float
+    translation_mm: np.ndarray
+    rotation_rad: np.ndarray
+    result: FEContactResult | None
+
+
+def solve_history(base: FEContactProblem, times_s: Any, forces_n: Any, relaxation_time_s: float,
+                  scheme: str = DEFAULT_TIME_SCHEME, comm: Any = None) -> list[KelvinVoigtStep]:
+    """Kelvin-Voigt FE contact over a load history (module docstring), the body at rest before.
+
+    ``base``: the problem (mesh, material, obstacle, free motions) at every time point, its
+    force replaced by ``forces_n`` (n, 3) at ``times_s`` (n,) in s, increasing.
+    """
+    from dataclasses import replace
+
+    from fem_reference.contact import _fe_modules, materialize_mesh, solve_contact
+
+    MPI = _fe_modules()["MPI"]
+    comm = MPI.COMM_WORLD if comm is None else comm
+    mesh = materialize_mesh(base, comm)
+    history = KelvinVoigtHistory(mesh, 1 if base.resolved_element() == "P1" else 2, relaxation_time_s, scheme)
+    steps = []
+    for k, (t, force) in enumerate(zip(np.asarray(times_s, float), np.asarray(forces_n, float))):
+        if not np.any(force):
+            if k == 0:
+                history.start_at_rest(float(t))
+                steps.append(KelvinVoigtStep(float(t), np.zeros(3), np.zeros(3), None))
+            else:
+                d, q = history.relax(float(t), base.obstacle, base.contact_tag)
+                steps.append(KelvinVoigtStep(float(t), d, q, None))
+            continue
+        problem = replace(base, mesh=mesh, force_n=force)
+        c0, hd, hq = history.prepare(problem, float(t))
+        result = solve_contact(problem, comm, keep_fields=True)
+        d, q = history.commit(float(t), result, c0, hd, hq, problem)
+        result.fields = None
+        steps.append(KelvinVoigtStep(float(t), d, q, result))
+    return steps

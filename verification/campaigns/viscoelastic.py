@@ -1,0 +1,184 @@
+"""``viscoelastic``: Kelvin-Voigt EDEM against the Kelvin-Voigt FE twin over time (docs/campaigns.md).
+
+The FE twin (:mod:`fem_reference.viscoelastic`, BDF2 in time) is the continuum whose stress is
+C : (eps + tau d eps/dt), with the springs' tau and the same C. Each case compares one discrete
+run with it at every time point (peak pressure, contact area and displacement at each instant;
+the metrics are the largest over the instants, ``per_time`` in metrics.json keeps them all):
+
+* beds: viscoelastic EDEM with the independent springs, with the coupled thin layer
+  (``cartilage.coupling = "thin-layer"``), and DEM with the coupled layer at the same instants
+  (static: what ignoring the creep costs);
+* scenes: the bonded cylinder layer (``cylinder-layer``, gap law, vs the FE layer) and the ideal
+  ankle (``ideal-standing`` without ligaments, threshold law, vs the FE slab);
+* load histories (tau = 1.4 s, the thesis's): a step of 333 N held 5 tau, a load/unload cycle
+  (step held 2 tau, unloaded to 10 % and held 2 tau: EDEM refuses a zero load after creep, see
+  docs/campaigns.md) and, on the ankle, the thesis ramp (``viscoelastic-ramp``: 200 -> 1800 N in
+  5 s, held 10 s, back in 5 s) sampled every second, preceded by a rise from zero in tau / 4 so
+  that both sides start from the unloaded body;
+* time step: the step on the ideal ankle at dt = tau/2, tau/4, tau/8 (both sides refined
+  together): the error against the time step and against wall time.
+
+Poisson's ratio 0.3, 0.42, 0.45 on the cylinder layer under the step and the cycle; 0.42 elsewhere.
+FE: the layer P2 at 2.0 mm (one element through the 2 mm layer), the ankle slab P1 at 1.0 mm
+(P2 at 0.45: P1 locks); the FE time step is the scenes' (tau/4 for the first tau, then coarser),
+whose error is that of the closed-form tests (tests/fem_reference/test_fe_kelvin_voigt.py: BDF2
+errs by 2.5 % of the creep at dt = tau/8 just after a load raised in one step, about 5 % at tau/4,
+and by 0.2 % where the load changes smoothly). Measured, not judged: the errors are reported against the goal of the
+issue (10 % at every instant with the coupled layer at nu 0.3-0.45), flagged where missed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from verification.campaign_model import Analysis, Campaign, Case, Figure
+from verification.campaigns.cylinder_plane import ERROR_PANELS, FE_TABLE_COLUMNS, fe_comparison_case
+
+#: wall time with 2 jobs on 2 cores, nothing cached: measured 502 s at load 2-7 (12 FE runs of 14-173 s);
+#: at load 12-15 the layer's FE runs took about 5 min each (docs/campaigns.md)
+EXPECTED_TIME_S = 600.0
+
+TAU_S = 1.4
+LOAD_N = 333.0
+NUS = (0.3, 0.42, 0.45)
+FE_LAYER = {"mesh_size_mm": 2.0, "degree": 2}
+FE_SLAB = {"mesh_size_mm": 1.0, "degree": 1}
+FE_SLAB_P2 = {"mesh_size_mm": 1.0, "degree": 2}
+BEDS = {
+    "springs": ("edem", {}, "viscoelastic EDEM, independent springs"),
+    "coupled": ("edem", {"cartilage.coupling": "thin-layer"}, "viscoelastic EDEM, coupled thin layer"),
+    "dem": ("dem", {"cartilage.coupling": "thin-layer"}, "DEM (static), coupled thin layer"),
+}
+GOAL = {"metrics": ("displacement_rel_error", "peak_pressure_rel_error", "contact_area_rel_error"),
+        "strict": 0.10, "strict_nu": 0.45, "loose": 0.10, "ratio_metric": "pressure_l2_rel_error", "ratio": 1.0}
+GOAL_LINES = tuple((m, 0.10, "goal: 10 % at every instant") for m in GOAL["metrics"])
+
+
+def _grid(*pieces: tuple[float, float]) -> list[float]:
+    """Time points from 0: (step, until) pieces."""
+    times = [0.0]
+    for step, until in pieces:
+        while times[-1] < until - 1e-9:
+            times.append(round(times[-1] + step, 9))
+    return times
+
+
+def step_history(load_n: float, dt_s: float | None = None, hold_tau: float = 5.0) -> tuple[list[float], list[float]]:
+    """Zero at t = 0, ``load_n`` from the first step on, held ``hold_tau`` tau: dt tau/4 for a tau,
+    then tau/2, then tau (or ``dt_s`` throughout)."""
+    if dt_s is not None:
+        times = _grid((dt_s, hold_tau * TAU_S))
+    else:
+        times = _grid((TAU_S / 4, TAU_S), (TAU_S / 2, 3 * TAU_S), (TAU_S, hold_tau * TAU_S))
+    return times, [0.0] + [load_n] * (len(times) - 1)
+
+
+def cycle_history(load_n: float) -> tuple[list[float], list[float]]:
+    """The step held 2 tau, then 10 % of it from the next step on, held 2 tau."""
+    q, h = TAU_S / 4, TAU_S / 2
+    up = _grid((q, TAU_S), (h, 2 * TAU_S))
+    down = [up[-1] + x for x in _grid((q, TAU_S), (h, 2 * TAU_S))[1:]]
+    times = up + down
+    return times, [0.0] + [load_n] * (len(up) - 1) + [0.1 * load_n] * len(down)
+
+
+def thesis_ramp_history() -> tuple[list[float], list[list[float]]]:
+    """The thesis ramp of ``viscoelastic-ramp`` every second, after a rise from zero in tau / 4."""
+    from edem.scene import load_scene
+
+    scene = load_scene("viscoelastic-ramp")
+    t = np.asarray(scene.load.time_s)
+    pick = np.isclose(np.mod(t + 1e-9, 1.0), 0.0, atol=1e-6)
+    shift = TAU_S / 4
+    times = [0.0] + [float(x) + shift for x in t[pick]]
+    forces = [[0.0, 0.0, 0.0]] + [[float(v) for v in f] for f in scene.load.force_n[pick]]
+    return times, forces
+
+
+def _overrides(times: list[float], forces: list[Any], nu: float, model: str) -> dict[str, Any]:
+    force = [f if isinstance(f, list) else [0.0, 0.0, float(f)] for f in forces]
+    out: dict[str, Any] = {"load.time_s": times, "load.force_n": force, "cartilage.poissons_ratio": nu,
+                           "viscoelastic.relaxation_time_s": TAU_S, "viscoelastic.integrator": "exact"}
+    if model == "slab":
+        out["ligaments"] = []
+    if any(f[1] for f in force):
+        # frictionless FE contact cannot hold the antero-posterior component of the thesis ramp
+        # while the contact is a line at the top of the dome (docs/method.md, section 6): both sides fix ty
+        out["constraints.fixed_dofs"] = ["tx", "ty", "rx", "ry", "rz"]
+    return out
+
+
+#: (model, scene, FE side, what)
+MODELS = {
+    "layer": ("cylinder-layer", "fe-layer", "cylinder (R 20 mm) with a bonded 2 mm layer on a plane, gap law vs the FE layer (P2, 2.0 mm)"),
+    "slab": ("ideal-standing", "fe-slab", "ideal ankle, threshold law vs the FE slab (P1 at 1.0 mm; P2 at nu 0.45), no ligaments"),
+}
+
+
+def case_name(model: str, history: str, bed: str, nu: float) -> str:
+    return f"{model}-{history}-{bed}-nu{nu:g}"
+
+
+def _points() -> list[tuple[str, str, float, tuple[list[float], list[Any]]]]:
+    points = []
+    for nu in NUS:
+        points.append(("layer", "step", nu, step_history(LOAD_N)))
+        points.append(("layer", "cycle", nu, cycle_history(LOAD_N)))
+    points.append(("slab", "cycle", 0.42, cycle_history(LOAD_N)))
+    points.append(("slab", "ramp", 0.42, thesis_ramp_history()))
+    for k in (2, 4, 8):
+        points.append(("slab", f"step-dt{k}", 0.42, step_history(LOAD_N, TAU_S / k, hold_tau=3.0)))
+    return points
+
+
+def _cases() -> list[Case]:
+    cases = []
+    for model, history, nu, (times, forces) in _points():
+        scene, fe_side, what = MODELS[model]
+        fe = FE_LAYER if model == "layer" else (FE_SLAB_P2 if nu > 0.42 else FE_SLAB)
+        dt = min(np.diff(times))
+        for bed, (method, extra, bed_what) in BEDS.items():
+            if history.startswith("step-dt") and bed == "dem":
+                continue  # the time step sweep: the viscoelastic beds only
+            cases.append(fe_comparison_case(
+                case_name(model, history, bed, nu),
+                f"{what}; {bed_what}; {history} ({len(times)} time points, smallest dt {dt:g} s, tau {TAU_S:g} s), nu {nu:g}. Measured, not judged",
+                scene, (method, fe_side), overrides={**_overrides(times, forces, nu, model), **extra}, options=fe,
+                params={"poissons_ratio": nu, "dt_s": float(dt), "time_points": float(len(times))}, maps=False))
+    return cases
+
+
+def campaign() -> Campaign:
+    cases = tuple(_cases())
+    names = {c.name for c in cases}
+    figures, analyses = [], []
+    for model, history in (("layer", "step"), ("layer", "cycle"), ("slab", "cycle"), ("slab", "ramp")):
+        nu = 0.42
+        group = tuple(n for n in (case_name(model, history, bed, nu) for bed in BEDS) if n in names)
+        for column, what in (("disp_z_mm", "displacement along z (mm)"), ("peak_pressure_mpa", "peak pressure (MPa)"), ("contact_area_mm2", "contact area (mm^2)")):
+            figures.append(Figure(f"{model}-{history}-{column}", f"{MODELS[model][0]}, {history}, nu {nu:g}: {what} against time, each bed (a) and the FE twin (b)",
+                                  "timeseries", group, column=column))
+    for history in ("step", "cycle"):
+        series = tuple((BEDS[bed][2], tuple(case_name("layer", history, bed, nu) for nu in NUS)) for bed in BEDS)
+        figures.append(Figure(f"layer-{history}-poisson", f"cylinder layer, {history}: the largest error over the instants against Poisson's ratio (dashed: the goal)",
+                              "sweep", tuple(n for _, g in series for n in g), x="poissons_ratio", y=ERROR_PANELS, logy=True, series=series, lines=GOAL_LINES))
+    dt_series = tuple((BEDS[bed][2], tuple(case_name("slab", f"step-dt{k}", bed, 0.42) for k in (2, 4, 8))) for bed in ("springs", "coupled"))
+    figures.append(Figure("slab-step-dt", "ideal ankle, step held 3 tau: the largest error over the instants against the time step (both sides refined together)",
+                          "sweep", tuple(n for _, g in dt_series for n in g), x="dt_s", y=ERROR_PANELS, logx=True, logy=True, series=dt_series))
+    figures.append(Figure("error-vs-time", "Error against the discrete side's wall time (families by name; dashed: the Pareto front)", "error-vs-time",
+                          tuple(c.name for c in cases), y=("displacement_rel_error", "peak_pressure_rel_error"), logx=True, logy=True))
+    analyses.append(Analysis("table", "Every case: the largest error over the instants and the values at the FE's instants. Reported, no verdict", "table",
+                             tuple(c.name for c in cases), {"columns": FE_TABLE_COLUMNS}))
+    pairs = tuple((n, n.replace("-coupled-", "-springs-", 1)) for n in sorted(names) if "-coupled-" in n)
+    analyses.append(Analysis(
+        "goal", "The goal: viscoelastic EDEM with the coupled layer within 10 % of the FE twin at every instant (displacement, peak, area) at nu 0.3-0.45. Flagged where not met",
+        "goal", tuple(n for pair in pairs for n in pair),
+        {**GOAL, "pairs": pairs, "note": "Errors are the largest over the instants of |EDEM - FE| / FE; the ratio column is the coupled bed's pressure-field L2 error over the independent springs'. "
+         "The FE's own time error (BDF2 at the scenes' steps) is about 5 % of the creep just after a load raised in one step and 0.2 % where it changes smoothly (closed-form tests)."}))
+    return Campaign(
+        "viscoelastic",
+        "Viscoelastic EDEM (independent springs, coupled thin layer) and DEM against the Kelvin-Voigt FE twin over time: cylinder layer and ideal ankle, "
+        "a step held 5 tau, a load/unload cycle, the thesis ramp, nu 0.3-0.45, and a time step sweep. Errors at every instant, reported against the 10 % goal (flagged), not judged.",
+        cases, tuple(figures), tuple(analyses))
