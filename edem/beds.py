@@ -167,13 +167,13 @@ class IndependentSprings(Bed):
         return solve_unilateral(step.directions, step.law, load, fixed_dofs=step.fixed_dofs, shear=step.shear, length_scale_mm=step.length_scale_mm)
 
     def viscoelastic_increment(self, step, elastic, previous_load, load, weights):
-        """Springs that still hold an elastic force while the total force has vanished (the load
-        went to zero) stay in the contact set, so they can creep back."""
+        """Every spring that holds an elastic force creeps with its dashpot over the step (its total
+        force may vanish, e.g. when the load goes to zero, while its elastic force relaxes), so it
+        stays in the increment's set whatever the quasi-static solve under T_k left active."""
         phi, psi = weights
         directions, law, shear = step.directions, step.law, step.shear
         force0, stiffness0 = law.force_and_stiffness(np.zeros(directions.shape[0]))
-        scale = 1e-9 * max(float(np.abs(force0).max(initial=0.0)), float(np.abs(load).max()), 1e-300)
-        active = elastic.active | ((force0 > 0) & (elastic.element_force_n >= -scale))
+        active = elastic.active | (force0 > 0)
         free = np.array([d not in step.fixed_dofs for d in DOF_NAMES])
         u = np.zeros(6)
         if np.any(active) and (phi or psi):

@@ -134,3 +134,42 @@ def test_ramp_equilibrium_every_step_pressure_follows_load_displacement_lags():
         assert np.all(np.diff(peak[t <= 5.0]) > 0) and np.all(np.diff(peak[t >= 15.0]) < 0)
         at_ramp_end.append(np.linalg.norm(result.steps[int(np.argmin(np.abs(t - 5.0)))].displacement_mm))
     assert at_ramp_end[0] > at_ramp_end[1] > at_ramp_end[2] > 0
+
+
+def test_unloading_to_zero_creeps_back_to_the_start_on_the_1d_solution():
+    """Plates held under 400 N for 4 tau, the load taken to 0 over one step (read as linear within
+    it), then held at 0: every spring creeps back with its dashpot, x' = (F(t) - K x) / (K tau), and
+    returns to the start. Exact integrator: the discrete solution is the exact one for loads linear
+    within a step, to round-off (1e-9 of the loaded displacement)."""
+    time = np.array([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 12.0])
+    force = np.zeros((time.size, 3))
+    force[1:5, 2] = 400.0
+    scene = make_scene(grid_plate(20, 20, 4), plane(lambda x, y: THICKNESS), force, time_s=time, law="gap", thickness_mm=THICKNESS,
+                       max_spring_length_mm=2 * THICKNESS, fixed_dofs=IN_PLANE, viscoelastic=Viscoelastic(1.0, "exact"))
+    z = np.array([s.displacement_mm[2] for s in run(scene, "edem").steps])
+    exact = [0.0]
+    for k in range(1, time.size):  # x' = (F(t) - K x) / (K tau), F linear from F0 to F1 over [t0, t1]: exact step
+        dt, f0, f1 = time[k] - time[k - 1], force[k - 1, 2], force[k, 2]
+        decay = np.exp(-dt)
+        exact.append(exact[-1] * decay + (f0 * (1 - decay) + (f1 - f0) * (1 - (1 - decay) / dt)) / STIFFNESS)
+    np.testing.assert_allclose(z, exact, rtol=0, atol=1e-9 * max(exact))
+    assert z[-1] < 1e-3 * z[4]  # back at the start (within e^-7 of the loaded displacement)
+
+
+def test_unloading_a_curved_contact_to_zero_creeps_back_without_flying_off():
+    """A cylinder pressed 333 N into a plane for 4 tau, then unloaded to 0 over one step and held:
+    the springs that hold an elastic force creep back with their dashpots, so the body returns
+    towards its start: the approach falls at every step once unloaded and no displacement exceeds
+    the loaded one (before: the springs the zero-load solve had separated left a near-singular
+    increment, and the body moved by 1.5e4 mm with exit 0)."""
+    time = np.array([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0])
+    force = np.zeros((time.size, 3))
+    force[1:5, 2] = 333.0
+    scene = make_scene(cylinder_patch(20.0, 30.0, 60.0, 40, 30), plane(lambda x, y: THICKNESS), force, time_s=time, law="gap",
+                       thickness_mm=THICKNESS, max_spring_length_mm=2 * THICKNESS, fixed_dofs=("tx", "rx", "ry", "rz"),
+                       viscoelastic=Viscoelastic(1.0, "exact"))
+    u = np.array([s.displacement_mm for s in run(scene, "edem").steps])
+    loaded = float(np.abs(u[4, 2]))
+    assert loaded > 0.1  # pressed into the layer (0.22 mm)
+    assert np.all(np.diff(u[4:, 2]) < 0)  # creeps back at every step once unloaded
+    assert float(np.abs(u).max()) <= loaded * (1 + 1e-9)
