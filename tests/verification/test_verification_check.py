@@ -254,3 +254,15 @@ def test_stored_quantities_are_the_campaigns_definitions(tmp_path):
     for ours, theirs in (("regularised_peak_pressure_mpa", "regularised_peak_pressure_rel_error"), ("peak_pressure_mpa", "peak_pressure_rel_error"),
                          ("contact_area_mm2", "contact_area_rel_error"), ("displacement_mm", "displacement_rel_error")):
         assert errors[ours] == pytest.approx(campaign[theirs], rel=1e-12, abs=1e-15), ours  # the same arithmetic on the same numbers
+
+
+def test_refresh_without_fe_does_not_keep_the_fe_values_of_an_old_format(references, capsys):
+    """--no-fe keeps stored FE values only of the current format (format 1 has no regularised
+    peak, and its FE was measured on its own face): it says why it kept none."""
+    _edit(references / "flat-plates.json", lambda d: d.__setitem__("format", 1))
+    scenes = tuple(c for c in CHECK_SCENES if c.name == "flat-plates")
+    assert run_check(refresh=True, references=references, scenes=scenes, with_fe=False) == 0
+    after = json.loads((references / "flat-plates.json").read_text())
+    assert after["format"] == FORMAT_VERSION and after["fe"] is None and "not requested" in after["fe_unavailable"]
+    out = capsys.readouterr().out
+    assert "no stored FE values can be kept" in out and "key 'format'" in out
