@@ -76,7 +76,7 @@ from verification.analyses import format_analysis, run_analysis
 from verification.campaign_model import Campaign, Case, validate_campaign
 from verification.campaign_safety import CampaignInterrupted, campaign_lock, init_worker, sigint_blocked, stop_children
 from verification.fe_analytic import FE_PROBLEMS, half_width_errors
-from verification.fe_convergence import FE_VALUE_METRICS, fe_values
+from verification.fe_convergence import FE_VALUE_METRICS, fe_relative_error, fe_values
 from verification.metrics import (
     COMPARISON_METRICS,
     COP_METRICS,
@@ -428,14 +428,15 @@ def judge(case: Case, record: dict[str, Any], fe_errors: dict[str, float] | None
     """The case's verdict (one of verification.verdicts.CASE_VERDICTS) and, per tolerance, its
     value, tolerance, basis (kind and reason) and verdict (verification.verdicts.tolerance_verdicts).
     ``fe_errors``: the FE reference's estimated relative error per metric (default: the case's
-    ``fe_errors``; none known when both are empty)."""
+    ``fe_errors``, else the stored mesh-convergence study's estimate for its FE run,
+    verification.fe_convergence.fe_relative_error; none known when neither has one)."""
     statuses = [s["status"] for s in record["sides"]]
     refused_as_declared = case.expect is not None and case.expect.outcome == "refused" and record["metrics"].get("outcome_mismatch") == 0.0
     if any(s == UNAVAILABLE for s in statuses):
         return UNAVAILABLE, {}
     metrics = {m: as_float(v) for m, v in record["metrics"].items() if m in case.tolerance}
     verdicts = tolerance_verdicts(metrics, case.tolerance, case.bases(), not_applicable=refused_as_declared,
-                                  fe_errors=fe_errors if fe_errors is not None else (case.fe_errors or None))
+                                  fe_errors=fe_errors if fe_errors is not None else (case.fe_errors or fe_relative_error(case)))
     expected = None if case.expect is None else case.expect.outcome
     return case_verdict(statuses, verdicts, expected, refused_as_declared), verdicts
 

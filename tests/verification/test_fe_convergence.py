@@ -115,3 +115,33 @@ def test_a_campaign_table_shows_the_fe_error_of_a_studied_run_and_says_unknown_o
     assert result["columns"] == ["case", "peak err", "FE err", "note"]
     assert result["rows"][0]["cells"][2] == "3.12 %"
     assert result["rows"][1]["cells"][2] == "unknown"
+
+
+def test_a_judged_case_takes_its_fe_error_from_the_study_and_a_band_within_it_judges_nothing(tmp_path, monkeypatch):
+    """A quick trust case (judged against the 25 % model band) whose FE run is in the stored study:
+    every judged metric carries the study's FE error, and a metric whose FE error is not below
+    the band is 'FE not converged enough to judge' whatever its value; one whose run is not in
+    the study is judged on its value alone."""
+    import json
+
+    from verification import fe_convergence
+    from verification.campaigns.quick import trust_cases
+    from verification.runner import judge
+    from verification.status import FE_NOT_CONVERGED, FLAGGED
+
+    case = next(c for c in trust_cases() if c.name == "slab-F333-nu0.42")
+    key = fe_key(case.scene, case.sides[-1], case.overrides, case.options)
+    file = tmp_path / "fe_convergence.json"
+    file.write_text(json.dumps({"entries": {key: {"case": "x", "errors": {"displacement_rel_error": 0.30, "regularised_peak_pressure_rel_error": 0.02}}}}))
+    monkeypatch.setattr(fe_convergence, "REFERENCE_FILE", file)
+    metrics = {m: 0.05 for m in case.tolerance}
+    metrics.update(force_residual_rel=1e-12, non_finite_outputs=0.0)  # the invariants hold
+    metrics["displacement_rel_error"] = -0.40  # outside the band, but the FE's own error (30 %) exceeds the band (25 %)
+    record = {"sides": [{"status": "ok"}, {"status": "ok"}], "metrics": metrics}
+    status, verdicts = judge(case, record)
+    assert verdicts["displacement_rel_error"]["verdict"] == FE_NOT_CONVERGED and verdicts["displacement_rel_error"]["fe_error"] == 0.30
+    assert verdicts["regularised_peak_pressure_rel_error"]["verdict"] == "met" and verdicts["regularised_peak_pressure_rel_error"]["fe_error"] == 0.02
+    assert status == FE_NOT_CONVERGED
+    other = next(c for c in trust_cases() if c.name == "slab-F333-nu0.3")  # not in this study: judged on its value
+    status, verdicts = judge(other, record)
+    assert status == FLAGGED and "fe_error" not in verdicts["displacement_rel_error"]
