@@ -136,33 +136,6 @@ def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
     _save(plt, fig, spec["title"], path)
 
 
-def _lines_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
-    """kind "lines": every metric of ``y`` against the cases' ``params[x]`` on one small chart
-    (relative errors in %), with ``exact["band"]`` drawn as the declared band."""
-    plt = _matplotlib()
-    names = [n for n in spec["cases"] if n in rows and rows[n]["status"] not in ("unavailable", "error")]
-    xs = np.array([_value(rows[n]["params"].get(spec["x"])) for n in names])
-    fig, ax = plt.subplots(figsize=(6.0, 3.4), constrained_layout=True)
-    for metric, marker in zip(spec["y"], "osd^v"):
-        ys = np.array([_value(rows[n]["metrics"].get(metric)) for n in names]) * 100.0
-        ok = np.isfinite(xs) & np.isfinite(ys)
-        label = axis_label(metric).split(":")[0]
-        if names and all((rows[n].get("verdicts") or {}).get(metric, {}).get("kind") == "by-construction" for n in names):
-            label += " (set by the law by construction: not judged)"
-        ax.plot(xs[ok], ys[ok], marker + ("--" if "not judged" in label else "-"), label=label)
-    band = (spec.get("exact") or {}).get("band")
-    if band is not None:
-        ax.axhline(100.0 * band, color="grey", ls="--", label=f"declared band ±{100 * band:.0f} %")
-        ax.axhline(-100.0 * band, color="grey", ls="--")
-    ax.axhline(0.0, color="black", lw=0.6)
-    ax.set_xlabel(axis_label(spec["x"]))
-    ax.set_ylabel("relative error (a − b)/|b| (%); L2 ≥ 0")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.savefig(path, dpi=110)  # small, with its title as the caption below it
-    plt.close(fig)
-
-
 def _error_time_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
     """kind "error-vs-time": each metric of y against the wall time of side a (one panel per
     metric, log axes as declared), one series per family of cases (the case name up to its last
@@ -360,8 +333,6 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
                     _sweep_figure(spec, rows, path)
                 elif spec["kind"] == "histogram":
                     _histogram_figure(spec, rows, path)
-                elif spec["kind"] == "lines":
-                    _lines_figure(spec, rows, path)
                 elif spec["kind"] == "timeseries":
                     _timeseries_figure(spec, rows, out_dir, path)
                 elif spec["kind"] == "error-vs-time":
