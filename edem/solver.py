@@ -133,7 +133,7 @@ def run(
             raise SolverError(
                 f"time point {k} (t = {t:g} s): {bad} springs are compressed past their length "
                 f"(h <= 0, the bodies interpenetrate); the {cartilage.law} law needs h > 0: "
-                + ("use more time points so each increment is small, or the linear gap law" if k else "separate the bodies or use the linear gap law")
+                + ("use more time points so each increment is small ([load] max_step_s), or the linear gap law" if k else "separate the bodies or use the linear gap law")
             )
         if n_c == 0 and not scene.ligaments and np.any(loads[k]):
             raise SolverError(
@@ -175,7 +175,7 @@ def run(
         if overstrained:
             warnings.append(
                 f"time point {k} (t = {t:g} s): {overstrained} springs compressed past their length "
-                "(strain >= 100 %): the spring bed is outside its range" + (", use more time points" if method == "edem" else "")
+                "(strain >= 100 %): the spring bed is outside its range" + (", use more time points ([load] max_step_s)" if method == "edem" else "")
             )
         if viscous is None:
             u, elastic_force = solution.displacement, total_force
