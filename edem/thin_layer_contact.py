@@ -242,7 +242,10 @@ def solve_thin_layer(
     if shear is not None:
         resultant = resultant + shear.generalised_force(u, active)
     residual = np.where(free, resultant - load, 0.0)
-    scale = float(np.linalg.norm(load * to_newton)) + float(f.sum()) + 1e-9  # floor: a nanonewton, for a vanishing load
+    # The forces in play: the load, the solved forces and those the overlaps stand for (EDEM's
+    # push-back: under a vanishing load the stored forces are what the solve balances away).
+    pushed = float(np.sum((spring_scale * np.clip(overlap_mm, 0.0, None))[touchable]))
+    scale = float(np.linalg.norm(load * to_newton)) + float(f.sum()) + pushed + 1e-9  # floor: a nanonewton, for a vanishing load
     # The 6 x 6 solve balances to round-off; only an accepted cycle or a regularised transient set
     # (1e-8 of the full stiffness) can leave more, and both stay far below 10 cycle_rtol.
     if float(np.linalg.norm(residual * to_newton)) > 10.0 * cycle_rtol * scale:
