@@ -623,6 +623,12 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
             continue
         metrics = [r["metrics"] for r in level_rows]
         dofs = [float(m["fe_n_dofs"]) for m in metrics]
+        if not all(a < b for a, b in zip(dofs, dofs[1:])):
+            # e.g. a 1 mm layer: one element through it at 2.0 and at 1.0 mm, the same mesh twice
+            why = "meshes not distinct: the mesher gave " + ", ".join(f"{d / 1e3:.0f}k" for d in dofs) + " DOFs, no three-level estimate"
+            out_rows.append({"cells": [point["point"], "all", why, "–", "–", "–", "–", "–", "–"]})
+            points.append({"point": point["point"], "unavailable": why})
+            continue
         sizes = [n ** (-1.0 / 3.0) for n in dofs]  # representative size h ~ N^(-1/3)
         extra = rows.get(point["extra"]) if point.get("extra") else None
         extra_ok = extra is not None and all(s.get("status") == OK for s in extra.get("sides", []))

@@ -145,3 +145,27 @@ def test_a_judged_case_takes_its_fe_error_from_the_study_and_a_band_within_it_ju
     other = next(c for c in trust_cases() if c.name == "slab-F333-nu0.3")  # not in this study: judged on its value
     status, verdicts = judge(other, record)
     assert status == FLAGGED and "fe_error" not in verdicts["displacement_rel_error"]
+
+
+def test_a_point_whose_meshes_are_not_distinct_is_reported_without_an_estimate_and_the_others_still_are():
+    """A 1 mm layer gets one element through it at 2.0 and at 1.0 mm: the same mesh twice. That
+    point says so (no three-level estimate); a properly refined point beside it is estimated."""
+    from verification.analyses import fe_convergence_analysis
+    from verification.campaign_model import Analysis
+    from verification.fe_convergence import FE_VALUE_METRICS
+    from verification.status import OK
+
+    def row(dofs: float, value: float) -> dict:
+        metrics = {m: value for m in FE_VALUE_METRICS}
+        metrics.update(fe_n_dofs=dofs, fe_wall_time_s=1.0, fe_peak_memory_mb=1.0)
+        return {"sides": [{"side": "fe-layer", "status": OK}], "metrics": metrics, "options": {"mesh_size_mm": 1.0, "degree": 2}}
+
+    rows = {"same-h2": row(32e3, 1.0), "same-h1": row(32e3, 1.0), "same-h0.7": row(210e3, 1.1),
+            "fine-h2": row(1e3, 1.0 + 0.1), "fine-h1": row(8e3, 1.0 + 0.1 / 4), "fine-h0.7": row(64e3, 1.0 + 0.1 / 16)}
+    points = [{"point": p, "levels": [f"{p}-h2", f"{p}-h1", f"{p}-h0.7"], "extra": None, "scene": "cylinder-layer", "side": "fe-layer",
+               "overrides": {}} for p in ("same", "fine")]
+    result = fe_convergence_analysis(Analysis("c", "c", "fe-convergence", tuple(rows), {"points": points, "findings": []}), rows)
+    same = [r["cells"] for r in result["rows"] if r["cells"][0] == "same"]
+    assert len(same) == 1 and same[0][2].startswith("meshes not distinct")
+    fine = [r["cells"] for r in result["rows"] if r["cells"][0] == "fine" and r["cells"][1] == "displacement"]
+    assert fine and fine[0][3] == "2"  # h ~ N^(-1/3) halves, the error quarters: order 2
