@@ -24,7 +24,7 @@ from reports.plots import axis_label, plot_timeseries
 from verification.analyses import grid_of
 from verification.campaigns import instant_indices
 from verification.status import Status
-from verification.verdicts import CASE_VERDICTS, FE_TOO_COARSE, NOT_JUDGED, VERDICT_MEANINGS, headline
+from verification.verdicts import CASE_VERDICTS, FE_ERROR_UNKNOWN, FE_TOO_COARSE, NOT_JUDGED, VERDICT_MEANINGS, headline
 
 #: case verdicts (verification.verdicts) and analysis statuses
 STATUS_COLOURS = {Status.VERIFIED: "#1b7f3a", Status.FLAGGED: "#c05600", Status.FE_NOT_CONVERGED: "#6a3d9a", Status.REFUSED_AS_DECLARED: "#1b5e9a",
@@ -452,6 +452,10 @@ def _metrics_cell(row: dict[str, Any]) -> str:
         if verdict["verdict"] == FE_TOO_COARSE:
             parts.append(f'<span class="fecoarse">{h(metric)} = {_fmt_metric(metric, value)}: {h(FE_TOO_COARSE)} (band {_fmt(verdict["tolerance"])} '
                          f'&le; the FE\'s estimated error {_fmt(verdict.get("fe_error"))})</span>')
+            continue
+        if verdict["verdict"] == FE_ERROR_UNKNOWN:
+            parts.append(f'<span class="fecoarse">{h(metric)} = {_fmt_metric(metric, value)} inside the band {_fmt(verdict["tolerance"])}, '
+                         f'but {h(FE_ERROR_UNKNOWN)}: its run is not in the fe-convergence study, not judged</span>')
             continue
         cls, mark = marks.get(verdict["verdict"], ("na", "vs"))
         parts.append(f'<span class="{cls}">{h(metric)} = {_fmt_metric(metric, value)} {mark} {_fmt(verdict["tolerance"])}</span>')

@@ -44,6 +44,7 @@ import traceback
 import warnings
 from collections.abc import Callable
 from typing import Any
+from pathlib import Path
 
 import numpy as np
 
@@ -607,6 +608,21 @@ def _size_pct(x: float | None) -> str:
     return "–" if x is None or not math.isfinite(x) else f"{100.0 * x:.2f} %"
 
 
+def _field_estimate(level_rows: list[dict[str, Any]], sizes: list[float], extra: dict[str, Any] | None):
+    """The pressure field's estimated L2 error on each mesh (verification.fe_convergence.field_errors)
+    and that of the extra (P1) run (its difference from the finest plus the finest's error), read
+    from the result directories; None when a row does not say where they are."""
+    from verification.fe_convergence import field_difference, field_errors
+
+    rows = level_rows + ([extra] if extra is not None else [])
+    if any(not r.get("out_dir") or not r.get("result_dirs") for r in rows):
+        return None
+    dirs = [Path(r["out_dir"]) / r["result_dirs"][0] for r in rows]
+    est = field_errors(sizes, (field_difference(dirs[0], dirs[2]), field_difference(dirs[1], dirs[2])), field_difference(dirs[0], dirs[1]))
+    extra_error = None if extra is None else field_difference(dirs[3], dirs[2]) + est.errors[-1]
+    return est, extra_error
+
+
 def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Per point and quantity: the three meshes' values, order, extrapolation and errors; the
     errors keyed for :func:`verification.fe_convergence.fe_relative_error` in ``values["entries"]``."""
@@ -656,6 +672,20 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
                 cells.append("–")
             cells += [", ".join(f"{d / 1e3:.0f}k" for d in dofs),
                       ", ".join(f"{t:.0f} s / {_fmt(None if mem is None or not math.isfinite(float(mem)) else float(mem) / 1e3, 2)} GB" for t, mem in zip(record["wall_time_s"], record["peak_memory_mb"]))]
+            out_rows.append({"cells": cells, "flag": not est.asymptotic})
+        fields = _field_estimate(level_rows, sizes, extra if extra_ok else None)
+        if fields is not None:
+            est, extra_error = fields
+            record["quantities"]["pressure field (L2)"] = est.to_dict()
+            for k, e in enumerate(est.errors):
+                level_errors[k]["pressure_l2_rel_error"] = e
+            cells = [point["point"], "pressure field (L2)", "differences from the finest: " + ", ".join(_size_pct(v) for v in est.values[:2]), _fmt(est.order, 3),
+                     "on a line" if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in est.errors)]
+            if extra_error is not None:
+                extra_errors["pressure_l2_rel_error"] = extra_error
+                record["quantities"]["pressure field (L2)"]["p1_error"] = extra_error
+            cells.append("–" if extra_error is None else f"({_size_pct(extra_error)})")
+            cells += out_rows[-1]["cells"][-2:]
             out_rows.append({"cells": cells, "flag": not est.asymptotic})
         ratios = [float(m["fe_peak_pressure_mpa"]) / float(m["fe_p98_pressure_mpa"]) if float(m["fe_p98_pressure_mpa"]) > 0 else math.nan for m in metrics]
         record["peak_over_p98"] = ratios

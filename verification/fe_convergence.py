@@ -132,6 +132,47 @@ def richardson(sizes: list[float] | tuple[float, ...], values: list[float] | tup
     return Richardson(h, f, order, None, False, spread)
 
 
+def field_difference(dir_a: str | Path, dir_b: str | Path) -> float:
+    """||p_a - p_b|| / ||p_b||: the L2 relative difference of two FE runs' pressure per area of M
+    (PRESSURE_ON_MOBILE, the field the comparisons judge) at their last time point, on a's
+    triangles (a's corner mean at each centroid against b interpolated at the centroid's closest
+    point of b's surface, weighted by a's triangle areas; verification.metrics.l2_relative_error)."""
+    from edem.pressure_metrics import PRESSURE_ON_MOBILE
+    from edem.resultdir import read_result_dir
+    from verification.metrics import frame_index, l2_relative_error, project_onto_surface
+
+    frames = []
+    for d in (dir_a, dir_b):
+        result = read_result_dir(d)
+        frames.append(result.frame(frame_index(result, len(result.time_s) - 1)))
+    a, b = frames
+    proj = project_onto_surface(b.points_mm, b.triangles, a.centroids_mm)
+    p_b = np.einsum("ij,ij->i", proj.barycentric, b.point_data[PRESSURE_ON_MOBILE][b.triangles[proj.triangle]])
+    p_a = a.point_data[PRESSURE_ON_MOBILE][a.triangles].mean(axis=1)
+    return l2_relative_error(p_a, p_b, a.areas_mm2)
+
+
+def field_errors(sizes: list[float] | tuple[float, ...], to_finest: tuple[float, float], between_coarse: float) -> Richardson:
+    """Each mesh's estimated relative L2 error of the pressure field from its differences.
+
+    ``to_finest``: the L2 differences of the two coarser meshes' fields from the finest's
+    (:func:`field_difference`, relative to the finest's norm); ``between_coarse``: that of the
+    coarsest from the middle mesh. Near convergence p_h = p* + C h^q e with one shape e, so the
+    fields lie on a line: s_h = ||p_h - p_finest|| is affine in h^q and :func:`richardson` on
+    (s_1, s_2, 0) gives q and the finest's own offset s_0; each mesh's error is |s_i - s_0|.
+    The line needs s_1 = between_coarse + s_2 (to 10 %, or the fields do not move along one
+    shape); otherwise, or outside the asymptotic range, each mesh's error is its largest
+    difference from the other meshes (what refining has been seen to change), ``asymptotic`` False.
+    """
+    s1, s2 = (float(x) for x in to_finest)
+    est = richardson(sizes, (s1, s2, 0.0))
+    on_line = abs(s1 - (s2 + between_coarse)) <= 0.1 * max(s1, 1e-300)
+    if est.asymptotic and on_line:
+        return Richardson(est.sizes, est.values, est.order, est.extrapolated, True, tuple(abs(x - est.extrapolated) for x in est.values))
+    spread = (max(s1, between_coarse), max(s2, between_coarse), max(s1, s2))
+    return Richardson(est.sizes, est.values, est.order, None, False, spread)
+
+
 def pressure_percentile_by_area(pressure_mpa: np.ndarray, vertices_mm: np.ndarray, triangles: np.ndarray, percentile: float = 98.0) -> float:
     """The pressure below which ``percentile`` % of the contact area lies (MPa).
 
@@ -190,9 +231,27 @@ def fe_key(scene: str, side: str, overrides: dict[str, Any], options: dict[str, 
     from verification.sides import side_inputs
 
     kept, read = side_inputs(side, dict(overrides), dict(options))
+    kept = {k: v for k, v in kept.items() if not _scene_says(scene, k, v)}
     read.pop("steps", None)
     settings = {k: (float(v) if k == "mesh_size_mm" else v) for k, v in read.items()}
     return json.dumps({"scene": scene, "side": side, "overrides": kept, "options": settings}, sort_keys=True, separators=(",", ":"))
+
+
+def _scene_says(scene: str, dotted: str, value: Any) -> bool:
+    """Whether the scene file already sets ``dotted`` to ``value`` (an override that changes
+    nothing: the subject campaign's FE run and quick's at the scene's own nu are one run)."""
+    from edem.errors import InputError
+    from edem.scene import read_scene_toml, resolve_scene_path
+
+    try:
+        table: Any = read_scene_toml(resolve_scene_path(scene))
+    except InputError:
+        return False
+    for name in dotted.split("."):
+        if not isinstance(table, dict) or name not in table:
+            return False
+        table = table[name]
+    return table == value
 
 
 def load_reference(path: str | Path | None = None) -> dict[str, Any]:

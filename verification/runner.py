@@ -436,7 +436,8 @@ def judge(case: Case, record: dict[str, Any], fe_errors: dict[str, float] | None
         return UNAVAILABLE, {}
     metrics = {m: as_float(v) for m, v in record["metrics"].items() if m in case.tolerance}
     verdicts = tolerance_verdicts(metrics, case.tolerance, case.bases(), not_applicable=refused_as_declared,
-                                  fe_errors=fe_errors if fe_errors is not None else (case.fe_errors or fe_relative_error(case)))
+                                  fe_errors=fe_errors if fe_errors is not None else (case.fe_errors or fe_relative_error(case)),
+                                  fe_reference=len(case.sides) > 1 and case.sides[-1].startswith("fe-"))
     expected = None if case.expect is None else case.expect.outcome
     return case_verdict(statuses, verdicts, expected, refused_as_declared), verdicts
 
@@ -673,6 +674,7 @@ def _run_campaign_locked(
                 "cached": cached[case.name],
                 "case_dir": f"cases/{case.name}",
                 "result_dirs": [f"cases/{case.name}/{s['result_dir']}" for s in record["sides"] if s.get("result_dir")],
+                "out_dir": str(out),  # where result_dirs are, for an analysis that reads the fields (fe-convergence)
             }
         )
     counts = count_verdicts([r["status"] for r in case_rows])

@@ -25,7 +25,10 @@ Per tolerance the verdict is "met", "outside band" (a model band exceeded), "fai
 converged enough to judge": when the FE reference carries an estimated relative error for the
 metric (``fe_errors`` of :func:`tolerance_verdicts`, metric -> relative error, e.g. a Richardson
 estimate from its mesh study) and the model band is not larger than that error, the band can judge
-nothing. Errors are signed ((a - b) / |b|); a band bounds their magnitude.
+nothing. Against an FE reference whose error has not been estimated (its run is not in the
+mesh study, ``fe_reference`` without ``fe_errors`` for the metric) a value inside the band is "FE
+error unknown": a band can only be met against a reference whose own error is known to be
+smaller. Errors are signed ((a - b) / |b|); a band bounds their magnitude.
 
 A case ends as exactly one of :data:`CASE_VERDICTS`:
 
@@ -33,7 +36,8 @@ A case ends as exactly one of :data:`CASE_VERDICTS`:
   declared-outcome (converges) or model-band;
 * ``flagged``: everything else met, but a model-band tolerance exceeded;
 * ``FE not converged enough to judge``: nothing outside a band, but a model band no wider than
-  the FE reference's own estimated error (it needs a finer FE to be judged);
+  the FE reference's own estimated error, or an FE reference whose error is unknown (it needs a
+  finer FE, or a mesh study, to be judged);
 * ``refused as declared``: declared to be refused, and refused with the declared message;
 * ``ran``: ran and met its invariants and sanity bounds, but no tolerance makes an accuracy claim
   (its numbers are reported, with no verdict);
@@ -65,11 +69,13 @@ CASE_VERDICTS = (VERIFIED, FLAGGED, FE_NOT_CONVERGED, REFUSED_AS_DECLARED, RAN, 
 #: per-tolerance verdicts beyond "met", "outside band", "fail", "missing" and "n/a"
 NOT_JUDGED = "reported, not judged"
 FE_TOO_COARSE = str(FE_NOT_CONVERGED)
+FE_ERROR_UNKNOWN = "FE error unknown"
 #: what each verdict means, for the report's legend
 VERDICT_MEANINGS = {
     VERIFIED: "met every tolerance, including one whose origin is a closed form's discretisation error, an FE mesh-convergence estimate, a declared outcome or a stated model band",
     FLAGGED: "outside a declared model band (against the FE reference or the thesis): a limit of the model, reported",
-    FE_NOT_CONVERGED: "a declared model band no wider than the FE reference's own estimated error for that metric: the reference cannot judge it",
+    FE_NOT_CONVERGED: ("a declared model band no wider than the FE reference's own estimated error for that metric, or an FE reference whose error "
+                       "has not been estimated (not in the fe-convergence study): the reference cannot judge it"),
     REFUSED_AS_DECLARED: "declared to be refused (input outside the model) and refused with the declared message",
     RAN: "ran to equilibrium; its numbers are reported with no accuracy verdict",
     FAILED: "missed a tolerance that is not a model band: a bug or a broken run",
@@ -120,7 +126,8 @@ def bases_for(tolerance: Mapping[str, float], given: Mapping[str, Basis] | None 
 
 
 def tolerance_verdicts(metrics: Mapping[str, Any], tolerance: Mapping[str, float], bases: Mapping[str, Basis],
-                       not_applicable: bool = False, fe_errors: Mapping[str, float] | None = None) -> dict[str, dict[str, Any]]:
+                       not_applicable: bool = False, fe_errors: Mapping[str, float] | None = None,
+                       fe_reference: bool = False) -> dict[str, dict[str, Any]]:
     """Per tolerance: value, tolerance, basis kind and reason, and its verdict (module docstring).
 
     A value is judged by its magnitude (errors are signed). ``not_applicable``: a case refused as
@@ -128,7 +135,8 @@ def tolerance_verdicts(metrics: Mapping[str, Any], tolerance: Mapping[str, float
     per metric (metric -> error >= 0, e.g. ``{"contact_area_rel_error": 0.07}`` from a Richardson
     estimate of its mesh study; default None: none known); a model band not larger than it gives
     "FE not converged enough to judge" for that metric, whatever the value (its
-    ``fe_error`` is recorded).
+    ``fe_error`` is recorded). ``fe_reference``: the values compare against an FE reference, so a
+    model band without its FE error is "FE error unknown" rather than met.
     """
     out = {}
     fe_errors = dict(fe_errors or {})
@@ -144,6 +152,8 @@ def tolerance_verdicts(metrics: Mapping[str, Any], tolerance: Mapping[str, float
                 entry["verdict"] = NOT_JUDGED
             elif "fe_error" in entry and tol <= entry["fe_error"]:
                 entry["verdict"] = FE_TOO_COARSE
+            elif abs(value) <= tol and basis.kind == MODEL_BAND and fe_reference and "fe_error" not in entry:
+                entry["verdict"] = FE_ERROR_UNKNOWN
             elif abs(value) <= tol:
                 entry["verdict"] = NOT_JUDGED if basis.kind == SANITY else "met"
             else:
@@ -168,7 +178,7 @@ def case_verdict(side_statuses: list[str], verdicts: Mapping[str, Mapping[str, A
         return REFUSED_AS_DECLARED
     if any(v["verdict"] == "outside band" for v in verdicts.values()):
         return FLAGGED
-    if any(v["verdict"] == FE_TOO_COARSE for v in verdicts.values()):
+    if any(v["verdict"] in (FE_TOO_COARSE, FE_ERROR_UNKNOWN) for v in verdicts.values()):
         return FE_NOT_CONVERGED
     if any(v["verdict"] == "met" and v["kind"] in CLAIM_KINDS for v in verdicts.values()):
         return VERIFIED

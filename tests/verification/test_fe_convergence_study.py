@@ -11,6 +11,7 @@ import pytest
 
 from verification.campaign_model import Case
 from verification.fe_convergence import fe_key, fe_relative_error, pressure_percentile_by_area, richardson
+from verification.verdicts import FE_ERROR_UNKNOWN
 
 
 @pytest.mark.parametrize("order", [1.0, 2.0, 3.0])
@@ -121,7 +122,8 @@ def test_a_judged_case_takes_its_fe_error_from_the_study_and_a_band_within_it_ju
     """A quick trust case (judged against the 25 % model band) whose FE run is in the stored study:
     every judged metric carries the study's FE error, and a metric whose FE error is not below
     the band is 'FE not converged enough to judge' whatever its value; one whose run is not in
-    the study is judged on its value alone."""
+    the study is flagged outside the band but cannot meet it: inside, its metric is 'FE error
+    unknown' and the case is not verified."""
     import json
 
     from verification import fe_convergence
@@ -145,6 +147,47 @@ def test_a_judged_case_takes_its_fe_error_from_the_study_and_a_band_within_it_ju
     other = next(c for c in trust_cases() if c.name == "slab-F333-nu0.3")  # not in this study: judged on its value
     status, verdicts = judge(other, record)
     assert status == FLAGGED and "fe_error" not in verdicts["displacement_rel_error"]
+    assert verdicts["regularised_peak_pressure_rel_error"]["verdict"] == FE_ERROR_UNKNOWN
+    inside = {"sides": record["sides"], "metrics": {**metrics, "displacement_rel_error": -0.05}}
+    assert judge(other, inside)[0] == FE_NOT_CONVERGED
+    assert judge(case, inside)[0] == FE_NOT_CONVERGED  # still: the displacement's FE error (30 %) exceeds the band
+
+
+def test_a_band_met_against_a_closed_form_needs_no_fe_error():
+    """The 'FE error unknown' rule is about FE references only: the same model band met by a
+    case without an FE side is met."""
+    from verification.verdicts import MODEL_BAND, Basis, case_verdict, tolerance_verdicts
+
+    bases = {"x_rel_error": Basis(MODEL_BAND, "a declared band")}
+    assert tolerance_verdicts({"x_rel_error": 0.1}, {"x_rel_error": 0.25}, bases)["x_rel_error"]["verdict"] == "met"
+    verdicts = tolerance_verdicts({"x_rel_error": 0.1}, {"x_rel_error": 0.25}, bases, fe_reference=True)
+    assert verdicts["x_rel_error"]["verdict"] == FE_ERROR_UNKNOWN
+    assert case_verdict(["ok", "ok"], verdicts, None, False) == "FE not converged enough to judge"
+
+
+@pytest.mark.parametrize("order", [1.5, 2.0, 3.0])
+def test_field_errors_of_fields_on_a_line_are_their_distances_from_the_limit(order):
+    """p_h = p* + h^q e (one error shape): the differences from the finest mesh are
+    (h^q - h3^q) |e| / |p3|, and the estimated L2 error of each mesh is h^q |e| / |p3| exactly
+    (Richardson on the positions along the line; 1e-8: the fixed-point order, as above)."""
+    from verification.fe_convergence import field_errors
+
+    sizes, c = (2.0, 1.2, 0.7), 0.013  # c = |e| / |p3|
+    s = [c * (h**order - sizes[2] ** order) for h in sizes]
+    est = field_errors(sizes, (s[0], s[1]), s[0] - s[1])
+    assert est.asymptotic and est.order == pytest.approx(order, rel=1e-9)
+    np.testing.assert_allclose(est.errors, [c * h**order for h in sizes], rtol=1e-8)
+
+
+def test_field_errors_off_a_line_are_the_largest_differences_seen():
+    """Coarse fields not on one line through the finest (the coarse-to-middle difference is not
+    the difference of their distances from the finest): no extrapolation; each mesh's error is
+    its largest difference from the others."""
+    from verification.fe_convergence import field_errors
+
+    est = field_errors((2.0, 1.0, 0.7), (0.05, 0.03), 0.06)
+    assert not est.asymptotic and est.extrapolated is None
+    assert est.errors == pytest.approx((0.06, 0.06, 0.05))
 
 
 def test_a_point_whose_meshes_are_not_distinct_is_reported_without_an_estimate_and_the_others_still_are():
@@ -169,3 +212,12 @@ def test_a_point_whose_meshes_are_not_distinct_is_reported_without_an_estimate_a
     assert len(same) == 1 and same[0][2].startswith("meshes not distinct")
     fine = [r["cells"] for r in result["rows"] if r["cells"][0] == "fine" and r["cells"][1] == "displacement"]
     assert fine and fine[0][3] == "2"  # h ~ N^(-1/3) halves, the error quarters: order 2
+
+
+def test_an_override_that_repeats_the_scene_file_names_the_same_fe_run():
+    """subject-standing's file sets nu 0.42: quick's override of 0.42 and the subject campaign's
+    run without it are one FE run with one key, and one study entry serves both; 0.45 is another."""
+    options = {"mesh_size_mm": 1.0, "degree": 2}
+    same = fe_key("subject-standing", "fe-slab", {"ligaments": [], "cartilage.poissons_ratio": 0.42}, options)
+    assert same == fe_key("subject-standing", "fe-slab", {"ligaments": []}, options)
+    assert same != fe_key("subject-standing", "fe-slab", {"ligaments": [], "cartilage.poissons_ratio": 0.45}, options)

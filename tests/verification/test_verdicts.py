@@ -142,7 +142,11 @@ def test_the_runner_passes_a_cases_fe_errors_to_its_verdicts():
     record = {"sides": [{"status": "ok"}, {"status": "ok"}], "metrics": {m: 0.0 for m in case.tolerance}}
     status, verdicts = judge(case, record)
     assert status == "FE not converged enough to judge" and verdicts["contact_area_rel_error"]["fe_error"] == 0.3
-    assert judge(case, record, fe_errors={})[0] == "verified"
+    # with the FE's error known and small for every judged metric, a case inside its band is verified
+    small = {m: 0.01 for m in case.tolerance}
+    assert judge(case, record, fe_errors=small)[0] == "verified"
+    # with none known, an FE reference judges nothing (FE error unknown)
+    assert judge(case, record, fe_errors={})[0] == "FE not converged enough to judge"
 
 
 def test_the_threshold_laws_area_on_the_ideal_ankle_is_reported_not_judged():

@@ -149,5 +149,6 @@ def summary_from_cached_cases(out_dir: str | Path) -> dict[str, Any]:
         if len(case.sides) == 1 and fe_dirs:  # the FE run's values as this code measures them (a definition added since it ran)
             metrics.update(fe_values(fe_dirs[0]))
         rows[case.name] = {"name": case.name, "sides": record["sides"], "metrics": metrics, "options": case.options, "scene": case.scene,
-                           "overrides": case.overrides, "params": case.params, "status": record.get("status", "ran")}
+                           "overrides": case.overrides, "params": case.params, "status": record.get("status", "ran"), "out_dir": str(out_dir),
+                           "result_dirs": [f"cases/{case.name}/{s['result_dir']}" for s in record["sides"] if s.get("result_dir")]}
     return {"campaign": study.name, "analyses": [run_analysis(a, rows) for a in study.analyses]}
