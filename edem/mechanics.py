@@ -57,6 +57,8 @@ def rotation_matrix(rotation_vector_rad: np.ndarray) -> np.ndarray:
     angle = math.sqrt(x * x + y * y + z * z)
     if angle < 1e-300:
         return np.eye(3)
+    if not math.isfinite(angle):  # (math.sin raises on inf: nan, as numpy's sine gives, for callers to refuse)
+        return np.full((3, 3), np.nan)
     x, y, z = x / angle, y / angle, z / angle
     sin, cos = math.sin(angle), math.cos(angle)
     versine = 1.0 - cos
