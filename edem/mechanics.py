@@ -185,12 +185,12 @@ def _regular_solve(stiffness: np.ndarray, scale: np.ndarray, rhs: np.ndarray, rt
     """
     if not scale.size:  # nothing free, nothing to restrain
         return np.zeros(0)
-    a = stiffness / np.outer(scale, scale)
+    a = stiffness / (scale[:, None] * scale)
     factor, info = dpotrf(a, lower=1, clean=0)
     if info:  # a leading minor not positive definite
         return None
     pivots = factor.diagonal()  # sqrt of the pivots a_jj - sum_m L_jm^2
-    if not np.all(pivots * pivots > 1e3 * rtol * np.abs(a).max()):  # (also catches nan)
+    if not (pivots * pivots).min() > 1e3 * rtol * np.abs(a).max():  # (a nan pivot fails it too)
         return None
     x, _ = dpotrs(factor, rhs / scale, lower=1)
     return x / scale
