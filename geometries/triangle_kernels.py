@@ -41,7 +41,7 @@ def closest_points_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: 
 
     The arithmetic runs on the x, y and z components as separate arrays: numpy pays per row on
     a last axis of 3 (products with a broadcast (..., 1) factor, reductions over xyz), which made
-    the (..., 3) form several times slower on the tens of thousands of point-triangle pairs of a
+    the (..., 3) form 1.5-2x slower on the tens of thousands of point-triangle pairs of a
     pre-flight. The weights are formed once, from the winning edge and its parameter.
     """
     p, a, b, c = ([x[..., i] for i in range(3)] for x in (p, a, b, c))
@@ -75,11 +75,11 @@ def closest_points_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: 
         best_u = np.where(better, u, best_u)
         best_edge = np.where(better, edge_index, best_edge)
     # The edge from vertex i to vertex j gives i the weight 1 - u and j the weight u.
-    rest = 1.0 - best_u
+    from_end = 1.0 - best_u
     on_edge = (
-        np.where(best_edge == 0, rest, np.where(best_edge == 2, best_u, 0.0)),
-        np.where(best_edge == 1, rest, np.where(best_edge == 0, best_u, 0.0)),
-        np.where(best_edge == 2, rest, np.where(best_edge == 1, best_u, 0.0)),
+        np.where(best_edge == 0, from_end, np.where(best_edge == 2, best_u, 0.0)),
+        np.where(best_edge == 1, from_end, np.where(best_edge == 0, best_u, 0.0)),
+        np.where(best_edge == 2, from_end, np.where(best_edge == 1, best_u, 0.0)),
     )
     weights = np.stack([np.where(inside, w_in, w_edge) for w_in, w_edge in zip((1.0 - s - t, s, t), on_edge)], axis=-1)
     return np.where(inside, d2_inside, best_d2), weights
@@ -114,8 +114,8 @@ def _vertex_to_surface_mm(points_mm: np.ndarray, vertices_mm: np.ndarray, triang
     candidates = np.flatnonzero(nearest_vertex - longest_edge <= bound)
     # All (point, triangle) pairs within the radius as two index arrays (no list per point). The
     # radius is padded by round-off so that a centroid exactly on it is never lost.
-    pairs = cKDTree(points_mm[candidates]).sparse_distance_matrix(cKDTree(centroids), (bound + reach) * (1.0 + 1e-12), output_type="ndarray")
-    point_of, triangle_of = candidates[pairs["i"]], pairs["j"]
+    near = cKDTree(points_mm[candidates]).sparse_distance_matrix(cKDTree(centroids), (bound + reach) * (1.0 + 1e-12), output_type="ndarray")
+    point_of, triangle_of = candidates[near["i"]], near["j"]
     normal = cross_rows(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     size = np.sqrt(np.einsum("ij,ij->i", normal, normal))
     unit = normal / np.where(size > 0.0, size, 1.0)[:, None]  # (degenerate: zero, plane distance 0)
@@ -126,11 +126,11 @@ def _vertex_to_surface_mm(points_mm: np.ndarray, vertices_mm: np.ndarray, triang
     # Pairs whose plane lies within the best distance so far, with a margin far above the round-off
     # of either figure (~1e-15 of the coordinates) and far below any distance that matters.
     within = np.sqrt(squared.min()) + 1e-9 * (bound + reach)
-    rest = np.flatnonzero(plane <= within)
-    pairs = np.concatenate([first, rest])
+    rest = np.flatnonzero(plane <= within)  # (may repeat some of the first: measured twice, alike)
+    measured = np.concatenate([first, rest])
     squared = np.concatenate([squared, closest_points_on_triangles(points_mm[point_of[rest]], *np.moveaxis(corners[triangle_of[rest]], 1, 0))[0]])
     best = int(np.argmin(squared))
-    return float(np.sqrt(squared[best])), int(point_of[pairs[best]])
+    return float(np.sqrt(squared[best])), int(point_of[measured[best]])
 
 
 def closest_distance_mm(a_vertices_mm: np.ndarray, a_triangles: np.ndarray, b_vertices_mm: np.ndarray,
