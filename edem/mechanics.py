@@ -24,6 +24,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf, dpotrs
 
 from edem.errors import SolverError
 from edem.laws import ElementLaw
@@ -46,12 +47,28 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 
 def rotation_matrix(rotation_vector_rad: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula: the finite rotation whose axis-angle vector is ``rotation_vector_rad``."""
-    angle = float(np.linalg.norm(rotation_vector_rad))
+    """Rodrigues' formula: the finite rotation (3, 3) whose axis-angle vector (3,) is
+    ``rotation_vector_rad``, R = cos a I + sin a W_k + (1 - cos a) k k^T for the unit axis k.
+
+    Formed from Python floats: it is called a few times per time point, where numpy's per-call
+    overhead on 3-vectors costs several times the arithmetic.
+    """
+    x, y, z = np.asarray(rotation_vector_rad, float).tolist()
+    angle = math.sqrt(x * x + y * y + z * z)
     if angle < 1e-300:
         return np.eye(3)
-    k = skew(np.asarray(rotation_vector_rad, float) / angle)
-    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+    if not math.isfinite(angle):  # (math.sin raises on inf: nan, as numpy's sine gives, for callers to refuse)
+        return np.full((3, 3), np.nan)
+    x, y, z = x / angle, y / angle, z / angle
+    sin, cos = math.sin(angle), math.cos(angle)
+    versine = 1.0 - cos
+    return np.array(
+        [
+            [cos + versine * x * x, versine * x * y - sin * z, versine * x * z + sin * y],
+            [versine * x * y + sin * z, cos + versine * y * y, versine * y * z - sin * x],
+            [versine * x * z - sin * y, versine * y * z + sin * x, cos + versine * z * z],
+        ]
+    )
 
 
 def rotation_vector(rotation: np.ndarray) -> np.ndarray:
@@ -158,33 +175,25 @@ def _norm(v: np.ndarray) -> float:
 def _regular_solve(stiffness: np.ndarray, scale: np.ndarray, rhs: np.ndarray, rtol: float = 1e-10) -> np.ndarray | None:
     """x with stiffness @ x = rhs if the stiffness is regular, else None.
 
+    ``stiffness`` (p, p) with p <= 6 free DOFs (N/mm, N, N mm), ``scale`` (p,) and ``rhs`` (p,).
     Regular: positive definite with every Cholesky pivot well above round-off (``1e3 rtol`` of
     its largest entry once the DOFs are in the same units: ``scale`` is 1 for a translation, a
     characteristic length for a rotation); then no DOF is unrestrained at ``rtol`` and
     :func:`unrestrained_dofs` needs no eigensolve. The factor that decides it also gives x.
-    The matrix is at most 6 x 6: a Cholesky over its DOFs in plain floats costs less than one
-    call into numpy.linalg.
+    LAPACK's potrf/potrs are called directly: at 6 x 6 the checks and dispatch of
+    numpy.linalg or scipy.linalg.cho_factor cost several times the factorisation itself.
     """
-    n = scale.size
-    if not n:  # nothing free, nothing to restrain
+    if not scale.size:  # nothing free, nothing to restrain
         return np.zeros(0)
-    a = (stiffness / np.outer(scale, scale)).tolist()
-    tolerance = 1e3 * rtol * max(abs(x) for row in a for x in row)
-    factor = [[0.0] * n for _ in range(n)]  # lower triangle L, a = L L^T
-    for j in range(n):
-        pivot = a[j][j] - sum(factor[j][m] ** 2 for m in range(j))
-        if not pivot > tolerance:  # (also catches nan)
-            return None
-        factor[j][j] = diagonal = math.sqrt(pivot)
-        for i in range(j + 1, n):
-            factor[i][j] = (a[i][j] - sum(factor[i][m] * factor[j][m] for m in range(j))) / diagonal
-    y = [0.0] * n  # L y = rhs (scaled), then L^T z = y, x = z (unscaled)
-    b = (rhs / scale).tolist()
-    for i in range(n):
-        y[i] = (b[i] - sum(factor[i][m] * y[m] for m in range(i))) / factor[i][i]
-    for i in reversed(range(n)):
-        y[i] = (y[i] - sum(factor[m][i] * y[m] for m in range(i + 1, n))) / factor[i][i]
-    return np.array(y) / scale
+    a = stiffness / (scale[:, None] * scale)
+    factor, info = dpotrf(a, lower=1, clean=0)
+    if info:  # a leading minor not positive definite
+        return None
+    pivots = factor.diagonal()  # sqrt of the pivots a_jj - sum_m L_jm^2
+    if not (pivots * pivots).min() > 1e3 * rtol * np.abs(a).max():  # (a nan pivot fails it too)
+        return None
+    x, _ = dpotrs(factor, rhs / scale, lower=1)
+    return x / scale
 
 
 def unrestrained_dofs(stiffness: np.ndarray, free: np.ndarray, length_scale_mm: float, rtol: float = 1e-10) -> list[str]:
