@@ -90,7 +90,9 @@ Factorisation. The vertex matrices are SPD and banded once renumbered by reverse
 (half-bandwidth about the square root of the vertex count on a surface patch), so LAPACK's banded
 Cholesky factors them; it took 0.35-0.65x the time of SuperLU's symmetric-mode LU on the ankle
 surfaces (1.1k-14k vertices). The ordering depends on the sparsity only and is found once per
-cell set (``OperatorPattern``); past ``MAX_BANDED_HALF_WIDTH`` the sparse LU takes over.
+cell set (``OperatorPattern``); past ``MAX_BANDED_HALF_WIDTH`` the sparse LU takes over. A
+refactorisation on the same pattern keeps the factor's columns before the first one whose
+entries changed and factors only the trailing block (``OperatorPattern._banded_cholesky``).
 """
 
 from __future__ import annotations
@@ -554,7 +556,8 @@ class OperatorPattern:
         trailing, info = dpbtrf(band[:, start:], lower=1, overwrite_ab=1)  # in place: the view is column-major
         if info > 0:
             raise np.linalg.LinAlgError(f"leading minor {start + info} is not positive definite")
-        band[:, start:] = trailing  # (no copy where LAPACK worked in place)
+        if not np.shares_memory(trailing, band):  # LAPACK worked on a copy
+            band[:, start:] = trailing
         return band
 
 
