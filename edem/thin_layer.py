@@ -447,7 +447,8 @@ class OperatorPattern:
     matrix's data, -1 for a pair on the free edge; Q^T diag(x) Q is then the pattern with x / 9
     added at the slots (no sparse product, no re-assembly). The band layout of the factorisation
     (an ordering and where each stored entry goes) depends on the pattern only, so it is found
-    at the first factorisation and reused.
+    at the first factorisation and reused; so is the last band factor, in part
+    (``_banded_cholesky``).
     """
 
     indices: np.ndarray
@@ -538,7 +539,7 @@ class OperatorPattern:
         band = band.reshape((width + 1, n), order="F")  # column j of the band is contiguous
         last = self.last_factor
         start = 0
-        if last is not None and last[0].shape == entries.shape:
+        if last is not None:
             changed = np.flatnonzero(entries != last[0])
             start = int(flat[changed].min()) // (width + 1) if changed.size else n  # the first column that differs
         if start == n:
