@@ -7,8 +7,9 @@ solved) with ``coupling = "none"`` and ``"thin-layer"`` (Pade and two-pole symbo
 and 30k springs. The Embree scene is built once. The models run alternately round by round (so a
 load spike of the shared machine hits all of them) and the script prints, per size and law, the
 medians of the whole run and of its solve stage (assembly + unilateral solve + viscoelastic
-increment, without the ray casting they share), the coupled layer's factorisations, and the
-ratios coupled / independent.
+increment, without the ray casting they share), the coupled layer's factorisations (and the share
+of the banded Cholesky's columns they factored: a refactorisation keeps those before the first
+changed one), and the ratios coupled / independent.
 
     .venv/bin/python benchmarks/bench_thin_layer.py [--steps 20] [--rounds 3] [--sizes 0.94,0.3] [--laws threshold,gap]
 """
@@ -35,18 +36,31 @@ GOALS = {"pade": 2.0, "two-pole": 5.0}  # issue 23: coupled / independent spring
 
 class FactorCount:
     """Counts the coupled layer's sparse factorisations (each active-set iteration asks for one;
-    reused or low-rank-corrected factors are not counted)."""
+    reused or low-rank-corrected factors are not counted), and of the banded Cholesky's columns
+    those it factored (a refactorisation keeps the columns before the first changed one)."""
 
     def __init__(self):
         self.count = 0
+        self.band_columns = [0, 0]  # factored, of
         self._factorise = thin_layer.LayerCompliance._factorise
+        banded_cholesky, dpbtrf = thin_layer.OperatorPattern._banded_cholesky, thin_layer.dpbtrf
         counter = self
 
         def counted(layer, weight):
             counter.count += 1
             return counter._factorise(layer, weight)
 
+        def columns(pattern, entries):
+            counter.band_columns[1] += pattern.n_vertices
+            return banded_cholesky(pattern, entries)
+
+        def factored(ab, **options):
+            counter.band_columns[0] += ab.shape[1]
+            return dpbtrf(ab, **options)
+
         thin_layer.LayerCompliance._factorise = counted
+        thin_layer.OperatorPattern._banded_cholesky = columns
+        thin_layer.dpbtrf = factored
 
 
 def bench(mesh_size_mm: float, law: str, n_steps: int, rounds: int, counter: FactorCount) -> None:
@@ -60,13 +74,16 @@ def bench(mesh_size_mm: float, law: str, n_steps: int, rounds: int, counter: Fac
     totals: dict[str, list[float]] = {c: [] for c in couplings}
     solves: dict[str, list[float]] = {c: [] for c in couplings}
     factorisations: dict[str, int] = {}
+    band_share: dict[str, str] = {}
     results = {}
     run(scenes["none"], "edem", caster=caster)  # warm-up: imports, first Embree traversal
     for _ in range(rounds):
         for coupling in couplings:
-            before = counter.count
+            before, columns = counter.count, list(counter.band_columns)
             results[coupling] = run(scenes[coupling], "edem", caster=caster)
             factorisations[coupling] = counter.count - before
+            of = counter.band_columns[1] - columns[1]
+            band_share[coupling] = f" (banded columns factored {100 * (counter.band_columns[0] - columns[0]) / of:.0f} %)" if of else ""
             totals[coupling].append(results[coupling].wall_time_s)
             solves[coupling].append(results[coupling].seconds["solve"])
     medians = {c: (statistics.median(totals[c]), statistics.median(solves[c])) for c in couplings}
@@ -75,7 +92,7 @@ def bench(mesh_size_mm: float, law: str, n_steps: int, rounds: int, counter: Fac
         print(
             f"{law:9s} {result.n_springs:6d} springs, {coupling:8s}: run {medians[coupling][0]:8.3f} s, solve {medians[coupling][1]:8.3f} s "
             f"(median of {rounds}, EDEM, {n_steps} time points); iterations {sum(s.iterations for s in result.steps)}, "
-            f"factorisations {factorisations[coupling]}; final peak {last.peak_pressure_mpa:.3f} MPa, area {last.contact_area_mm2:.0f} mm^2"
+            f"factorisations {factorisations[coupling]}{band_share[coupling]}; final peak {last.peak_pressure_mpa:.3f} MPa, area {last.contact_area_mm2:.0f} mm^2"
         )
     for symbol, goal in GOALS.items():
         ratio = medians[symbol][0] / medians["none"][0]
