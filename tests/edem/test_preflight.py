@@ -184,5 +184,6 @@ def test_closest_distance_is_measured_once_per_pair_of_surfaces_and_again_when_o
     raised = TriangleSurface(scene.fixed.vertices_mm + [0.0, 0.0, 0.5], scene.fixed.triangles)
     moved = make_scene(scene.mobile, raised, [0.0, 0.0, 100.0], fixed_dofs=("tx", "ty", "rx", "ry", "rz"), method="dem",
                        law="gap", thickness_mm=2.5, max_spring_length_mm=3.5)
+    # 1e-9 mm: as above, far above the round-off of mm coordinates (1e-15) and far below the 0.5 mm move
     assert run(moved).preflight.closest_distance_mm == pytest.approx(2.5, abs=1e-9)
     assert len(measured) == 2
