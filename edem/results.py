@@ -4,6 +4,7 @@ the format and its one writer, :func:`edem.resultdir.write_run`)."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,8 +52,10 @@ class StepResult:
     contact_moment_nmm: np.ndarray = field(default_factory=lambda: np.zeros(3))
     centre_of_pressure_mm: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
-    @property
+    @functools.cached_property
     def contact_area_mm2(self) -> float:
+        # cached: the summary, the time series row and the mean pressure each ask for it (a
+        # step's arrays are never changed once it is made)
         return float(self.area_mm2[self.in_contact].sum())
 
     @property

@@ -159,3 +159,31 @@ fixed_dofs = ["tx", "ty", "rz"]
     assert "200 of 200 springs, 100 % of the spring-bearing area" in printed
     written = json.loads((tmp_path / "out" / "summary.json").read_text())["preflight"]
     assert (written["n_in_window"], written["closest_distance_mm"]) == (200, pytest.approx(2.0, abs=1e-9))
+
+
+def test_closest_distance_is_measured_once_per_pair_of_surfaces_and_again_when_one_moves(monkeypatch):
+    """Runs on the same two surfaces (a campaign grid varying the cartilage) share the measured
+    closest distance; a fixed body 0.5 mm higher is measured again and gives the plates' gap
+    plus 0.5 mm exactly (the 2 mm of the first scene is the plates' z offset)."""
+    import edem.preflight as preflight_module
+
+    measured = []
+    original = preflight_module.closest_distance_mm
+
+    def counting(*arrays):
+        measured.append(1)
+        return original(*arrays)
+
+    monkeypatch.setattr(preflight_module, "closest_distance_mm", counting)
+    monkeypatch.setattr(preflight_module, "_CLOSEST", type(preflight_module._CLOSEST)())
+    first = run(half_covered_plates(max_spring_length_mm=3.5)).preflight
+    again = run(half_covered_plates(max_spring_length_mm=4.0)).preflight  # another window, the same surfaces
+    assert len(measured) == 1
+    assert again.closest_distance_mm == first.closest_distance_mm == pytest.approx(2.0, abs=1e-9)
+    scene = half_covered_plates()
+    raised = TriangleSurface(scene.fixed.vertices_mm + [0.0, 0.0, 0.5], scene.fixed.triangles)
+    moved = make_scene(scene.mobile, raised, [0.0, 0.0, 100.0], fixed_dofs=("tx", "ty", "rx", "ry", "rz"), method="dem",
+                       law="gap", thickness_mm=2.5, max_spring_length_mm=3.5)
+    # 1e-9 mm: as above, far above the round-off of mm coordinates (1e-15) and far below the 0.5 mm move
+    assert run(moved).preflight.closest_distance_mm == pytest.approx(2.5, abs=1e-9)
+    assert len(measured) == 2
