@@ -446,6 +446,21 @@ def _nu_series(rows: dict[str, dict[str, Any]], names: list[str]) -> list[tuple[
     return [(float(rows[n]["params"]["poissons_ratio"]), rows[n]) for n in names if n in rows]
 
 
+def _why_missed(row: dict[str, Any], metric: str, error: float | None, reference: dict[str, Any]) -> str:
+    """Why a card metric misses the goal, in a few words: by construction, the FE's own error
+    (at least the miss, or unknown), or the bed (the FE's error well below the miss)."""
+    if (row.get("verdicts") or {}).get(metric, {}).get("kind") == "by-construction":
+        return ": by construction"
+    from verification.fe_convergence import fe_relative_error
+
+    fe = (fe_relative_error(row, reference) or {}).get(metric)
+    if fe is None:
+        return ": FE error unknown"
+    if error is not None and fe >= abs(error):
+        return f": within the FE's own error {100 * fe:.1f} %"
+    return f": the bed (FE's own error {100 * fe:.1f} %)"
+
+
 def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Plain sentences with figures: can the default bed be trusted for an ankle, and where not.
 
@@ -463,6 +478,11 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         return {"columns": [], "rows": [], "status": UNAVAILABLE, "notes": [],
                 "values": {"sentences": [f"Not answered on this installation: the comparison with the FE reference did not run ({why}). Install the `fe` extra and rerun."]}}
     quantities = (("displacement_norm_mm", "displacement"), ("regularised_peak_pressure_mpa", "regularised peak pressure"), ("mean_contact_area_mm2", "contact area"))
+    error_metrics = {"displacement_norm_mm": "displacement_rel_error", "regularised_peak_pressure_mpa": "regularised_peak_pressure_rel_error",
+                     "mean_contact_area_mm2": "contact_area_rel_error"}
+    from verification.fe_convergence import fe_error_text, fe_relative_error, load_reference
+
+    reference = load_reference()
     default_bed = next(iter(s["beds"]))
     sentences = []
     pa, pb, dp = _signed(base, "regularised_peak_pressure_mpa")
@@ -489,9 +509,10 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
             for quantity, what in quantities:
                 errors = [(nu, _signed(row, quantity)[2]) for nu, row in series]
                 parts.append(f"{what} " + ", ".join(f"{_pct(e)}" for _nu, e in errors))
-                out = [(nu, e) for nu, e in errors if e is None or abs(e) > goal]
+                out = [(nu, e, row) for (nu, e), (_nu, row) in zip(errors, series) if e is None or abs(e) > goal]
                 if bed == default_bed and out:
-                    missed.append(f"{what} on the {ankle} at nu " + ", ".join(f"{nu:g}" for nu, _e in out) + " (" + ", ".join(_pct(e) for _nu, e in out) + ")")
+                    missed.append(f"{what} on the {ankle} at nu " + ", ".join(f"{nu:g}" for nu, _e, _r in out) + " ("
+                                  + ", ".join(_pct(e) + _why_missed(row, error_metrics[quantity], e, reference) for _nu, e, row in out) + ")")
             sentences.append(f"{ankle[0].upper() + ankle[1:]}, {bed}, against the FE at nu " + ", ".join(f"{nu:g}" for nu, _r in series) + ": " + "; ".join(parts) + ".")
             areas = [_metric(row, "a_at_b_mean_contact_area_mm2") for _nu, row in series]
             if len(areas) > 1 and all(a is not None and a > 0 for a in areas) and max(areas) / min(areas) - 1.0 < FIXED_AREA_REL:
@@ -505,7 +526,8 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         )
     if missed:
         sentences.append(f"Goal (every card metric of the default bed within {100 * goal:.0f} % of the FE, nu 0.3-0.49): not reached for " + "; ".join(missed)
-                         + ". The FE here is the coarse reference of this job (note below), without a mesh-convergence error yet.")
+                         + ". Each miss says why: set by construction (the threshold law's area), the FE's own estimated error (its mesh study, "
+                         "fe-convergence) at least as large as the miss, that error unknown, or else the bed's model error against a reference that can judge it.")
     elif s["beds"]:
         sentences.append(f"Goal (every card metric of the default bed within {100 * goal:.0f} % of the FE, nu 0.3-0.49): reached on every ankle compared, against this job's coarse FE.")
     layers = [(float(ok[n]["params"].get("thickness_mm")), _signed(ok[n], "regularised_peak_pressure_mpa")[2], _signed(ok[n], "mean_contact_area_mm2")[2]) for n in s["layer_cases"] if n in ok]
@@ -520,9 +542,6 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
             f"Low loads: at {_fmt(low['params'].get('load_n'))} N the layer's regularised peak-pressure error is {_pct(_signed(low, 'regularised_peak_pressure_mpa')[2])} against "
             f"{_pct(_signed(layer_base, 'regularised_peak_pressure_mpa')[2])} at 333 N: a small patch is mostly rim."
         )
-    from verification.fe_convergence import fe_error_text, fe_relative_error, load_reference
-
-    reference = load_reference()
     table = []
     for name in analysis.cases:
         row = rows.get(name)

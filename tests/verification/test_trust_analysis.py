@@ -39,7 +39,7 @@ def test_signed_errors_the_goal_and_an_area_fixed_by_construction():
     fixed = [s for s in sentences if s.startswith("Fixed by construction")]
     assert len(fixed) == 1 and "463.4 mm² on the ideal ankle with the springs," in fixed[0] and "coupled" not in fixed[0]  # its area moves
     goal = next(s for s in sentences if s.startswith("Goal"))
-    assert "not reached" in goal and "contact area on the ideal ankle at nu 0.49 (+11 %)" in goal and "displacement" not in goal
+    assert "not reached" in goal and "contact area on the ideal ankle at nu 0.49 (+11 %: FE error unknown)" in goal and "displacement" not in goal
 
 
 def test_goal_reached_when_every_card_metric_of_the_default_bed_is_within_it():
@@ -49,3 +49,21 @@ def test_goal_reached_when_every_card_metric_of_the_default_bed_is_within_it():
         rows[f"s-{nu}"] = _row(nu, (0.5, 1.0), (0.7, 1.0), (463.4, 400.0))  # the springs miss it: not the default bed's goal
     goal = next(s for s in _analysis(rows)["values"]["sentences"] if s.startswith("Goal"))
     assert "reached on every ankle compared" in goal
+
+
+def test_a_goal_miss_names_its_cause_by_construction_the_fes_own_error_or_the_bed():
+    """The area set by construction is said so; a miss no larger than the FE's own estimated error
+    is put on the FE; a miss well above it on the bed; an FE run outside the study is 'unknown'."""
+    from verification.analyses import _why_missed
+    from verification.campaigns.quick import trust_cases
+    from verification.fe_convergence import fe_key
+
+    case = next(c for c in trust_cases() if c.name == "slab-coupled-F333-nu0.42")
+    row = {"scene": case.scene, "sides": list(case.sides), "overrides": case.overrides, "options": case.options,
+           "verdicts": {"contact_area_rel_error": {"kind": "by-construction"}}}
+    reference = {"entries": {fe_key(case.scene, case.sides[-1], case.overrides, case.options): {"errors": {"displacement_rel_error": 0.15,
+                                                                                                          "regularised_peak_pressure_rel_error": 0.01}}}}
+    assert _why_missed(row, "contact_area_rel_error", 0.2, reference) == ": by construction"
+    assert _why_missed(row, "displacement_rel_error", -0.12, reference) == ": within the FE's own error 15.0 %"
+    assert _why_missed(row, "regularised_peak_pressure_rel_error", -0.12, reference) == ": the bed (FE's own error 1.0 %)"
+    assert _why_missed(row, "regularised_peak_pressure_rel_error", -0.12, {"entries": {}}) == ": FE error unknown"
