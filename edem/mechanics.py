@@ -244,6 +244,7 @@ def solve_unilateral(
     rtol: float = 1e-10,
     cycle_rtol: float = 1e-7,
     max_iterations: int = 60,
+    start_displacement: np.ndarray | None = None,
 ) -> UnilateralSolution:
     """Equilibrium sum_j max(s_j(g_j . u), 0) g_j + shear(u) = T of the unilateral elements.
 
@@ -252,8 +253,12 @@ def solve_unilateral(
     minimisation of the convex energy Pi by a semismooth Newton iteration: each step solves with
     the stiffness of the current active set, which adds elements as well as removes them (the
     thesis's removal-only loop can stop on a wrong set), damped by an Armijo line search on Pi and
-    a fraction-to-boundary rule for log-law elements. The first step takes every element as
-    active, as DEM does. On return the KKT conditions hold: active elements are compressed,
+    a fraction-to-boundary rule for log-law elements. The first step starts from u = 0 and takes
+    every element as active, as DEM does; given ``start_displacement`` (6,) (e.g. the previous
+    time point's solution) it starts there instead, with the elements compressed there as the
+    active set, unless they leave a free DOF unrestrained or a log element is crushed there.
+    Pi is convex with one minimiser, so the start changes the iterations, not the answer (up to
+    the tolerances below). On return the KKT conditions hold: active elements are compressed,
     inactive ones are not, and the residual of force and moment balance is at round-off (or below
     ``cycle_rtol`` of the force scale when a spring at zero force makes the active set cycle).
 
@@ -301,13 +306,19 @@ def solve_unilateral(
             hessian = hessian + shear.stiffness(active[:n_shear])[np.ix_(dofs, dofs)]
         return hessian
 
-    u_f = np.zeros(dofs.size)
-    approach = np.zeros(m)  # g_j . u, advanced with u (no product with all the rows per step)
-    s, k = law.force_and_stiffness(approach)
-    active = np.ones(m, bool)
-    seen: set[bytes] = set()
     max_approach = law.max_approach_mm()  # fixed over the solve; all inf for linear elements
     bounded = bool(np.isfinite(max_approach).any())
+    u_f = np.zeros(dofs.size)
+    approach = np.zeros(m)  # g_j . u, advanced with u (no product with all the rows per step)
+    warm = start_displacement is not None
+    if warm:
+        u_f = np.asarray(start_displacement, float)[dofs]
+        approach = np.einsum("i,ij->j", u_f, cols)
+        if bounded and not np.all(approach < max_approach):  # a log element crushed there: from u = 0
+            warm, u_f, approach = False, np.zeros(dofs.size), np.zeros(m)
+    s, k = law.force_and_stiffness(approach)
+    active = s > 0 if warm else np.ones(m, bool)
+    seen: set[bytes] = set()
     # From the second iteration on, active == (s > 0) and this is the previous residual: reused.
     grad = gradient(u_f, s, active)
     load_norm = _norm(load_f * to_newton_f)
@@ -317,6 +328,13 @@ def solve_unilateral(
     for iteration in range(1, max_iterations + 1):
         hessian = stiffness(k, active)
         step = _regular_solve(hessian, dof_scale, -grad)
+        if step is None and iteration == 1 and warm:
+            # The elements compressed at the start leave a DOF free: start from u = 0 as DEM does.
+            u_f, approach, active = np.zeros(dofs.size), np.zeros(m), np.ones(m, bool)
+            s, k = law.force_and_stiffness(approach)
+            grad = gradient(u_f, s, active)
+            hessian = stiffness(k, active)
+            step = _regular_solve(hessian, dof_scale, -grad)
         if step is None:
             everything = assemble_stiffness(directions, k, np.ones(m, bool), shear)
             missing = unrestrained_dofs(everything, free, length_scale_mm)
@@ -339,8 +357,9 @@ def solve_unilateral(
         known, known_energy = known_energy, None
         accepted = None  # (approach, s, k) of the accepted line-search trial
         if slope < 0.0:
-            # Armijo on Pi. The first, all-active step (DEM's) is taken whole: with non-negative
-            # offsets it descends anyway (Pi <= the all-active quadratic it minimises).
+            # Armijo on Pi. The first step is taken whole: all active (DEM's), with non-negative
+            # offsets, it descends anyway (Pi <= the all-active quadratic it minimises); from a
+            # given start it is a plain Newton step on Pi, the next iterations are damped.
             # (From the second iteration on, active == (s > 0): the compressed elements.)
             e0, size = known if known is not None else energy(u_f, approach, active)
             # Differences below the energy's round-off say nothing: the step is then taken.
