@@ -27,7 +27,7 @@ import numpy as np
 from scipy.linalg.lapack import dpotrf, dpotrs
 
 from edem.errors import SolverError
-from edem.laws import ElementLaw
+from edem.laws import ElementLaw, LinearElements
 from edem.rowwise import rows_times
 from geometries.triangle_kernels import cross_rows
 
@@ -72,15 +72,12 @@ def rotation_matrix(rotation_vector_rad: np.ndarray) -> np.ndarray:
 
 
 def rotation_vector(rotation: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`rotation_matrix` (axis-angle vector of a rotation matrix, angle < pi)."""
-    cos_angle = np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0)
-    angle = float(np.arccos(cos_angle))
-    axial = np.array(
-        [rotation[2, 1] - rotation[1, 2], rotation[0, 2] - rotation[2, 0], rotation[1, 0] - rotation[0, 1]]
-    )
-    if angle < 1e-8:
-        return 0.5 * axial
-    return angle / (2.0 * np.sin(angle)) * axial
+    """Inverse of :func:`rotation_matrix` (axis-angle vector of a rotation matrix, angle < pi);
+    in Python floats, as :func:`rotation_matrix` (once per time point)."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(rotation, float).tolist()
+    angle = math.acos(min(max((r00 + r11 + r22 - 1.0) / 2.0, -1.0), 1.0))
+    factor = 0.5 if angle < 1e-8 else angle / (2.0 * math.sin(angle))
+    return np.array([factor * (r21 - r12), factor * (r02 - r20), factor * (r10 - r01)])
 
 
 def generalised_directions(points_mm: np.ndarray, directions: np.ndarray, reference_point_mm: np.ndarray) -> np.ndarray:
@@ -306,8 +303,9 @@ def solve_unilateral(
             hessian = hessian + shear.stiffness(active[:n_shear])[np.ix_(dofs, dofs)]
         return hessian
 
-    max_approach = law.max_approach_mm()  # fixed over the solve; all inf for linear elements
-    bounded = bool(np.isfinite(max_approach).any())
+    # fixed over the solve; none for linear elements (no call, no array of inf)
+    max_approach = None if isinstance(law, LinearElements) else law.max_approach_mm()
+    bounded = max_approach is not None and bool(np.isfinite(max_approach).any())
     u_f = np.zeros(dofs.size)
     approach = np.zeros(m)  # g_j . u, advanced with u (no product with all the rows per step)
     warm = start_displacement is not None
