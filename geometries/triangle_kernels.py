@@ -88,16 +88,18 @@ def closest_points_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: 
 # Point-triangle pairs measured first, those nearest their triangles' planes: the best of them
 # bounds the distance, and only the pairs whose plane is nearer than that are measured after.
 _FIRST_PAIRS = 64
+# Every this-many-th point's nearest vertex gives the first bound on the distance.
+_SAMPLE_STRIDE = 16
 
 
 def _vertex_to_surface_mm(points_mm: np.ndarray, vertices_mm: np.ndarray, triangles: np.ndarray) -> tuple[float, int]:
     """Smallest distance from the points (n, 3) to the triangle surface (mm) and the point that has it.
 
     A point's distance to a triangle is at least its distance to the triangle's centroid minus the
-    triangle's largest centroid-to-corner distance r, and at most its distance to the nearest
-    vertex d_v. So only the points whose d_v can beat the best d_v by the longest edge, and for
-    each only the triangles whose centroid lies within min d_v + max r, are candidate pairs.
-    A pair's distance is also at least sqrt(plane^2 + (aside - r)^2), with the point's distance
+    triangle's largest centroid-to-corner distance r, and the smallest distance is at most any
+    point's distance to its nearest vertex d_v (here the least over every 16th point). So only
+    the pairs whose centroid lies within that d_v + max r of the point are candidates (a k-d tree
+    over all the points against one over the centroids finds them). A pair's distance is also at least sqrt(plane^2 + (aside - r)^2), with the point's distance
     to the triangle's plane and its foot's distance from the centroid, aside: the
     :data:`_FIRST_PAIRS` pairs with the smallest bound are measured exactly, and of the others
     only those whose bound is below the best of them (large triangles, e.g. a box of a dozen,
@@ -108,17 +110,18 @@ def _vertex_to_surface_mm(points_mm: np.ndarray, vertices_mm: np.ndarray, triang
 
     corners = vertices_mm[triangles]
     centroids = corners.mean(axis=1)
-    spokes, edges = corners - centroids[:, None], corners - np.roll(corners, 1, axis=1)
+    spokes = corners - centroids[:, None]
     spoke = np.sqrt((spokes * spokes).sum(axis=2).max(axis=1, initial=0.0))  # r of every triangle
     reach = float(spoke.max(initial=0.0))
-    longest_edge = float(np.sqrt((edges * edges).sum(axis=2).max(initial=0.0)))
-    nearest_vertex, _ = cKDTree(vertices_mm).query(points_mm)
-    bound = float(nearest_vertex.min())
-    candidates = np.flatnonzero(nearest_vertex - longest_edge <= bound)
-    # All (point, triangle) pairs within the radius as two index arrays (no list per point). The
-    # radius is padded by round-off so that a centroid exactly on it is never lost.
-    near = cKDTree(points_mm[candidates]).sparse_distance_matrix(cKDTree(centroids), (bound + reach) * (1.0 + 1e-12), output_type="ndarray")
-    point_of, triangle_of = candidates[near["i"]], near["j"]
+    # The nearest vertex of every _SAMPLE_STRIDE-th point bounds the smallest distance from above
+    # (a search from every point costs several times the pairs below, on joint surfaces whose
+    # points lie near the other surface over a wide area).
+    bound = float(cKDTree(vertices_mm).query(points_mm[::_SAMPLE_STRIDE])[0].min())
+    # All (point, triangle) pairs within the radius as two index arrays (no list per point): a
+    # pair further apart is further than the bound. The radius is padded by round-off so that
+    # a centroid exactly on it is never lost.
+    near = cKDTree(points_mm).sparse_distance_matrix(cKDTree(centroids), (bound + reach) * (1.0 + 1e-12), output_type="ndarray")
+    point_of, triangle_of = near["i"], near["j"]
     normal = cross_rows(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     size = np.sqrt(np.einsum("ij,ij->i", normal, normal))
     unit = normal / np.where(size > 0.0, size, 1.0)[:, None]  # (degenerate: zero, plane distance 0)
