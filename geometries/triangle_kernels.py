@@ -85,8 +85,8 @@ def closest_points_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: 
     return np.where(inside, d2_inside, best_d2), weights
 
 
-# Point-triangle pairs measured first, those nearest their triangles' planes: the best of them
-# bounds the distance, and only the pairs whose plane is nearer than that are measured after.
+# Point-triangle pairs measured first, those with the smallest lower bound: the best of them
+# bounds the distance, and only the pairs whose bound is below that are measured after.
 _FIRST_PAIRS = 64
 # Every this-many-th point's nearest vertex gives the first bound on the distance.
 _SAMPLE_STRIDE = 16
@@ -98,13 +98,14 @@ def _vertex_to_surface_mm(points_mm: np.ndarray, vertices_mm: np.ndarray, triang
     A point's distance to a triangle is at least its distance to the triangle's centroid minus the
     triangle's largest centroid-to-corner distance r, and the smallest distance is at most any
     point's distance to its nearest vertex d_v (here the least over every 16th point). So only
-    the pairs whose centroid lies within that d_v + max r of the point are candidates (a k-d tree
-    over all the points against one over the centroids finds them). A pair's distance is also at least sqrt(plane^2 + (aside - r)^2), with the point's distance
-    to the triangle's plane and its foot's distance from the centroid, aside: the
-    :data:`_FIRST_PAIRS` pairs with the smallest bound are measured exactly, and of the others
-    only those whose bound is below the best of them (large triangles, e.g. a box of a dozen,
-    give every point several pairs, of which few come near; conforming joint surfaces give each
-    point many near planes, of which few triangles lie below it).
+    the pairs whose centroid lies within that d_v + max r of the point are candidates (a k-d
+    tree over all the points against one over the centroids finds them). A pair's distance is
+    also at least sqrt(plane^2 + (aside - r)^2), with the point's distance to the triangle's
+    plane and its foot's distance from the centroid, aside: the :data:`_FIRST_PAIRS` pairs with
+    the smallest bound are measured exactly, and of the others only those whose bound is below
+    the best of them (large triangles, e.g. a box of a dozen, give every point several pairs, of
+    which few come near; conforming joint surfaces give each point many near planes, of which
+    few triangles lie below it).
     """
     from scipy.spatial import cKDTree
 
