@@ -163,8 +163,19 @@ class IndependentSprings(Bed):
                 f'coupling = "{CoupledThinLayer.coupling}" with it, or no thin_layer_symbol',
             )
 
+    def __init__(self, scene, caster: RayCaster) -> None:
+        super().__init__(scene, caster)
+        # The previous time point's solution (EDEM: its increment; DEM: its displacement from M's
+        # initial pose), where the next solve starts (None: the first time point, from u = 0).
+        self.previous_displacement: np.ndarray | None = None
+
     def solve(self, step, load):
-        return solve_unilateral(step.directions, step.law, load, fixed_dofs=step.fixed_dofs, shear=step.shear, length_scale_mm=step.length_scale_mm)
+        solution = solve_unilateral(
+            step.directions, step.law, load, fixed_dofs=step.fixed_dofs, shear=step.shear, length_scale_mm=step.length_scale_mm,
+            start_displacement=self.previous_displacement,
+        )
+        self.previous_displacement = solution.displacement
+        return solution
 
     def viscoelastic_increment(self, step, elastic, previous_load, load, weights):
         """Every spring that holds an elastic force creeps with its dashpot over the step (its total

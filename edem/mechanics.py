@@ -27,7 +27,7 @@ import numpy as np
 from scipy.linalg.lapack import dpotrf, dpotrs
 
 from edem.errors import SolverError
-from edem.laws import ElementLaw
+from edem.laws import ElementLaw, LinearElements
 from edem.rowwise import rows_times
 from geometries.triangle_kernels import cross_rows
 
@@ -72,15 +72,12 @@ def rotation_matrix(rotation_vector_rad: np.ndarray) -> np.ndarray:
 
 
 def rotation_vector(rotation: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`rotation_matrix` (axis-angle vector of a rotation matrix, angle < pi)."""
-    cos_angle = np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0)
-    angle = float(np.arccos(cos_angle))
-    axial = np.array(
-        [rotation[2, 1] - rotation[1, 2], rotation[0, 2] - rotation[2, 0], rotation[1, 0] - rotation[0, 1]]
-    )
-    if angle < 1e-8:
-        return 0.5 * axial
-    return angle / (2.0 * np.sin(angle)) * axial
+    """Inverse of :func:`rotation_matrix` (axis-angle vector of a rotation matrix, angle < pi);
+    in Python floats, as :func:`rotation_matrix` (once per time point)."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(rotation, float).tolist()
+    angle = math.acos(min(max((r00 + r11 + r22 - 1.0) / 2.0, -1.0), 1.0))
+    factor = 0.5 if angle < 1e-8 else angle / (2.0 * math.sin(angle))
+    return np.array([factor * (r21 - r12), factor * (r02 - r20), factor * (r10 - r01)])
 
 
 def generalised_directions(points_mm: np.ndarray, directions: np.ndarray, reference_point_mm: np.ndarray) -> np.ndarray:
@@ -244,6 +241,7 @@ def solve_unilateral(
     rtol: float = 1e-10,
     cycle_rtol: float = 1e-7,
     max_iterations: int = 60,
+    start_displacement: np.ndarray | None = None,
 ) -> UnilateralSolution:
     """Equilibrium sum_j max(s_j(g_j . u), 0) g_j + shear(u) = T of the unilateral elements.
 
@@ -252,8 +250,12 @@ def solve_unilateral(
     minimisation of the convex energy Pi by a semismooth Newton iteration: each step solves with
     the stiffness of the current active set, which adds elements as well as removes them (the
     thesis's removal-only loop can stop on a wrong set), damped by an Armijo line search on Pi and
-    a fraction-to-boundary rule for log-law elements. The first step takes every element as
-    active, as DEM does. On return the KKT conditions hold: active elements are compressed,
+    a fraction-to-boundary rule for log-law elements. The first step starts from u = 0 and takes
+    every element as active, as DEM does; given ``start_displacement`` (6,) (e.g. the previous
+    time point's solution) it starts there instead, with the elements compressed there as the
+    active set, unless they leave a free DOF unrestrained or a log element is crushed there.
+    Pi is convex with one minimiser, so the start changes the iterations, not the answer (up to
+    the tolerances below). On return the KKT conditions hold: active elements are compressed,
     inactive ones are not, and the residual of force and moment balance is at round-off (or below
     ``cycle_rtol`` of the force scale when a spring at zero force makes the active set cycle).
 
@@ -301,13 +303,20 @@ def solve_unilateral(
             hessian = hessian + shear.stiffness(active[:n_shear])[np.ix_(dofs, dofs)]
         return hessian
 
+    # fixed over the solve; none for linear elements (no call, no array of inf)
+    max_approach = None if isinstance(law, LinearElements) else law.max_approach_mm()
+    bounded = max_approach is not None and bool(np.isfinite(max_approach).any())
     u_f = np.zeros(dofs.size)
     approach = np.zeros(m)  # g_j . u, advanced with u (no product with all the rows per step)
+    warm = start_displacement is not None
+    if warm:
+        u_f = np.asarray(start_displacement, float)[dofs]
+        approach = np.einsum("i,ij->j", u_f, cols)
+        if bounded and not np.all(approach < max_approach):  # a log element crushed there: from u = 0
+            warm, u_f, approach = False, np.zeros(dofs.size), np.zeros(m)
     s, k = law.force_and_stiffness(approach)
-    active = np.ones(m, bool)
+    active = s > 0 if warm else np.ones(m, bool)
     seen: set[bytes] = set()
-    max_approach = law.max_approach_mm()  # fixed over the solve; all inf for linear elements
-    bounded = bool(np.isfinite(max_approach).any())
     # From the second iteration on, active == (s > 0) and this is the previous residual: reused.
     grad = gradient(u_f, s, active)
     load_norm = _norm(load_f * to_newton_f)
@@ -317,6 +326,13 @@ def solve_unilateral(
     for iteration in range(1, max_iterations + 1):
         hessian = stiffness(k, active)
         step = _regular_solve(hessian, dof_scale, -grad)
+        if step is None and iteration == 1 and warm:
+            # The elements compressed at the start leave a DOF free: start from u = 0 as DEM does.
+            u_f, approach, active = np.zeros(dofs.size), np.zeros(m), np.ones(m, bool)
+            s, k = law.force_and_stiffness(approach)
+            grad = gradient(u_f, s, active)
+            hessian = stiffness(k, active)
+            step = _regular_solve(hessian, dof_scale, -grad)
         if step is None:
             everything = assemble_stiffness(directions, k, np.ones(m, bool), shear)
             missing = unrestrained_dofs(everything, free, length_scale_mm)
@@ -339,8 +355,9 @@ def solve_unilateral(
         known, known_energy = known_energy, None
         accepted = None  # (approach, s, k) of the accepted line-search trial
         if slope < 0.0:
-            # Armijo on Pi. The first, all-active step (DEM's) is taken whole: with non-negative
-            # offsets it descends anyway (Pi <= the all-active quadratic it minimises).
+            # Armijo on Pi. The first step is taken whole: all active (DEM's), with non-negative
+            # offsets, it descends anyway (Pi <= the all-active quadratic it minimises); from a
+            # given start it is a plain Newton step on Pi, the next iterations are damped.
             # (From the second iteration on, active == (s > 0): the compressed elements.)
             e0, size = known if known is not None else energy(u_f, approach, active)
             # Differences below the energy's round-off say nothing: the step is then taken.

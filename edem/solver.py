@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 
@@ -140,7 +141,7 @@ def run(
                 f"time point {k} (t = {t:g} s): no spring is a candidate: no part of the fixed body lies "
                 f"within h_max = {cartilage.max_spring_length_mm:g} mm of the mobile body along its normals"
             )
-        g_current = pose.points(g0[None])[0]
+        g_current = g0 + pose.translation_mm  # (G is M's pivot: R (G - G) + G + t)
         # Gather the candidates once by index (cheaper than repeated boolean masks over all springs).
         cand_idx = geometry.candidate_index
         lig_rows, lig_law, _ = ligament_elements(ligaments, pose, f_pose, g_current)
@@ -187,7 +188,8 @@ def run(
             if not np.all(np.isfinite(u)):
                 raise SolverError(f"time point {k} (t = {t:g} s): the viscoelastic integration diverged (non-finite displacement)")
         # Overflowed numbers pass every comparison below (NaN > limit is False): refuse them here.
-        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(elastic_force))):
+        # (A finite sum has no inf or nan term; a sum that overflowed takes the exact test.)
+        if not math.isfinite(float(u.sum()) + float(elastic_force.sum())) and not (np.all(np.isfinite(u)) and np.all(np.isfinite(elastic_force))):
             raise SolverError(
                 f"time point {k} (t = {t:g} s): the solution diverged (non-finite displacement or spring forces; "
                 f"load {np.abs(loads[k]).max():.3g} against {n_c} springs of modulus {cartilage.youngs_modulus_mpa:g} MPa): "

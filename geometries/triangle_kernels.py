@@ -85,48 +85,62 @@ def closest_points_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: 
     return np.where(inside, d2_inside, best_d2), weights
 
 
-# Point-triangle pairs measured first, those nearest their triangles' planes: the best of them
-# bounds the distance, and only the pairs whose plane is nearer than that are measured after.
+# Point-triangle pairs measured first, those with the smallest lower bound: the best of them
+# bounds the distance, and only the pairs whose bound is below that are measured after.
 _FIRST_PAIRS = 64
+# Every this-many-th point's nearest vertex gives the first bound on the distance.
+_SAMPLE_STRIDE = 16
 
 
 def _vertex_to_surface_mm(points_mm: np.ndarray, vertices_mm: np.ndarray, triangles: np.ndarray) -> tuple[float, int]:
     """Smallest distance from the points (n, 3) to the triangle surface (mm) and the point that has it.
 
     A point's distance to a triangle is at least its distance to the triangle's centroid minus the
-    triangle's largest centroid-to-corner distance r, and at most its distance to the nearest
-    vertex d_v. So only the points whose d_v can beat the best d_v by the longest edge, and for
-    each only the triangles whose centroid lies within min d_v + max r, are candidate pairs.
-    A pair's distance is also at least the point's distance to the triangle's plane: the
-    :data:`_FIRST_PAIRS` pairs nearest their planes are measured exactly, and of the others only
-    those whose plane is nearer than the best of them (large triangles, e.g. a box of a dozen,
-    give every point several pairs, of which few come near).
+    triangle's largest centroid-to-corner distance r, and the smallest distance is at most any
+    point's distance to its nearest vertex d_v (here the least over every 16th point). So only
+    the pairs whose centroid lies within that d_v + max r of the point are candidates (a k-d
+    tree over all the points against one over the centroids finds them). A pair's distance is
+    also at least sqrt(plane^2 + (aside - r)^2), with the point's distance to the triangle's
+    plane and its foot's distance from the centroid, aside: the :data:`_FIRST_PAIRS` pairs with
+    the smallest bound are measured exactly, and of the others only those whose bound is below
+    the best of them (large triangles, e.g. a box of a dozen, give every point several pairs, of
+    which few come near; conforming joint surfaces give each point many near planes, of which
+    few triangles lie below it).
     """
     from scipy.spatial import cKDTree
 
     corners = vertices_mm[triangles]
     centroids = corners.mean(axis=1)
-    spokes, edges = corners - centroids[:, None], corners - np.roll(corners, 1, axis=1)
-    reach = float(np.sqrt((spokes * spokes).sum(axis=2).max(initial=0.0)))
-    longest_edge = float(np.sqrt((edges * edges).sum(axis=2).max(initial=0.0)))
-    nearest_vertex, _ = cKDTree(vertices_mm).query(points_mm)
-    bound = float(nearest_vertex.min())
-    candidates = np.flatnonzero(nearest_vertex - longest_edge <= bound)
-    # All (point, triangle) pairs within the radius as two index arrays (no list per point). The
-    # radius is padded by round-off so that a centroid exactly on it is never lost.
-    near = cKDTree(points_mm[candidates]).sparse_distance_matrix(cKDTree(centroids), (bound + reach) * (1.0 + 1e-12), output_type="ndarray")
-    point_of, triangle_of = candidates[near["i"]], near["j"]
+    spokes = corners - centroids[:, None]
+    spoke = np.sqrt((spokes * spokes).sum(axis=2).max(axis=1, initial=0.0))  # r of every triangle
+    reach = float(spoke.max(initial=0.0))
+    # The nearest vertex of every _SAMPLE_STRIDE-th point bounds the smallest distance from above
+    # (a search from every point costs several times the pairs below, on joint surfaces whose
+    # points lie near the other surface over a wide area).
+    bound = float(cKDTree(vertices_mm).query(points_mm[::_SAMPLE_STRIDE])[0].min())
+    # All (point, triangle) pairs within the radius as two index arrays (no list per point): a
+    # pair further apart is further than the bound. The radius is padded by round-off so that
+    # a centroid exactly on it is never lost.
+    near = cKDTree(points_mm).sparse_distance_matrix(cKDTree(centroids), (bound + reach) * (1.0 + 1e-12), output_type="ndarray")
+    point_of, triangle_of = near["i"], near["j"]
     normal = cross_rows(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     size = np.sqrt(np.einsum("ij,ij->i", normal, normal))
     unit = normal / np.where(size > 0.0, size, 1.0)[:, None]  # (degenerate: zero, plane distance 0)
     offset = points_mm[point_of] - corners[triangle_of, 0]
-    plane = np.abs(np.einsum("ij,ij->i", offset, unit[triangle_of]))
-    first = np.argpartition(plane, _FIRST_PAIRS)[:_FIRST_PAIRS] if plane.size > _FIRST_PAIRS else np.arange(plane.size)
+    plane = np.einsum("ij,ij->i", offset, unit[triangle_of])
+    plane *= plane
+    # A pair's squared distance is at least the plane's squared distance plus that of the point's
+    # foot on the plane from the triangle, which lies within r of the centroid:
+    # (sqrt(|p - c|^2 - plane^2) - r)^2 where positive (near conforming surfaces, most pairs'
+    # planes are near, but their triangles are off to the side).
+    aside = np.sqrt(np.maximum(near["v"] * near["v"] - plane, 0.0)) - spoke[triangle_of]
+    lower = plane + np.square(np.maximum(aside, 0.0))
+    first = np.argpartition(lower, _FIRST_PAIRS)[:_FIRST_PAIRS] if lower.size > _FIRST_PAIRS else np.arange(lower.size)
     squared = closest_points_on_triangles(points_mm[point_of[first]], *np.moveaxis(corners[triangle_of[first]], 1, 0))[0]
-    # Pairs whose plane lies within the best distance so far, with a margin far above the round-off
-    # of either figure (~1e-15 of the coordinates) and far below any distance that matters.
+    # Pairs whose bound lies within the best distance so far, with a margin far above the
+    # round-off of either figure (~1e-15 of the coordinates) and far below any distance that matters.
     within = np.sqrt(squared.min()) + 1e-9 * (bound + reach)
-    rest = np.flatnonzero(plane <= within)  # (may repeat some of the first: measured twice, alike)
+    rest = np.flatnonzero(lower <= within * within)  # (may repeat some of the first: measured twice, alike)
     measured = np.concatenate([first, rest])
     squared = np.concatenate([squared, closest_points_on_triangles(points_mm[point_of[rest]], *np.moveaxis(corners[triangle_of[rest]], 1, 0))[0]])
     best = int(np.argmin(squared))

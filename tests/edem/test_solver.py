@@ -377,3 +377,105 @@ def test_linear_gap_law_handles_interpenetration():
     step = run(scene, "dem").steps[0]
     np.testing.assert_allclose(step.pressure_mpa, force / 400.0, rtol=1e-10)
     assert step.displacement_mm[2] == pytest.approx(force * t / (E_CONF * 400.0) - (t - h0), rel=1e-10)
+
+
+def _kkt_bound_mm(directions, law, solution, load, rtol=1e-10):
+    """How far two solutions that both meet the solver's balance tolerance (rtol of the force
+    scale, the load plus every element force) on the same active set can differ: twice that
+    residual through the inverse stiffness of the set (free DOFs tz, rx, ry)."""
+    free = [2, 3, 4]
+    _, k = law.force_and_stiffness(directions @ solution.displacement)
+    stiffness = directions.T @ (directions * (k * solution.active)[:, None])
+    scale = np.linalg.norm(load) + np.abs(solution.element_force_n).sum()
+    return 2.0 * rtol * scale * np.linalg.norm(np.linalg.inv(stiffness[np.ix_(free, free)]), 2)
+
+
+@pytest.mark.parametrize("law_name", ["linear", "log"])
+def test_a_start_displacement_reaches_the_cold_start_minimiser(law_name):
+    """Pi is convex with one minimiser: from the cold start (u = 0, all active), from the
+    solution itself (one iteration), from near it, from far off and from a start where nothing
+    is compressed (the fallback to u = 0), the active set is the same and u differs by no more
+    than the balance tolerance allows (:func:`_kkt_bound_mm`)."""
+    from edem.laws import LinearElements, LogElements
+    from edem.mechanics import solve_unilateral
+
+    mobile = grid_plate(20, 20, 8)
+    g = generalised_directions(mobile.centroids_mm, mobile.unit_normals, np.zeros(3))
+    rng = np.random.default_rng(7)
+    stiffness = mobile.areas_mm2 * E_CONF / rng.uniform(1.5, 2.5, len(g))
+    offset = rng.uniform(-0.05, 0.05, len(g))  # (mm of compression before the increment: some springs open)
+    if law_name == "linear":
+        law = LinearElements(stiffness * offset, stiffness)
+    else:
+        law = LogElements(offset, stiffness, np.full(len(g), 1.5))
+    load = np.array([0.0, 0.0, 300.0, 400.0, -250.0, 0.0])
+    fixed = IN_PLANE
+    cold = solve_unilateral(g, law, load, fixed_dofs=fixed, length_scale_mm=10.0)
+    assert 0 < cold.active.sum() < len(g) and cold.iterations > 1  # a partial contact: the set had to be found
+    bound = _kkt_bound_mm(g, law, cold, load)
+    u = cold.displacement
+    starts = {
+        "solution": u,
+        "near": u + np.array([0, 0, 0.01, 1e-3, -1e-3, 0]),
+        "far": u + np.array([0, 0, 0.3, 0.02, 0.01, 0]),
+        "nothing compressed": np.array([0, 0, -5.0, 0, 0, 0]),
+    }
+    for name, start in starts.items():
+        warm = solve_unilateral(g, law, load, fixed_dofs=fixed, length_scale_mm=10.0, start_displacement=start)
+        assert np.array_equal(warm.active, cold.active), name
+        assert np.abs(warm.displacement - u).max() <= bound, name
+        if name == "solution":
+            assert warm.iterations == 1
+
+
+def test_log_start_that_crushes_an_element_starts_from_rest():
+    """A start past a log element's thickness (infinite force) is not taken: the solve starts from
+    u = 0 as the cold start does and gives its answer to round-off."""
+    from edem.laws import LogElements
+    from edem.mechanics import solve_unilateral
+
+    mobile = grid_plate(20, 20, 6)
+    g = generalised_directions(mobile.centroids_mm, mobile.unit_normals, np.zeros(3))
+    stiffness = mobile.areas_mm2 * E_CONF / 2.0
+    law = LogElements(np.full(len(g), 0.01), stiffness, np.full(len(g), 1.5))
+    load = np.array([0.0, 0.0, 500.0, 0.0, 0.0, 0.0])
+    cold = solve_unilateral(g, law, load, fixed_dofs=IN_PLANE, length_scale_mm=10.0)
+    warm = solve_unilateral(g, law, load, fixed_dofs=IN_PLANE, length_scale_mm=10.0, start_displacement=np.array([0, 0, 2.0, 0, 0, 0]))
+    np.testing.assert_allclose(warm.displacement, cold.displacement, rtol=1e-12, atol=1e-15)
+    assert warm.iterations == cold.iterations
+
+
+def test_edem_started_from_the_previous_step_equals_the_cold_start(monkeypatch):
+    """Each EDEM increment starts from the previous one (edem.beds.IndependentSprings): over a
+    load and unload on a cylinder, where the contact grows and shrinks, every time point's
+    contact set equals the cold start's and its pressures agree to the balance tolerance
+    (1e-10 of the force scale, against forces of up to 2 kN: 1e-9 of the peak pressure), in
+    fewer Newton iterations."""
+    import edem.beds
+    from edem.mechanics import solve_unilateral
+
+    scene = make_scene(cylinder_patch(20.0, 28.0, 114.0, 60, 10), plane(lambda x, y: 1.5), ramp(2000.0, 20, 20), fixed_dofs=("tx", "rx", "ry", "rz"))
+    warm = run(scene, "edem").steps
+    monkeypatch.setattr(edem.beds, "solve_unilateral", lambda *args, start_displacement=None, **kw: solve_unilateral(*args, **kw))
+    cold = run(scene, "edem").steps
+    peak = max(step.peak_pressure_mpa for step in cold)
+    for a, b in zip(warm, cold):
+        assert np.array_equal(a.in_contact, b.in_contact)
+        np.testing.assert_allclose(a.pressure_mpa, b.pressure_mpa, rtol=0, atol=1e-9 * peak)
+    assert sum(s.iterations for s in warm) < sum(s.iterations for s in cold)
+
+
+def test_rotation_vector_inverts_rotation_matrix():
+    """rotation_vector(rotation_matrix(v)) = v for angles from 1e-12 rad (the small-angle branch)
+    to 2.5 rad; non-finite rotations give nan, for callers to refuse. Tolerance 1e-9 relative:
+    acos loses digits near an angle of 0 (there the axial part alone gives v), the round trip
+    is otherwise at round-off (about 1e-15 here)."""
+    from edem.mechanics import rotation_matrix, rotation_vector
+
+    rng = np.random.default_rng(2)
+    for angle in np.r_[1e-12, 1e-9, 10.0 ** rng.uniform(-6, 0.4, 200)]:
+        axis = rng.normal(size=3)
+        v = angle * axis / np.linalg.norm(axis)
+        np.testing.assert_allclose(rotation_vector(rotation_matrix(v)), v, rtol=1e-9, atol=1e-20)
+    assert np.array_equal(rotation_vector(np.eye(3)), np.zeros(3))
+    assert np.isnan(rotation_vector(np.full((3, 3), np.nan))).all()

@@ -58,10 +58,11 @@ def _brute_closest_distance_mm(a_vertices, a_triangles, b_vertices, b_triangles)
 
 
 def test_closest_distance_is_the_minimum_over_every_vertex_and_triangle_both_ways():
-    """The pruned search (nearest-vertex bound, centroid radius, plane distance) measures every
-    pair that can hold the minimum: the same distance as all pairs, on a box of 12 large triangles
-    under a fine bumpy sheet (each sheet vertex has several box triangles in reach, few near) and on
-    random triangle soups."""
+    """The pruned search (nearest-vertex bound, centroid radius, plane and sideways distance)
+    measures every pair that can hold the minimum: the same distance as all pairs, on a box of 12
+    large triangles under a fine bumpy sheet (each sheet vertex has several box triangles in reach,
+    few near), on two conforming bumpy sheets 2 mm apart (a joint: every vertex has many triangles'
+    planes near it, few triangles) and on random triangle soups."""
     box = np.array([[x, y, z] for x in (-20.0, 20.0) for y in (-20.0, 20.0) for z in (-10.0, 0.0)])
     box_triangles = np.array([[0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4],
                               [2, 6, 7], [2, 7, 3], [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]])
@@ -69,8 +70,9 @@ def test_closest_distance_is_the_minimum_over_every_vertex_and_triangle_both_way
     sheet = np.column_stack([u.ravel(), v.ravel(), 1.3 + 0.01 * (u.ravel() ** 2 + v.ravel() ** 2)])
     i = (np.arange(30)[:, None] * 31 + np.arange(30)[None]).ravel()
     sheet_triangles = np.vstack([np.column_stack([i, i + 1, i + 32]), np.column_stack([i, i + 32, i + 31])])
-    cases = [(sheet, sheet_triangles, box, box_triangles)]
     rng = np.random.default_rng(5)
+    bumps = sheet + rng.uniform(-0.05, 0.05, sheet.shape) + [0.3, 0.2, 2.0]
+    cases = [(sheet, sheet_triangles, box, box_triangles), (sheet, sheet_triangles, bumps, sheet_triangles[:, ::-1])]
     for _ in range(10):
         a, b = rng.normal(scale=rng.uniform(0.5, 5.0), size=(40, 3)), rng.normal(scale=rng.uniform(0.5, 5.0), size=(30, 3)) + rng.normal(scale=3.0, size=3)
         cases.append((a, rng.integers(0, 40, size=(50, 3)), b, rng.integers(0, 30, size=(40, 3))))
