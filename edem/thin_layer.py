@@ -765,5 +765,7 @@ def layer_compliance(
         # S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl (module docstring, variable thickness).
         c_nl = abs(strength) * h_over_g
         smoothing, pattern = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl, edge_at_cells, dirichlet)
-        terms.append(SmoothingTerm(float(np.sign(strength)), (pattern.q.T @ sp.diags(c_nl)).tocsr(), smoothing, np.broadcast_to(c_nl, cells.shape), pattern))
+        q = pattern.q  # Z^T = diag(c_nl) Q: Q's rows scaled, no sparse product
+        z_t = sp.csr_matrix((q.data * np.repeat(np.broadcast_to(c_nl, cells.shape), np.diff(q.indptr)), q.indices, q.indptr), shape=q.shape)
+        terms.append(SmoothingTerm(float(np.sign(strength)), z_t.T.tocsr(), smoothing, np.broadcast_to(c_nl, cells.shape), pattern))
     return LayerCompliance(model.local * h_over_g / mesh.area_mm2[cells], tuple(terms), mesh.memo.setdefault("factor", {}))
