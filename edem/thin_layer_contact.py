@@ -87,7 +87,6 @@ class ActiveSystem:
     vertex_per_mm: np.ndarray  # (V, 6)
     local_mm_per_n: np.ndarray  # (n_c,) the local compliance it was built with
     carried_force_n: np.ndarray | None = None  # (n_c,) c: f and z are then over the stored state (module docstring)
-    layer_local_mm_per_n: np.ndarray | None = None  # (n_c,) the layer's own local compliance, where c is given
 
     @staticmethod
     def build(
@@ -101,34 +100,25 @@ class ActiveSystem:
         local = layer.local_mm_per_n if local_mm_per_n is None else local_mm_per_n
         lam = 1.0 / local[active]
         rhs = np.column_stack([overlap_mm[active], directions[active]])  # (n_I, 7)
-        if carried_force_n is not None:
-            released = np.where(active, 0.0, carried_force_n)  # c_N: the carried forces that left the contact
-            carried = (carried_force_n, layer.local_mm_per_n)
-        else:
-            released, carried = None, (None, None)
-        if not layer.coupled:
-            forces = lam[:, None] * rhs
-            if carried_force_n is not None:
-                forces[:, 0] += carried_force_n[active]
-            return ActiveSystem(active, forces[:, 0], forces[:, 1:], np.zeros(0), np.zeros((0, 6)), local, *carried)
-        # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T.
-        weight = np.zeros(active.shape[0])
-        weight[active] = lam
-        solve = layer.factorise_coupled(weight)
-        loads = np.zeros((active.shape[0], 7))
-        loads[active] = lam[:, None] * rhs
-        if released is not None:
-            loads[:, 0] -= released  # -Z_N c_N joins the u-free column
-        # A zero column (DEM: no overlap before the increment; a fixed DOF) needs no solves.
-        nonzero = np.flatnonzero(np.any(loads, axis=0))
-        vertex = np.zeros((layer.z.shape[0], 7))
         forces = lam[:, None] * rhs
-        if nonzero.size:
-            vertex[:, nonzero] = solve(np.asarray(layer.z @ loads[:, nonzero]))
-            forces[:, nonzero] -= lam[:, None] * (layer.z_t[active] @ vertex[:, nonzero])
+        vertex = np.zeros((layer.z.shape[0] if layer.coupled else 0, 7))
+        if layer.coupled:
+            # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T.
+            weight = np.zeros(active.shape[0])
+            weight[active] = lam
+            solve = layer.factorise_coupled(weight)
+            loads = np.zeros((active.shape[0], 7))
+            loads[active] = lam[:, None] * rhs
+            if carried_force_n is not None:
+                loads[:, 0] -= np.where(active, 0.0, carried_force_n)  # -Z_N c_N joins the u-free column
+            # A zero column (DEM: no overlap before the increment; a fixed DOF) needs no solves.
+            nonzero = np.flatnonzero(np.any(loads, axis=0))
+            if nonzero.size:
+                vertex[:, nonzero] = solve(np.asarray(layer.z @ loads[:, nonzero]))
+                forces[:, nonzero] -= lam[:, None] * (layer.z_t[active] @ vertex[:, nonzero])
         if carried_force_n is not None:
             forces[:, 0] += carried_force_n[active]
-        return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local, *carried)
+        return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local, carried_force_n)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
         return self.force0_n + self.force_per_mm @ u
@@ -140,7 +130,7 @@ class ActiveSystem:
         f[self.active] = self.forces(u)
         w = self.local_mm_per_n * f
         if self.carried_force_n is not None:
-            w = w - self.layer_local_mm_per_n * self.carried_force_n
+            w = w - layer.local_mm_per_n * self.carried_force_n
         if layer.coupled:
             w = w + layer.z_t @ (self.vertex0 + self.vertex_per_mm @ u)
         return w
