@@ -7,9 +7,10 @@ solved) with ``coupling = "none"`` and ``"thin-layer"`` (Pade and two-pole symbo
 and 30k springs. The Embree scene is built once. The models run alternately round by round (so a
 load spike of the shared machine hits all of them) and the script prints, per size and law, the
 medians of the whole run and of its solve stage (assembly + unilateral solve + viscoelastic
-increment, without the ray casting they share), the coupled layer's factorisations (and the share
-of the banded Cholesky's columns they factored: a refactorisation keeps those before the first
-changed one), and the ratios coupled / independent.
+increment, without the ray casting they share), the coupled layer's factorisations (and LAPACK's
+banded factorisations, of the contact matrix or any other, with the share of their columns they
+factored: a refactorisation keeps those before the first changed one), and the ratios coupled /
+independent.
 
     .venv/bin/python benchmarks/bench_thin_layer.py [--steps 20] [--rounds 3] [--sizes 0.94,0.3] [--laws threshold,gap]
 """
