@@ -4,7 +4,8 @@ The springs of ``edem.mechanics`` are replaced by a layer whose surface deflecti
 candidate spring) answers the spring forces f (N) through the symmetric positive definite
 compliance of ``edem.thin_layer``: w = C f. The rigid motion u (6 DOFs) approaches spring j by
 g_j . u, so the layer must be compressed by d_j(u) = d0_j + g_j . u (d0: the overlap before the
-increment: t - h for the gap law, C f_carried for the threshold law's EDEM push-back, 0 in DEM).
+increment: t - h for the gap law, C f_carried for the threshold law's EDEM push-back, 0 in DEM;
+the push-back is solved for without forming C f_carried, see "Carried forces" below).
 Contact is the complementarity problem
 
     f >= 0,   y = C f - d(u) >= 0,   f . y = 0,   sum_j f_j g_j + ligaments + shear = T,
@@ -27,6 +28,29 @@ iterations. Ligaments (tension-only) and the shear springs enter the 6 x 6 as in
 A nonlinear law (gap-log) adds to w its columns' excess e(f) over the linear column
 (``ContactLaw.column_excess_mm``); each iteration linearises it at the previous forces, which
 changes Lam and d0 only, so the same factorisation serves (Newton on the same active set).
+
+Carried forces
+--------------
+For the threshold law's EDEM push-back d0 = o + C c (c: the forces f_carried committed at the
+previous step, o a geometric overlap, 0 there), forming C c needs H^-1 Z c, a factorisation of
+sigma H alone besides the contact matrix's. The solve works instead on the increments
+delta = f - c and zeta = z - z_c, z_c = (sigma H)^-1 Z c, over the stored state, where the carried
+forces' own deflection C c cancels from both sides of w_I = d_I(u):
+
+    local_I delta_I + Z_I^T zeta = o_I + D_I u,   sigma H zeta = Z delta,   delta_N = -c_N,
+
+(f_N = 0 out of contact). Eliminating delta_I = Lam (o_I + D_I u - Z_I^T zeta),
+
+    (sigma H + Z_I Lam Z_I^T) zeta = Z_I Lam (o_I + D_I u) - Z_N c_N,   f_I = c_I + Lam (o_I + D_I u - Z_I^T zeta),
+
+the same matrix as above, with the carried forces of the springs that left the contact as one
+more load in the u-free right-hand side: the same factorisation serves, and while every spring
+that carried a force stays in contact (c_N = 0, as in the viscoelastic increment, whose set holds
+them) that column is Lam o_I alone (no solve where o = 0). The gap out of contact is
+y_N = C delta - o - D u = -local_N c_N + Z_N^T zeta - o_N - D_N u; the deflection reported is
+w - C c = C delta, the layer's deflection over the push-back (C c itself would need the extra
+factorisation). A nonlinear column linearised at f0 as (local + slope) f + shift puts
+o - shift - slope c in place of o (the linear part of the push-back still cancels).
 """
 
 from __future__ import annotations
@@ -62,42 +86,51 @@ class ActiveSystem:
     vertex0: np.ndarray  # (V,) the stacked vertex fields z at u = 0 (LayerCompliance)
     vertex_per_mm: np.ndarray  # (V, 6)
     local_mm_per_n: np.ndarray  # (n_c,) the local compliance it was built with
+    carried_force_n: np.ndarray | None = None  # (n_c,) c: f and z are then over the stored state (module docstring)
 
     @staticmethod
     def build(
-        layer: LayerCompliance, directions: np.ndarray, overlap_mm: np.ndarray, active: np.ndarray, local_mm_per_n: np.ndarray | None = None
+        layer: LayerCompliance, directions: np.ndarray, overlap_mm: np.ndarray, active: np.ndarray, local_mm_per_n: np.ndarray | None = None,
+        carried_force_n: np.ndarray | None = None,
     ) -> "ActiveSystem":
         """``local_mm_per_n`` (n_c,): the local compliance, the layer's unless a nonlinear column
-        is linearised (``solve_thin_layer``)."""
+        is linearised (``solve_thin_layer``). ``carried_force_n`` (n_c,): the forces c whose
+        push-back C c adds to ``overlap_mm`` (module docstring, "Carried forces"); the vertex
+        fields are then the increments zeta over z_c."""
         local = layer.local_mm_per_n if local_mm_per_n is None else local_mm_per_n
         lam = 1.0 / local[active]
         rhs = np.column_stack([overlap_mm[active], directions[active]])  # (n_I, 7)
-        if not layer.coupled:
-            forces = lam[:, None] * rhs
-            return ActiveSystem(active, forces[:, 0], forces[:, 1:], np.zeros(0), np.zeros((0, 6)), local)
-        # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T.
-        weight = np.zeros(active.shape[0])
-        weight[active] = lam
-        solve = layer.factorise_coupled(weight)
-        # A zero column (DEM: no overlap before the increment; a fixed DOF) needs no solves.
-        nonzero = np.flatnonzero(np.any(rhs, axis=0))
-        loads = np.zeros((active.shape[0], nonzero.size))
-        loads[active] = lam[:, None] * rhs[:, nonzero]
-        vertex = np.zeros((layer.z.shape[0], 7))
         forces = lam[:, None] * rhs
-        if nonzero.size:
-            vertex[:, nonzero] = solve(np.asarray(layer.z @ loads))
-            forces[:, nonzero] -= lam[:, None] * (layer.z_t[active] @ vertex[:, nonzero])
-        return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local)
+        vertex = np.zeros((layer.z.shape[0] if layer.coupled else 0, 7))
+        if layer.coupled:
+            # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T.
+            weight = np.zeros(active.shape[0])
+            weight[active] = lam
+            solve = layer.factorise_coupled(weight)
+            loads = np.zeros((active.shape[0], 7))
+            loads[active] = lam[:, None] * rhs
+            if carried_force_n is not None:
+                loads[:, 0] -= np.where(active, 0.0, carried_force_n)  # -Z_N c_N joins the u-free column
+            # A zero column (DEM: no overlap before the increment; a fixed DOF) needs no solves.
+            nonzero = np.flatnonzero(np.any(loads, axis=0))
+            if nonzero.size:
+                vertex[:, nonzero] = solve(np.asarray(layer.z @ loads[:, nonzero]))
+                forces[:, nonzero] -= lam[:, None] * (layer.z_t[active] @ vertex[:, nonzero])
+        if carried_force_n is not None:
+            forces[:, 0] += carried_force_n[active]
+        return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local, carried_force_n)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
         return self.force0_n + self.force_per_mm @ u
 
     def deflection(self, layer: LayerCompliance, u: np.ndarray) -> np.ndarray:
-        """w = C f at every candidate for the forces of this set under u (local part as built)."""
+        """w = C f at every candidate for the forces of this set under u (local part as built);
+        with carried forces c, w - C c (module docstring, "Carried forces")."""
         f = np.zeros(self.active.shape[0])
         f[self.active] = self.forces(u)
         w = self.local_mm_per_n * f
+        if self.carried_force_n is not None:
+            w = w - layer.local_mm_per_n * self.carried_force_n
         if layer.coupled:
             w = w + layer.z_t @ (self.vertex0 + self.vertex_per_mm @ u)
         return w
@@ -129,6 +162,15 @@ def _linearised(layer: LayerCompliance, column: Callable[[np.ndarray], tuple[np.
     return layer.local_mm_per_n + slope, excess - slope * force_n
 
 
+def _offset(layer: LayerCompliance, overlap_mm: np.ndarray, shift, local: np.ndarray | None, pushback_force_n: np.ndarray | None) -> np.ndarray:
+    """The u-free overlap ActiveSystem.build takes: o - shift, and with carried forces c and a
+    linearised column of local compliance ``local`` also - (local - layer's) c (module docstring)."""
+    offset = overlap_mm - shift
+    if pushback_force_n is not None and local is not None:
+        offset = offset - (local - layer.local_mm_per_n) * pushback_force_n
+    return offset
+
+
 def _solve_free(k: np.ndarray, rhs: np.ndarray, free: np.ndarray) -> np.ndarray:
     u = np.zeros(6)
     u[free] = np.linalg.solve(k[np.ix_(free, free)], rhs[free])
@@ -148,6 +190,7 @@ def solve_thin_layer(
     length_scale_mm: float = 1.0,
     initial_active: np.ndarray | None = None,
     column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
+    pushback_force_n: np.ndarray | None = None,
     cycle_rtol: float = 1e-7,
     newton_rtol: float = 1e-10,
     max_iterations: int = 60,
@@ -163,8 +206,11 @@ def solve_thin_layer(
     candidate. ``column``: a nonlinear law's columns, f (n,) -> (excess (n,) mm, its derivative
     (n,) mm/N) (``ContactLaw.column_excess_mm``): w(f) = C f + excess(f), linearised at the
     previous iterate's forces (Newton; converged when the forces move by less than
-    ``newton_rtol`` of the largest). Returns element forces for the springs then the ligaments,
-    with ``active`` the contact set; raises SolverError like ``solve_unilateral``.
+    ``newton_rtol`` of the largest). ``pushback_force_n`` (n,): forces c (N) whose push-back
+    C c adds to ``overlap_mm`` (the threshold law's stored forces in EDEM), solved for without
+    forming it (module docstring, "Carried forces"); the deflection returned is then w - C c.
+    Returns element forces for the springs then the ligaments, with ``active`` the contact set;
+    raises SolverError like ``solve_unilateral``.
     """
     n_c = directions.shape[0]
     if ligament_rows is None:
@@ -189,13 +235,14 @@ def solve_thin_layer(
     for iteration in range(1, max_iterations + 1):
         if column is not None:
             local, shift = _linearised(layer, column, linearised_at)
-        system = ActiveSystem.build(layer, free_directions, overlap_mm - shift, active, local)
+        offset = _offset(layer, overlap_mm, shift, local, pushback_force_n)
+        system = ActiveSystem.build(layer, free_directions, offset, active, local, pushback_force_n)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         stiffness = system.stiffness(directions) + k_other
         rhs = load - system.pushback(directions) - f_other
         if unrestrained_dofs(stiffness, free, length_scale_mm):
             if everything is None:
-                full = ActiveSystem.build(layer, free_directions, overlap_mm - shift, touchable, local)
+                full = ActiveSystem.build(layer, free_directions, offset, touchable, local, pushback_force_n)
                 k_all, _ = _others(ligament_rows, ligament_law, np.ones_like(ligament_active), shear, touchable)
                 everything = full.stiffness(directions) + k_all
                 missing = unrestrained_dofs(everything, free, length_scale_mm)
@@ -245,6 +292,8 @@ def solve_thin_layer(
     # The forces in play: the load, the solved forces and those the overlaps stand for (EDEM's
     # push-back: under a vanishing load the stored forces are what the solve balances away).
     pushed = float(np.sum((spring_scale * np.clip(overlap_mm, 0.0, None))[touchable]))
+    if pushback_force_n is not None:
+        pushed += float(np.abs(pushback_force_n).sum())  # stands for spring_scale C c without forming C c
     scale = float(np.linalg.norm(load * to_newton)) + float(f.sum()) + pushed + 1e-9  # floor: a nanonewton, for a vanishing load
     # The 6 x 6 solve balances to round-off; only an accepted cycle or a regularised transient set
     # (1e-8 of the full stiffness) can leave more, and both stay far below 10 cycle_rtol.
@@ -278,6 +327,7 @@ def thin_layer_viscoelastic_increment(
     weights: tuple[float, float],
     fixed_dofs: tuple[str, ...],
     column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
+    pushback: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Kelvin-Voigt increment on the coupled layer (``edem.viscoelastic``, eq. 6.18).
 
@@ -285,7 +335,9 @@ def thin_layer_viscoelastic_increment(
     ligaments) plus the springs that carried a force into the step (so they can creep back); u = K^-1 [phi (T_{k-1} - p) + psi (T_k - T_{k-1})]
     with K the coupled contact stiffness and p the push-back of that set at u = 0. A nonlinear
     ``column`` (``solve_thin_layer``) is linearised at the forces carried into the step, the
-    state at u = 0, as the spring bed linearises its law there. Returns u and the elastic element
+    state at u = 0, as the spring bed linearises its law there. ``pushback``: the carried forces'
+    push-back C f_carried adds to ``overlap_mm`` (``solve_thin_layer``'s ``pushback_force_n``;
+    as they are all in the set, their column needs no solve). Returns u and the elastic element
     forces (springs then ligaments) to commit.
     """
     phi, psi = weights
@@ -297,7 +349,9 @@ def thin_layer_viscoelastic_increment(
     f = np.zeros(n_c)
     if np.any(active):
         local, shift = (None, 0.0) if column is None else _linearised(layer, column, carried_force_n)
-        system = ActiveSystem.build(layer, directions * free, overlap_mm - shift, active, local)  # fixed DOFs: no solves (solve_thin_layer)
+        pushed = carried_force_n if pushback else None
+        offset = _offset(layer, overlap_mm, shift, local, pushed)
+        system = ActiveSystem.build(layer, directions * free, offset, active, local, pushed)  # fixed DOFs: no solves (solve_thin_layer)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         if phi or psi:
             k = system.stiffness(directions) + k_other
@@ -343,7 +397,9 @@ class CoupledStep:
     thickness: the length the law's shear springs use (t for the gap law, the current spring
     length for the threshold law; on the band t or the candidates' median). The overlap d0 is t - h for an
     "overlap" law (gap) or C f_carried for a "carried" law (threshold: the EDEM push-back of the
-    forces committed at the previous step, zero in DEM); -inf on the band.
+    forces committed at the previous step, zero in DEM); -inf on the band. The push-back is kept
+    as its forces (``pushback_force_n``, with ``overlap_mm`` 0) and solved for by the contact
+    solve's own factorisation (module docstring, "Carried forces").
     """
 
     layer: LayerCompliance
@@ -355,6 +411,7 @@ class CoupledStep:
     ligament_law: LinearElements
     column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None  # a nonlinear law's columns (solve_thin_layer)
     shortest_smoothing_mm: float = np.inf  # sqrt(b) h of the symbol's shortest term at the candidates' median thickness
+    pushback_force_n: np.ndarray | None = None  # (n_d,) a "carried" law's forces c, whose push-back C c adds to overlap_mm
 
     @staticmethod
     def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law) -> "CoupledStep":
@@ -379,10 +436,12 @@ class CoupledStep:
         length = geometry.spring_length_mm[domain]
         layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends, cartilage.thin_layer_symbol)
         overlap = np.full(domain.shape, -np.inf)
+        pushback = None
         if law.thin_layer == "carried":
-            carried = np.zeros(domain.shape)
-            carried[is_candidate] = carried_force_n
-            overlap[is_candidate] = layer.deflection(carried)[is_candidate] if np.any(carried) else 0.0
+            overlap[is_candidate] = 0.0
+            if np.any(carried_force_n):
+                pushback = np.zeros(domain.shape)
+                pushback[is_candidate] = carried_force_n
         else:
             overlap[is_candidate] = (thickness - length)[is_candidate]
         rows = np.zeros((domain.shape[0], 6))
@@ -392,7 +451,7 @@ class CoupledStep:
             column = functools.partial(law.column_excess_mm, area_mm2=mesh.area_mm2[domain], confined_modulus_mpa=cartilage.confined_modulus_mpa,
                                        thickness_mm=thickness)
         shortest = float(np.sqrt(min(screenings)) * np.median(candidate_thickness)) if screenings and cand.size else np.inf
-        return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law, column, shortest)
+        return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law, column, shortest, pushback)
 
     def resolution_warning(self, mesh: SurfaceMesh) -> list[str]:
         """A warning when the symbol's shortest smoothing length is below the springs' size (the
@@ -434,7 +493,7 @@ class CoupledStep:
             solve_thin_layer(
                 self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
-                initial_active=initial, column=self.column,
+                initial_active=initial, column=self.column, pushback_force_n=self.pushback_force_n,
             )
         )
 
@@ -460,5 +519,6 @@ class CoupledStep:
         u, force = thin_layer_viscoelastic_increment(
             self.directions, self.layer, self.overlap_mm, self.ligament_rows, self.ligament_law, self._shear(shear),
             np.concatenate([active, elastic.active[n_c:]]), carried, previous_load, load, weights, fixed_dofs, self.column,
+            pushback=self.pushback_force_n is not None,
         )
         return u, np.concatenate([force[: c.shape[0]][c], force[c.shape[0]:]])

@@ -421,3 +421,46 @@ def test_a_band_factor_refactored_from_the_first_changed_column_equals_a_fresh_o
     x = solve(rhs)
     assert np.abs(matrix @ x - rhs).max() <= 1e-11 * abs(matrix).max() * np.abs(x).max()
     np.testing.assert_allclose(x, fresh(rhs), rtol=0.0, atol=1e-12 * np.abs(x).max())
+
+
+def test_a_cell_sets_pattern_restricted_from_the_surfaces_is_the_assembly_of_its_corner_pairs():
+    """The operator pattern of a cell set, cut from the whole surface's (``surface_pairs``), sums
+    per-pair values into the same matrix as adding them pair by pair at the cells' kept vertices
+    (off the free edge, and off the cells' own boundary where the layer ends there), stores no
+    pair the cells lack (a structural zero would widen the band) and keeps the vertices in the
+    surface's order; Q is the corner mean on those vertices. For cell sets with holes, the whole
+    surface and a single triangle, on a plate with a free edge, for every boundary option."""
+    plate = grid_plate(10.0, 10.0, 12)
+    mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
+    n_v = mesh.free_edge_vertex.shape[0]
+    rng = np.random.default_rng(11)
+    for size in (1, 40, plate.n_triangles // 2, plate.n_triangles):
+        cells = np.sort(rng.choice(plate.n_triangles, size, replace=False))
+        tri = mesh.triangles[cells]
+        for edge_at_cells, dirichlet in ((False, True), (True, True), (True, False), (False, False)):
+            mesh.memo.clear()
+            pattern = mesh.operator_pattern(cells, edge_at_cells, dirichlet)
+            free = np.zeros(n_v, bool) if not dirichlet else mesh.free_edge_vertex | (mesh.boundary_of(cells) if edge_at_cells else False)
+            kept = np.zeros(n_v, bool)
+            kept[tri] = True
+            kept &= ~free
+            vertices = np.flatnonzero(kept)  # the surface's order
+            number = np.full(n_v, -1)
+            number[vertices] = np.arange(vertices.size)
+            values = rng.uniform(1.0, 2.0, (cells.size, 9))
+            expected = np.zeros((vertices.size, vertices.size))
+            touched = np.zeros((vertices.size, vertices.size), bool)
+            for pair in range(9):
+                i, j = number[tri[:, pair // 3]], number[tri[:, pair % 3]]
+                inside = (i >= 0) & (j >= 0)
+                np.add.at(expected, (i[inside], j[inside]), values[inside, pair])
+                touched[i[inside], j[inside]] = True
+            matrix = pattern.matrix(pattern.sum_at_slots(values))
+            # Round-off: the same nine values per entry at most, summed in another order.
+            np.testing.assert_allclose(matrix.toarray(), expected, rtol=1e-15, atol=0)
+            assert matrix.nnz == touched.sum()
+            q = np.zeros((cells.size, vertices.size))
+            for corner in range(3):
+                inside = number[tri[:, corner]] >= 0
+                q[np.flatnonzero(inside), number[tri[inside, corner]]] += 1.0 / 3.0
+            np.testing.assert_array_equal(pattern.q.toarray(), q)

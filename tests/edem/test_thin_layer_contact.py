@@ -17,7 +17,7 @@ from edem.scene import Viscoelastic, load_scene
 from edem.solver import run
 from edem.springs import Ligament, Placement, spring_geometry
 from edem.thin_layer import pade_symbol, taylor_coefficients, two_pole_symbol
-from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
+from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh, solve_thin_layer, thin_layer_viscoelastic_increment
 from geometries.surface import TriangleSurface
 
 E = 10.35
@@ -432,3 +432,53 @@ def test_an_under_resolved_smoothing_term_is_warned():
     length = np.sqrt(min(two_pole_symbol(0.49).screenings)) * scene.cartilage.thickness_mm
     size = np.sqrt(2.0 * np.median(scene.spring_area_mm2))
     assert length < size and f"length, {length:.2g} mm" in warning and f"size {size:.2g} mm" in warning
+
+
+@pytest.mark.parametrize("symbol", ("pade", "two-pole"))
+def test_push_back_solved_over_the_carried_forces_equals_the_formed_push_back(symbol):
+    """EDEM's push-back d0 = C c of carried forces c, solved for as increments over them with the
+    contact matrix's own factor (module docstring, "Carried forces"), equals the solve on the
+    formed d0 = C c to round-off: forces, pose, the gap out of contact, and the deflection less
+    C c; also where springs that carried a force leave the contact (c_N != 0: here the carried
+    forces are those of a load 2.5 times the one applied, scaled spring by spring by 0-2, so the
+    body backs off and the springs that carried little leave), and for the viscoelastic
+    increment, whose set keeps every carried spring."""
+    scene = coupled(make_scene(cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), [0.0, 0.0, 1500.0],
+                               fixed_dofs=CYLINDER_DOFS, poissons_ratio=0.45, law="threshold"), thin_layer_symbol=symbol)
+    geometry = spring_geometry(scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2,
+                               Placement.identity(scene.reference_point_mm), RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles),
+                               scene.fixed_placement(0), scene.cartilage)
+    cand = geometry.candidate
+    rows = generalised_directions(geometry.centroid_mm[cand], geometry.normal[cand], scene.reference_point_mm)
+    mesh = coupled_layer_mesh(scene)
+    no_ligaments = (np.zeros((0, 6)), LinearElements(np.zeros(0), np.zeros(0)))
+    dem = CoupledStep.build(mesh, geometry, scene.cartilage, np.zeros(cand.sum()), rows, *no_ligaments)
+    carried = dem.solve(np.array([0.0, 0.0, 1500.0, 0.0, 0.0, 0.0]), CYLINDER_DOFS, None, 1.0).element_force_n[: cand.sum()]
+    carried = carried * np.random.default_rng(7).uniform(0.0, 2.0, carried.shape)
+    step = CoupledStep.build(mesh, geometry, scene.cartilage, carried, rows, *no_ligaments)
+    c = step.pushback_force_n
+    assert np.all(step.overlap_mm[step.candidate] == 0.0) and np.array_equal(c[step.candidate], carried)
+    formed = step.layer.deflection(c)  # C c: the factorisation of H alone the solve does without
+    load = np.array([0.0, 0.0, 600.0, 0.0, 0.0, 0.0])
+    new = solve_thin_layer(step.directions, step.layer, step.overlap_mm, load, fixed_dofs=CYLINDER_DOFS, pushback_force_n=c)
+    old = solve_thin_layer(step.directions, step.layer, formed, load, fixed_dofs=CYLINDER_DOFS)
+    released = ~new.active[: c.shape[0]] & (c > 0.0)
+    assert released.sum() >= 10  # the released carried forces' column (-Z_N c_N) is exercised
+    scale = np.abs(old.element_force_n).max()
+    # Round-off: the two paths differ by solves with differently factored matrices (H, and the
+    # contact matrix), each accurate to about 1e-13 of its result on this 0.3k-vertex layer.
+    np.testing.assert_allclose(new.element_force_n, old.element_force_n, rtol=0, atol=1e-10 * scale)
+    assert np.array_equal(new.active, old.active)
+    np.testing.assert_allclose(new.displacement, old.displacement, rtol=1e-10, atol=1e-12)
+    depth = np.abs(formed).max()
+    np.testing.assert_allclose(new.gap_mm, old.gap_mm, rtol=0, atol=1e-10 * depth)
+    np.testing.assert_allclose(new.deflection_mm, old.deflection_mm - formed, rtol=0, atol=1e-10 * depth)
+    # The viscoelastic increment (its set: the elastic one and every carried spring).
+    elastic = np.concatenate([new.active[: c.shape[0]], np.zeros(0, bool)])
+    args = (step.directions, step.layer)
+    rest = (*no_ligaments, None, elastic, c, np.array([0, 0, 1500.0, 0, 0, 0]), load,
+            (0.4, 0.3), CYLINDER_DOFS)
+    u_new, f_new = thin_layer_viscoelastic_increment(*args, step.overlap_mm, *rest, pushback=True)
+    u_old, f_old = thin_layer_viscoelastic_increment(*args, formed, *rest)
+    np.testing.assert_allclose(u_new, u_old, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(f_new, f_old, rtol=0, atol=1e-10 * scale)
