@@ -39,7 +39,7 @@ def _flat_plates():
 def test_dofs_per_element_and_the_direct_solver_while_its_memory_fits():
     """P1: 3 per vertex; P2: 3 per vertex and edge (edges ~ vertices + cells); TH adds a pressure
     per vertex. The LU is used while its estimate times the safety factor fits the memory
-    available, the Krylov solver past that; TH (a saddle point) keeps the LU."""
+    available, the Krylov solver past that, for every element."""
     small = estimate(1000, 300, "P1", available_bytes=24e9)
     assert small.dofs == 900 and small.solver == "direct"
     assert estimate(1000, 300, "P2").dofs == 3 * (300 + 1300)
@@ -49,7 +49,11 @@ def test_dofs_per_element_and_the_direct_solver_while_its_memory_fits():
     need = SAFETY * memory_bytes(dofs, "direct")
     assert estimate(cells, cells // 5, "P2", available_bytes=need).solver == "direct" and direct_fits(dofs, need)
     assert estimate(cells, cells // 5, "P2", available_bytes=need * 0.99).solver == "iterative" and not direct_fits(dofs, need * 0.99)
-    assert estimate(cells, cells // 5, "TH", available_bytes=need * 0.99).solver == "direct"
+    # Taylor-Hood too: past the LU's memory its Krylov path is the Schur-complement field split
+    assert estimate(cells, cells // 5, "TH", available_bytes=need * 0.99).solver == "iterative"
+    # a forced solver is estimated as such, whatever fits
+    assert estimate(cells, cells // 5, "P2", available_bytes=need * 0.99, linear_solver="direct").solver == "direct"
+    assert estimate(1000, 300, "P1", available_bytes=24e9, linear_solver="iterative").solver == "iterative"
     # memory grows faster than the DOFs for the direct solver (LU fill), linearly for Krylov
     a, b = estimate(10_000, 2_000, "P1"), estimate(80_000, 16_000, "P1")
     assert b.memory_bytes > a.memory_bytes
