@@ -17,7 +17,9 @@ exactly the force balance ``e_j . (F_c - force_n) = 0``. Newton solves the borde
     [ G^T  H ] [dt ] = [r ],         K_j = dR~/dt_j, G_j = dr_j/du~, H = dr/dt
 
 with PETSc SNES (newtonls) through a shell matrix and an exact block-elimination
-preconditioner (one MUMPS factorisation of A per iteration, k + 1 back-substitutions).
+preconditioner (one MUMPS factorisation of A per iteration, k + 1 back-substitutions; past the
+LU's memory, k + 1 preconditioned Krylov solves instead: :func:`_krylov_amg`,
+:func:`_krylov_fieldsplit`).
 
 Heavy imports (dolfinx, petsc4py, ufl, basix) happen inside the functions.
 """
@@ -405,8 +407,9 @@ def _use_iterative(s: "_Setup") -> bool:
 INNER_RTOL = 1e-10
 #: Inner Krylov iterations before a solve is declared not converged.
 INNER_MAX_IT = 1000
-#: GMRES restart: on the 0.7 mm subject slab the default 30 stalled (2000 iterations, no
-#: convergence, at an inner tolerance of 1e-12 on the preconditioned residual).
+#: GMRES restart (PETSc's default is 30: with it and GAMG's defaults the 0.7 mm subject slab did
+#: not converge in 2000 iterations). PETSc allocates the Krylov vectors as the iteration reaches
+#: them: 60 iterations on 420k DOFs hold 0.2 GB.
 GMRES_RESTART = 200
 
 #: GAMG settings for the elastic block (PETSc options under the inner solver's prefix). Threshold:
@@ -438,6 +441,7 @@ def _rigid_body_modes(coords: np.ndarray, like: Any) -> list:
 
 
 def _near_nullspace(s: "_Setup", coords: np.ndarray, like: Any) -> Any:
+    """The rigid-body modes at ``coords`` as an orthonormal PETSc near-nullspace."""
     PETSc = s.m["PETSc"]
     modes = _rigid_body_modes(coords, like)
     for j, vec in enumerate(modes):  # Gram-Schmidt: a PETSc null space has an orthonormal basis
@@ -491,13 +495,15 @@ def _krylov_fieldsplit(ksp: Any, s: "_Setup") -> tuple[list, list[str]]:
     keys set, for :func:`_destroy`."""
     fem, ufl, PETSc = s.m["fem"], s.m["ufl"], s.m["PETSc"]
     offset = s.V.dofmap.index_map.local_range[0]  # mixed space: block size 1
-    V0, u_map = s.V.sub(0).collapse()
-    Q, p_map = s.V.sub(1).collapse()
+    # collapse(): the subspace and, per cell type (one here), the parent dof of each of its dofs,
+    # owned first; the displacement's unrolled node by node (3 i + component)
+    V0, (u_map,) = s.V.sub(0).collapse()
+    Q, (p_map,) = s.V.sub(1).collapse()
     nu_owned = V0.dofmap.index_map.size_local
     np_owned = Q.dofmap.index_map.size_local
-    is_u = PETSc.IS().createGeneral(offset + np.asarray(u_map[: 3 * nu_owned], dtype=np.int32), comm=s.comm)
+    is_u = PETSc.IS().createGeneral((offset + u_map[: 3 * nu_owned]).astype(PETSc.IntType), comm=s.comm)
     is_u.setBlockSize(3)
-    is_p = PETSc.IS().createGeneral(offset + np.asarray(p_map[:np_owned], dtype=np.int32), comm=s.comm)
+    is_p = PETSc.IS().createGeneral((offset + p_map[:np_owned]).astype(PETSc.IntType), comm=s.comm)
     like = PETSc.Vec().createMPI((3 * nu_owned, PETSc.DECIDE), bsize=3, comm=s.comm)
     nsp = _near_nullspace(s, V0.tabulate_dof_coordinates()[:nu_owned], like)
     like.destroy()
