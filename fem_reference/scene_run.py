@@ -125,7 +125,7 @@ class FEStepResult:
     mean_edge_mm: float = 0.0
     layers: int = 0
     warnings: list[str] = field(default_factory=list)
-    linear_solver: str = "direct"  # the inner solve used (LINEAR_SOLVERS); "direct" when nothing was solved
+    linear_solver: str = ""  # the inner solve used: "direct" or "iterative"; "" when nothing was solved
     krylov_iterations: int = 0  # iterative path: inner Krylov iterations over the time point's solves
 
 
@@ -192,7 +192,7 @@ class FERunResult:
             "layers_through_thickness": max(int(x.layers) for x in steps),
             "newton_iterations": int(sum(x.iterations for x in steps)),
             # the inner solves: "direct" (LU) or "iterative" (Krylov; its iterations over all solves)
-            "linear_solver": sorted({x.linear_solver for x in steps}),
+            "linear_solver": sorted({x.linear_solver for x in steps if x.linear_solver}),
             "krylov_iterations": int(sum(x.krylov_iterations for x in steps)),
             "max_nominal_strain": max(float(x.max_nominal_strain) for x in steps),
             "nominal_strain_definition": NOMINAL_STRAIN_DEFINITION,
