@@ -165,7 +165,8 @@ def check_fits(size: FESize, mesh_size_mm: float, *, file: str | None, key: str,
             f"a x{SAFETY:g} margin) but {available / 1e9:.3g} GB are available",
             file=file,
             key=key,
-            expected=f"a mesh size whose estimate fits (e.g. {suggest_size(size, mesh_size_mm, available):.3g} mm or larger)",
+            expected=f"a mesh size whose estimate fits (e.g. {suggest_size(size, mesh_size_mm, available):.3g} mm or larger)"
+                     + (", or the Krylov solver (linear_solver auto or iterative)" if size.solver == "direct" else ""),
         )
 
 

@@ -66,6 +66,10 @@ def test_a_solve_that_does_not_fit_is_refused_naming_size_and_memory():
     text = str(err.value)
     assert "0.01 mm" in text and "400 GB" in text and "8 GB are available" in text and "scene.toml" in text
     check_fits(size, 0.01, file=None, key="k", available_bytes=SAFETY * 4e11 + 1)  # fits: no error
+    assert "Krylov" not in text  # already the iterative solver
+    forced_lu = FESize(cells=10**6, vertices=2 * 10**5, dofs=3 * 10**6, solver="direct", memory_bytes=4e11)
+    with pytest.raises(InputError, match="Krylov solver"):  # a forced LU that does not fit names the way out
+        check_fits(forced_lu, 0.1, file="scene.toml", key="linear_solver", available_bytes=8e9)
 
 
 def test_edem_fe_with_a_tiny_mesh_size_exits_2_before_meshing(capsys):
