@@ -74,13 +74,15 @@ def test_taylor_hood_field_split_gives_the_lu_solution(comm):
     """The Krylov path for Taylor-Hood (GMRES + Schur-complement field split: GAMG with the
     rigid-body near-nullspace on u, the pressure mass matrix scaled by -(1/mu + 1/lambda) on p;
     docs/method.md, section 6) converges to the LU's contact solution: same bone displacement,
-    peak pressure and contact area. Tolerance 1e-7 relative: both Newton runs stop at 1e-10 of
-    their first residual and each inner solve is exact to INNER_RTOL = 1e-10, so the iterates
-    differ by about the Jacobian's condition number (<= 1e3 here) times 1e-10; the contact area,
-    a sum over the facets in contact, is the same active set. Iterations: at most 80 per inner
-    solve (measured 37 on average, 47 at most; the limit leaves room for another PETSc build's
-    aggregation without admitting a preconditioner that does not see the saddle point, which
-    does not converge at all, test below)."""
+    peak pressure and contact area.
+
+    Tolerance 2e-3 = 2 x condition x 1e-10: both Newton runs stop at 1e-10 of their first residual
+    (each inner solve is exact to INNER_RTOL = 1e-10, so Newton reaches that stop), which puts each
+    within condition x 1e-10 of the discrete solution relative to its starting error, the two
+    within twice that; the 2-norm condition number of the last Jacobian here is 9.3e6 (scipy
+    svds). Iterations: at most 80 per inner solve (measured 37 on average, 47 at most; the limit
+    leaves room for another PETSc build's aggregation without admitting a preconditioner that
+    does not see the saddle point, which does not converge at all, test below)."""
     direct = solve_contact(_cylinder_on_th_slab(comm, "direct"))
     krylov = solve_contact(_cylinder_on_th_slab(comm, "iterative"))
     solves = 2 * krylov.newton_iterations  # k + 1 inner solves per Newton step, k = 1 free translation
@@ -90,9 +92,10 @@ def test_taylor_hood_field_split_gives_the_lu_solution(comm):
     assert (direct.linear_solver, krylov.linear_solver) == ("direct", "iterative")
     assert 0 < krylov.krylov_iterations <= 80 * solves
     assert krylov.relative_force_residual < 1e-6
-    np.testing.assert_allclose(krylov.bone_displacement_mm, direct.bone_displacement_mm, rtol=1e-7, atol=1e-12)
-    assert krylov.peak_pressure_mpa == pytest.approx(direct.peak_pressure_mpa, rel=1e-7)
-    assert krylov.contact_area_mm2 == pytest.approx(direct.contact_area_mm2, rel=1e-7)
+    rtol = 2.0 * 9.3e6 * 1e-10
+    np.testing.assert_allclose(krylov.bone_displacement_mm, direct.bone_displacement_mm, rtol=rtol, atol=1e-12)
+    assert krylov.peak_pressure_mpa == pytest.approx(direct.peak_pressure_mpa, rel=rtol)
+    assert krylov.contact_area_mm2 == pytest.approx(direct.contact_area_mm2, rel=rtol)
 
 
 def test_plain_amg_on_the_taylor_hood_saddle_point_does_not_converge(comm, monkeypatch):
