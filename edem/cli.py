@@ -118,14 +118,17 @@ def _fe(args: argparse.Namespace) -> int:
     try:
         overrides = dict(parse_override(o) for o in args.set)
         scene = load_scene(args.scene, overrides)
-        settings = resolve_settings(scene, model=args.model, mesh_size_mm=args.mesh_size, degree=args.degree, argument_keys=FE_FLAGS)
+        settings = resolve_settings(scene, model=args.model, mesh_size_mm=args.mesh_size, degree=args.degree,
+                                    linear_solver=args.linear_solver, argument_keys=FE_FLAGS)
         steps = parse_steps(args.steps, len(scene.load.time_s))
         out = _out_dir(args, scene.name, settings.method, overrides=overrides)
-        record = provenance(args.scene, overrides, {"model": settings.model, "mesh_size_mm": settings.mesh_size_mm, "degree": settings.degree})
+        record = provenance(args.scene, overrides, {"model": settings.model, "mesh_size_mm": settings.mesh_size_mm, "degree": settings.degree,
+                                                        "linear_solver": settings.linear_solver})
         n_solves = len(scene.load.time_s) if steps is None else len(steps)
         if rank == 0 and n_solves > 1 and sys.stderr.isatty():
             bar = _step_bar(n_solves, f"{scene.name} ({settings.method})")
-        result = run_scene(scene, model=settings.model, mesh_size_mm=args.mesh_size, degree=args.degree, steps=steps, out_dir=out,
+        result = run_scene(scene, model=settings.model, mesh_size_mm=args.mesh_size, degree=args.degree,
+                           linear_solver=args.linear_solver, steps=steps, out_dir=out,
                            overwrite=args.overwrite, provenance=record, progress=None if bar is None else (lambda k: bar.update(1)),
                            on_size=_print_fe_size if rank == 0 else None,
                            solve_progress=_fe_solve_progress(args.progress, bar) if rank == 0 else None)
@@ -141,9 +144,10 @@ def _fe(args: argparse.Namespace) -> int:
     for warning in result.warnings:
         print(f"edem fe: warning: {warning}", file=sys.stderr)
     data = result.summary()
+    krylov = f" ({data['krylov_iterations']} Krylov iterations)" if "iterative" in data["linear_solver"] else ""
     print(
         f"{scene.name}: FE {settings.model} ({data['element']}, mesh {settings.mesh_size_mm:g} mm), {data['steps']} time point(s), "
-        f"{data['n_dofs']} DOFs, {data['newton_iterations']} Newton iterations, {result.wall_time_s:.3f} s\n"
+        f"{data['n_dofs']} DOFs, {data['newton_iterations']} Newton iterations{krylov}, {result.wall_time_s:.3f} s\n"
         f"  peak pressure {data['peak_pressure_mpa']:.4g} MPa, max contact area {data['max_contact_area_mm2']:.4g} mm^2, "
         f"final displacement [{', '.join(f'{x:.4g}' for x in data['final_displacement_mm'])}] mm\n"
         f"  results: {out}/ (summary.json, timeseries.csv, pressure.pvd)"
@@ -152,7 +156,7 @@ def _fe(args: argparse.Namespace) -> int:
 
 
 #: the `edem fe` flag of each resolve_settings argument (errors name what the user typed)
-FE_FLAGS = {"model": "--model", "mesh_size_mm": "--mesh-size", "degree": "--degree"}
+FE_FLAGS = {"model": "--model", "mesh_size_mm": "--mesh-size", "degree": "--degree", "linear_solver": "--linear-solver"}
 
 
 def parse_steps(text: str | None, n: int) -> list[int] | None:
@@ -319,6 +323,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="replace an existing result directory (never another kind of directory)")
     p.add_argument("--mesh-size", type=float, metavar="MM", help="element size in mm; overrides [fe] mesh_size_mm")
     p.add_argument("--degree", type=int, choices=(1, 2), help="element degree (2: P2, or Taylor-Hood at nu >= 0.49); overrides [fe] degree")
+    p.add_argument("--linear-solver", metavar="NAME",
+                   help="inner linear solve: auto (MUMPS LU while it fits in memory, Krylov past that), direct or iterative "
+                        "(docs/method.md, section 6); overrides [fe] linear_solver")
     p.add_argument("--steps", metavar="LIST", help="time points to solve, e.g. 0,5-9,10:65:8 (default: all)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="lines from inside each solve on stderr (Newton residual, contact nodes, Krylov iterations); "

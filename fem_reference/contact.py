@@ -17,7 +17,9 @@ exactly the force balance ``e_j . (F_c - force_n) = 0``. Newton solves the borde
     [ G^T  H ] [dt ] = [r ],         K_j = dR~/dt_j, G_j = dr_j/du~, H = dr/dt
 
 with PETSc SNES (newtonls) through a shell matrix and an exact block-elimination
-preconditioner (one MUMPS factorisation of A per iteration, k + 1 back-substitutions).
+preconditioner (one MUMPS factorisation of A per iteration, k + 1 back-substitutions; past the
+LU's memory, k + 1 preconditioned Krylov solves instead: :func:`_krylov_amg`,
+:func:`_krylov_fieldsplit`).
 
 Heavy imports (dolfinx, petsc4py, ufl, basix) happen inside the functions.
 """
@@ -391,26 +393,42 @@ class _Setup:
 
 
 def _use_iterative(s: "_Setup") -> bool:
-    """Whether the inner solve is Krylov + AMG (see :class:`SolverOptions.linear_solver`)."""
+    """Whether the inner solve is Krylov (see :data:`fem_reference.problem.LINEAR_SOLVERS`)."""
     from fem_reference.sizing import direct_fits
 
     choice = s.problem.solver.linear_solver
-    if choice not in ("auto", "direct", "iterative"):
-        raise ValueError(f"linear_solver must be 'auto', 'direct' or 'iterative', got {choice!r}")
-    if s.element == "TH":  # a saddle point: plain AMG does not apply, keep the LU
-        return False
     return choice == "iterative" or (choice == "auto" and not direct_fits(s.n_global))
 
 
-def _rigid_body_modes(s: "_Setup", like: Any) -> list:
-    """The six rigid-body motions of the displacement space as PETSc vectors (owned dofs), the
-    near-nullspace GAMG builds its coarse spaces from (elasticity's kernel without supports)."""
-    nodes = s.V.dofmap.index_map.size_local
-    x = s.V.tabulate_dof_coordinates()[:nodes]
-    centred = x - x.mean(axis=0) if nodes else x
+#: Relative tolerance of each inner Krylov solve, on the unpreconditioned residual (GMRES with
+#: right preconditioning). Newton stops at 1e-10 of its first residual: an inner solve 1e-10
+#: exact makes each step a Newton step up to a relative 1e-10, so Newton's last steps keep
+#: reducing the residual by about that factor (inexact Newton) instead of stalling.
+INNER_RTOL = 1e-10
+#: Inner Krylov iterations before a solve is declared not converged.
+INNER_MAX_IT = 1000
+#: GMRES restart (PETSc's default is 30: with it and GAMG's defaults the 0.7 mm subject slab did
+#: not converge in 2000 iterations). PETSc allocates the Krylov vectors as the iteration reaches
+#: them: 60 iterations on 420k DOFs hold 0.2 GB.
+GMRES_RESTART = 200
+
+#: GAMG settings for the elastic block (PETSc options under the inner solver's prefix). Threshold:
+#: drop graph edges below 5 % of the diagonal before aggregating, so that the thin slabs'
+#: anisotropic P2 couplings give compact aggregates; 3 Chebyshev-Jacobi smoothing steps per
+#: level. Measured on the subject-like ankle (1.4 mm, P2, 73k DOFs): 120-140 iterations per
+#: inner solve with the PETSc defaults and GMRES(30) at 1e-12, about 60 with these.
+GAMG_OPTIONS = {"pc_gamg_threshold": "0.05", "mg_levels_ksp_type": "chebyshev",
+                "mg_levels_pc_type": "jacobi", "mg_levels_ksp_max_it": "3"}
+
+
+def _rigid_body_modes(coords: np.ndarray, like: Any) -> list:
+    """The six rigid-body motions at the displacement nodes ``coords`` (n, 3) (owned, in the order
+    of ``like``'s blocks of three) as PETSc vectors: the near-nullspace GAMG builds its coarse
+    spaces from (elasticity's kernel without supports)."""
+    centred = coords - coords.mean(axis=0) if len(coords) else coords
     modes = []
     for j in range(6):
-        field = np.zeros((nodes, 3))
+        field = np.zeros_like(centred)
         if j < 3:
             field[:, j] = 1.0
         else:  # rotation about axis j - 3: e x (x - c)
@@ -422,19 +440,90 @@ def _rigid_body_modes(s: "_Setup", like: Any) -> list:
     return modes
 
 
-def _krylov_amg(ksp: Any, A: Any, s: "_Setup") -> None:
-    """CG (symmetric Nitsche, theta = 1) or GMRES with GAMG and the rigid-body near-nullspace.
-
-    The inner solve sits inside Newton: its relative tolerance is far below Newton's own so that
-    Newton keeps its quadratic rate."""
+def _near_nullspace(s: "_Setup", coords: np.ndarray, like: Any) -> Any:
+    """The rigid-body modes at ``coords`` as an orthonormal PETSc near-nullspace."""
     PETSc = s.m["PETSc"]
+    modes = _rigid_body_modes(coords, like)
+    for j, vec in enumerate(modes):  # Gram-Schmidt: a PETSc null space has an orthonormal basis
+        for prev in modes[:j]:
+            vec.axpy(-vec.dot(prev), prev)
+        vec.normalize()
+    return PETSc.NullSpace().create(vectors=modes, comm=s.comm)
+
+
+def _set_inner_options(ksp: Any, options: dict[str, str]) -> list[str]:
+    """Put ``options`` in the PETSc database under the inner solver's prefix and read them.
+    They stay there until the solve ends (:func:`_destroy` removes the returned keys): the
+    multigrid levels and the field-split blocks read theirs when the preconditioner is set up."""
+    from petsc4py import PETSc
+
+    db = PETSc.Options()
+    keys = [f"{ksp.getOptionsPrefix()}{key}" for key in options]
+    for key, val in zip(keys, options.values()):
+        db[key] = val
+    ksp.setFromOptions()
+    return keys
+
+
+def _krylov_amg(ksp: Any, A: Any, s: "_Setup") -> list[str]:
+    """P1/P2: CG (symmetric Nitsche, theta = 1) or right-preconditioned GMRES with GAMG and the
+    rigid-body near-nullspace on the blocked (3 per node) displacement."""
+    nodes = s.V.dofmap.index_map.size_local
     vec, _ = A.createVecs()
-    modes = _rigid_body_modes(s, vec)
-    basis = PETSc.NullSpace().create(vectors=modes, comm=s.comm)
-    A.setNearNullSpace(basis)
-    ksp.setType("cg" if s.problem.nitsche.theta == 1.0 else "gmres")
-    ksp.setTolerances(rtol=1e-12, atol=0.0, max_it=2000)
-    ksp.getPC().setType("gamg")
+    A.setNearNullSpace(_near_nullspace(s, s.V.tabulate_dof_coordinates()[:nodes], vec))
+    vec.destroy()
+    options = {"pc_type": "gamg", **GAMG_OPTIONS}
+    if s.problem.nitsche.theta == 1.0:
+        options["ksp_type"] = "cg"
+    else:
+        options.update(ksp_type="gmres", ksp_gmres_restart=str(GMRES_RESTART), ksp_pc_side="right")
+    ksp.setTolerances(rtol=INNER_RTOL, atol=0.0, max_it=INNER_MAX_IT)
+    return _set_inner_options(ksp, options)
+
+
+def _krylov_fieldsplit(ksp: Any, s: "_Setup") -> tuple[list, list[str]]:
+    """Taylor-Hood: right-preconditioned GMRES with a Schur-complement field split (u, p).
+
+    Displacement block: one GAMG cycle with the rigid-body near-nullspace (its IS ordered node by
+    node, block size 3); it holds the Nitsche contact terms in u. Pressure (Schur complement
+    S = A_pp - A_pu A_uu^-1 A_up, negative definite): approximated by -(1/mu + 1/lambda) M_p,
+    the pressure mass matrix scaled like the inverse shear stiffness plus the compressible term
+    (-M_p / lambda is A_pp itself; div A_uu^-1 div^T is spectrally M_p / mu on inf-sup stable
+    elements), one Jacobi sweep on it. Full factorisation (lower, Schur, upper).
+
+    Returns the PETSc objects the solve keeps (index sets, the pressure matrix) and the option
+    keys set, for :func:`_destroy`."""
+    fem, ufl, PETSc = s.m["fem"], s.m["ufl"], s.m["PETSc"]
+    offset = s.V.dofmap.index_map.local_range[0]  # mixed space: block size 1
+    # collapse(): the subspace and, per cell type (one here), the parent dof of each of its dofs,
+    # owned first; the displacement's unrolled node by node (3 i + component)
+    V0, (u_map,) = s.V.sub(0).collapse()
+    Q, (p_map,) = s.V.sub(1).collapse()
+    nu_owned = V0.dofmap.index_map.size_local
+    np_owned = Q.dofmap.index_map.size_local
+    is_u = PETSc.IS().createGeneral((offset + u_map[: 3 * nu_owned]).astype(PETSc.IntType), comm=s.comm)
+    is_u.setBlockSize(3)
+    is_p = PETSc.IS().createGeneral((offset + p_map[:np_owned]).astype(PETSc.IntType), comm=s.comm)
+    like = PETSc.Vec().createMPI((3 * nu_owned, PETSc.DECIDE), bsize=3, comm=s.comm)
+    nsp = _near_nullspace(s, V0.tabulate_dof_coordinates()[:nu_owned], like)
+    like.destroy()
+    is_u.compose("nearnullspace", nsp)
+    p, q = ufl.TrialFunction(Q), ufl.TestFunction(Q)
+    scale = fem.Constant(s.mesh, -(1.0 / float(s.mu.value) + 1.0 / float(s.lam.value)))
+    Mp = s.m["fem_petsc"].assemble_matrix(fem.form(scale * p * q * s.dx))
+    Mp.assemble()
+    pc = ksp.getPC()
+    pc.setType("fieldsplit")
+    pc.setFieldSplitIS(("u", is_u), ("p", is_p))
+    pc.setFieldSplitType(PETSc.PC.CompositeType.SCHUR)
+    pc.setFieldSplitSchurFactType(PETSc.PC.FieldSplitSchurFactType.FULL)
+    pc.setFieldSplitSchurPreType(PETSc.PC.FieldSplitSchurPreType.USER, Mp)
+    options = {"ksp_type": "gmres", "ksp_gmres_restart": str(GMRES_RESTART), "ksp_pc_side": "right",
+               "fieldsplit_u_ksp_type": "preonly", "fieldsplit_u_pc_type": "gamg",
+               **{f"fieldsplit_u_{k}": v for k, v in GAMG_OPTIONS.items()},
+               "fieldsplit_p_ksp_type": "preonly", "fieldsplit_p_pc_type": "jacobi"}
+    ksp.setTolerances(rtol=INNER_RTOL, atol=0.0, max_it=INNER_MAX_IT)
+    return [is_u, is_p, nsp, Mp], _set_inner_options(ksp, options)
 
 
 class _BorderedSystem:
@@ -458,14 +547,19 @@ class _BorderedSystem:
         self.ksp = PETSc.KSP().create(s.comm)
         self.ksp.setOptionsPrefix(f"{prefix}inner_")
         self.iterative = _use_iterative(s)
-        if self.iterative:
-            _krylov_amg(self.ksp, self.A, s)
-        else:
+        self.krylov_iterations = 0
+        self.keep: list = []  # PETSc objects of the preconditioner, destroyed with the system
+        self.option_keys: list[str] = []  # its entries in the PETSc options database, likewise
+        if not self.iterative:
             self.ksp.setType("preonly")
             pc = self.ksp.getPC()
             pc.setType("lu")
             pc.setFactorSolverType("mumps")
-        self.ksp.setFromOptions()
+            self.ksp.setFromOptions()
+        elif s.element == "TH":
+            self.keep, self.option_keys = _krylov_fieldsplit(self.ksp, s)
+        else:
+            self.option_keys = _krylov_amg(self.ksp, self.A, s)
         self.wu, self.zu = self.A.createVecs()
         self.K = [np.zeros(self.no) for _ in range(self.k)]
         self.G = [np.zeros(self.no) for _ in range(self.k)]
@@ -502,9 +596,12 @@ class _BorderedSystem:
     def solve_A(self, rhs: np.ndarray) -> np.ndarray:
         self._load(rhs)
         self.ksp.solve(self.wu, self.zu)
-        if self.iterative and self.ksp.getConvergedReason() <= 0:
+        if not self.iterative:
+            return np.array(self.zu.getArray(readonly=True))
+        self.krylov_iterations += self.ksp.getIterationNumber()
+        if self.ksp.getConvergedReason() <= 0:
             raise FEConvergenceError(
-                f"the inner Krylov solve ({self.ksp.getType()} + GAMG) did not converge",
+                f"the inner Krylov solve ({self.ksp.getType()} + {self.ksp.getPC().getType()}) did not converge",
                 reason=str(self.ksp.getConvergedReason()), residual_norm=self.ksp.getResidualNorm(),
                 iterations=self.ksp.getIterationNumber())
         return np.array(self.zu.getArray(readonly=True))
@@ -860,6 +957,7 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
         constraint_force_n=constraint_force,
         n_dofs=int(s.n_global + k),
         linear_solver="iterative" if iterative else "direct",
+        krylov_iterations=int(system.krylov_iterations),
         newton_iterations=int(iters),
         converged_reason=reason_name,
         wall_time_s=wall,
@@ -900,7 +998,7 @@ def _monitor_progress(snes: Any, system: _BorderedSystem, s: _Setup, pressure: A
 
     snes.setMonitor(newton)
     if system.iterative and s.comm.rank == 0:
-        method = f"{system.ksp.getType()}+gamg"
+        method = f"{system.ksp.getType()}+{'fieldsplit' if s.element == 'TH' else 'gamg'}"
         system.ksp.setMonitor(lambda _ksp, it, rnorm: progress.krylov(int(it), float(rnorm), method))
 
 
@@ -909,6 +1007,11 @@ def _destroy(*objs: Any) -> None:
         if isinstance(o, _BorderedSystem):
             o.ksp.destroy()
             o.A.destroy()
+            for obj in o.keep:
+                obj.destroy()
+            db = o.PETSc.Options()
+            for key in o.option_keys:
+                del db[key]
             o.wu.destroy()
             o.zu.destroy()
         elif o is not None:

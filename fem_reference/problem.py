@@ -243,6 +243,19 @@ class NitscheParameters:
             raise ValueError(f"Nitsche gamma0 must be > 0, got {self.gamma0!r}")
 
 
+#: Inner linear solves of the bordered Newton (``SolverOptions.linear_solver``, ``[fe]
+#: linear_solver``, ``edem fe --linear-solver``); docs/method.md, section 6.
+LINEAR_SOLVERS = {
+    "auto": "direct while the LU's memory estimate (x2) fits the memory available "
+            "(fem_reference.sizing.direct_fits), iterative past that",
+    "direct": "MUMPS LU of the Jacobian",
+    "iterative": "Krylov: P1/P2 GMRES (CG for Nitsche theta = 1) + GAMG with the rigid-body "
+                 "near-nullspace; Taylor-Hood GMRES + Schur-complement field split (GAMG with the "
+                 "near-nullspace on the displacement, a pressure mass matrix scaled by "
+                 "1/mu + 1/lambda on the pressure)",
+}
+
+
 @dataclass(frozen=True)
 class SolverOptions:
     """Newton (PETSc SNES) settings. Tolerances are on the residual norm (N)."""
@@ -254,10 +267,12 @@ class SolverOptions:
     force_balance_rtol: float = 1e-6  # a converged solve must balance the load to this
     petsc_options: tuple[tuple[str, str], ...] = ()  # extra SNES options (without prefix)
     monitor: bool = False  # print the Newton residuals and translations (rank 0)
-    # inner linear solve: "direct" (MUMPS LU), "iterative" (Krylov + GAMG with the rigid-body
-    # near-nullspace) or "auto" (direct while its memory estimate fits,
-    # fem_reference.sizing.direct_fits; iterative past that, never for TH)
-    linear_solver: str = "auto"
+    linear_solver: str = "auto"  # a key of LINEAR_SOLVERS: the inner linear solve
+
+    def __post_init__(self) -> None:
+        if self.linear_solver not in LINEAR_SOLVERS:
+            raise ValueError(f"linear_solver must be one of {', '.join(LINEAR_SOLVERS)}, "
+                             f"got {self.linear_solver!r}")
 
 
 @dataclass
@@ -450,7 +465,8 @@ class FEContactResult:
     method: str  # "nitsche" or "vi"
     outer_iterations: int = 0  # VI path: secant steps on the translation
     warnings: list[str] = field(default_factory=list)
-    linear_solver: str = "direct"  # the inner solve used: "direct" (LU) or "iterative" (Krylov + GAMG)
+    linear_solver: str = "direct"  # the inner solve used: "direct" or "iterative" (LINEAR_SOLVERS)
+    krylov_iterations: int = 0  # iterative path: inner Krylov iterations summed over all solves
     # free rotations (empty without them): small rotation vector of the bone about G, the moment
     # of the contact force about G and |P_rot (M_c - moment)|
     rotation_axes: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))

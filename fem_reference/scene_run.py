@@ -70,6 +70,7 @@ from fem_reference.problem import (
     FEConvergenceError,
     FEMesh,
     RigidSurface,
+    SolverOptions,
 )
 from fem_reference.progress import SolveProgress
 from fem_reference.settings import FESettings, resolve_settings
@@ -124,6 +125,8 @@ class FEStepResult:
     mean_edge_mm: float = 0.0
     layers: int = 0
     warnings: list[str] = field(default_factory=list)
+    linear_solver: str = ""  # the inner solve used: "direct" or "iterative"; "" when nothing was solved
+    krylov_iterations: int = 0  # iterative path: inner Krylov iterations over the time point's solves
 
 
 @dataclass
@@ -188,6 +191,9 @@ class FERunResult:
             "mean_edge_mm": max(float(x.mean_edge_mm) for x in steps),
             "layers_through_thickness": max(int(x.layers) for x in steps),
             "newton_iterations": int(sum(x.iterations for x in steps)),
+            # the inner solves: "direct" (LU) or "iterative" (Krylov; its iterations over all solves)
+            "linear_solver": sorted({x.linear_solver for x in steps if x.linear_solver}),
+            "krylov_iterations": int(sum(x.krylov_iterations for x in steps)),
             "max_nominal_strain": max(float(x.max_nominal_strain) for x in steps),
             "nominal_strain_definition": NOMINAL_STRAIN_DEFINITION,
             "max_principal_strain": max(float(x.max_principal_strain) for x in steps),
@@ -250,7 +256,7 @@ def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: S
         return None  # the model refuses this with its own message
     edge = mean_edge(scene.mobile.vertices_mm, scene.mobile.triangles[mask])
     cells, vertices = solid_size(int(mask.sum()), edge, thickness, settings.mesh_size_mm, settings.layers_through_thickness)
-    size = estimate(cells, vertices, settings.element)
+    size = estimate(cells, vertices, settings.element, linear_solver=settings.linear_solver)
     check_fits(size, settings.mesh_size_mm, file=scene.source, key="mesh_size_mm (--mesh-size, or [fe] in the scene)")
     return size
 
@@ -386,6 +392,7 @@ def _orthonormal_rows(cols: np.ndarray) -> np.ndarray:
 
 def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | None = None,
               degree: int | None = None, element: str | None = None,
+              linear_solver: str | None = None,
               steps: Sequence[int] | None = None, out_dir: str | Path | None = None,
               layers_through_thickness: int | None = None, comm: Any = None,
               progress: Callable[[int], None] | None = None, overwrite: bool = False,
@@ -395,7 +402,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     points and, with ``out_dir``, write the result directory (docs/result-format.md) (rank 0 only).
 
     Settings come from the arguments, then the scene's ``[fe]`` table (model, mesh_size_mm,
-    degree, element, layers_through_thickness), then the defaults (:func:`resolve_settings`).
+    degree, element, layers_through_thickness, linear_solver), then the defaults
+    (:func:`resolve_settings`).
     ``steps``: None (all) or time point indices (negative ones count from the end).
     ``progress(k)`` is called after each solved time point. ``overwrite``: replace an existing
     result directory at ``out_dir``; ``provenance`` (:func:`edem.resultdir.provenance`) is written
@@ -413,7 +421,8 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     started = time.perf_counter()
     reset_peak_memory()
     settings = resolve_settings(scene, model=model, mesh_size_mm=mesh_size_mm, degree=degree,
-                                element=element, layers_through_thickness=layers_through_thickness)
+                                element=element, layers_through_thickness=layers_through_thickness,
+                                linear_solver=linear_solver)
     n_times = len(scene.load.time_s)
     selected = _selected_steps(steps, n_times)
     try:
@@ -519,6 +528,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             initial_rotation_rad=previous["q"] * ratio if warm else None,
             initial_field=previous["ut"] * ratio if warm else None,
             strain_warning=STRAIN_WARNING,
+            solver=SolverOptions(linear_solver=settings.linear_solver),
         )
 
         if viscous is not None:
@@ -761,6 +771,7 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
         contact_area_mm2=float(res.contact_area_mm2),
         contact_area_on_mobile_mm2=float(area_on_mobile),
         iterations=int(res.newton_iterations),
+        linear_solver=res.linear_solver, krylov_iterations=int(res.krylov_iterations),
         force_residual_n=float(res.force_residual_n),
         moment_residual_nmm=float(res.moment_residual_nmm),
         n_dofs=int(res.n_dofs),

@@ -14,6 +14,7 @@ from typing import Any
 
 from edem.laws import LAWS
 from fem_reference.models import FE_MODELS
+from fem_reference.problem import LINEAR_SOLVERS
 from fem_reference.viscoelastic import DEFAULT_TIME_SCHEME, TIME_SCHEMES
 from geometries.errors import InputError
 
@@ -38,6 +39,8 @@ class FESettings:
     layers_through_thickness: int | None
     # Kelvin-Voigt scenes ([viscoelastic]): fem_reference.viscoelastic.TIME_SCHEMES
     time_scheme: str = DEFAULT_TIME_SCHEME
+    # the inner linear solve, a key of fem_reference.problem.LINEAR_SOLVERS
+    linear_solver: str = "auto"
 
     @property
     def method(self) -> str:
@@ -47,6 +50,7 @@ class FESettings:
 def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: float | None = None,
                      degree: int | None = None, element: str | None = None,
                      layers_through_thickness: int | None = None, time_scheme: str | None = None,
+                     linear_solver: str | None = None,
                      argument_keys: Mapping[str, str] | None = None) -> FESettings:
     """Arguments first, then the scene's ``[fe]`` table, then the defaults.
 
@@ -57,6 +61,8 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     mesh_size_mm: default :data:`DEFAULT_MESH_SIZE_MM` of the degree.
     time_scheme: the implicit scheme of a viscoelastic scene (:mod:`fem_reference.viscoelastic`),
     default BDF2.
+    linear_solver: the inner linear solve (:data:`fem_reference.problem.LINEAR_SOLVERS`), default
+    "auto" (direct while the LU fits in memory, Krylov past that).
     argument_keys: how errors name an argument given here (default: its parameter name).
     """
     fe = dict(scene.fe or {})
@@ -131,4 +137,9 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     if scheme not in TIME_SCHEMES:
         raise InputError(f"unknown time scheme {scheme!r}", file=file, key=scheme_key,
                          expected=" or ".join(TIME_SCHEMES) + " (the viscoelastic FE's implicit scheme)")
-    return FESettings(fe_model.name, el, el_degree, float(size), layers, scheme)
+    solver, solver_key = pick(linear_solver, "linear_solver")
+    solver = "auto" if solver is None else solver
+    if solver not in LINEAR_SOLVERS:
+        raise InputError(f"unknown linear solver {solver!r}", file=file, key=solver_key,
+                         expected="; ".join(f"{k} ({v})" for k, v in LINEAR_SOLVERS.items()))
+    return FESettings(fe_model.name, el, el_degree, float(size), layers, scheme, solver)

@@ -78,25 +78,29 @@ def direct_fits(dofs: int, available_bytes: float | None = None) -> bool:
     :data:`SAFETY` within the memory available (default: :func:`available_memory_bytes`).
 
     The inner linear solve of the bordered Newton is an LU factorisation while this holds and a
-    Krylov method with algebraic multigrid past it (``SolverOptions.linear_solver = "auto"``):
-    the LU is exact and robust on the contact problem, the Krylov path is the fallback for
-    meshes whose factor would not fit."""
+    Krylov method with algebraic multigrid (a Schur-complement field split for Taylor-Hood) past
+    it (``SolverOptions.linear_solver = "auto"``): the LU is exact and, below this size, faster;
+    the Krylov path is for meshes whose factor would not fit."""
     available = available_memory_bytes() if available_bytes is None else available_bytes
     return SAFETY * memory_bytes(dofs, "direct") <= available
 
 
-def estimate(cells: int, vertices: int, element: str, available_bytes: float | None = None) -> FESize:
-    """DOFs of the element on a tetrahedral mesh, the solver ``auto`` picks and its peak memory.
+def estimate(cells: int, vertices: int, element: str, available_bytes: float | None = None,
+             linear_solver: str = "auto") -> FESize:
+    """DOFs of the element on a tetrahedral mesh, the solver used and its peak memory.
 
     Edges of a tetrahedral mesh: about vertices + cells (Euler's formula with two faces per
     cell). P1: 3 per vertex; P2: 3 per vertex and edge; Taylor-Hood: P2 plus 1 per vertex.
-    Solver: direct while :func:`direct_fits` (with ``available_bytes``, default the memory
-    available now), iterative past that; Taylor-Hood (a saddle point) is always direct.
+    Solver (``linear_solver``, :data:`fem_reference.problem.LINEAR_SOLVERS`): "direct" or
+    "iterative" as given; "auto" is direct while :func:`direct_fits` (with ``available_bytes``,
+    default the memory available now), iterative past that (P1, P2 and Taylor-Hood alike).
     """
     edges = vertices + cells
     dofs = 3 * vertices if element == "P1" else 3 * (vertices + edges) + (vertices if element == "TH" else 0)
-    iterative = element != "TH" and not direct_fits(dofs, available_bytes)
-    solver = "iterative" if iterative else "direct"
+    if linear_solver == "auto":
+        solver = "direct" if direct_fits(dofs, available_bytes) else "iterative"
+    else:
+        solver = linear_solver
     return FESize(cells, vertices, dofs, solver, memory_bytes(dofs, solver))
 
 
@@ -161,7 +165,8 @@ def check_fits(size: FESize, mesh_size_mm: float, *, file: str | None, key: str,
             f"a x{SAFETY:g} margin) but {available / 1e9:.3g} GB are available",
             file=file,
             key=key,
-            expected=f"a mesh size whose estimate fits (e.g. {suggest_size(size, mesh_size_mm, available):.3g} mm or larger)",
+            expected=f"a mesh size whose estimate fits (e.g. {suggest_size(size, mesh_size_mm, available):.3g} mm or larger)"
+                     + (", or the Krylov solver (linear_solver auto or iterative)" if size.solver == "direct" else ""),
         )
 
 

@@ -137,21 +137,38 @@ def test_summary_is_json_ready(comm):
     assert HERTZ_BLOCK > 0
 
 
-@pytest.mark.parametrize("element, nitsche", [
-    ("P2", NitscheParameters()),
-    pytest.param("P1", NitscheParameters(theta=1.0, gamma0=10.0), marks=pytest.mark.slow),
+@pytest.mark.parametrize("element, nitsche, condition", [
+    ("P2", NitscheParameters(), 5.4e5),
+    pytest.param("P1", NitscheParameters(theta=1.0, gamma0=10.0), 1.7e4, marks=pytest.mark.slow),
 ])
-def test_krylov_amg_inner_solve_gives_the_direct_solution(comm, element, nitsche):
-    """The iterative inner solve (GMRES, or CG for the symmetric theta = 1 variant, with GAMG and
-    the rigid-body near-nullspace; used when the LU would not fit in memory, fem_reference.sizing.direct_fits) converges to
-    the LU solution: same bone displacement and peak pressure. Tolerance 1e-7 relative: Newton
-    stops at a residual of 1e-10 of the load and the inner solve at 1e-12, so the two iterates
-    agree far below it; a wrong near-nullspace or preconditioner does not converge at all."""
+def test_krylov_amg_inner_solve_gives_the_direct_solution(comm, element, nitsche, condition):
+    """The iterative inner solve (right-preconditioned GMRES, or CG for the symmetric theta = 1
+    variant, with GAMG and the rigid-body near-nullspace; used when the LU would not fit in
+    memory, fem_reference.sizing.direct_fits) converges to the LU solution: same bone
+    displacement, peak pressure and contact area.
+
+    Tolerance: both Newton runs stop at a residual of 1e-10 of their first (the inner solves are
+    exact to INNER_RTOL = 1e-10 of their right-hand side, so Newton reaches that stop), which puts
+    each within condition x 1e-10 of the discrete solution relative to its starting error (about
+    the solution's size), and the two within twice that. ``condition``: the 2-norm condition number
+    of the last Jacobian on this mesh (scipy svds, measured 5.4e5 for P2 and 1.7e4 for P1).
+
+    Iterations: at most 100 per inner solve (k + 1 = 2 solves per Newton step); measured on the
+    P2 mesh: 59 with these settings, 73 without the near-nullspace, 146 with PETSc's defaults
+    (GMRES(30), unfiltered GAMG graph, 2 smoothing steps), the setting that did not converge on
+    the 0.7 mm subject ankle."""
     hc = 0.25
     mesh = hertz_mesh(comm, hc, size_far=2.5)
     direct = solve_contact(hertz_problem(mesh, hc, element=element, nitsche=nitsche, solver=SolverOptions(linear_solver="direct")))
     krylov = solve_contact(hertz_problem(mesh, hc, element=element, nitsche=nitsche, solver=SolverOptions(linear_solver="iterative")))
+    report(f"Krylov vs LU ({element})", newton=krylov.newton_iterations, krylov=krylov.krylov_iterations,
+           per_solve=krylov.krylov_iterations / (2 * krylov.newton_iterations),
+           d_diff=krylov.bone_displacement_mm[2] / direct.bone_displacement_mm[2] - 1)
     assert (direct.linear_solver, krylov.linear_solver) == ("direct", "iterative")
+    assert (direct.krylov_iterations, 0 < krylov.krylov_iterations) == (0, True)
+    assert krylov.krylov_iterations <= 100 * 2 * krylov.newton_iterations
     assert krylov.relative_force_residual < 1e-6
-    np.testing.assert_allclose(krylov.bone_displacement_mm, direct.bone_displacement_mm, rtol=1e-7, atol=1e-12)
-    assert krylov.peak_pressure_mpa == pytest.approx(direct.peak_pressure_mpa, rel=1e-7)
+    rtol = 2.0 * condition * 1e-10
+    np.testing.assert_allclose(krylov.bone_displacement_mm, direct.bone_displacement_mm, rtol=rtol, atol=1e-12)
+    assert krylov.peak_pressure_mpa == pytest.approx(direct.peak_pressure_mpa, rel=rtol)
+    assert krylov.contact_area_mm2 == pytest.approx(direct.contact_area_mm2, rel=rtol)

@@ -111,6 +111,25 @@ def test_flat_plates_nu0_is_exact_uniaxial_strain(tmp_path):
     assert np.allclose(p, 1.0, rtol=1e-9)
     assert d == pytest.approx(1.0 * 2.0 / E, rel=1e-9)
     assert s["max_contact_area_mm2"] == pytest.approx(400.0, rel=1e-9)
+    assert (s["linear_solver"], s["krylov_iterations"]) == (["direct"], 0)
+
+
+def test_forced_krylov_path_keeps_the_uniaxial_strain_closed_form(tmp_path):
+    """`--linear-solver iterative` (docs/method.md, section 6) solves the same flat plates as the
+    LU: p = F / A at every node and d = (F / A) h / E at nu = 0. Tolerance: Newton stops at 1e-10
+    of its first residual (the inner Krylov solves are exact to INNER_RTOL = 1e-10, so it gets
+    there), within condition x 1e-10 of the discrete solution (condition number of the Jacobian
+    212 on this mesh, scipy svds), plus the discrete solution's 1e-9 of the LU test above;
+    summary.json says which solver ran and its iterations."""
+    out = tmp_path / "fe"
+    s = edem_fe(out, PLATES, "--degree", "1", "--mesh-size", "1.0", "--linear-solver", "iterative",
+                "--set", "cartilage.poissons_ratio=0.0")
+    p = frame(out).point_data["pressure_mpa"]
+    report("flat plates nu=0, Krylov", d=s["final_displacement_mm"][2], krylov=s["krylov_iterations"])
+    assert s["linear_solver"] == ["iterative"] and s["krylov_iterations"] > 0
+    rtol = 212 * 1e-10 + 1e-9
+    assert np.allclose(p, 1.0, rtol=rtol, atol=0.0)
+    assert s["final_displacement_mm"][2] == pytest.approx(1.0 * 2.0 / E, rel=rtol)
 
 
 def test_flat_plates_slab_confined_interior_and_result_directory(tmp_path):
@@ -357,6 +376,8 @@ def test_fe_refuses_per_side_layers_it_cannot_model_naming_the_key(capsys, model
     (["--set", "fe.element=P2", "--degree", "1"], "--degree"),
     (["--mesh-size", "-1"], "--mesh-size"),
     (["--set", 'fe.time_scheme="rk4"'], "fe.time_scheme"),
+    (["--linear-solver", "cholesky"], "--linear-solver"),
+    (["--set", 'fe.linear_solver="lu"'], "fe.linear_solver"),
 ])
 def test_bad_fe_input_exits_2(capsys, args, key):
     """docs/result-format.md: bad FE settings exit 2 with a message naming the key; nothing is solved."""

@@ -39,7 +39,7 @@ def _flat_plates():
 def test_dofs_per_element_and_the_direct_solver_while_its_memory_fits():
     """P1: 3 per vertex; P2: 3 per vertex and edge (edges ~ vertices + cells); TH adds a pressure
     per vertex. The LU is used while its estimate times the safety factor fits the memory
-    available, the Krylov solver past that; TH (a saddle point) keeps the LU."""
+    available, the Krylov solver past that, for every element."""
     small = estimate(1000, 300, "P1", available_bytes=24e9)
     assert small.dofs == 900 and small.solver == "direct"
     assert estimate(1000, 300, "P2").dofs == 3 * (300 + 1300)
@@ -49,7 +49,11 @@ def test_dofs_per_element_and_the_direct_solver_while_its_memory_fits():
     need = SAFETY * memory_bytes(dofs, "direct")
     assert estimate(cells, cells // 5, "P2", available_bytes=need).solver == "direct" and direct_fits(dofs, need)
     assert estimate(cells, cells // 5, "P2", available_bytes=need * 0.99).solver == "iterative" and not direct_fits(dofs, need * 0.99)
-    assert estimate(cells, cells // 5, "TH", available_bytes=need * 0.99).solver == "direct"
+    # Taylor-Hood too: past the LU's memory its Krylov path is the Schur-complement field split
+    assert estimate(cells, cells // 5, "TH", available_bytes=need * 0.99).solver == "iterative"
+    # a forced solver is estimated as such, whatever fits
+    assert estimate(cells, cells // 5, "P2", available_bytes=need * 0.99, linear_solver="direct").solver == "direct"
+    assert estimate(1000, 300, "P1", available_bytes=24e9, linear_solver="iterative").solver == "iterative"
     # memory grows faster than the DOFs for the direct solver (LU fill), linearly for Krylov
     a, b = estimate(10_000, 2_000, "P1"), estimate(80_000, 16_000, "P1")
     assert b.memory_bytes > a.memory_bytes
@@ -62,6 +66,10 @@ def test_a_solve_that_does_not_fit_is_refused_naming_size_and_memory():
     text = str(err.value)
     assert "0.01 mm" in text and "400 GB" in text and "8 GB are available" in text and "scene.toml" in text
     check_fits(size, 0.01, file=None, key="k", available_bytes=SAFETY * 4e11 + 1)  # fits: no error
+    assert "Krylov" not in text  # already the iterative solver
+    forced_lu = FESize(cells=10**6, vertices=2 * 10**5, dofs=3 * 10**6, solver="direct", memory_bytes=4e11)
+    with pytest.raises(InputError, match="Krylov solver"):  # a forced LU that does not fit names the way out
+        check_fits(forced_lu, 0.1, file="scene.toml", key="linear_solver", available_bytes=8e9)
 
 
 def test_edem_fe_with_a_tiny_mesh_size_exits_2_before_meshing(capsys):
