@@ -448,7 +448,7 @@ def _nu_series(rows: dict[str, dict[str, Any]], names: list[str]) -> list[tuple[
 
 def _why_missed(row: dict[str, Any], metric: str, error: float | None, reference: dict[str, Any]) -> str:
     """Why a card metric misses the goal, in a few words: by construction, the FE's own error
-    (at least the miss, or unknown), or the bed (the FE's error well below the miss)."""
+    (at least the miss, or unknown), or beyond that error (a model error of the bed or the law)."""
     if (row.get("verdicts") or {}).get(metric, {}).get("kind") == "by-construction":
         return ": by construction"
     from verification.fe_convergence import fe_relative_error
@@ -458,7 +458,7 @@ def _why_missed(row: dict[str, Any], metric: str, error: float | None, reference
         return ": FE error unknown"
     if error is not None and fe >= abs(error):
         return f": within the FE's own error {100 * fe:.1f} %"
-    return f": the bed (FE's own error {100 * fe:.1f} %)"
+    return f": beyond the FE's own error {100 * fe:.1f} %"
 
 
 def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -527,7 +527,7 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     if missed:
         sentences.append(f"Goal (every card metric of the default bed within {100 * goal:.0f} % of the FE, nu 0.3-0.49): not reached for " + "; ".join(missed)
                          + ". Each miss says why: set by construction (the threshold law's area), the FE's own estimated error (its mesh study, "
-                         "fe-convergence) at least as large as the miss, that error unknown, or else the bed's model error against a reference that can judge it.")
+                         "fe-convergence) at least as large as the miss, that error unknown, or beyond it: a model error (of the bed or of the law) that the reference can see.")
     elif s["beds"]:
         sentences.append(f"Goal (every card metric of the default bed within {100 * goal:.0f} % of the FE, nu 0.3-0.49): reached on every ankle compared, against this job's coarse FE.")
     layers = [(float(ok[n]["params"].get("thickness_mm")), _signed(ok[n], "regularised_peak_pressure_mpa")[2], _signed(ok[n], "mean_contact_area_mm2")[2]) for n in s["layer_cases"] if n in ok]
