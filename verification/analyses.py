@@ -43,8 +43,8 @@ import math
 import traceback
 import warnings
 from collections.abc import Callable
-from typing import Any
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
