@@ -346,3 +346,19 @@ def test_springs_are_compared_with_the_fe_measured_on_m(tmp_path):
     fe_a = write_result_dir(tmp_path / "fe-a", [row_b], [(pb, tb, face, None)], "fe-layer", {"contact_area_on_mobile_mm2": [50.0]})
     both_fe = compare_result_dirs(fe_a, b)
     assert both_fe["b_measured_on"] == "b's own surface" and both_fe["metrics"]["contact_area_rel_error"] == 0.0
+
+
+def test_field_difference_of_two_fe_runs_is_the_l2_of_their_on_m_fields(tmp_path):
+    """Two FE-layout runs on different plate meshes, b's field on M linear and a's 1.03 times it:
+    a's corner mean at its centroids and b's P1 interpolation there are both exact for a linear
+    field, so ||p_a - p_b|| / ||p_b|| = 0.03 and, the other way round, 0.03 / 1.03 (round-off of
+    sums of a few hundred terms). The face pressure (pressure_mpa) is not the field compared."""
+    from verification.fe_convergence import field_difference
+
+    pa, ta = plate_mesh(6, 10.0, 0.0)
+    pb, tb = plate_mesh(17, 10.0, 0.0)
+    row = {"time_s": 0.0, "peak_pressure_mpa": 1.0, "mean_pressure_mpa": 0.5, "contact_area_mm2": 100.0}
+    a = write_result_dir(tmp_path / "a", [row], [(pa, ta, {"pressure_mpa": np.ones(len(pa)), "pressure_on_mobile_mpa": 1.03 * linear_pressure(pa)}, None)], "fe-slab")
+    b = write_result_dir(tmp_path / "b", [row], [(pb, tb, {"pressure_mpa": np.zeros(len(pb)), "pressure_on_mobile_mpa": linear_pressure(pb)}, None)], "fe-slab")
+    assert field_difference(a, b) == pytest.approx(0.03, rel=1e-12)
+    assert field_difference(b, a) == pytest.approx(0.03 / 1.03, rel=1e-12)
