@@ -53,13 +53,15 @@ KNEE = DATA / "lenhart2015-knee"
 
 
 @pytest.mark.skipif(not KNEE.is_dir(), reason=f"public knee data not at {KNEE}")
-def test_knee_area_grows_with_load_does_not_depend_on_h_max_and_is_as_documented(tmp_path):
+def test_knee_area_grows_with_load_does_not_depend_on_h_max_and_is_as_documented(tmp_path, monkeypatch):
     pytest.importorskip("matplotlib")
     ex = example("lenhart_knee")
     doc = " ".join(ex.__doc__.split())
     for bed, areas in ex.EXPECTED_AREA_MM2.items():
         assert " / ".join(f"{a:.0f}" for a in areas) in doc, bed
-    numbers = ex.main(["--data", str(DATA), "--out", str(tmp_path)])
+    # as docs/examples/README.md runs it: from the repository, with paths relative to it
+    monkeypatch.chdir(ROOT)
+    numbers = ex.main(["--data", os.path.relpath(DATA, ROOT), "--out", os.path.relpath(tmp_path, ROOT)])
     assert (tmp_path / "pressure.png").stat().st_size > 0
     half_spring = 0.5 * numbers["largest_spring_mm2"]
     for bed, expected in ex.EXPECTED_AREA_MM2.items():

@@ -81,7 +81,7 @@ REACTION_PREFIX = "ankle_r_on_talus_r_in_tibia_r"
 
 
 def default_data() -> Path:
-    return Path(os.environ.get("EDEM_SHARED_DATA", ROOT.parent / "shared" / "data"))
+    return Path(os.environ.get("EDEM_SHARED_DATA", ROOT.parent / "shared" / "data")).resolve()
 
 
 def _analyze(osim, name: str, analysis, model: Path, data: Path, out: Path, external_loads: Path) -> None:
@@ -223,14 +223,20 @@ def plot(path: Path, stance_pct: np.ndarray, reaction_n: np.ndarray, contact_n: 
     plt.close(fig)
 
 
+def _absolute(text: str) -> Path:
+    """A command-line path made absolute: the scene files (and OpenSim's setup files) written
+    under --out resolve their paths from their own folder, not from the working directory."""
+    return Path(text).resolve()
+
+
 def main(argv: list[str] | None = None) -> dict:
     """Run the example; return the measured numbers (also written to ``OUT/numbers.json``)."""
     import edem
     from edem.resultdir import read_timeseries_csv
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=default_data(), help="the public data folder (holds opensim-gait2392/)")
-    parser.add_argument("--out", type=Path, default=ROOT / "results" / "examples" / "gait2392-ankle")
+    parser.add_argument("--data", type=_absolute, default=default_data(), help="the public data folder (holds opensim-gait2392/)")
+    parser.add_argument("--out", type=_absolute, default=ROOT / "results" / "examples" / "gait2392-ankle")
     args = parser.parse_args(argv)
     data = args.data / "opensim-gait2392"
     args.out.mkdir(parents=True, exist_ok=True)

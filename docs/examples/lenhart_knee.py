@@ -66,7 +66,7 @@ AREA_RTOL = 0.03
 
 
 def default_data() -> Path:
-    return Path(os.environ.get("EDEM_SHARED_DATA", ROOT.parent / "shared" / "data"))
+    return Path(os.environ.get("EDEM_SHARED_DATA", ROOT.parent / "shared" / "data")).resolve()
 
 
 def scene_toml(knee: Path) -> str:
@@ -128,13 +128,19 @@ def plot(path: Path, runs: dict) -> None:
     plt.close(fig)
 
 
+def _absolute(text: str) -> Path:
+    """A command-line path made absolute: the scene files (and OpenSim's setup files) written
+    under --out resolve their paths from their own folder, not from the working directory."""
+    return Path(text).resolve()
+
+
 def main(argv: list[str] | None = None) -> dict:
     """Run the example; return the measured numbers (also written to ``OUT/numbers.json``)."""
     import edem
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=default_data(), help="the public data folder (holds lenhart2015-knee/)")
-    parser.add_argument("--out", type=Path, default=ROOT / "results" / "examples" / "lenhart-knee")
+    parser.add_argument("--data", type=_absolute, default=default_data(), help="the public data folder (holds lenhart2015-knee/)")
+    parser.add_argument("--out", type=_absolute, default=ROOT / "results" / "examples" / "lenhart-knee")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     scene_file = args.out / "knee.toml"
