@@ -520,6 +520,15 @@ def _first_of_each_side_first(todo: list[Todo]) -> list[Todo]:
     return first + later
 
 
+def limit_blas_threads() -> None:
+    """One BLAS thread in this process, as edem.cli.main sets OPENBLAS_NUM_THREADS before numpy
+    loads (its comment says why: OpenBLAS threads that find their core busy spin), for a Dask
+    worker whose numpy is already loaded."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1, user_api="blas")
+
+
 def _executor_results(
     todo: list[Todo], jobs: int, scheduler: str | None
 ) -> Iterable[tuple[Case, dict[str, Any]]]:
@@ -536,6 +545,7 @@ def _executor_results(
         except (OSError, TimeoutError, ValueError) as exc:
             raise InputError(f"cannot reach the Dask scheduler: {exc}", key="--scheduler", expected="the address of a running scheduler, e.g. tcp://host:8786") from None
         with client:
+            client.run(limit_blas_threads)  # workers started by the user loaded numpy before edem could set the variable
             futures = {
                 client.submit(execute_case, case, str(case_dir), key, shared, key=f"edem-case-{case.name}-{key[:12]}", pure=False): case
                 for case, case_dir, key, shared in todo

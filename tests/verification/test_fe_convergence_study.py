@@ -221,3 +221,16 @@ def test_an_override_that_repeats_the_scene_file_names_the_same_fe_run():
     same = fe_key("subject-standing", "fe-slab", {"ligaments": [], "cartilage.poissons_ratio": 0.42}, options)
     assert same == fe_key("subject-standing", "fe-slab", {"ligaments": []}, options)
     assert same != fe_key("subject-standing", "fe-slab", {"ligaments": [], "cartilage.poissons_ratio": 0.45}, options)
+
+
+def test_every_fe_reference_of_the_judging_campaigns_is_a_mesh_level_of_the_study():
+    """Issue 24, item 1: each FE reference of quick, subject, thin-layer and cylinder-plane is one
+    of the fe-convergence campaign's FE runs (same key), so once the study has run, every such
+    comparison carries its FE's estimated error."""
+    from verification.campaigns import cylinder_plane, fe_convergence, quick, subject, thin_layer
+
+    study = fe_convergence.campaign()
+    studied = {fe_key(c.scene, c.sides[-1], c.overrides, c.options) for c in study.cases if len(c.sides) == 1}
+    missing = [case.name for module in (quick, subject, cylinder_plane, thin_layer) for case in module.campaign().cases
+               if len(case.sides) > 1 and case.sides[-1].startswith("fe-") and fe_key(case.scene, case.sides[-1], case.overrides, case.options) not in studied]
+    assert missing == []

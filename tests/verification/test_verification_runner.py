@@ -333,6 +333,33 @@ def test_dask_with_worker_processes(tmp_path):
     assert summary["computed"] == 2 and summary["exit_status"] == 0
 
 
+def test_dask_workers_run_cases_on_one_blas_thread(tmp_path, monkeypatch):
+    """A worker whose environment does not set OPENBLAS_NUM_THREADS (Dask's nanny sets it only
+    by its default pre-spawn-environ) loads numpy with one BLAS thread per core; the campaign
+    leaves it one, as edem.cli.main does for its own processes."""
+    import dask
+
+    distributed = pytest.importorskip("dask.distributed")
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):  # an earlier nanny in this process may have set them
+        monkeypatch.delenv(name, raising=False)
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": {}}):
+        with distributed.LocalCluster(n_workers=1, processes=True, threads_per_worker=1, dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+            before = client.run(_blas_threads)
+            summary = run_campaign(tiny_campaign(), tmp_path / "dask", scheduler=cluster.scheduler_address, report=False)
+            after = client.run(_blas_threads)
+    assert summary["computed"] == 2 and summary["exit_status"] == 0
+    if list(before.values()) == [1]:
+        pytest.skip("this machine's BLAS starts with one thread: nothing to limit")
+    assert list(after.values()) == [1]
+
+
+def _blas_threads() -> int:
+    import numpy  # noqa: F401  (its BLAS loaded, as a campaign's first case loads it)
+    from threadpoolctl import threadpool_info
+
+    return max((p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"), default=0)
+
+
 def test_declared_outcomes_are_checked_not_assumed(tmp_path):
     """A case that converges but was declared refused, a refusal with another message and a run
     without the declared warning each fail on outcome_mismatch."""

@@ -20,6 +20,7 @@ and the order is solved for the unequal ratios.
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +58,46 @@ CHECK = {"force_residual_rel": 1e-6}
 CHECK_BASIS = {"force_residual_rel": Basis(INVARIANT, "the FE solve balances the load to 1e-6 (fem_reference's force-balance check)")}
 
 
-def study_points() -> list[tuple[str, Case]]:
+#: the levels of a layer no thicker than this (mm): at 2.0 and 1.0 mm its mesh is the same (one
+#: element through it, M's own triangles), so the study takes 1.0 mm, 0.7 mm (triangles halved, 2
+#: elements through it) and 0.7 mm with 4 elements through it; the last step refines only through
+#: the layer, so the estimate mostly falls back to the largest difference between the meshes
+THIN_LAYER_MM = 1.0
+THIN_LAYER_LEVELS = ({"mesh_size_mm": 1.0, "degree": 2}, {"mesh_size_mm": 0.7, "degree": 2}, {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 4})
+
+
+def point_levels(source: Case) -> list[dict[str, Any]]:
+    """The three FE options of a point, coarsest first: :data:`LEVELS_MM` at P2 (Taylor-Hood
+    from nu 0.49, the FE's own choice), or :data:`THIN_LAYER_LEVELS` for a layer of at most
+    :data:`THIN_LAYER_MM`. A viscoelastic reference keeps its own element (quick's is P1 at
+    nu 0.42, where P1 does not lock): each of its levels is a whole creep history, and P2 at
+    0.7 mm would be seven solves of 10-45 min."""
+    if source.sides[-1] == "fe-layer" and _layer_thickness_mm(source) <= THIN_LAYER_MM:
+        return [dict(options) for options in THIN_LAYER_LEVELS]
+    viscoelastic = any(key.startswith("viscoelastic.") for key in source.overrides)
+    degree = int(source.options.get("degree", 2)) if viscoelastic else 2
+    return [{"mesh_size_mm": size, "degree": degree} for size in LEVELS_MM]
+
+
+def _layer_thickness_mm(case: Case) -> float:
+    from edem.scene import read_scene_toml, resolve_scene_path
+
+    if "cartilage.thickness_mm" in case.overrides:
+        return float(case.overrides["cartilage.thickness_mm"])
+    return float(read_scene_toml(resolve_scene_path(case.scene))["cartilage"]["thickness_mm"])
+
+
+def _cost_rank(case: Case) -> int:
+    """How dear a point's finest mesh is, for the order of the runs: the 2 mm layer (0.7 mm:
+    0.3M DOFs, 2-4 min), the ideal ankle (0.4M, 10-45 min), the subject-like ankle (0.53M, 14-30
+    min), the 3 mm layer (0.46M, Taylor-Hood past the LU's memory), last the 1 mm layer (its 2.0
+    and 1.0 mm meshes coincide: no estimate, docs/campaigns.md)."""
+    if case.scene != "cylinder-layer":
+        return 1 if case.scene == "ideal-standing" else 2
+    return {2.0: 0, 3.0: 3}.get(float(case.overrides.get("cartilage.thickness_mm", 2.0)), 4)
+
+
+def quick_points() -> list[tuple[str, Case]]:
     """(point name, the quick campaign's case) for every FE reference of quick's trust section:
     one per FE run (the beds of an ankle and nu share one, verification.sides.side_inputs), named
     by its independent-springs case."""
@@ -65,6 +105,43 @@ def study_points() -> list[tuple[str, Case]]:
 
     coupled_suffix = TRUST_BEDS["coupled"][0]
     return [(case.name, case) for case in trust_cases() if coupled_suffix not in case.name]
+
+
+def study_points() -> list[tuple[str, Case]]:
+    """Every point of the study: :func:`quick_points`, then :func:`reference_points`."""
+    quick = quick_points()
+    return quick + reference_points({_point_key(case) for _, case in quick})
+
+
+#: the words of a case name that name its bed or its discrete side, not its FE run
+_BED_WORDS = re.compile(r"-(coupled|two-pole|springs|dem-vs-fe|edem-vs-fe)(?=-|$)")
+
+
+def _point_key(case: Case) -> str:
+    """The FE run a point studies, whatever the mesh (its key at the 1.0 mm level)."""
+    from verification.fe_convergence import fe_key
+
+    return fe_key(case.scene, case.sides[-1], dict(case.overrides), {"mesh_size_mm": 1.0, "degree": 2})
+
+
+def reference_points(covered: set[str]) -> list[tuple[str, Case]]:
+    """(point name, case) for each FE run of the ``quick``, ``subject``, ``cylinder-plane`` and
+    ``thin-layer`` campaigns not in ``covered`` (point keys, :func:`_point_key`) whose options
+    are one of its study levels (:func:`point_levels`), named by the first case using it without
+    its bed words. A reference at other options would have no study: it stays "FE error
+    unknown" (tests/verification/test_fe_convergence_study.py checks that none is left)."""
+    from verification.campaigns import cylinder_plane, quick, subject, thin_layer
+
+    points, seen = [], set(covered)
+    for module in (quick, subject, cylinder_plane, thin_layer):
+        for case in module.campaign().cases:
+            if len(case.sides) < 2 or not case.sides[-1].startswith("fe-") or dict(case.options) not in point_levels(case):
+                continue
+            key = _point_key(case)
+            if key not in seen:
+                seen.add(key)
+                points.append((_BED_WORDS.sub("", case.name), case))
+    return points
 
 
 def _fe_case(name: str, source: Case, options: dict, what: str) -> Case:
@@ -85,13 +162,14 @@ def _fe_case(name: str, source: Case, options: dict, what: str) -> Case:
 def campaign() -> Campaign:
     cases, points = [], []
     for point, source in study_points():
-        names = []
-        for size in LEVELS_MM:
-            name = f"{point}-h{size:g}"
-            cases.append(_fe_case(name, source, {"mesh_size_mm": size, "degree": 2}, f"mesh level {size:g} mm"))
+        names, levels = [], point_levels(source)
+        for options in levels:
+            layers = options.get("layers_through_thickness")
+            name = f"{point}-h{options['mesh_size_mm']:g}" + (f"-L{layers}" if layers else "")
+            cases.append(_fe_case(name, source, options, f"mesh level {options['mesh_size_mm']:g} mm" + (f", {layers} layers" if layers else "")))
             names.append(name)
         extra = None
-        if source.options.get("degree") == 1:  # quick's own P1 reference, judged against the study's extrapolation
+        if source.options.get("degree") == 1 and dict(source.options) not in levels:  # quick's own P1 reference, judged against the study's extrapolation
             extra = f"{point}-P1-h{source.options['mesh_size_mm']:g}"
             cases.append(_fe_case(extra, source, dict(source.options), "quick's P1 reference"))
         points.append({"point": point, "levels": names, "extra": extra, "source_case": source.name, "scene": source.scene,
@@ -107,12 +185,18 @@ def campaign() -> Campaign:
     # the points item 3 of issue 24 rests on complete first, then every point's cheap meshes, then
     # the other points' finest meshes (on 2 shared cores each takes 10-40 min): a campaign cut
     # short still has whole points
+    # short still has whole points; the other campaigns' points after quick's, cheapest first,
+    # each point's three meshes together
     rank = {p: k for k, p in enumerate(PRIORITY)}
+    quick = {p for p, _ in quick_points()}
+    cost = {p: (_cost_rank(source), k) for k, (p, source) in enumerate(study_points())}
 
     def order(case: Case) -> tuple:
         point = case.name.rsplit("-h", 1)[0].removesuffix("-P1")
+        if point not in quick:
+            return (True, *cost[point], -case.options["mesh_size_mm"])
         fine = case.options["mesh_size_mm"] < 1.0
-        return (rank.get(point, len(rank)) >= 2, fine, rank.get(point, len(rank)), -case.options["mesh_size_mm"])
+        return (False, rank.get(point, len(rank)) >= 2, fine, rank.get(point, len(rank)), -case.options["mesh_size_mm"])
 
     cases.sort(key=order)
     analysis = Analysis("fe-convergence", "FE mesh convergence: observed order and Richardson error of each compared quantity, with each mesh's cost",

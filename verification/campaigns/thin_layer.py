@@ -11,17 +11,14 @@ layer, and at 333 N on both ankles; loads 333, 1000, 4190 N at nu 0.42 and 0.49 
 they share one FE run (the FE never reads the coupling: verification.runner's side store).
 
 FE (P2; Taylor-Hood from nu 0.49): the base cylinder layer (2 mm, 333 N, the nu sweep) at
-0.5 mm in-plane with two elements through the thickness given explicitly (``FE_LAYER``: the layer's
-FE mesh-convergence study, docs/campaigns.md: at 1.0 mm the layer's displacement
-and peak are not converged, and 2 layers move them by at most 0.2 % against 6-8; the default
-layer count at 0.5 mm, ceil(t / size), would double the DOFs and need ~8 GB for Taylor-Hood);
-measured 55-75 s per P2 run and 160 s per Taylor-Hood run at t = 2 mm by that study; here,
-under load 8 on the shared 2-core machine, 110-235 s (P2) and 388 s and 797 s (Taylor-Hood, nu
-0.49 and 0.499). Every other case stays at 1.0 mm (``FE_COARSE``: the default layer count there,
-ceil(t / size): 1, 2, 3 elements through the 1, 2, 3 mm layers): the finer FE on all 22 layer
-runs would have taken the campaign to an estimated 75 min with --jobs 2 at that load, past the
-45 min it may take. So the 1 and 3 mm layers and the load sweep carry the 1.0 mm FE's
-discretisation error (at 2 mm, compare their 1.0 mm errors with the base sweep's 0.5 mm ones).
+0.7 mm (``FE_LAYER``: M's triangles halved, ceil(2 / 0.7) = 3 elements through the layer), the
+finest level of the ``fe-convergence`` study, which gives each of these six runs its own
+estimated error (docs/campaigns.md; until 2026-11 this sweep used 0.5 mm with two elements
+through the layer, the same triangles and one layer fewer, whose error no study gave); 293k DOFs,
+2-3 min per P2 run at 4.4 GB by LU. Every other case stays at 1.0 mm (``FE_COARSE``: the default
+layer count there, ceil(t / size): 1, 2, 3 elements through the 1, 2, 3 mm layers), the middle
+level of the same study, which gives their errors too (the 1 mm layer's excepted: its 2.0 and
+1.0 mm meshes coincide, so it has no three-level estimate and stays "FE error unknown").
 The ankles (slab): 30 s to 4 min per run at 1.0 mm.
 Tolerances are generous (the campaign measures; it fails only when something is
 broken). The issue's goal (displacement, peak and contact area within 10 % of the FE up to nu
@@ -37,8 +34,8 @@ from typing import Any
 from verification.campaign_model import THESIS_BED, Analysis, Campaign, Case, Figure
 from verification.campaigns.cylinder_plane import ERROR_PANELS, FE_COARSE, FE_TABLE_COLUMNS, fe_comparison_case
 
-#: the FE layer of the cylinder cases: 0.5 mm in-plane, two elements through the thickness (module docstring)
-FE_LAYER = {"mesh_size_mm": 0.5, "degree": 2, "layers_through_thickness": 2}
+#: the FE layer of the base cylinder sweep: the fe-convergence study's finest level (module docstring)
+FE_LAYER = {"mesh_size_mm": 0.7, "degree": 2}
 
 #: wall time with 2 jobs on 2 cores, nothing cached (estimate from measured runs: with every FE
 #: layer at 1.0 mm it took 1421 s at load 4-7; the six base-layer runs at 0.5 mm took 1818 s of FE
@@ -99,7 +96,7 @@ def _cases() -> list[Case]:
             overrides.update({"geometry.plafond_gap_mm": thickness, "cartilage.thickness_mm": thickness})
         element = "Taylor-Hood P2-P1" if nu >= 0.49 else "P2"
         fe = FE_LAYER if (model, load, thickness) == ("layer", BASE_LOAD_N, BASE_THICKNESS_MM) else FE_COARSE
-        fe_text = f"FE {element} at {fe['mesh_size_mm']:g} mm" + (f", {fe['layers_through_thickness']} elements through the layer" if "layers_through_thickness" in fe else "")
+        fe_text = f"FE {element} at {fe['mesh_size_mm']:g} mm"
         for variant, (extra, bed, _) in VARIANTS.items():
             cases.append(
                 fe_comparison_case(
@@ -143,7 +140,7 @@ def campaign() -> Campaign:
     figures.append(Figure("error-vs-time", "Error against the DEM wall time, the coupled beds (Pade, two-pole) vs the independent springs (families: model-variant-load-thickness, points by nu); dashed: the Pareto front",
                           "error-vs-time", names, y=("pressure_l2_rel_error", "displacement_rel_error"), logx=True, logy=True))
     analyses += [Analysis(f"pareto-{m}", f"Pareto front of {m} against the DEM wall time", "pareto", names,
-                          {"metric": m, "truth": "each case against its FE run (P2, Taylor-Hood from nu 0.49; the base layer at 0.5 mm with 2 elements through it, the rest at 1.0 mm)"}) for m in ("pressure_l2_rel_error", "displacement_rel_error")]
+                          {"metric": m, "truth": "each case against its FE run (P2, Taylor-Hood from nu 0.49; the base layer at 0.7 mm, the rest at 1.0 mm)"}) for m in ("pressure_l2_rel_error", "displacement_rel_error")]
     goals = []
     for variant in COUPLED_VARIANTS:
         pairs = tuple((n, n.replace(f"-{variant}-", "-springs-", 1)) for n in names if f"-{variant}-" in n)
@@ -159,7 +156,7 @@ def campaign() -> Campaign:
     return Campaign(
         "thin-layer",
         "Coupled thin-layer bed vs independent springs vs the FE continuum (layer and slab; cylinder, ideal and subject-like ankles), sweeping Poisson's ratio 0 .. 0.499, the layer thickness 1-3 mm and the load 333-4190 N. "
-        "FE P2 (Taylor-Hood from nu 0.49): the base layer (2 mm, 333 N) at 0.5 mm with two elements through it, every other case at 1.0 mm; one FE run shared by the three variants of each point (Pade, two-pole, springs). The issue's goal is the analyses 'goal' (Pade) and 'goal-two-pole' (flagged where not met), not a failure.",
+        "FE P2 (Taylor-Hood from nu 0.49): the base layer (2 mm, 333 N) at 0.7 mm, every other case at 1.0 mm (the fe-convergence study's finest and middle levels, each with its estimated error); one FE run shared by the three variants of each point (Pade, two-pole, springs). The issue's goal is the analyses 'goal' (Pade) and 'goal-two-pole' (flagged where not met), not a failure.",
         cases,
         tuple(figures),
         (*goals, *analyses),
