@@ -773,7 +773,8 @@ class LayerCompliance:
         contact set (the two terms' fields are coupled only through springs in contact), so the
         ordering is found anew each time: one pattern holding every spring of the layer would keep
         it, but on the gap law's 30k-spring layer (the whole surface) its fill made each
-        factorisation 2x slower (217 ms against 111 ms).
+        factorisation 2x slower (217 ms against 111 ms), and one growing with the springs in
+        contact over a time point was found again at 56 of 76 factorisations (docs/method.md).
         """
         if len(self.terms) == 1:
             term = self.terms[0]
