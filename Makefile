@@ -30,6 +30,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/bench_edem.py
 	$(PY) benchmarks/bench_raycast.py
 	$(PY) benchmarks/bench_thin_layer.py
+	$(PY) benchmarks/bench_factorisations.py
 	$(PY) benchmarks/bench_step_vs_cast.py --floor
 	$(PY) benchmarks/bench_vtk_read.py
 	$(PY) benchmarks/bench_campaign_throughput.py sensitivity population-coupled

@@ -93,6 +93,11 @@ surfaces (1.1k-14k vertices). The ordering depends on the sparsity only and is f
 cell set (``OperatorPattern``); past ``MAX_BANDED_HALF_WIDTH`` the sparse LU takes over. A
 refactorisation on the same pattern keeps the factor's columns before the first one whose
 entries changed and factors only the trailing block (``OperatorPattern._banded_cholesky``).
+Fill-reducing sparse factors did not beat it on the stances' matrices (0.6k-14k vertices,
+``benchmarks/bench_factorisations.py``, docs/method.md): QDLDL's LDL^T with its ordering kept
+and only the numbers refactored took 1.2-3.6x the banded path's time, CHOLMOD through cholespy
+(no numeric-only refactorisation) 3.1-6.2x, SuperLU 2.7-4.1x. The two-pole's block matrix is
+indefinite; QDLDL factors it, each solve checked against its backward error (``indefinite_solve``).
 """
 
 from __future__ import annotations
@@ -626,6 +631,50 @@ class LowRankUpdate:
         return solve
 
 
+def indefinite_solve(matrix: sp.csc_matrix):
+    """solve(rhs (v,) or (v, k)) with a symmetric indefinite matrix (v, v): QDLDL's LDL^T, checked.
+
+    QDLDL (approximate minimum degree, then an LDL^T with its pivots on the diagonal) factored
+    and solved the two-pole's block matrices of the ankle stances in 0.55-0.77x SuperLU's time
+    (symmetric mode, threshold pivoting), with residuals at round-off (relative <= 5e-15 against
+    SuperLU's 2e-15; ``benchmarks/bench_factorisations.py``). The
+    block is not quasi-definite (the bulge term's local compliance is below its strength, so its
+    diagonal block is indefinite where springs are in contact), so no pivot order is guaranteed
+    stable; each solve is therefore checked, and past a normwise backward error of v times the
+    unit round-off (the bound of a factorisation without element growth) the matrix is factored by
+    SuperLU with threshold pivoting instead. A zero pivot (QDLDL refuses it) goes the same way.
+    """
+    import qdldl  # a core dependency, imported where the two-pole needs it
+
+    n = matrix.shape[0]
+    try:
+        ldl = qdldl.Solver(matrix)
+    except RuntimeError:  # a zero pivot
+        ldl = None
+    norm = float(np.abs(matrix).sum(axis=1).max()) if n else 0.0  # ||A||_inf
+    pivoted = []
+
+    def superlu():
+        if not pivoted:
+            try:
+                pivoted.append(splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve)
+            except RuntimeError as error:  # SuperLU's "singular matrix"
+                raise SolverError(f"the coupled thin-layer matrix is singular ({error})") from None
+        return pivoted[0]
+
+    def solve(rhs: np.ndarray) -> np.ndarray:
+        if ldl is None or pivoted:
+            return superlu()(rhs)
+        columns = rhs.reshape(n, -1)
+        x = np.column_stack([ldl.solve(b) for b in columns.T])  # QDLDL solves one vector at a time
+        backward = np.abs(matrix @ x - columns).max(axis=0) / (norm * np.abs(x).max(axis=0) + np.abs(columns).max(axis=0))
+        if not np.all(backward <= n * np.finfo(float).eps):  # also NaN
+            return superlu()(rhs)
+        return x.reshape(rhs.shape)
+
+    return solve
+
+
 @dataclass(frozen=True)
 class SmoothingTerm:
     """One term sigma Z^T H^-1 Z of the compliance (module docstring): Z = Q^T diag(weight)."""
@@ -720,20 +769,18 @@ class LayerCompliance:
 
         One term: sigma (H + sigma Z diag(x) Z^T), SPD (module docstring), by the pattern's
         banded Cholesky. Two: the block matrix is symmetric but indefinite (its blocks' signs
-        differ), so SuperLU factors it in its symmetric mode (minimum degree on A + A^T, the
-        diagonal pivot kept unless below a tenth of the column's largest entry): on the 30k-spring
-        ankle 0.6 s against 0.75 s for column approximate minimum degree, with 38 % less fill and
-        the same residual (benchmarks/bench_thin_layer.py).
+        differ), factored by QDLDL's LDL^T, checked (``indefinite_solve``). Its pattern follows the
+        contact set (the two terms' fields are coupled only through springs in contact), so the
+        ordering is found anew each time: one pattern holding every spring of the layer would keep
+        it, but on the gap law's 30k-spring layer (the whole surface) its fill made each
+        factorisation 2x slower (217 ms against 111 ms), and one growing with the springs in
+        contact over a time point was found again at 56 of 76 factorisations (docs/method.md).
         """
         if len(self.terms) == 1:
             term = self.terms[0]
             solve = term.pattern.factorise(term.coupled_data(spring_weight))
             return solve if term.sigma > 0 else (lambda rhs: -solve(rhs))
-        block = self._signed_block + self.z @ (self.z_t.multiply(spring_weight[:, None])).tocsc()
-        try:
-            return splu(block.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve
-        except RuntimeError as error:  # SuperLU's "singular matrix"
-            raise SolverError(f"the coupled thin-layer matrix is singular ({error})") from None
+        return indefinite_solve((self._signed_block + self.z @ (self.z_t.multiply(spring_weight[:, None])).tocsc()).tocsc())
 
     def deflection(self, force_n: np.ndarray) -> np.ndarray:
         """Surface deflection w (m,) in mm under spring forces f (m,) in N."""

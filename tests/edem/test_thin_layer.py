@@ -331,6 +331,47 @@ def test_two_term_factor_solves_the_indefinite_block_to_round_off():
     np.testing.assert_allclose(w[active], d[active], rtol=0.0, atol=1e-10 * d.max())
 
 
+def test_two_pole_block_ldlt_agrees_with_pivoted_lu_within_its_condition(monkeypatch):
+    """The two-pole's indefinite block, factored by QDLDL's LDL^T without SuperLU, solves to the
+    same x as SuperLU's pivoted LU: both are accepted at a normwise backward error of at most
+    V eps, so each is within cond(A) V eps of the exact solution (the forward-error bound of a
+    backward-stable solve) and they differ by at most twice that."""
+    import edem.thin_layer as thin_layer
+    from scipy.sparse.linalg import splu
+
+    plate = grid_plate(10.0, 10.0, 12)
+    mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
+    cells = np.arange(plate.n_triangles)
+    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol="two-pole")
+    rng = np.random.default_rng(7)
+    weight = np.where(rng.uniform(size=cells.size) < 0.5, 1.0 / layer.local_mm_per_n, 0.0)
+    matrix = (sp.block_diag([t.sigma * t.h for t in layer.terms]) + layer.z @ sp.diags(weight) @ layer.z.T).tocsc()
+    pivoted = []
+    monkeypatch.setattr(thin_layer, "splu", lambda *a, **k: pivoted.append(1) or splu(*a, **k))
+    rhs = rng.standard_normal((matrix.shape[0], 3))
+    x = layer.factorise_coupled(weight)(rhs)
+    assert not pivoted  # the LDL^T's own solve was accepted
+    reference = splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve(rhs)
+    bound = 2.0 * np.linalg.cond(matrix.toarray(), np.inf) * matrix.shape[0] * np.finfo(float).eps
+    assert np.abs(x - reference).max() <= bound * np.abs(reference).max()
+
+
+def test_indefinite_solve_pivots_where_diagonal_pivots_would_grow():
+    """The 4 x 4 tridiagonal matrix with ones beside a diagonal d = 1e-12 is well conditioned
+    (cond_inf = 4) but every diagonal pivot order starts on d, so an LDL^T without pivoting grows
+    by 1/d (QDLDL's own answer is off by 3e-5); the checked solve sees the backward error and
+    solves by SuperLU's pivoted LU instead: within cond(A) n eps of numpy's dense LU, twice over
+    (both backward stable)."""
+    from edem.thin_layer import indefinite_solve
+
+    n, d = 4, 1e-12
+    dense = np.diag(np.full(n, d)) + np.diag(np.ones(n - 1), 1) + np.diag(np.ones(n - 1), -1)
+    rhs = np.array([1.0, -2.0, 3.0, -4.0])
+    x = indefinite_solve(sp.csc_matrix(dense))(rhs)
+    exact = np.linalg.solve(dense, rhs)
+    assert np.abs(x - exact).max() <= 2.0 * np.linalg.cond(dense, np.inf) * n * np.finfo(float).eps * np.abs(exact).max()
+
+
 @pytest.mark.parametrize("symbol", ["pade", "two-pole"])
 def test_a_few_changed_springs_reuse_the_factor_and_still_solve_to_round_off(symbol, monkeypatch):
     """The active-set iteration's next matrix differs in a few springs' weights: the kept factor,
