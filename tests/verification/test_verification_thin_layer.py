@@ -93,4 +93,4 @@ def test_coupled_layer_beats_the_springs_against_the_fe_at_nu_049(tmp_path):
     metrics = json.loads((tmp_path / "metrics.json").read_text())
     rows = {c["name"]: c["metrics"] for c in metrics["cases"]}
     for metric in ("displacement_rel_error", "peak_pressure_rel_error", "pressure_l2_rel_error"):
-        assert rows[names[0]][metric] < rows[names[1]][metric]
+        assert abs(rows[names[0]][metric]) < abs(rows[names[1]][metric])  # errors keep their sign: compare their sizes
