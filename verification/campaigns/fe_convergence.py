@@ -130,11 +130,14 @@ def reference_points(covered: set[str]) -> list[tuple[str, Case]]:
     are one of its study levels (:func:`point_levels`), named by the first case using it without
     its bed words. A reference at other options would have no study: it stays "FE error
     unknown" (tests/verification/test_fe_convergence_study.py checks that none is left)."""
-    from verification.campaigns import cylinder_plane, quick, subject, thin_layer
+    from verification.campaigns.cylinder_plane import campaign as cylinder_plane
+    from verification.campaigns.quick import campaign as quick
+    from verification.campaigns.subject import campaign as subject
+    from verification.campaigns.thin_layer import campaign as thin_layer
 
     points, seen = [], set(covered)
-    for module in (quick, subject, cylinder_plane, thin_layer):
-        for case in module.campaign().cases:
+    for campaign_of in (quick, subject, cylinder_plane, thin_layer):
+        for case in campaign_of().cases:
             if len(case.sides) < 2 or not case.sides[-1].startswith("fe-") or dict(case.options) not in point_levels(case):
                 continue
             key = _point_key(case)
