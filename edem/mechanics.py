@@ -20,6 +20,7 @@ and ends with the KKT check of docs/method.md#1-two-rigid-bones-and-a-bed-of-spr
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -155,6 +156,21 @@ def _free_mask(fixed_dofs: tuple[str, ...]) -> np.ndarray:
     return free
 
 
+@functools.lru_cache(maxsize=16)
+def _dof_frame(fixed_dofs: tuple[str, ...], length_scale_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(free (6,) bool, free DOF indices (p,), to_newton (6,), to_newton (p,), dof_scale (p,)) of a
+    solve, read-only: the same for every time point of a run, so built once (a handful of small
+    arrays, whose construction costs more than a solve's arithmetic at a few thousand springs)."""
+    free = _free_mask(fixed_dofs)
+    dofs = np.flatnonzero(free)
+    to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)  # moments in N
+    dof_scale = np.array([1.0, 1.0, 1.0] + [length_scale_mm] * 3)[dofs]
+    frame = (free, dofs, to_newton, to_newton[dofs], dof_scale)
+    for array in frame:
+        array.flags.writeable = False
+    return frame
+
+
 def singular_stiffness_error(missing: list[str]) -> SolverError:
     """The refusal for DOFs that no element resists, with the ways to restrain them."""
     return SolverError(
@@ -263,18 +279,15 @@ def solve_unilateral(
     is unrestrained (singular stiffness), naming the DOFs.
     """
     m = directions.shape[0]
-    free = _free_mask(fixed_dofs)
+    free, dofs, to_newton, to_newton_f, dof_scale = _dof_frame(tuple(fixed_dofs), float(length_scale_mm))
     load = np.where(free, np.asarray(load, float), 0.0)
-    to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)  # moments in N
     n_shear = 0 if shear is None else shear.normals.shape[0]
     # The iteration runs on the free DOFs only (u is zero on the fixed ones): the rows g_j
     # restricted to them, stored as p <= 6 contiguous columns (p, m), so every product over the
     # elements is p / 6 of the full one and runs along contiguous columns. The products are
     # einsums, not BLAS calls, which OpenBLAS would spread over threads (see edem.rowwise).
-    dofs = np.flatnonzero(free)
     cols = np.ascontiguousarray(directions[:, dofs].T)
-    load_f, to_newton_f = load[dofs], to_newton[dofs]
-    dof_scale = np.array([1.0, 1.0, 1.0] + [length_scale_mm] * 3)[dofs]
+    load_f = load[dofs]
 
     def full(u_f: np.ndarray) -> np.ndarray:
         u = np.zeros(6)

@@ -24,7 +24,8 @@ import numpy as np
 
 from edem.errors import SolverError
 from edem.mechanics import DOF_NAMES, balanceable, generalised_directions, unrestrained_dofs
-from edem.springs import Placement, ligament_elements, spring_geometry
+from edem.rowwise import row_dot
+from edem.springs import Placement, SpringGeometry, ligament_elements, spring_geometry
 from geometries.surface import TriangleSurface
 from geometries.triangle_kernels import closest_distance_mm
 
@@ -139,7 +140,7 @@ def gap_curvature_radius_mm(length_mm: np.ndarray, centroid_mm: np.ndarray, norm
         return None
     closest = hit[np.argmin(length_mm[hit])]
     offset = centroid_mm[hit] - centroid_mm[closest]
-    across = (offset**2).sum(axis=1) - (offset @ normal[closest]) ** 2
+    across = row_dot(offset, offset) - (offset @ normal[closest]) ** 2
     rise = length_mm[hit] - length_mm[closest]
     reach = max(float(np.sort(across)[min(CURVATURE_FIT_SPRINGS, hit.size - 1)]), fit_radius_mm**2)
     use = (across > 0) & (across <= reach)
@@ -147,6 +148,17 @@ def gap_curvature_radius_mm(length_mm: np.ndarray, centroid_mm: np.ndarray, norm
         return None
     slope = float((across[use] * rise[use]).sum() / (across[use] ** 2).sum())  # rise = slope r^2
     return 0.5 / slope if slope > 0 else None
+
+
+def _median_edge_mm(vertices_mm: np.ndarray, triangles: np.ndarray) -> float:
+    """Median length (mm) of the edges of ``triangles`` (k, 3), each triangle's three counted.
+
+    Corner by corner, as rows of points: a norm over a last axis of 3 runs several times slower
+    (:mod:`edem.rowwise`); the squares sum in the same order, so the lengths are the same numbers.
+    """
+    corners = [np.take(vertices_mm, triangles[:, j], axis=0) for j in range(3)]
+    edges = [corners[j] - corners[j - 1] for j in range(3)]
+    return float(np.median(np.sqrt(np.concatenate([row_dot(e, e) for e in edges]))))
 
 
 def _rows(centroid_mm: np.ndarray, normal: np.ndarray, area_mm2: np.ndarray, reference_mm: np.ndarray, shear: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -188,6 +200,7 @@ def preflight(
     fixed_pose: Callable[[int], Placement],
     caster: RayCaster,
     rays: Rays,
+    first_geometry: SpringGeometry | None = None,
 ) -> Preflight:
     """Measure what the springs see at the first loaded time point, and refuse what cannot be solved.
 
@@ -201,6 +214,9 @@ def preflight(
         Time point index -> F's placement.
     caster, rays : RayCaster, Rays
         The fixed body's ray caster and M's springs prepared for it (as the solver uses them).
+    first_geometry : SpringGeometry, optional
+        M's springs already measured at its initial pose against F at time point 0 (the solver's
+        first step): used, not measured again, when time point 0 is the one checked.
 
     Returns
     -------
@@ -236,7 +252,10 @@ def preflight(
     # M's reference frame: F's vertices placed there (M is at its initial pose).
     placed = TriangleSurface(f_pose.points(scene.fixed.vertices_mm), scene.fixed.triangles)
     closest = _closest_distance_of(scene.mobile.vertices_mm, scene.mobile.triangles, placed.vertices_mm, placed.triangles)
-    in_window = spring_geometry(centroid, normal, area, mobile_pose, caster, f_pose, cartilage, rays)
+    if k == 0 and first_geometry is not None:
+        in_window = first_geometry
+    else:
+        in_window = spring_geometry(centroid, normal, area, mobile_pose, caster, f_pose, cartilage, rays)
     # Rays across the whole scene ahead of the springs (from -h_max, as the window, to the far
     # side of both bodies): the gap field, and the springs that face F at any distance. The
     # caster's window is symmetric: the rays start half the span ahead, and their lengths are
@@ -250,8 +269,7 @@ def preflight(
     facing = np.isfinite(length)
     sizes = area[facing] if facing.any() else area
     tri = scene.mobile.triangles[scene.spring_triangle[facing] if facing.any() else scene.spring_triangle]
-    v = scene.mobile.vertices_mm
-    median_edge = float(np.median(np.linalg.norm(v[tri] - v[np.roll(tri, 1, axis=1)], axis=2)))
+    median_edge = _median_edge_mm(scene.mobile.vertices_mm, tri)
     spring_size = math.sqrt(float(np.median(sizes)))
 
     load_n = float(np.linalg.norm(loads[k, :3]))

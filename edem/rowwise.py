@@ -42,6 +42,9 @@ def rows_times(rows: np.ndarray, matrix: np.ndarray, out: np.ndarray | None = No
 
 # Rows viewed at once by add_rows: the inner loop then runs over 3 x this many numbers.
 _ROWS_PER_BLOCK = 256
+# Repeats a (3,) vector along a block of rows by one gather (np.tile's Python layers cost several
+# times that at every call).
+_BLOCK_REPEAT = np.tile(np.arange(3), _ROWS_PER_BLOCK)
 
 
 def add_rows(rows: np.ndarray, vector: np.ndarray) -> np.ndarray:
@@ -58,13 +61,13 @@ def min_rows(rows: np.ndarray, vector: np.ndarray, out: np.ndarray | None = None
 
 def _with_each_row(ufunc: np.ufunc, rows: np.ndarray, vector: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """``ufunc(rows, vector)`` with the (3,) vector repeated along blocks of _ROWS_PER_BLOCK rows."""
-    if out is None and rows.shape[0] < _ROWS_PER_BLOCK:  # (a few points: no block to form)
-        return ufunc(rows, vector)
+    if rows.shape[0] < _ROWS_PER_BLOCK:  # (a few points: no block to form)
+        return ufunc(rows, vector, out=out)
     rows = np.ascontiguousarray(rows)
     if out is None:
         out = np.empty_like(rows, dtype=np.result_type(rows, vector))
     whole = rows.shape[0] - rows.shape[0] % _ROWS_PER_BLOCK
     width = rows.shape[1] * _ROWS_PER_BLOCK
-    ufunc(rows[:whole].reshape(-1, width), np.tile(vector, _ROWS_PER_BLOCK), out=out[:whole].reshape(-1, width))
+    ufunc(rows[:whole].reshape(-1, width), np.take(vector, _BLOCK_REPEAT), out=out[:whole].reshape(-1, width))
     ufunc(rows[whole:], vector, out=out[whole:])
     return out

@@ -117,14 +117,17 @@ def run(
     ligaments = ligament_table(scene.ligaments)
     reference_rows = generalised_directions(spring_centroid, spring_normal, g0)
     rays = caster.prepare(spring_centroid, spring_normal)  # checked once, cast at every time point
-    report = preflight(scene, loads, scene.fixed_placement, caster, rays)
+    # M's springs at its initial pose at time point 0: the first step's geometry, which the
+    # pre-flight also checks when the load starts at time point 0 (measured once for both).
+    first_geometry = spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, scene.fixed_placement(0), cartilage, rays)
+    report = preflight(scene, loads, scene.fixed_placement, caster, rays, first_geometry)
     seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
         clock = time.perf_counter()
         if method == "dem":
             pose, stored = Placement.identity(g0), np.zeros((3, n_springs))
         f_pose = scene.fixed_placement(k)
-        geometry = spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, f_pose, cartilage, rays)
+        geometry = first_geometry if k == 0 else spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, f_pose, cartilage, rays)
         seconds["geometry"] += time.perf_counter() - clock
         clock = time.perf_counter()
         n_c = int(geometry.candidate_index.size)
@@ -150,7 +153,7 @@ def run(
         directions = turn_rows(np.take(reference_rows, cand_idx, axis=0), pose.rotation, len(lig_rows))
         directions[n_c:] = lig_rows
         normals = directions[:n_c, :3]
-        area_c = spring_area[cand_idx]
+        area_c = geometry.candidate_area_mm2
         stored_c = np.take(stored, cand_idx, axis=1).T
         stored_normal = row_dot(stored_c, normals)
         # (the tangential part of the stored forces only matters, and is only formed, with shear)

@@ -112,6 +112,11 @@ class SpringGeometry:
         """(c,) signed ray lengths of the candidates."""
         return np.take(self.spring_length_mm, self.candidate_index)
 
+    @cached_property
+    def candidate_area_mm2(self) -> np.ndarray:
+        """(c,) areas of the candidates (the law, the shear springs and the pressures share them)."""
+        return np.take(self.area_mm2, self.candidate_index)
+
     def candidate_thickness_mm(self, cartilage: Cartilage) -> np.ndarray | float | None:
         """The undeformed thickness the law takes: (c,) per candidate with measured thickness,
         else the cartilage's ``thickness_mm``."""
@@ -169,7 +174,7 @@ def contact_law(
     and 3.19). ``stored_normal_force_n`` is the EDEM push-back per candidate spring (zero for DEM).
     """
     return cartilage.spring_law.elements(
-        np.take(geometry.area_mm2, geometry.candidate_index), geometry.candidate_length_mm, cartilage.confined_modulus_mpa,
+        geometry.candidate_area_mm2, geometry.candidate_length_mm, cartilage.confined_modulus_mpa,
         geometry.candidate_thickness_mm(cartilage), stored_normal_force_n,
     )
 
@@ -191,7 +196,7 @@ def shear_terms(
     return ShearTerms(
         arm_mm=geometry.candidate_centroid_mm - reference_point_mm,
         normals=geometry.mobile.vectors(np.take(geometry.reference_normal, sel, axis=0)),
-        stiffness_n_per_mm=np.take(geometry.area_mm2, sel) * cartilage.shear_modulus_mpa / h,
+        stiffness_n_per_mm=geometry.candidate_area_mm2 * cartilage.shear_modulus_mpa / h,
         stored_force_n=stored_tangential_force_n,
     )
 
