@@ -24,7 +24,7 @@ import numpy as np
 
 from edem.errors import SolverError
 from edem.mechanics import DOF_NAMES, balanceable, generalised_directions, unrestrained_dofs
-from edem.rowwise import row_dot
+from edem.rowwise import add_rows, row_dot
 from edem.springs import Placement, SpringGeometry, ligament_elements, spring_geometry
 from geometries.surface import TriangleSurface
 from geometries.triangle_kernels import closest_distance_mm
@@ -139,10 +139,11 @@ def gap_curvature_radius_mm(length_mm: np.ndarray, centroid_mm: np.ndarray, norm
     if hit.size < 3:
         return None
     closest = hit[np.argmin(length_mm[hit])]
-    offset = centroid_mm[hit] - centroid_mm[closest]
+    offset = add_rows(np.take(centroid_mm, hit, axis=0), -centroid_mm[closest])
     across = row_dot(offset, offset) - (offset @ normal[closest]) ** 2
     rise = length_mm[hit] - length_mm[closest]
-    reach = max(float(np.sort(across)[min(CURVATURE_FIT_SPRINGS, hit.size - 1)]), fit_radius_mm**2)
+    nearest = min(CURVATURE_FIT_SPRINGS, hit.size - 1)
+    reach = max(float(np.partition(across, nearest)[nearest]), fit_radius_mm**2)
     use = (across > 0) & (across <= reach)
     if use.sum() < 2:
         return None
@@ -260,8 +261,9 @@ def preflight(
     # side of both bodies): the gap field, and the springs that face F at any distance. The
     # caster's window is symmetric: the rays start half the span ahead, and their lengths are
     # measured back from the springs.
-    corners = np.vstack([scene.mobile.vertices_mm, placed.vertices_mm])
-    half = 0.5 * (cartilage.max_spring_length_mm + float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0))))
+    corners = (scene.mobile.vertices_mm, placed.vertices_mm)
+    diagonal = np.maximum(*(c.max(axis=0) for c in corners)) - np.minimum(*(c.min(axis=0) for c in corners))
+    half = 0.5 * (cartilage.max_spring_length_mm + float(np.linalg.norm(diagonal)))
     ahead = half - cartilage.max_spring_length_mm
     shifted = caster.prepare(centroid + ahead * normal, normal)
     wide = spring_geometry(centroid, normal, area, mobile_pose, caster, f_pose, replace(cartilage, max_spring_length_mm=half), shifted)
@@ -316,7 +318,8 @@ def _refuse_out_of_reach(
     centroid, normal, area = scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2
     shear = scene.cartilage.shear_modulus_mpa > 0
     lig_rows, lig_law, _ = ligament_elements(scene.ligaments, Placement.identity(g0), f_pose, g0)
-    length_scale = float(np.sqrt(((centroid - g0) ** 2).sum(axis=1).mean()))
+    arm = add_rows(centroid, -g0)
+    length_scale = float(np.sqrt(row_dot(arm, arm).mean()))
 
     def shortfall(springs: np.ndarray) -> str | None:
         rows, weights = _rows(centroid[springs], normal[springs], area[springs], g0, shear)

@@ -17,7 +17,7 @@ from edem.plausibility import emit, merge_repeated
 from edem.preflight import patch_resolution_warning, preflight
 from edem.raycast import RayCaster
 from edem.results import RunResult, StepResult
-from edem.rowwise import row_dot
+from edem.rowwise import add_rows, row_dot
 from edem.scene import Scene
 from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, ligament_table, shear_terms, spring_geometry
 from edem.viscoelastic import check_rk2_stability, integrator_weights
@@ -93,7 +93,8 @@ def run(
     g0 = scene.reference_point_mm
     n_springs = scene.spring_area_mm2.shape[0]
     spring_centroid, spring_normal, spring_area = scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2
-    arm_squared = ((spring_centroid - g0) ** 2).sum(axis=1)
+    arm = add_rows(spring_centroid, -g0)
+    arm_squared = row_dot(arm, arm)
     length_scale = float(np.sqrt(arm_squared.mean()))
     # Distance of the furthest spring from G: no rigid motion of M changes it (check_increment's bound).
     arm_bound = float(np.sqrt(arm_squared.max(initial=0.0)))
