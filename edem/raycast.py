@@ -461,49 +461,49 @@ class RayCaster:
         # The padding keeps float32 round-off at both ends from hiding a hit inside the window;
         # hits in the padding are filtered out in float64 below.
         seg_start = np.full(n, -h - step)
-        active = np.arange(n)
+        active: np.ndarray | None = None  # the rays still searched; None: all (the first round)
         missed: list[np.ndarray] = []
         hard: list[np.ndarray] = []
 
         for _ in range(_MAX_ROUNDS):
-            if not active.size:
-                break
             # Traverse past the window end (up to the far side of F): a ray whose nearest hit
             # lies beyond the window is then a plain 'no spring', not a miss worth a repair probe.
-            if active.size == n:  # first round: every ray, one common start (a scalar), no gather
+            if active is None:  # first round: every ray, one common start (a scalar), no gather
                 o, d, s0 = origins, dirs, seg_start
                 start = -h - step
                 start_points = d * start
                 start_points += o
                 ray = self._embree_run(start_points, d, np.full(n, (h + self._reach_mm) - start, np.float32))
                 window_end = (h + step) - start
+            elif not active.size:
+                break
             else:
                 o, d, s0 = origins[active], dirs[active], seg_start[active]
                 ray = self._embree_run(o + s0[:, None] * d, d, (h + self._reach_mm) - s0)
                 window_end = (h + step) - s0
             prim = ray["primID"]
             none = prim < 0
-            missed.append(active[none])
+            missed.append(np.flatnonzero(none) if active is None else active[none])
             # A nearest float32 hit beyond the window (and its padding) ends the search: no spring.
             found = ray["tfar"] <= window_end
             found &= ~none
             if found.all():  # e.g. every spring facing F: no gather
-                idx, k, u32, v32 = active, prim.astype(np.int64), ray["u"], ray["v"]
+                idx, k, u32, v32 = np.arange(n) if active is None else active, prim.astype(np.int64), ray["u"], ray["v"]
             else:
                 # Integer row gathers by np.take: a boolean mask (or []) over (n, 3) rows is
                 # several times slower.
                 rows = np.flatnonzero(found)
-                idx, k, s0 = active[rows], np.take(prim, rows).astype(np.int64), s0[rows]
+                idx, k, s0 = rows if active is None else active[rows], np.take(prim, rows).astype(np.int64), s0[rows]
                 o, d = np.take(o, rows, axis=0), np.take(d, rows, axis=0)
                 u32, v32 = np.take(ray["u"], rows), np.take(ray["v"], rows)
-            t, u, v, det, edge = self._remeasure(o, d, k, u32, v32)
+            t, det, edge, u_edge, v_edge = self._remeasure(o, d, k, u32, v32)
             # Embree's float32 answer is only trusted where float64 puts the ray on its triangle;
             # a ray that lands at (or, in float64, just past) an edge or vertex of it is re-solved
             # exactly among the triangles around that triangle: a float32 tie is always between
             # neighbours, so this stays local (never a pass over all of F).
             # Only the rows the re-measure tested in full can be off their triangle (the others
             # are inside by more than float32 round-off); nan barycentrics, det == 0, are too.
-            fix = edge[~_inside(u[edge], v[edge], _REFERENCE_SLACK)]
+            fix = edge[~_inside(u_edge, v_edge, _REFERENCE_SLACK)]
             lost = fix[:0]
             if fix.size:
                 far = np.full(fix.size, h + self._reach_mm)
@@ -559,13 +559,13 @@ class RayCaster:
     def _remeasure(
         self, o: np.ndarray, d: np.ndarray, k: np.ndarray, u32: np.ndarray, v32: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(t, u, v, det, edge) in float64 of rays o + t d on Embree's triangles k (see _moller_trumbore).
+        """(t, det, edge, u, v) in float64 of rays o + t d on Embree's triangles k (see _moller_trumbore).
 
         Where Embree's float32 barycentrics put the hit well inside the triangle (further from every
         edge than float32 round-off can move it) the triangle is certainly right and only the
-        plane distance is recomputed in float64 (signed length directly from the true origin);
-        Embree's u, v are returned for those rows. The other rows, ``edge`` (ascending), get a full
-        Moller-Trumbore test.
+        plane distance is recomputed in float64 (signed length directly from the true origin).
+        The other rows, ``edge`` (ascending), get a full Moller-Trumbore test: u, v are theirs
+        (``edge``'s rows only).
         """
         rows = np.take(self._plane_rows, k, axis=0)  # take: far cheaper than [] for row gathers
         normal = rows[:, :3]
@@ -573,16 +573,20 @@ class RayCaster:
         with np.errstate(divide="ignore", invalid="ignore"):
             t = (rows[:, 3] - row_dot(normal, o)) / along
         det = -along
-        u, v = u32.astype(np.float64), v32.astype(np.float64)
-        margin = np.minimum(np.minimum(u, v), 1.0 - u - v)
+        # Distance from the nearest edge in float64 without converting u and v: the float32 min(u, v)
+        # is exact, 1 - u - v is formed in float64 (each float32 term converted exactly).
+        third = np.subtract(1.0, u32, dtype=np.float64)
+        third -= v32
+        margin = np.minimum(np.minimum(u32, v32), third)
         edge = np.flatnonzero(~(margin > rows[:, 4]))
+        u = v = third[:0]
         if edge.size:
             ke = k[edge]
-            t[edge], u[edge], v[edge], det[edge] = _moller_trumbore(
+            t[edge], u, v, det[edge] = _moller_trumbore(
                 o[edge], d[edge], self._v0[ke], self._edge1[ke], self._edge2[ke]
             )
         self.pairs_tested += k.size
-        return t, u, v, det, edge
+        return t, det, edge, u, v
 
     def _repair_misses(
         self,
