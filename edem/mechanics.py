@@ -406,7 +406,7 @@ def solve_unilateral(
             active = new_active
             break
         seen.add(signature)
-        if not np.any(new_active):
+        if not new_active.any():
             raise SolverError(
                 "no equilibrium: no spring stays in compression under this load, so the load pulls "
                 "the bodies apart"

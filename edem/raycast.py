@@ -483,7 +483,7 @@ class RayCaster:
                 window_end = (h + step) - s0
             prim = ray["primID"]
             none = prim < 0
-            missed.append(np.flatnonzero(none) if active is None else active[none])
+            missed.append(none.nonzero()[0] if active is None else active[none])
             # A nearest float32 hit beyond the window (and its padding) ends the search: no spring.
             found = ray["tfar"] <= window_end
             found &= ~none
@@ -492,10 +492,10 @@ class RayCaster:
             else:
                 # Integer row gathers by np.take: a boolean mask (or []) over (n, 3) rows is
                 # several times slower.
-                rows = np.flatnonzero(found)
-                idx, k, s0 = rows if active is None else active[rows], np.take(prim, rows).astype(np.int64), s0[rows]
-                o, d = np.take(o, rows, axis=0), np.take(d, rows, axis=0)
-                u32, v32 = np.take(ray["u"], rows), np.take(ray["v"], rows)
+                rows = found.nonzero()[0]
+                idx, k, s0 = rows if active is None else active[rows], prim.take(rows).astype(np.int64), s0[rows]
+                o, d = o.take(rows, axis=0), d.take(rows, axis=0)
+                u32, v32 = ray["u"].take(rows), ray["v"].take(rows)
             t, det, edge, u_edge, v_edge = self._remeasure(o, d, k, u32, v32)
             # Embree's float32 answer is only trusted where float64 puts the ray on its triangle;
             # a ray that lands at (or, in float64, just past) an edge or vertex of it is re-solved
@@ -567,7 +567,7 @@ class RayCaster:
         The other rows, ``edge`` (ascending), get a full Moller-Trumbore test: u, v are theirs
         (``edge``'s rows only).
         """
-        rows = np.take(self._plane_rows, k, axis=0)  # take: far cheaper than [] for row gathers
+        rows = self._plane_rows.take(k, axis=0)  # take: far cheaper than [] for row gathers
         normal = rows[:, :3]
         along = row_dot(normal, d)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -578,7 +578,7 @@ class RayCaster:
         third = np.subtract(1.0, u32, dtype=np.float64)
         third -= v32
         margin = np.minimum(np.minimum(u32, v32), third)
-        edge = np.flatnonzero(~(margin > rows[:, 4]))
+        edge = (~(margin > rows[:, 4])).nonzero()[0]
         u = v = third[:0]
         if edge.size:
             ke = k[edge]
@@ -611,20 +611,20 @@ class RayCaster:
         near_f = self._may_meet_surface(origins, dirs, missed, s0, h + self._step_mm)
         if not near_f.any():
             return
-        keep = np.flatnonzero(near_f)
+        keep = near_f.nonzero()[0]
         missed, s0 = missed[keep], s0[keep]
-        o, d = np.take(origins, missed, axis=0), np.take(dirs, missed, axis=0)
+        o, d = origins.take(missed, axis=0), dirs.take(missed, axis=0)
         # A sideways direction that never lines up with a mesh's axes or diagonals.
         side = cross_rows(d, np.array([0.5377, 0.8326, 0.1329]))
         size = row_dot(side, side)
-        small = np.flatnonzero(size < 0.09)  # d nearly along that direction: another one
+        small = (size < 0.09).nonzero()[0]  # d nearly along that direction: another one
         if small.size:
             side[small] = cross_rows(d[small], np.array([0.1329, -0.5377, 0.8326]))
             size[small] = row_dot(side[small], side[small])
         side /= np.sqrt(size)[:, None]
         probe = o + s0[:, None] * d + self._probe_shift_mm * side
         prim = self._embree_run(probe, d, (h + self._step_mm) - s0)["primID"].astype(np.int64)
-        near = np.flatnonzero(prim >= 0)
+        near = (prim >= 0).nonzero()[0]
         if not near.size:
             return
         low, high = np.full(near.size, np.nextafter(-h, h)), np.full(near.size, h)
@@ -650,10 +650,10 @@ class RayCaster:
         if grid is None:  # F's triangles too large for a grid: every ray is probed
             return np.ones(rows.size, bool)
         marked, lower, inverse_cell, top, strides = grid
-        point = np.take(origins, rows, axis=0)
+        point = origins.take(rows, axis=0)
         middle = 0.5 * (s_start + s_end)
         if middle.any():  # (a first-round miss's window is centred on its origin)
-            point += middle[:, None] * np.take(dirs, rows, axis=0)
+            point += middle[:, None] * dirs.take(rows, axis=0)
         point = add_rows(point, -lower)
         point *= inverse_cell
         # Clipping sends points outside the grid to its border cells, which are never marked: the

@@ -132,7 +132,7 @@ def run(
         seconds["geometry"] += time.perf_counter() - clock
         clock = time.perf_counter()
         n_c = int(geometry.candidate_index.size)
-        if cartilage.spring_law.needs_positive_length and np.any(geometry.candidate_length_mm <= 0.0):
+        if cartilage.spring_law.needs_positive_length and (geometry.candidate_length_mm <= 0.0).any():
             # k = E'/h (threshold) and p = -E' ln(h/t) (gap-log) have no meaning once h <= 0.
             bad = int((geometry.candidate_length_mm <= 0.0).sum())
             raise SolverError(
@@ -151,11 +151,11 @@ def run(
         lig_rows, lig_law, _ = ligament_elements(ligaments, pose, f_pose, g_current)
         # Rows g = (n, (c - G) x n) of the candidates: both parts turn with M, so they are the
         # reference rows (built once) turned by M's rotation; one gather and one product.
-        directions = turn_rows(np.take(reference_rows, cand_idx, axis=0), pose.rotation, len(lig_rows))
+        directions = turn_rows(reference_rows.take(cand_idx, axis=0), pose.rotation, len(lig_rows))
         directions[n_c:] = lig_rows
         normals = directions[:n_c, :3]
         area_c = geometry.candidate_area_mm2
-        stored_c = np.take(stored, cand_idx, axis=1).T
+        stored_c = stored.take(cand_idx, axis=1).T
         stored_normal = row_dot(stored_c, normals)
         # (the tangential part of the stored forces only matters, and is only formed, with shear)
         shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals) if cartilage.shear_modulus_mpa else None
@@ -206,7 +206,7 @@ def run(
         # sum f (R X + b) / sum f = R (sum f X / sum f) + b: the candidates' centroids are only
         # placed at the pose if check_increment needs them.
         force_sum = spring_force.sum()
-        centre = pose.points((spring_force @ np.take(spring_centroid, cand_idx, axis=0))[None] / force_sum)[0] if force_sum > 0 else g_current
+        centre = pose.points((spring_force @ spring_centroid.take(cand_idx, axis=0))[None] / force_sum)[0] if force_sum > 0 else g_current
         n_contact = int(solution.active[:n_c].sum())
         if not n_contact:  # (M's normals at the pose are only formed for this check)
             check_contact_kept(loads[k, :3], geometry.normal, spring_area, n_contact, free, u, where)

@@ -105,17 +105,17 @@ class SpringGeometry:
     @cached_property
     def candidate_index(self) -> np.ndarray:
         """(c,) indices of the candidate springs, ascending."""
-        return np.flatnonzero(self.candidate)
+        return self.candidate.nonzero()[0]
 
     @cached_property
     def candidate_length_mm(self) -> np.ndarray:
         """(c,) signed ray lengths of the candidates."""
-        return np.take(self.spring_length_mm, self.candidate_index)
+        return self.spring_length_mm.take(self.candidate_index)
 
     @cached_property
     def candidate_area_mm2(self) -> np.ndarray:
         """(c,) areas of the candidates (the law, the shear springs and the pressures share them)."""
-        return np.take(self.area_mm2, self.candidate_index)
+        return self.area_mm2.take(self.candidate_index)
 
     def candidate_thickness_mm(self, cartilage: Cartilage) -> np.ndarray | float | None:
         """The undeformed thickness the law takes: (c,) per candidate with measured thickness,
