@@ -662,10 +662,8 @@ class RayCaster:
         np.maximum(point, 0.0, out=point)
         min_rows(point, top, out=point)
         np.floor(point, out=point)
-        flat = point[:, 0] * strides[0]
-        flat += point[:, 1] * strides[1]
-        flat += point[:, 2]  # (stride 1)
-        return marked[flat.astype(np.int64)]
+        # (one product: its terms and sums are whole numbers below 2^53, exact in any order)
+        return marked[(point @ strides).astype(np.int64)]
 
     def _near_cells(self, reach_mm: float) -> _Grid | None:
         """A grid over F's box padded by ``reach_mm`` whose marked cells hold every point within

@@ -36,9 +36,11 @@ def rows_times(rows: np.ndarray, matrix: np.ndarray, out: np.ndarray | None = No
     """``rows @ matrix`` for tall (n, k) ``rows`` and a small (k, j) ``matrix``, in slices of
     rows that OpenBLAS multiplies without starting threads (into ``out`` if given)."""
     n = rows.shape[0]
+    step = max(1, _SINGLE_THREAD_WORK // max(1, matrix.shape[0] * matrix.shape[1]) - 1)
+    if n <= step:  # one slice: the product itself (no slicing, as numpy would do it)
+        return np.matmul(rows, matrix, out=out)
     if out is None:
         out = np.empty((n, matrix.shape[1]))
-    step = max(1, _SINGLE_THREAD_WORK // max(1, matrix.shape[0] * matrix.shape[1]) - 1)
     for start in range(0, n, step):  # a few slices of thousands of rows, not a loop over rows
         np.matmul(rows[start : start + step], matrix, out=out[start : start + step])
     return out
