@@ -479,3 +479,19 @@ def test_rotation_vector_inverts_rotation_matrix():
         np.testing.assert_allclose(rotation_vector(rotation_matrix(v)), v, rtol=1e-9, atol=1e-20)
     assert np.array_equal(rotation_vector(np.eye(3)), np.zeros(3))
     assert np.isnan(rotation_vector(np.full((3, 3), np.nan))).all()
+
+
+def test_the_solves_dof_arrays_shared_across_time_points_cannot_be_changed():
+    """The free DOFs, their scales and the moment-to-force factors are built once per constraint
+    set and shared by every solve: they are read-only (a solve that wrote into them would change
+    the next one), and equal a fresh construction."""
+    from edem.mechanics import _dof_frame
+
+    free, dofs, to_newton, to_newton_free, scale = _dof_frame(("tx", "rz"), 12.5)
+    assert np.array_equal(free, [False, True, True, True, True, False]) and np.array_equal(dofs, [1, 2, 3, 4])
+    assert np.array_equal(to_newton, [1.0, 1.0, 1.0, 1 / 12.5, 1 / 12.5, 1 / 12.5])
+    assert np.array_equal(to_newton_free, to_newton[dofs]) and np.array_equal(scale, [1.0, 1.0, 12.5, 12.5])
+    for array in (free, dofs, to_newton, to_newton_free, scale):
+        with pytest.raises(ValueError):
+            array[0] = array[1]
+    assert _dof_frame(("tx", "rz"), 12.5)[1] is dofs
