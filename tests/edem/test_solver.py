@@ -495,3 +495,21 @@ def test_the_solves_dof_arrays_shared_across_time_points_cannot_be_changed():
         with pytest.raises(ValueError):
             array[0] = array[1]
     assert _dof_frame(("tx", "rz"), 12.5)[1] is dofs
+
+
+def test_balanceable_answers_for_every_row_when_only_rows_outside_its_sample_balance_the_load():
+    """balanceable tries a sample of the rows first: a load that only rows left out of the sample
+    can carry (here the one row pushing along -z, among 999 pushing along +z) is still balanceable,
+    and not without that row; a load the sample carries is balanceable."""
+    from edem.mechanics import balanceable
+
+    rows = np.zeros((1000, 6))
+    rows[:, 2] = 1.0
+    rows[:, 0] = np.linspace(-1.0, 1.0, 1000)
+    rows[1] = [0.0, 0.0, -1.0, 0.0, 0.0, 0.0]
+    free = np.array([True, False, True, False, False, False])
+    to_newton = np.ones(6)
+    assert balanceable(rows, np.array([0.0, 0.0, -5.0, 0, 0, 0]), free, to_newton)
+    assert balanceable(rows, np.array([0.3, 0.0, 5.0, 0, 0, 0]), free, to_newton)
+    rows[1] = rows[2]
+    assert not balanceable(rows, np.array([0.0, 0.0, -5.0, 0, 0, 0]), free, to_newton)
