@@ -490,7 +490,7 @@ class RayCaster:
             if found.all():  # e.g. every spring facing F: no gather
                 idx, k, u32, v32 = np.arange(n) if active is None else active, prim.astype(np.int64), ray["u"], ray["v"]
             else:
-                # Integer row gathers by np.take: a boolean mask (or []) over (n, 3) rows is
+                # Integer row gathers by take: a boolean mask (or []) over (n, 3) rows is
                 # several times slower.
                 rows = found.nonzero()[0]
                 idx, k, s0 = rows if active is None else active[rows], prim.take(rows).astype(np.int64), s0[rows]
