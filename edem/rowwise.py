@@ -67,7 +67,7 @@ def min_rows(rows: np.ndarray, vector: np.ndarray, out: np.ndarray | None = None
 
 def _with_each_row(ufunc: np.ufunc, rows: np.ndarray, vector: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """``ufunc(rows, vector)`` with the (3,) vector repeated along blocks of _ROWS_PER_BLOCK rows."""
-    if rows.shape[0] < _ROWS_PER_BLOCK:  # (a few points: no block to form)
+    if rows.shape[0] < 4 * _ROWS_PER_BLOCK:  # (a few blocks at most: broadcasting is as fast)
         return ufunc(rows, vector, out=out)
     rows = np.ascontiguousarray(rows)
     if out is None:

@@ -44,7 +44,12 @@ class Placement:
 
     def affine(self) -> tuple[np.ndarray, np.ndarray]:
         """(R, b) with x = R X + b."""
-        return self.rotation, self.pivot_mm + self.translation_mm - self.rotation @ self.pivot_mm
+        return self.rotation, self._offset_mm
+
+    @cached_property
+    def _offset_mm(self) -> np.ndarray:
+        # (formed once per placement: a time point places M's and F's points several times)
+        return self.pivot_mm + self.translation_mm - self.rotation @ self.pivot_mm
 
 
 @dataclass(frozen=True)
