@@ -135,6 +135,13 @@ def gap_curvature_radius_mm(length_mm: np.ndarray, centroid_mm: np.ndarray, norm
     :data:`CURVATURE_FIT_SPRINGS` nearest. None when the gap does not grow (conforming surfaces)
     or fewer than 3 springs see F.
     """
+    profile = _gap_profile(length_mm, centroid_mm, normal)
+    return None if profile is None else _fitted_radius_mm(profile, fit_radius_mm)
+
+
+def _gap_profile(length_mm: np.ndarray, centroid_mm: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(r^2 (m,) mm^2, rise of the gap (m,) mm, r^2 of the CURVATURE_FIT_SPRINGS-th nearest) of the
+    m springs that see F, about the closest one (:func:`gap_curvature_radius_mm`); None under 3."""
     hit = np.flatnonzero(np.isfinite(length_mm))
     if hit.size < 3:
         return None
@@ -143,7 +150,14 @@ def gap_curvature_radius_mm(length_mm: np.ndarray, centroid_mm: np.ndarray, norm
     across = row_dot(offset, offset) - (offset @ normal[closest]) ** 2
     rise = length_mm[hit] - length_mm[closest]
     nearest = min(CURVATURE_FIT_SPRINGS, hit.size - 1)
-    reach = max(float(np.partition(across, nearest)[nearest]), fit_radius_mm**2)
+    return across, rise, float(np.partition(across, nearest)[nearest])
+
+
+def _fitted_radius_mm(profile: tuple[np.ndarray, np.ndarray, float], fit_radius_mm: float) -> float | None:
+    """R of the least-squares rise = r^2 / (2 R) over the springs of a :func:`_gap_profile` within
+    ``fit_radius_mm`` (and at least its nearest few); None unless the gap grows."""
+    across, rise, nearest = profile
+    reach = max(nearest, fit_radius_mm**2)
     use = (across > 0) & (across <= reach)
     if use.sum() < 2:
         return None
@@ -286,11 +300,12 @@ def preflight(
         patch_t = float(np.median(cartilage.layers.mobile.thickness_mm) + np.median(cartilage.layers.fixed.thickness_mm))
     else:
         patch_t = cartilage.thickness_mm
-    radius = gap_curvature_radius_mm(length, centroid, normal)
+    profile = _gap_profile(length, centroid, normal)
+    radius = None if profile is None else _fitted_radius_mm(profile, 0.0)
     patch = None
     if radius is not None and load_n > 0:
         _, a, _ = winkler_patch(load_n, cartilage.confined_modulus_mpa, patch_t, radius)
-        radius = gap_curvature_radius_mm(length, centroid, normal, fit_radius_mm=2.0 * a)  # refit over the patch
+        radius = _fitted_radius_mm(profile, 2.0 * a)  # refit over the patch
         if radius is not None:
             patch = winkler_patch(load_n, cartilage.confined_modulus_mpa, patch_t, radius)[1]
     report = Preflight(
@@ -327,10 +342,11 @@ def _refuse_out_of_reach(
     length_scale = float(np.sqrt(row_dot(arm, arm).mean()))
 
     def shortfall(springs: np.ndarray) -> str | None:
-        rows, weights = _rows(centroid[springs], normal[springs], area[springs], g0, shear)
+        """(springs: indices; row gathers by take, a boolean mask over (n, 3) rows is slower)"""
+        rows, weights = _rows(np.take(centroid, springs, axis=0), np.take(normal, springs, axis=0), np.take(area, springs), g0, shear)
         return _shortfall(np.vstack([rows, lig_rows]), np.concatenate([weights, lig_law.stiffness_n_per_mm]), load, free, length_scale)
 
-    problem = shortfall(in_reach)
+    problem = shortfall(np.flatnonzero(in_reach))
     if problem is None:
         return
     # The smallest window whose springs would do it (a larger window only adds springs).

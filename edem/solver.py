@@ -207,9 +207,8 @@ def run(
         # placed at the pose if check_increment needs them.
         force_sum = spring_force.sum()
         centre = pose.points((spring_force @ spring_centroid.take(cand_idx, axis=0))[None] / force_sum)[0] if force_sum > 0 else g_current
-        n_contact = int(solution.active[:n_c].sum())
-        if not n_contact:  # (M's normals at the pose are only formed for this check)
-            check_contact_kept(loads[k, :3], geometry.normal, spring_area, n_contact, free, u, where)
+        if not solution.active[:n_c].any():  # (M's normals at the pose are only formed for this check)
+            check_contact_kept(loads[k, :3], geometry.normal, spring_area, 0, free, u, where)
         check_increment(
             u, lambda: geometry.candidate_centroid_mm, g_current, cartilage, where, arm_bound_mm=arm_bound, in_contact=solution.active[:n_c]
         )
