@@ -290,9 +290,10 @@ class RayCaster:
             altitude = np.where(longest > 0, twice_area / longest, 0.0)
             margin = 64 * float(np.finfo(np.float32).eps) * scale / altitude
         self._interior_margin = np.where(np.isfinite(margin), np.minimum(margin, 1.0), 1.0)
-        # What the re-measure reads per hit, side by side: one row gather per hit instead of three
-        # scattered ones (random access into F's arrays dominates that gather).
-        self._plane_rows = np.column_stack([self._normal, self._plane_offset, self._interior_margin])
+        # What the re-measure reads per hit, one gather of (5, hits): n_x, n_y, n_z, n . v0 and the
+        # margin as contiguous rows (the products then run along them; measured faster than a
+        # gather of (hits, 5) rows read by column, on 4 triangles and on 34k alike).
+        self._plane_columns = np.vstack([self._normal.T, self._plane_offset, self._interior_margin])
 
     def _embree_run(
         self, origins: np.ndarray, directions: np.ndarray, tfar: np.ndarray
@@ -567,18 +568,17 @@ class RayCaster:
         The other rows, ``edge`` (ascending), get a full Moller-Trumbore test: u, v are theirs
         (``edge``'s rows only).
         """
-        rows = self._plane_rows.take(k, axis=0)  # take: far cheaper than [] for row gathers
-        normal = rows[:, :3]
-        along = row_dot(normal, d)
+        nx, ny, nz, offset, interior = self._plane_columns.take(k, axis=1)  # take: far cheaper than []
+        along = nx * d[:, 0] + ny * d[:, 1] + nz * d[:, 2]  # (row_dot's order of sums)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = (rows[:, 3] - row_dot(normal, o)) / along
+            t = (offset - (nx * o[:, 0] + ny * o[:, 1] + nz * o[:, 2])) / along
         det = -along
         # Distance from the nearest edge in float64 without converting u and v: the float32 min(u, v)
         # is exact, 1 - u - v is formed in float64 (each float32 term converted exactly).
         third = np.subtract(1.0, u32, dtype=np.float64)
         third -= v32
         margin = np.minimum(np.minimum(u32, v32), third)
-        edge = (~(margin > rows[:, 4])).nonzero()[0]
+        edge = (~(margin > interior)).nonzero()[0]
         u = v = third[:0]
         if edge.size:
             ke = k[edge]
