@@ -494,7 +494,9 @@ class RayCaster:
                 # Integer row gathers by take: a boolean mask (or []) over (n, 3) rows is
                 # several times slower.
                 rows = found.nonzero()[0]
-                idx, k, s0 = rows if active is None else active[rows], prim.take(rows).astype(np.int64), s0[rows]
+                k = prim.take(rows).astype(np.int64)
+                # (the first round's rays all start at one place: no gather of it)
+                idx, s0 = (rows, np.broadcast_to(start, rows.shape)) if active is None else (active[rows], s0[rows])
                 o, d = o.take(rows, axis=0), d.take(rows, axis=0)
                 u32, v32 = ray["u"].take(rows), ray["v"].take(rows)
             t, det, edge, u_edge, v_edge = self._remeasure(o, d, k, u32, v32)
