@@ -525,8 +525,9 @@ class RayCaster:
                 length[idx], hit[idx] = t, k
                 active = idx[:0]
                 break
-            length[idx[accept]] = t[accept]
-            hit[idx[accept]] = k[accept]
+            taken = accept.nonzero()[0]  # (one index for both scatters, not four boolean masks)
+            accepted = idx.take(taken)
+            length[accepted], hit[accepted] = t.take(taken), k.take(taken)
             missed.append(idx[lost])
             # Wrong-facing, or in the padding before the window: skip it and continue past it.
             # (Any hit beyond the window ends the search: nothing nearer was found.)
