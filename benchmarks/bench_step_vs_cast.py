@@ -128,7 +128,7 @@ def skeleton_step_s(scene, caster: RayCaster, steps) -> float:
         starts += origins
         ray = caster._embree_run(starts, directions, np.full(len(origins), 2.0 * h, np.float32))
         hit = np.flatnonzero(ray["primID"] >= 0)
-        plane = np.take(caster._plane_rows, np.take(ray["primID"], hit), axis=0)
+        plane = np.take(caster._plane_columns, np.take(ray["primID"], hit), axis=1).T
         length = (plane[:, 3] - row_dot(plane[:, :3], np.take(origins, hit, axis=0))) / row_dot(plane[:, :3], np.take(directions, hit, axis=0))
         inside = length <= h
         candidate, length = hit[inside], length[inside]

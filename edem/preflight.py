@@ -24,7 +24,8 @@ import numpy as np
 
 from edem.errors import SolverError
 from edem.mechanics import DOF_NAMES, balanceable, generalised_directions, unrestrained_dofs
-from edem.springs import Placement, ligament_elements, spring_geometry
+from edem.rowwise import add_rows, row_dot
+from edem.springs import Placement, SpringGeometry, ligament_elements, spring_geometry
 from geometries.surface import TriangleSurface
 from geometries.triangle_kernels import closest_distance_mm
 
@@ -134,19 +135,49 @@ def gap_curvature_radius_mm(length_mm: np.ndarray, centroid_mm: np.ndarray, norm
     :data:`CURVATURE_FIT_SPRINGS` nearest. None when the gap does not grow (conforming surfaces)
     or fewer than 3 springs see F.
     """
+    profile = _gap_profile(length_mm, centroid_mm, normal)
+    return None if profile is None else _fitted_radius_mm(profile, fit_radius_mm)
+
+
+def _gap_profile(length_mm: np.ndarray, centroid_mm: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(r^2 (m,) mm^2, rise of the gap (m,) mm, r^2 of the CURVATURE_FIT_SPRINGS-th nearest) of the
+    m springs that see F, about the closest one (:func:`gap_curvature_radius_mm`); None under 3."""
     hit = np.flatnonzero(np.isfinite(length_mm))
     if hit.size < 3:
         return None
     closest = hit[np.argmin(length_mm[hit])]
-    offset = centroid_mm[hit] - centroid_mm[closest]
-    across = (offset**2).sum(axis=1) - (offset @ normal[closest]) ** 2
+    offset = add_rows(np.take(centroid_mm, hit, axis=0), -centroid_mm[closest])
+    across = row_dot(offset, offset) - (offset @ normal[closest]) ** 2
     rise = length_mm[hit] - length_mm[closest]
-    reach = max(float(np.sort(across)[min(CURVATURE_FIT_SPRINGS, hit.size - 1)]), fit_radius_mm**2)
+    nearest = min(CURVATURE_FIT_SPRINGS, hit.size - 1)
+    return across, rise, float(np.partition(across, nearest)[nearest])
+
+
+def _fitted_radius_mm(profile: tuple[np.ndarray, np.ndarray, float], fit_radius_mm: float) -> float | None:
+    """R of the least-squares rise = r^2 / (2 R) over the springs of a :func:`_gap_profile` within
+    ``fit_radius_mm`` (and at least its nearest few); None unless the gap grows."""
+    across, rise, nearest = profile
+    reach = max(nearest, fit_radius_mm**2)
     use = (across > 0) & (across <= reach)
     if use.sum() < 2:
         return None
     slope = float((across[use] * rise[use]).sum() / (across[use] ** 2).sum())  # rise = slope r^2
     return 0.5 / slope if slope > 0 else None
+
+
+def _median_edge_mm(vertices_mm: np.ndarray, triangles: np.ndarray) -> float:
+    """Median length (mm) of the edges of ``triangles`` (k, 3), each triangle's three counted.
+
+    Corner by corner, as rows of points: a norm over a last axis of 3 runs several times slower
+    (:mod:`edem.rowwise`); the squares sum in the same order, so the lengths are the same numbers.
+    """
+    corners = [np.take(vertices_mm, triangles[:, j], axis=0) for j in range(3)]
+    edges = [corners[j] - corners[j - 1] for j in range(3)]
+    squared = np.concatenate([row_dot(e, e) for e in edges])
+    # np.median's middle one or two, square-rooted after the partition (sqrt keeps the order)
+    half = squared.size // 2
+    middle = [half - 1, half] if squared.size % 2 == 0 else [half]
+    return float(np.sqrt(np.partition(squared, middle)[middle]).mean())
 
 
 def _rows(centroid_mm: np.ndarray, normal: np.ndarray, area_mm2: np.ndarray, reference_mm: np.ndarray, shear: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -188,6 +219,7 @@ def preflight(
     fixed_pose: Callable[[int], Placement],
     caster: RayCaster,
     rays: Rays,
+    first_geometry: SpringGeometry | None = None,
 ) -> Preflight:
     """Measure what the springs see at the first loaded time point, and refuse what cannot be solved.
 
@@ -201,6 +233,9 @@ def preflight(
         Time point index -> F's placement.
     caster, rays : RayCaster, Rays
         The fixed body's ray caster and M's springs prepared for it (as the solver uses them).
+    first_geometry : SpringGeometry, optional
+        M's springs already measured at its initial pose against F at time point 0 (the solver's
+        first step): used, not measured again, when time point 0 is the one checked.
 
     Returns
     -------
@@ -236,13 +271,18 @@ def preflight(
     # M's reference frame: F's vertices placed there (M is at its initial pose).
     placed = TriangleSurface(f_pose.points(scene.fixed.vertices_mm), scene.fixed.triangles)
     closest = _closest_distance_of(scene.mobile.vertices_mm, scene.mobile.triangles, placed.vertices_mm, placed.triangles)
-    in_window = spring_geometry(centroid, normal, area, mobile_pose, caster, f_pose, cartilage, rays)
+    if k == 0 and first_geometry is not None:
+        in_window = first_geometry
+    else:
+        in_window = spring_geometry(centroid, normal, area, mobile_pose, caster, f_pose, cartilage, rays)
     # Rays across the whole scene ahead of the springs (from -h_max, as the window, to the far
     # side of both bodies): the gap field, and the springs that face F at any distance. The
     # caster's window is symmetric: the rays start half the span ahead, and their lengths are
     # measured back from the springs.
-    corners = np.vstack([scene.mobile.vertices_mm, placed.vertices_mm])
-    half = 0.5 * (cartilage.max_spring_length_mm + float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0))))
+    # (column by column: numpy's reductions over the rows of an (n, 3) array run ~20x slower)
+    bodies = (scene.mobile.vertices_mm, placed.vertices_mm)
+    diagonal = np.array([max(b[:, j].max() for b in bodies) - min(b[:, j].min() for b in bodies) for j in range(3)])
+    half = 0.5 * (cartilage.max_spring_length_mm + float(np.linalg.norm(diagonal)))
     ahead = half - cartilage.max_spring_length_mm
     shifted = caster.prepare(centroid + ahead * normal, normal)
     wide = spring_geometry(centroid, normal, area, mobile_pose, caster, f_pose, replace(cartilage, max_spring_length_mm=half), shifted)
@@ -250,8 +290,7 @@ def preflight(
     facing = np.isfinite(length)
     sizes = area[facing] if facing.any() else area
     tri = scene.mobile.triangles[scene.spring_triangle[facing] if facing.any() else scene.spring_triangle]
-    v = scene.mobile.vertices_mm
-    median_edge = float(np.median(np.linalg.norm(v[tri] - v[np.roll(tri, 1, axis=1)], axis=2)))
+    median_edge = _median_edge_mm(scene.mobile.vertices_mm, tri)
     spring_size = math.sqrt(float(np.median(sizes)))
 
     load_n = float(np.linalg.norm(loads[k, :3]))
@@ -261,11 +300,12 @@ def preflight(
         patch_t = float(np.median(cartilage.layers.mobile.thickness_mm) + np.median(cartilage.layers.fixed.thickness_mm))
     else:
         patch_t = cartilage.thickness_mm
-    radius = gap_curvature_radius_mm(length, centroid, normal)
+    profile = _gap_profile(length, centroid, normal)
+    radius = None if profile is None else _fitted_radius_mm(profile, 0.0)
     patch = None
     if radius is not None and load_n > 0:
         _, a, _ = winkler_patch(load_n, cartilage.confined_modulus_mpa, patch_t, radius)
-        radius = gap_curvature_radius_mm(length, centroid, normal, fit_radius_mm=2.0 * a)  # refit over the patch
+        radius = _fitted_radius_mm(profile, 2.0 * a)  # refit over the patch
         if radius is not None:
             patch = winkler_patch(load_n, cartilage.confined_modulus_mpa, patch_t, radius)[1]
     report = Preflight(
@@ -298,13 +338,15 @@ def _refuse_out_of_reach(
     centroid, normal, area = scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2
     shear = scene.cartilage.shear_modulus_mpa > 0
     lig_rows, lig_law, _ = ligament_elements(scene.ligaments, Placement.identity(g0), f_pose, g0)
-    length_scale = float(np.sqrt(((centroid - g0) ** 2).sum(axis=1).mean()))
+    arm = add_rows(centroid, -g0)
+    length_scale = float(np.sqrt(row_dot(arm, arm).mean()))
 
     def shortfall(springs: np.ndarray) -> str | None:
-        rows, weights = _rows(centroid[springs], normal[springs], area[springs], g0, shear)
+        """(springs: indices; row gathers by take, a boolean mask over (n, 3) rows is slower)"""
+        rows, weights = _rows(np.take(centroid, springs, axis=0), np.take(normal, springs, axis=0), np.take(area, springs), g0, shear)
         return _shortfall(np.vstack([rows, lig_rows]), np.concatenate([weights, lig_law.stiffness_n_per_mm]), load, free, length_scale)
 
-    problem = shortfall(in_reach)
+    problem = shortfall(np.flatnonzero(in_reach))
     if problem is None:
         return
     # The smallest window whose springs would do it (a larger window only adds springs).

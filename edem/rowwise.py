@@ -13,6 +13,10 @@ directions throughout edem.
   busy machine waiting for a preempted thread stretched one such product from ~0.1 ms to several
   ms (measured on this project's 2 shared cores). :func:`rows_times` multiplies in slices of rows
   small enough to stay on the calling thread.
+* In the per-time-point path (the cast, the step, the solve) gathers, nonzero indices and
+  reductions of 1-D masks are called as array methods (``a.take(i)``, ``mask.nonzero()[0]``,
+  ``mask.any()``): numpy's module functions wrap them in Python layers that cost about 1 us a
+  call, several percent of a step at a few thousand springs.
 """
 
 from __future__ import annotations
@@ -32,9 +36,11 @@ def rows_times(rows: np.ndarray, matrix: np.ndarray, out: np.ndarray | None = No
     """``rows @ matrix`` for tall (n, k) ``rows`` and a small (k, j) ``matrix``, in slices of
     rows that OpenBLAS multiplies without starting threads (into ``out`` if given)."""
     n = rows.shape[0]
+    step = max(1, _SINGLE_THREAD_WORK // max(1, matrix.shape[0] * matrix.shape[1]) - 1)
+    if n <= step:  # one slice: the product itself (no slicing, as numpy would do it)
+        return np.matmul(rows, matrix, out=out)
     if out is None:
         out = np.empty((n, matrix.shape[1]))
-    step = max(1, _SINGLE_THREAD_WORK // max(1, matrix.shape[0] * matrix.shape[1]) - 1)
     for start in range(0, n, step):  # a few slices of thousands of rows, not a loop over rows
         np.matmul(rows[start : start + step], matrix, out=out[start : start + step])
     return out
@@ -42,6 +48,9 @@ def rows_times(rows: np.ndarray, matrix: np.ndarray, out: np.ndarray | None = No
 
 # Rows viewed at once by add_rows: the inner loop then runs over 3 x this many numbers.
 _ROWS_PER_BLOCK = 256
+# Repeats a (3,) vector along a block of rows by one gather (np.tile's Python layers cost several
+# times that at every call).
+_BLOCK_REPEAT = np.tile(np.arange(3), _ROWS_PER_BLOCK)
 
 
 def add_rows(rows: np.ndarray, vector: np.ndarray) -> np.ndarray:
@@ -58,13 +67,13 @@ def min_rows(rows: np.ndarray, vector: np.ndarray, out: np.ndarray | None = None
 
 def _with_each_row(ufunc: np.ufunc, rows: np.ndarray, vector: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """``ufunc(rows, vector)`` with the (3,) vector repeated along blocks of _ROWS_PER_BLOCK rows."""
-    if out is None and rows.shape[0] < _ROWS_PER_BLOCK:  # (a few points: no block to form)
-        return ufunc(rows, vector)
+    if rows.shape[0] < 4 * _ROWS_PER_BLOCK:  # (a few blocks at most: broadcasting is as fast)
+        return ufunc(rows, vector, out=out)
     rows = np.ascontiguousarray(rows)
     if out is None:
         out = np.empty_like(rows, dtype=np.result_type(rows, vector))
     whole = rows.shape[0] - rows.shape[0] % _ROWS_PER_BLOCK
     width = rows.shape[1] * _ROWS_PER_BLOCK
-    ufunc(rows[:whole].reshape(-1, width), np.tile(vector, _ROWS_PER_BLOCK), out=out[:whole].reshape(-1, width))
+    ufunc(rows[:whole].reshape(-1, width), np.take(vector, _BLOCK_REPEAT), out=out[:whole].reshape(-1, width))
     ufunc(rows[whole:], vector, out=out[whole:])
     return out

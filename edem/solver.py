@@ -17,7 +17,7 @@ from edem.plausibility import emit, merge_repeated
 from edem.preflight import patch_resolution_warning, preflight
 from edem.raycast import RayCaster
 from edem.results import RunResult, StepResult
-from edem.rowwise import row_dot
+from edem.rowwise import add_rows, row_dot
 from edem.scene import Scene
 from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, ligament_table, shear_terms, spring_geometry
 from edem.viscoelastic import check_rk2_stability, integrator_weights
@@ -93,7 +93,8 @@ def run(
     g0 = scene.reference_point_mm
     n_springs = scene.spring_area_mm2.shape[0]
     spring_centroid, spring_normal, spring_area = scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2
-    arm_squared = ((spring_centroid - g0) ** 2).sum(axis=1)
+    arm = add_rows(spring_centroid, -g0)
+    arm_squared = row_dot(arm, arm)
     length_scale = float(np.sqrt(arm_squared.mean()))
     # Distance of the furthest spring from G: no rigid motion of M changes it (check_increment's bound).
     arm_bound = float(np.sqrt(arm_squared.max(initial=0.0)))
@@ -117,18 +118,21 @@ def run(
     ligaments = ligament_table(scene.ligaments)
     reference_rows = generalised_directions(spring_centroid, spring_normal, g0)
     rays = caster.prepare(spring_centroid, spring_normal)  # checked once, cast at every time point
-    report = preflight(scene, loads, scene.fixed_placement, caster, rays)
+    # M's springs at its initial pose at time point 0: the first step's geometry, which the
+    # pre-flight also checks when the load starts at time point 0 (measured once for both).
+    first_geometry = spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, scene.fixed_placement(0), cartilage, rays)
+    report = preflight(scene, loads, scene.fixed_placement, caster, rays, first_geometry)
     seconds = {"geometry": 0.0, "solve": 0.0}
     for k, t in enumerate(load.time_s):
         clock = time.perf_counter()
         if method == "dem":
             pose, stored = Placement.identity(g0), np.zeros((3, n_springs))
         f_pose = scene.fixed_placement(k)
-        geometry = spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, f_pose, cartilage, rays)
+        geometry = first_geometry if k == 0 else spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, f_pose, cartilage, rays)
         seconds["geometry"] += time.perf_counter() - clock
         clock = time.perf_counter()
         n_c = int(geometry.candidate_index.size)
-        if cartilage.spring_law.needs_positive_length and np.any(geometry.candidate_length_mm <= 0.0):
+        if cartilage.spring_law.needs_positive_length and (geometry.candidate_length_mm <= 0.0).any():
             # k = E'/h (threshold) and p = -E' ln(h/t) (gap-log) have no meaning once h <= 0.
             bad = int((geometry.candidate_length_mm <= 0.0).sum())
             raise SolverError(
@@ -147,11 +151,11 @@ def run(
         lig_rows, lig_law, _ = ligament_elements(ligaments, pose, f_pose, g_current)
         # Rows g = (n, (c - G) x n) of the candidates: both parts turn with M, so they are the
         # reference rows (built once) turned by M's rotation; one gather and one product.
-        directions = turn_rows(np.take(reference_rows, cand_idx, axis=0), pose.rotation, len(lig_rows))
+        directions = turn_rows(reference_rows.take(cand_idx, axis=0), pose.rotation, len(lig_rows))
         directions[n_c:] = lig_rows
         normals = directions[:n_c, :3]
-        area_c = spring_area[cand_idx]
-        stored_c = np.take(stored, cand_idx, axis=1).T
+        area_c = geometry.candidate_area_mm2
+        stored_c = stored.take(cand_idx, axis=1).T
         stored_normal = row_dot(stored_c, normals)
         # (the tangential part of the stored forces only matters, and is only formed, with shear)
         shear = shear_terms(geometry, cartilage, g_current, stored_c - stored_normal[:, None] * normals) if cartilage.shear_modulus_mpa else None
@@ -202,10 +206,9 @@ def run(
         # sum f (R X + b) / sum f = R (sum f X / sum f) + b: the candidates' centroids are only
         # placed at the pose if check_increment needs them.
         force_sum = spring_force.sum()
-        centre = pose.points((spring_force @ np.take(spring_centroid, cand_idx, axis=0))[None] / force_sum)[0] if force_sum > 0 else g_current
-        n_contact = int(solution.active[:n_c].sum())
-        if not n_contact:  # (M's normals at the pose are only formed for this check)
-            check_contact_kept(loads[k, :3], geometry.normal, spring_area, n_contact, free, u, where)
+        centre = pose.points((spring_force @ spring_centroid.take(cand_idx, axis=0))[None] / force_sum)[0] if force_sum > 0 else g_current
+        if not solution.active[:n_c].any():  # (M's normals at the pose are only formed for this check)
+            check_contact_kept(loads[k, :3], geometry.normal, spring_area, 0, free, u, where)
         check_increment(
             u, lambda: geometry.candidate_centroid_mm, g_current, cartilage, where, arm_bound_mm=arm_bound, in_contact=solution.active[:n_c]
         )

@@ -44,7 +44,12 @@ class Placement:
 
     def affine(self) -> tuple[np.ndarray, np.ndarray]:
         """(R, b) with x = R X + b."""
-        return self.rotation, self.pivot_mm + self.translation_mm - self.rotation @ self.pivot_mm
+        return self.rotation, self._offset_mm
+
+    @cached_property
+    def _offset_mm(self) -> np.ndarray:
+        # (formed once per placement: a time point places M's and F's points several times)
+        return self.pivot_mm + self.translation_mm - self.rotation @ self.pivot_mm
 
 
 @dataclass(frozen=True)
@@ -105,12 +110,17 @@ class SpringGeometry:
     @cached_property
     def candidate_index(self) -> np.ndarray:
         """(c,) indices of the candidate springs, ascending."""
-        return np.flatnonzero(self.candidate)
+        return self.candidate.nonzero()[0]
 
     @cached_property
     def candidate_length_mm(self) -> np.ndarray:
         """(c,) signed ray lengths of the candidates."""
-        return np.take(self.spring_length_mm, self.candidate_index)
+        return self.spring_length_mm.take(self.candidate_index)
+
+    @cached_property
+    def candidate_area_mm2(self) -> np.ndarray:
+        """(c,) areas of the candidates (the law, the shear springs and the pressures share them)."""
+        return self.area_mm2.take(self.candidate_index)
 
     def candidate_thickness_mm(self, cartilage: Cartilage) -> np.ndarray | float | None:
         """The undeformed thickness the law takes: (c,) per candidate with measured thickness,
@@ -169,7 +179,7 @@ def contact_law(
     and 3.19). ``stored_normal_force_n`` is the EDEM push-back per candidate spring (zero for DEM).
     """
     return cartilage.spring_law.elements(
-        np.take(geometry.area_mm2, geometry.candidate_index), geometry.candidate_length_mm, cartilage.confined_modulus_mpa,
+        geometry.candidate_area_mm2, geometry.candidate_length_mm, cartilage.confined_modulus_mpa,
         geometry.candidate_thickness_mm(cartilage), stored_normal_force_n,
     )
 
@@ -191,7 +201,7 @@ def shear_terms(
     return ShearTerms(
         arm_mm=geometry.candidate_centroid_mm - reference_point_mm,
         normals=geometry.mobile.vectors(np.take(geometry.reference_normal, sel, axis=0)),
-        stiffness_n_per_mm=np.take(geometry.area_mm2, sel) * cartilage.shear_modulus_mpa / h,
+        stiffness_n_per_mm=geometry.candidate_area_mm2 * cartilage.shear_modulus_mpa / h,
         stored_force_n=stored_tangential_force_n,
     )
 

@@ -187,3 +187,66 @@ def test_closest_distance_is_measured_once_per_pair_of_surfaces_and_again_when_o
     # 1e-9 mm: as above, far above the round-off of mm coordinates (1e-15) and far below the 0.5 mm move
     assert run(moved).preflight.closest_distance_mm == pytest.approx(2.5, abs=1e-9)
     assert len(measured) == 2
+
+
+def _counting_casts(monkeypatch):
+    """The number of ray casts against F (every spring's rays at one pose) made from now on."""
+    from edem.raycast import RayCaster
+
+    casts = []
+    original = RayCaster.cast_rays
+
+    def counting(self, *args, **kwargs):
+        casts.append(1)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(RayCaster, "cast_rays", counting)
+    return casts
+
+
+def test_the_first_time_point_is_cast_once_for_the_preflight_and_the_first_step(monkeypatch):
+    """A run of n time points casts n + 1 times: once per time point (the pre-flight checks time
+    point 0 on the first step's cast) and once across the whole scene for the gap field. The
+    pre-flight's figures are those it measures on its own cast."""
+    from edem.preflight import preflight
+
+    scene = half_covered_plates()
+    scene = make_scene(scene.mobile, scene.fixed, np.array([[0.0, 0.0, 50.0], [0.0, 0.0, 100.0], [0.0, 0.0, 80.0]]),
+                       time_s=np.array([0.0, 1.0, 2.0]), fixed_dofs=("tx", "ty", "rx", "ry", "rz"), law="gap", thickness_mm=2.5,
+                       method="edem")
+    casts = _counting_casts(monkeypatch)
+    result = run(scene)
+    assert len(casts) == len(result.steps) + 1 == 4
+    assert result.preflight.time_point == 0
+    from edem.raycast import RayCaster
+
+    caster = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles)
+    rays = caster.prepare(scene.spring_centroid_mm, scene.spring_normal)
+    alone = preflight(scene, scene.applied_loads(), scene.fixed_placement, caster, rays)
+    assert alone.as_dict() == result.preflight.as_dict()
+    assert (alone.n_in_window, alone.time_point) == (100, 0)
+
+
+def test_a_preflight_of_a_later_first_load_casts_at_that_time_point(monkeypatch):
+    """Unloaded at time point 0, the pre-flight checks the first loaded one, which no step has cast
+    before it: n + 2 casts, and the report names that time point."""
+    scene = half_covered_plates()
+    scene = make_scene(scene.mobile, scene.fixed, np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 100.0]]), time_s=np.array([0.0, 1.0]),
+                       fixed_dofs=("tx", "ty", "rx", "ry", "rz"), law="gap", thickness_mm=2.5, method="edem")
+    casts = _counting_casts(monkeypatch)
+    result = run(scene)
+    assert result.preflight.time_point == 1
+    assert len(casts) == len(result.steps) + 2 == 4
+
+
+def test_median_edge_is_the_median_of_every_triangle_edge_length_bit_for_bit():
+    """Corner by corner (no norm over a last axis of 3): the same numbers as the norm of the edge
+    vectors, on a mesh with edges of many lengths and an even and an odd count of edges."""
+    from edem.preflight import _median_edge_mm
+
+    rng = np.random.default_rng(11)
+    vertices = rng.normal(size=(400, 3)) * rng.uniform(0.1, 10.0, size=(400, 1))
+    for count in (301, 300):
+        triangles = rng.integers(0, 400, size=(count, 3))
+        expected = np.median(np.linalg.norm(vertices[triangles] - vertices[np.roll(triangles, 1, axis=1)], axis=2))
+        assert _median_edge_mm(vertices, triangles) == float(expected)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from edem.raycast import RayCaster, RayHits
+from edem.raycast import RayCaster, RayHits, _moller_trumbore
 from geometries.builders import icosphere
 
 BACKENDS = ["embree", "numpy"]
@@ -492,3 +492,34 @@ def test_rays_along_fixed_mesh_diagonals_are_resolved_locally_and_exactly():
     # cost would stay under 3x the aligned-free cast; a single whole-mesh pass adds ~14x.
     assert max(aligned) <= 3 * baseline, (baseline, aligned)
     print(f"float64 tests per cast: aligned-free {baseline}, aligned {aligned}")
+
+
+def test_remeasure_tests_in_full_exactly_the_rows_whose_float64_margin_is_not_clear_of_the_edges():
+    """The margin of Embree's float32 barycentrics from the triangle's edges, min(u, v, 1 - u - v),
+    is taken without converting u and v to float64 first: the rows it sends to the full float64
+    test, and their lengths, are those of the float64 margin. Barycentrics are drawn near every
+    edge and vertex (where float32 round-off matters) and well inside."""
+    vertices, triangles = icosphere(2, 10.0)
+    caster = RayCaster(vertices, triangles)
+    rng = np.random.default_rng(7)
+    n = 4000
+    k = rng.integers(0, len(triangles), n)
+    near = rng.choice([0.0, 1e-7, 1e-5, 1e-3, 0.3], size=(n, 2)) * rng.choice([-1.0, 1.0], size=(n, 2))
+    u32 = np.abs(np.where(rng.random(n) < 0.5, near[:, 0], 1.0 - near[:, 0] - np.abs(near[:, 1]))).astype(np.float32)
+    v32 = np.abs(near[:, 1]).astype(np.float32)
+    # Half the rows with 1 - u - v within float32 round-off of the triangle's margin: with u < 1/2,
+    # 1 - u formed in float32 is rounded (by up to 3e-8), so a margin formed in float32 would send
+    # other rows to the full test than float64 does.
+    at = slice(n // 2, n)
+    u32[at] = rng.uniform(0.05, 0.2, n - n // 2).astype(np.float32)
+    v32[at] = (1.0 - u32[at] - caster._interior_margin[k[at]] - rng.uniform(-3e-8, 3e-8, n - n // 2)).astype(np.float32)
+    o, d = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    t, det, edge, u, v = caster._remeasure(o, d, k, u32, v32)
+    u64, v64 = u32.astype(np.float64), v32.astype(np.float64)
+    margin = np.minimum(np.minimum(u64, v64), 1.0 - u64 - v64)
+    expected = np.flatnonzero(~(margin > caster._interior_margin[k]))
+    assert 0 < expected.size < n
+    assert np.array_equal(edge, expected)
+    t_full, u_full, v_full, det_full = _moller_trumbore(o[edge], d[edge], caster._v0[k[edge]], caster._edge1[k[edge]], caster._edge2[k[edge]])
+    assert np.array_equal(t[edge], t_full) and np.array_equal(u, u_full) and np.array_equal(v, v_full) and np.array_equal(det[edge], det_full)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from edem.rowwise import add_rows, row_dot, rows_times
+from edem.rowwise import add_rows, min_rows, row_dot, rows_times
 
 
 def test_row_dot_is_the_rowwise_dot_product():
@@ -36,3 +36,18 @@ def test_add_rows_is_the_broadcast_sum_bit_for_bit():
         rows = rng.normal(size=(n, 3))
         assert np.array_equal(add_rows(rows, vector), rows + vector)
         assert np.array_equal(add_rows(rows.astype(np.float32), vector), rows.astype(np.float32) + vector)
+
+
+def test_min_rows_is_the_broadcast_minimum_bit_for_bit_into_out():
+    """Row counts below, at and off a multiple of the block (256 rows), into ``out`` (the rows
+    themselves, as the ray caster's grid look-up does) and into a fresh array; an integer vector
+    (the grid's largest cell indices)."""
+    rng = np.random.default_rng(4)
+    for vector in (rng.normal(size=3), np.array([3, 7, 11])):
+        for n in (0, 5, 255, 256, 1000, 30001):
+            rows = 10.0 * rng.normal(size=(n, 3))
+            expected = np.minimum(rows, vector)
+            assert np.array_equal(min_rows(rows, vector), expected)
+            same = rows.copy()
+            assert min_rows(same, vector, out=same) is same
+            assert np.array_equal(same, expected)

@@ -479,3 +479,37 @@ def test_rotation_vector_inverts_rotation_matrix():
         np.testing.assert_allclose(rotation_vector(rotation_matrix(v)), v, rtol=1e-9, atol=1e-20)
     assert np.array_equal(rotation_vector(np.eye(3)), np.zeros(3))
     assert np.isnan(rotation_vector(np.full((3, 3), np.nan))).all()
+
+
+def test_the_solves_dof_arrays_shared_across_time_points_cannot_be_changed():
+    """The free DOFs, their scales and the moment-to-force factors are built once per constraint
+    set and shared by every solve: they are read-only (a solve that wrote into them would change
+    the next one), and equal a fresh construction."""
+    from edem.mechanics import _dof_frame
+
+    free, dofs, to_newton, to_newton_free, scale = _dof_frame(("tx", "rz"), 12.5)
+    assert np.array_equal(free, [False, True, True, True, True, False]) and np.array_equal(dofs, [1, 2, 3, 4])
+    assert np.array_equal(to_newton, [1.0, 1.0, 1.0, 1 / 12.5, 1 / 12.5, 1 / 12.5])
+    assert np.array_equal(to_newton_free, to_newton[dofs]) and np.array_equal(scale, [1.0, 1.0, 12.5, 12.5])
+    for array in (free, dofs, to_newton, to_newton_free, scale):
+        with pytest.raises(ValueError):
+            array[0] = array[1]
+    assert _dof_frame(("tx", "rz"), 12.5)[1] is dofs
+
+
+def test_balanceable_answers_for_every_row_when_only_rows_outside_its_sample_balance_the_load():
+    """balanceable tries a sample of the rows first: a load that only rows left out of the sample
+    can carry (here the one row pushing along -z, among 999 pushing along +z) is still balanceable,
+    and not without that row; a load the sample carries is balanceable."""
+    from edem.mechanics import balanceable
+
+    rows = np.zeros((1000, 6))
+    rows[:, 2] = 1.0
+    rows[:, 0] = np.linspace(-1.0, 1.0, 1000)
+    rows[1] = [0.0, 0.0, -1.0, 0.0, 0.0, 0.0]
+    free = np.array([True, False, True, False, False, False])
+    to_newton = np.ones(6)
+    assert balanceable(rows, np.array([0.0, 0.0, -5.0, 0, 0, 0]), free, to_newton)
+    assert balanceable(rows, np.array([0.3, 0.0, 5.0, 0, 0, 0]), free, to_newton)
+    rows[1] = rows[2]
+    assert not balanceable(rows, np.array([0.0, 0.0, -5.0, 0, 0, 0]), free, to_newton)
