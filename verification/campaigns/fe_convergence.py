@@ -1,15 +1,19 @@
-"""``fe-convergence``: the FE reference's own mesh-convergence error at the quick campaign's FE points.
+"""``fe-convergence``: the own mesh-convergence error of every FE reference a verdict rests on.
 
 Every FE run the ``quick`` campaign's trust section compares against (the ideal ankle's slab over
 Poisson's ratio, the bonded cylinder layer over thickness and at 100 N, the subject-like ankle
-standing) on three meshes of the FE's own mesher (``mesh_size_mm`` 2.0, 1.0 and 0.7 mm, P2 or
-Taylor-Hood; the finest solved by LU), plus the P1
-run ``quick`` uses at 1.0 mm where P1 does not lock. The analysis gives, per point and quantity,
-the three values, the observed order, the Richardson extrapolation and each mesh's estimated
-error (verification.fe_convergence), with each mesh's DOFs, wall time and peak memory.
-``edem verify fe-convergence --refresh-reference`` stores the estimates in
-``verification/references/fe_convergence.json``, where the other campaigns' FE references find
-their errors (:func:`verification.fe_convergence.fe_relative_error`).
+standing), then every other FE reference of ``quick``, ``subject``, ``cylinder-plane`` and
+``thin-layer`` (:func:`reference_points`: loads, Poisson's ratios 0 and 0.499, layer
+thicknesses, toe-off, the viscoelastic step), each on three meshes of the FE's own mesher
+(:func:`point_levels`: ``mesh_size_mm`` 2.0, 1.0 and 0.7 mm, P2 or Taylor-Hood; the 1 mm layer
+on 1.0, 0.7 and 0.7 mm with 4 elements through it; the viscoelastic reference in its own P1),
+plus the P1 run ``quick`` uses at 1.0 mm where P1 does not lock. Every reference is one of its
+point's meshes (the campaigns use the 1.0 mm level, ``thin-layer``'s base sweep the 0.7 mm one).
+The analysis gives, per point and quantity, the three values, the observed order, the Richardson
+extrapolation and each mesh's estimated error (verification.fe_convergence), with each mesh's
+DOFs, wall time and peak memory. ``edem verify fe-convergence --refresh-reference`` stores the
+estimates in ``verification/references/fe_convergence.json``, where the other campaigns' FE
+references find their errors (:func:`verification.fe_convergence.fe_relative_error`).
 
 The mesher refines M's triangles by midpoint subdivision (powers of 2 in plane) and sets the
 layers through the thickness to ceil(thickness / size): the three meshes are not one uniform
@@ -88,13 +92,13 @@ def _layer_thickness_mm(case: Case) -> float:
 
 
 def _cost_rank(case: Case) -> int:
-    """How dear a point's finest mesh is, for the order of the runs: the 2 mm layer (0.7 mm:
-    0.3M DOFs, 2-4 min), the ideal ankle (0.4M, 10-45 min), the subject-like ankle (0.53M, 14-30
-    min), the 3 mm layer (0.46M, Taylor-Hood past the LU's memory), last the 1 mm layer (its 2.0
-    and 1.0 mm meshes coincide: no estimate, docs/campaigns.md)."""
+    """How dear a point's finest mesh is, for the order of the runs (measured 2026-11-26 at load
+    2-4, docs/campaigns.md): the 2 mm layer (0.7 mm: 0.3M DOFs, 1-15 min), the 1 mm layer (0.38M
+    with 4 elements through it, 5-8 min), the ideal ankle (0.4M, 5-20 min), the 3 mm layer
+    (0.46M, 14-20 min), the subject-like ankle (0.53M, 14-30 min)."""
     if case.scene != "cylinder-layer":
-        return 1 if case.scene == "ideal-standing" else 2
-    return {2.0: 0, 3.0: 3}.get(float(case.overrides.get("cartilage.thickness_mm", 2.0)), 4)
+        return 2 if case.scene == "ideal-standing" else 4
+    return {2.0: 0, 1.0: 1, 3.0: 3}[float(case.overrides.get("cartilage.thickness_mm", 2.0))]
 
 
 def quick_points() -> list[tuple[str, Case]]:
@@ -163,8 +167,8 @@ def _fe_case(name: str, source: Case, options: dict, what: str) -> Case:
 
 
 def campaign() -> Campaign:
-    cases, points = [], []
-    for point, source in study_points():
+    cases, points, all_points = [], [], study_points()
+    for point, source in all_points:
         names, levels = [], point_levels(source)
         for options in levels:
             layers = options.get("layers_through_thickness")
@@ -178,7 +182,7 @@ def campaign() -> Campaign:
         points.append({"point": point, "levels": names, "extra": extra, "source_case": source.name, "scene": source.scene,
                        "side": source.sides[-1], "overrides": dict(source.overrides), "source_options": dict(source.options)})
     beds = []
-    for point, source in study_points():
+    for point, source in all_points:
         if point not in BED_POINTS:
             continue
         finest = {"mesh_size_mm": LEVELS_MM[-1], "degree": 2}
@@ -187,12 +191,11 @@ def campaign() -> Campaign:
                                            source.scene, ("dem", source.sides[-1]), overrides={**source.overrides, **extra_overrides}, options=finest, maps=False))
     # the points item 3 of issue 24 rests on complete first, then every point's cheap meshes, then
     # the other points' finest meshes (on 2 shared cores each takes 10-40 min): a campaign cut
-    # short still has whole points
     # short still has whole points; the other campaigns' points after quick's, cheapest first,
     # each point's three meshes together
     rank = {p: k for k, p in enumerate(PRIORITY)}
     quick = {p for p, _ in quick_points()}
-    cost = {p: (_cost_rank(source), k) for k, (p, source) in enumerate(study_points())}
+    cost = {p: (_cost_rank(source), k) for k, (p, source) in enumerate(all_points)}
 
     def order(case: Case) -> tuple:
         point = case.name.rsplit("-h", 1)[0].removesuffix("-P1")

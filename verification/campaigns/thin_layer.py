@@ -39,7 +39,8 @@ FE_LAYER = {"mesh_size_mm": 0.7, "degree": 2}
 
 #: wall time with 2 jobs on 2 cores, nothing cached (estimate from measured runs: with every FE
 #: layer at 1.0 mm it took 1421 s at load 4-7; the six base-layer runs at 0.5 mm took 1818 s of FE
-#: under load 8 instead of 225 s)
+#: under load 8 instead of 225 s; at 0.7 mm, in fe-convergence, 77-927 s each, 1860 s together, at
+#: load 2-4)
 EXPECTED_TIME_S = 2000.0
 
 NUS = (0.0, 0.3, 0.42, 0.45, 0.49, 0.499)
