@@ -441,8 +441,8 @@ def _metrics_cell(row: dict[str, Any]) -> str:
     """Each metric; a judged one with its tolerance, and every tolerance's reason (its basis) below."""
     h = html.escape
     parts, reasons = [], {}
-    # |value| against the tolerance (errors are signed); a metric with no verdict, a sanity bound or
-    # a metric set by construction is grey ("reported, not judged"), never green
+    # |value| against the tolerance (errors are signed); a metric with no verdict or a met sanity
+    # bound is grey ("reported, not judged"), never green
     marks = {"met": ("pass", "|·| &le;"), "fail": ("fail", "|·| &gt;"), "outside band": ("flagged", "|·| &gt; band")}
     for metric, value in row["metrics"].items():
         verdict = row["verdicts"].get(metric)

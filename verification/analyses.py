@@ -490,7 +490,7 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     ua, ub, du = _signed(base, "displacement_norm_mm")
     l2 = _metric(base, "pressure_l2_rel_error")
     by_construction = {m for m, v in (base.get("verdicts") or {}).items() if v.get("kind") == "by-construction"}
-    area_text = (f"its contact area {_fmt(aa, 4)} mm² against {_fmt(ab, 4)} mm² ({_pct(da)}; set by the threshold law by construction, reported, not judged)"
+    area_text = (f"its contact area {_fmt(aa, 4)} mm² against {_fmt(ab, 4)} mm² ({_pct(da)}; set by the threshold law by construction, judged against the band all the same)"
                  if "contact_area_rel_error" in by_construction else f"its contact area {_fmt(aa, 4)} mm² against {_fmt(ab, 4)} mm² ({_pct(da)})")
     sentences.append(
         f"The default bed, the {default_bed}, on the ideal ankle standing (333 N, Poisson's ratio 0.42, no ligaments): DEM's regularised peak pressure "

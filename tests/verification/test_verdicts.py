@@ -149,12 +149,16 @@ def test_the_runner_passes_a_cases_fe_errors_to_its_verdicts():
     assert judge(case, record, fe_errors={})[0] == "FE not converged enough to judge"
 
 
-def test_the_threshold_laws_area_on_the_ideal_ankle_is_reported_not_judged():
-    """463 mm^2 at every load and nu by construction: even +500 % neither flags nor verifies."""
+def test_an_area_set_by_construction_is_still_judged_against_the_band():
+    """463 mm^2 at every load and nu by construction, and still a card metric: inside the band it is
+    met, outside it the case is flagged (verified needs all three inside), and its reason says the
+    law sets it."""
     case = _quick_case("slab-F333-nu0.42")
-    values = {m: 0.0 for m in case.tolerance}
-    values["contact_area_rel_error"] = 5.0
-    verdicts = tolerance_verdicts(values, case.tolerance, case.bases())
-    assert verdicts["contact_area_rel_error"]["verdict"] == "reported, not judged"
-    assert "by construction" in verdicts["contact_area_rel_error"]["reason"]
-    assert case_verdict(["ok", "ok"], verdicts, None, False) == "verified"
+    band = case.tolerance["contact_area_rel_error"]
+    for area_error, verdict, case_status in ((0.5 * band, "met", "verified"), (-2.0 * band, "outside band", "flagged")):
+        values = {m: 0.0 for m in case.tolerance}
+        values["contact_area_rel_error"] = area_error
+        verdicts = tolerance_verdicts(values, case.tolerance, case.bases())
+        assert verdicts["contact_area_rel_error"]["verdict"] == verdict
+        assert verdicts["contact_area_rel_error"]["kind"] == "by-construction" and "by construction" in verdicts["contact_area_rel_error"]["reason"]
+        assert case_verdict(["ok", "ok"], verdicts, None, False) == case_status

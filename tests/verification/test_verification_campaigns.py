@@ -14,6 +14,7 @@ from edem.scene import load_scene
 from verification.campaign_model import THESIS_BED
 from verification.campaigns.quick import TRUST_ANKLES, TRUST_BEDS, TRUST_NUS, trust_name
 from verification.sides import is_shared_side, side_inputs, side_names
+from verification.verdicts import MODEL_BAND_REL
 
 
 def test_every_campaign_is_valid_data():
@@ -67,10 +68,12 @@ def test_quick_is_a_subset_of_the_other_campaigns_plus_ideal_standing_and_the_tr
         case = quick.case(name)
         assert (case.scene, case.sides) == (twin.scene, twin.sides)
         assert case.overrides == {**twin.overrides, "cartilage.poissons_ratio": 0.42}
-    for name in trust:  # the threshold law's area on the ankles is set by construction: reported, not judged
-        bases = quick.case(name).bases()
+    for name in trust:  # the threshold law's area on the ankles is set by construction, and judged against the same band
+        case = quick.case(name)
+        bases = case.bases()
         assert {m for m, b in bases.items() if b.kind == "model-band"} == banded - {"contact_area_rel_error"}
         assert bases["contact_area_rel_error"].kind == "by-construction"
+        assert case.tolerance["contact_area_rel_error"] == MODEL_BAND_REL
     assert quick.case("ideal-standing-edem-vs-dem").sides == ("edem", "dem")
     assert quick.cases[0].name in trust  # the ankle answer first
     assert [a.kind for a in quick.analyses] == ["trust"]
