@@ -41,10 +41,11 @@ LEVELS_MM = (2.0, 1.0, 0.7)
 #: the finest solves first, the subject and the base point ahead (item 3 of issue 24 rests on them)
 PRIORITY = ("subject-F333-nu0.42", "slab-F333-nu0.42", "slab-F333-nu0.49", "layer-F333-nu0.42-t2")
 #: wall time with 2 jobs on 2 cores, nothing cached: an estimate from the measured cases (docs/campaigns.md):
-#: twelve 0.7 mm solves (four ideal-ankle nus, four subject-ankle nus, four layers) of about 8 min
-#: each on a quiet core (error-vs-runtime's P2 at 0.7 mm) over two jobs, plus 28 meshes of 2.0 and
-#: 1.0 mm of 0.5-5 min; at load 9-14 a 0.7 mm solve took over 40 min
-EXPECTED_TIME_S = 4400.0
+#: quick's twelve points about 75 min (twelve 0.7 mm solves of about 8 min on a quiet core over two
+#: jobs, plus 28 meshes of 2.0 and 1.0 mm); the 30 points added on 2026-11-26 took 2 h 10 min on two
+#: processes at load 2-4, the six left then (Taylor-Hood and subject-like 0.7 mm solves) about 20-40
+#: min each; at load 9-14 a 0.7 mm solve took over 40 min
+EXPECTED_TIME_S = 18000.0
 #: what the study found on the subject-like ankle (issue 24, item 3), measured 2026-11-26 (docs/campaigns.md)
 FINDINGS = (
     "Subject-like ankle (issue 24, item 3): the FE's raw peak at 1.0 mm is not converged: refining in plane lowers it 22 % (1.913 -> 1.499 MPa; "
