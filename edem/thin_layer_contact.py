@@ -434,7 +434,8 @@ class CoupledStep:
             thickness[geometry.candidate[domain]] = candidate_thickness  # domain is sorted: candidates in their order
         is_candidate = geometry.candidate[domain]
         length = geometry.spring_length_mm[domain]
-        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends, cartilage.thin_layer_symbol)
+        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends, cartilage.thin_layer_symbol,
+                                 cartilage.thin_layer_smoothing_resolution)
         overlap = np.full(domain.shape, -np.inf)
         pushback = None
         if law.thin_layer == "carried":
