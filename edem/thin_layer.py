@@ -86,6 +86,21 @@ solve cuts the surface to a band around the candidates (``edem.thin_layer_contac
 Where the layer itself ends inside the surface (the threshold law's cartilage fills the gap only
 where the springs are candidates), its edge is free like the surface's (``edge_at_cells``).
 
+Coarse smoothing space. The smoothed field varies over sqrt(b) h (about 2.5 mm for the Pade on
+a 2 mm layer) while springs may be 0.3 mm apart, so with ``smoothing_resolution`` r > 0 a term
+whose coarse cells sqrt(b) h / r are at least COARSE_MIN_SPRINGS springs across is solved on a
+subspace of the P1 space: v = P v_c, P (v, V_c) the interpolation of a coarse triangulation
+(``coarse_transfer``), with the Galerkin operators H_c = P^T H P and Z_c = P^T Z, so
+
+    C_c = diag(c_loc / A) + sigma Z_c^T H_c^-1 Z_c.
+
+It is symmetric; P H_c^-1 P^T <= H^-1 (an H-orthogonal projection), so for sigma = -1 the
+coarse term removes less than the fine one: C_c >= C (still positive definite), converging to
+it as P -> I (P = I once every vertex is a coarse one). The coarse functions sum to one where
+none was dropped, so a uniform pressure on a layer without free edges still deflects it by
+h p / E'; the coarse vertices on the free edge are dropped, so the field still vanishes there.
+The coupled matrix keeps its form, sigma H_c + Z_c diag(x) Z_c^T, on the coarse pattern.
+
 Factorisation. The vertex matrices are SPD and banded once renumbered by reverse Cuthill-McKee
 (half-bandwidth about the square root of the vertex count on a surface patch), so LAPACK's banded
 Cholesky factors them; it took 0.35-0.65x the time of SuperLU's symmetric-mode LU on the ankle
