@@ -663,6 +663,7 @@ def coarse_transfer(vertices_mm: np.ndarray, triangles: np.ndarray, kept: np.nda
     seeds = np.concatenate([inner, fixed[_cube_seeds(vertices_mm[fixed], size_mm)]])
     key = np.unique(np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1) @ np.array([n, 1]))
     a, b = key // n, key % n
+    # + 1e-300: an edge of zero length (coincident vertices) would read as no edge
     graph = sp.csr_matrix((np.linalg.norm(vertices_mm[a] - vertices_mm[b], axis=1) + 1e-300, (a, b)), shape=(n, n))
     _, _, source = dijkstra(graph, directed=False, indices=seeds, return_predecessors=True, min_only=True)
     seed_index = np.full(n, -1)
