@@ -157,11 +157,9 @@ class IndependentSprings(Bed):
 
     @classmethod
     def check(cls, cartilage: Cartilage, table: SceneTable) -> None:
-        if table.has("thin_layer_symbol"):
-            raise table.error(
-                "thin_layer_symbol", "thin_layer_symbol only applies to the coupled thin layer",
-                f'coupling = "{CoupledThinLayer.coupling}" with it, or no thin_layer_symbol',
-            )
+        for key in ("thin_layer_symbol", "thin_layer_smoothing_resolution"):
+            if table.has(key):
+                raise table.error(key, f"{key} only applies to the coupled thin layer", f'coupling = "{CoupledThinLayer.coupling}" with it, or no {key}')
 
     def __init__(self, scene, caster: RayCaster) -> None:
         super().__init__(scene, caster)

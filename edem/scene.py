@@ -46,6 +46,7 @@ SECTIONS = {
         "shear_modulus_mpa",
         "coupling",
         "thin_layer_symbol",
+        "thin_layer_smoothing_resolution",
         *CARTILAGE_KEYS,  # measured thickness (edem.thickness)
     },
     "load": None,  # checked by edem.loads
@@ -173,6 +174,7 @@ class Scene:
         shear_modulus_mpa: float = 0.0,
         coupling: str = IndependentSprings.coupling,
         thin_layer_symbol: str | None = None,
+        thin_layer_smoothing_resolution: float | None = None,
         fixed_dofs: tuple[str, ...] = (),
         reference_point_mm: np.ndarray | None = None,
         kinematics: JointKinematics | None = None,
@@ -221,6 +223,10 @@ class Scene:
         thin_layer_symbol : str, optional
             With ``coupling="thin-layer"``, the layer's symbol, a name of
             :data:`edem.thin_layer.LAYER_SYMBOLS` (``"pade"``, the default, or ``"two-pole"``).
+        thin_layer_smoothing_resolution : float, optional
+            With ``coupling="thin-layer"``, cells of the coarse smoothing space per smoothing
+            length (as ``[cartilage] thin_layer_smoothing_resolution``); default 0, the springs'
+            own mesh (docs/method.md, "Coarse smoothing space").
         fixed_dofs : tuple of str
             Fixed DOFs of M among tx, ty, tz, rx, ry, rz.
         reference_point_mm : (3,) float, optional
@@ -272,6 +278,7 @@ class Scene:
         given = {
             "youngs_modulus_mpa": youngs_modulus_mpa, "poissons_ratio": poissons_ratio, "law": law, "max_spring_length_mm": max_spring_length_mm,
             "thickness_mm": thickness_mm, "shear_modulus_mpa": shear_modulus_mpa, "coupling": coupling, "thin_layer_symbol": thin_layer_symbol,
+            "thin_layer_smoothing_resolution": thin_layer_smoothing_resolution,
         }
         # numpy scalars as the plain numbers a TOML table holds; None: not given
         bones, uniform = {"mobile": mobile_bone, "fixed": fixed_bone}, {"mobile": mobile_thickness_mm, "fixed": fixed_thickness_mm}
@@ -361,6 +368,8 @@ def cartilage_from_table(table: dict[str, Any], file: str | Path, section: str =
     cartilage = Cartilage(
         coupling=coupling,
         thin_layer_symbol=cart.string("thin_layer_symbol", "pade", tuple(LAYER_SYMBOLS)),
+        thin_layer_smoothing_resolution=cart.number("thin_layer_smoothing_resolution", 0.0, nonnegative=True,
+                                                    what="cells of the coarse smoothing space per smoothing length (>= 0; 0: the springs' own mesh)"),
         youngs_modulus_mpa=cart.number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
         poissons_ratio=cart.number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
         law=law,

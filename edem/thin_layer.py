@@ -86,6 +86,21 @@ solve cuts the surface to a band around the candidates (``edem.thin_layer_contac
 Where the layer itself ends inside the surface (the threshold law's cartilage fills the gap only
 where the springs are candidates), its edge is free like the surface's (``edge_at_cells``).
 
+Coarse smoothing space. The smoothed field varies over sqrt(b) h (about 2.5 mm for the Pade on
+a 2 mm layer) while springs may be 0.3 mm apart, so with ``smoothing_resolution`` r > 0 a term
+whose coarse cells sqrt(b) h / r are at least COARSE_MIN_SPRINGS springs across is solved on a
+subspace of the P1 space: v = P v_c, P (v, V_c) the interpolation of a coarse triangulation
+(``coarse_transfer``), with the Galerkin operators H_c = P^T H P and Z_c = P^T Z, so
+
+    C_c = diag(c_loc / A) + sigma Z_c^T H_c^-1 Z_c.
+
+It is symmetric; P H_c^-1 P^T <= H^-1 (an H-orthogonal projection), so for sigma = -1 the
+coarse term removes less than the fine one: C_c >= C (still positive definite), converging to
+it as P -> I (P = I once every vertex is a coarse one). The coarse functions sum to one where
+none was dropped, so a uniform pressure on a layer without free edges still deflects it by
+h p / E'; the coarse vertices on the free edge are dropped, so the field still vanishes there.
+The coupled matrix keeps its form, sigma H_c + Z_c diag(x) Z_c^T, on the coarse pattern.
+
 Factorisation. The vertex matrices are SPD and banded once renumbered by reverse Cuthill-McKee
 (half-bandwidth about the square root of the vertex count on a surface patch), so LAPACK's banded
 Cholesky factors them; it took 0.35-0.65x the time of SuperLU's symmetric-mode LU on the ankle
@@ -109,7 +124,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import cho_solve_banded, lu_factor, lu_solve
 from scipy.linalg.lapack import dpbtrf
-from scipy.sparse.csgraph import reverse_cuthill_mckee
+from scipy.sparse.csgraph import dijkstra, reverse_cuthill_mckee
 from scipy.sparse.linalg import splu
 
 from edem.errors import SolverError
@@ -302,6 +317,8 @@ class SurfaceMesh:
     cotangents: np.ndarray  # (n, 3)
     incidence: sp.csr_matrix  # (n, n_vertices) triangle-vertex incidence
     free_edge_vertex: np.ndarray  # (n_vertices,) bool: on the surface's boundary (the cartilage's free edge)
+    #: (n_vertices, 3) mm, where known (``from_surface``): the coarse smoothing space needs them
+    vertices_mm: np.ndarray | None = field(default=None, compare=False, repr=False)
     memo: dict = field(default_factory=dict, compare=False, repr=False)  # the operator patterns of the last cell set
 
     @staticmethod
@@ -377,7 +394,8 @@ class SurfaceMesh:
 
     @staticmethod
     def from_surface(vertices_mm: np.ndarray, triangles: np.ndarray) -> "SurfaceMesh":
-        return SurfaceMesh.from_corners(triangles, vertices_mm[triangles])
+        mesh = SurfaceMesh.from_corners(triangles, vertices_mm[triangles])
+        return SurfaceMesh(mesh.triangles, mesh.area_mm2, mesh.cotangents, mesh.incidence, mesh.free_edge_vertex, np.asarray(vertices_mm, float))
 
     def smoothing_operators(
         self, cells: np.ndarray, mass_weight: np.ndarray, stiffness_weight: np.ndarray, edge_at_cells: bool = False, dirichlet: bool = True
@@ -405,6 +423,29 @@ class SurfaceMesh:
         element += (self.area_mm2[cells] * np.asarray(mass_weight, float) / 9.0)[:, None]
         return pattern.matrix(pattern.sum_at_slots(element)), pattern
 
+    def coarse_space(self, cells: np.ndarray, edge_at_cells: bool, dirichlet: bool, size_mm: float) -> "CoarseSpace":
+        """The coarse space about ``size_mm`` across on the triangles ``cells`` (``coarse_transfer``),
+        built once per cell set (kept with its operator patterns). Needs ``vertices_mm``."""
+        if self.vertices_mm is None:
+            raise ValueError("a coarse smoothing space needs the surface's vertex coordinates (SurfaceMesh.from_surface)")
+        fine = self.operator_pattern(cells, edge_at_cells, dirichlet)  # also starts this cell set's memo
+        key = ("coarse", edge_at_cells, dirichlet, float(size_mm))
+        if key not in self.memo:
+            fixed = self.fixed_vertices(cells, edge_at_cells, dirichlet)
+            used = np.zeros(fixed.shape[0], bool)
+            used[self.triangles[cells]] = True
+            kept, edge = np.flatnonzero(used & ~fixed), np.flatnonzero(used & fixed)  # kept: the fine space's vertices, in its order
+            self.memo[key] = CoarseSpace.build(fine, coarse_transfer(self.vertices_mm, self.triangles[cells], kept, edge, size_mm))
+        return self.memo[key]
+
+    def fixed_vertices(self, cells: np.ndarray, edge_at_cells: bool, dirichlet: bool) -> np.ndarray:
+        """(n_vertices,) bool: where the smoothed field vanishes (``smoothing_operators``)."""
+        if not dirichlet:
+            return np.zeros(self.free_edge_vertex.shape[0], bool)
+        if edge_at_cells:
+            return self.free_edge_vertex | self.boundary_of(cells)
+        return self.free_edge_vertex
+
     def operator_pattern(self, cells: np.ndarray, edge_at_cells: bool = False, dirichlet: bool = True) -> "OperatorPattern":
         """The sparsity of the operators on the triangles ``cells`` (indices, m), built once per cell set.
 
@@ -423,12 +464,7 @@ class SurfaceMesh:
         if cached is not None:
             return cached
         tri = self.triangles[cells]
-        if not dirichlet:
-            free = np.zeros(self.free_edge_vertex.shape[0], bool)
-        elif edge_at_cells:
-            free = self.free_edge_vertex | self.boundary_of(cells)
-        else:
-            free = self.free_edge_vertex
+        free = self.fixed_vertices(cells, edge_at_cells, dirichlet)
         # The cells' pattern is the whole surface's restricted to the pairs the cells hold, on the
         # vertices they use off the free edge (where the smoothed field vanishes), numbered in
         # the surface's order: O(n) masks, no sorting per cell set (``surface_pairs``).
@@ -583,6 +619,152 @@ class OperatorPattern:
         return band
 
 
+# --------------------------------------------------------------------------- the coarse smoothing space
+
+#: A term is solved on a coarse space only where its coarse size is at least this many springs
+#: across (the side sqrt(2 A) of the median triangle): below, the space keeps most of the
+#: vertices (1 mm cubes kept 0.74 of them on 0.94 mm springs) and building it costs more than
+#: the smaller factor saves (benchmarks/bench_coarse_smoothing.py).
+COARSE_MIN_SPRINGS = 2.0
+
+
+def _cube_seeds(points_mm: np.ndarray, size_mm: float) -> np.ndarray:
+    """Indices into ``points_mm`` (k, 3): per cube of side ``size_mm`` that holds any, the point
+    nearest the mean of those it holds."""
+    if points_mm.shape[0] == 0:
+        return np.zeros(0, np.int64)
+    cube = np.floor((points_mm - points_mm.min(axis=0)) / size_mm).astype(np.int64)
+    span = cube.max(axis=0) + 1
+    _, group = np.unique((cube[:, 0] * span[1] + cube[:, 1]) * span[2] + cube[:, 2], return_inverse=True)
+    count = np.bincount(group)
+    centre = np.column_stack([np.bincount(group, weights=points_mm[:, k]) for k in range(3)]) / count[:, None]
+    order = np.lexsort((np.linalg.norm(points_mm - centre[group], axis=1), group))  # per cube, nearest first
+    return order[np.r_[True, group[order][1:] != group[order][:-1]]]
+
+
+def coarse_transfer(vertices_mm: np.ndarray, triangles: np.ndarray, kept: np.ndarray, fixed: np.ndarray, size_mm: float) -> sp.csr_matrix:
+    """P (kept.size, V_c): the values at the fine vertices ``kept`` of the P1 functions of a coarse
+    triangulation, about ``size_mm`` across, of the surface ``triangles`` (m, 3) (module docstring,
+    "Coarse smoothing space").
+
+    Coarse vertices: one fine vertex per cube of side ``size_mm`` among ``kept``, and among
+    ``fixed`` (the vertices where the field vanishes), whose functions are then dropped. Each fine
+    vertex belongs to its nearest coarse vertex along the mesh's edges (scipy's multi-source
+    Dijkstra); a fine triangle whose corners belong to three coarse vertices makes a coarse
+    triangle (the dual of those regions). A fine vertex takes its barycentric coordinates in the
+    coarse triangle around its own coarse vertex that holds it best (its projection on the
+    triangle's plane; negative coordinates clipped, the rest rescaled to sum 1), so P 1 = 1 where
+    no function was dropped, and linear fields are kept inside the coarse triangles. A coarse
+    vertex is itself a fine vertex with its identity row, so P has full column rank.
+    """
+    tri = np.asarray(triangles, np.int64)
+    n = vertices_mm.shape[0]
+    inner = kept[_cube_seeds(vertices_mm[kept], size_mm)]
+    seeds = np.concatenate([inner, fixed[_cube_seeds(vertices_mm[fixed], size_mm)]])
+    key = np.unique(np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1) @ np.array([n, 1]))
+    a, b = key // n, key % n
+    # + 1e-300: an edge of zero length (coincident vertices) would read as no edge
+    graph = sp.csr_matrix((np.linalg.norm(vertices_mm[a] - vertices_mm[b], axis=1) + 1e-300, (a, b)), shape=(n, n))
+    _, _, source = dijkstra(graph, directed=False, indices=seeds, return_predecessors=True, min_only=True)
+    seed_index = np.full(n, -1)
+    seed_index[seeds] = np.arange(seeds.size)
+    region = np.where(source >= 0, seed_index[np.maximum(source, 0)], -1)  # (n,) the nearest coarse vertex
+    corners = region[tri]
+    dual = np.all(corners >= 0, axis=1) & (corners[:, 0] != corners[:, 1]) & (corners[:, 1] != corners[:, 2]) & (corners[:, 0] != corners[:, 2])
+    coarse = np.unique(np.sort(corners[dual], axis=1), axis=0)  # (k, 3) coarse triangles, in seed indices
+    # Every (fine vertex, coarse triangle around its coarse vertex) pair.
+    own = region[kept]
+    around = sp.csr_matrix((np.ones(coarse.size), (coarse.ravel(), np.repeat(np.arange(coarse.shape[0]), 3))), shape=(seeds.size, coarse.shape[0]))
+    count = np.where(own >= 0, np.diff(around.indptr)[np.maximum(own, 0)], 0)
+    vertex = np.repeat(np.arange(kept.size), count)
+    first = np.repeat(around.indptr[np.maximum(own, 0)] - (np.cumsum(count) - count), count)
+    triangle = around.indices[first + np.arange(vertex.size)]
+    corner = vertices_mm[seeds[coarse[triangle]]]  # (pairs, 3, 3)
+    e1, e2, d = corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0], vertices_mm[kept[vertex]] - corner[:, 0]
+    g11, g12, g22 = np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e1, e2), np.einsum("ij,ij->i", e2, e2)
+    r1, r2 = np.einsum("ij,ij->i", e1, d), np.einsum("ij,ij->i", e2, d)
+    det = g11 * g22 - g12 * g12
+    flat = det > 1e-12 * g11 * g22  # not a degenerate coarse triangle
+    det = np.where(flat, det, 1.0)
+    beta, gamma = (g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det
+    bary = np.column_stack([1.0 - beta - gamma, beta, gamma])
+    score = np.where(flat, bary.min(axis=1), -np.inf)
+    order = np.lexsort((-score, vertex))
+    best = order[np.r_[True, vertex[order][1:] != vertex[order][:-1]]] if order.size else order
+    best = best[np.isfinite(score[best])]
+    weight = np.clip(bary[best], 0.0, None)
+    weight /= weight.sum(axis=1, keepdims=True)
+    located = np.zeros(kept.size, bool)
+    located[vertex[best]] = True
+    alone = np.flatnonzero(~located & (own >= 0))  # no coarse triangle around: its coarse vertex's value
+    rows = np.concatenate([np.repeat(vertex[best], 3), alone])
+    cols = np.concatenate([coarse[triangle[best]].ravel(), own[alone]])
+    vals = np.concatenate([weight.ravel(), np.ones(alone.size)])
+    keep = (cols < inner.size) & (vals > 0.0)  # the fixed vertices' functions are dropped: the field vanishes there
+    p = sp.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(kept.size, inner.size))
+    p.sum_duplicates()
+    return p
+
+
+@dataclass
+class CoarseSpace:
+    """One smoothing term's coarse space on a cell set: the transfer P (v, V_c) from the coarse to
+    the fine vertices and the pattern of H_c + Z_c diag(x) Z_c^T (V_c, V_c), whose Q is Q P (m, V_c).
+
+    Z_c diag(x) Z_c^T adds x_t c_nl,t^2 (QP)_ta (QP)_tb at each pair (a, b) of spring t's coarse
+    vertices: ``pair_slot`` and ``pair_product`` ((QP)_ta (QP)_tb) list them spring by spring,
+    spring t's from ``pair_start[t]`` to ``pair_start[t + 1]``, so the coupled matrix's data is
+    one bincount over the springs of nonzero weight (``SmoothingTerm.coupled_data``).
+    """
+
+    transfer: sp.csr_matrix
+    pattern: OperatorPattern
+    keys: np.ndarray  # (nnz,) column * V_c + row of each stored entry (sorted)
+    pair_slot: np.ndarray
+    pair_product: np.ndarray
+    pair_start: np.ndarray  # (m + 1,)
+    galerkin: tuple[np.ndarray, sp.csc_matrix] | None = None  # the last fine H's data and its P^T H P
+
+    @staticmethod
+    def build(fine: OperatorPattern, transfer: sp.csr_matrix) -> "CoarseSpace":
+        qp = (fine.q @ transfer).tocsr()
+        qp.sort_indices()
+        support = abs(transfer)
+        structure = (support.T @ fine.matrix(np.ones(fine.indices.shape[0])) @ support).tocsc()  # no cancellation: a structural pattern
+        structure.sort_indices()
+        n_c = transfer.shape[1]
+        keys = np.repeat(np.arange(n_c), np.diff(structure.indptr)) * n_c + structure.indices
+        # Spring t's coarse pairs: every (a, b) of its row of Q P, padded to the longest row.
+        count = np.diff(qp.indptr)
+        m, width = qp.shape[0], int(count.max(initial=0))
+        row, position = np.repeat(np.arange(m), count), np.arange(qp.indices.shape[0]) - np.repeat(qp.indptr[:-1], count)
+        vertex, value = np.full((m, width), -1), np.zeros((m, width))
+        vertex[row, position], value[row, position] = qp.indices, qp.data
+        valid = (vertex[:, :, None] >= 0) & (vertex[:, None, :] >= 0)
+        a, b = np.broadcast_to(vertex[:, :, None], valid.shape)[valid], np.broadcast_to(vertex[:, None, :], valid.shape)[valid]
+        pattern = OperatorPattern(structure.indices, structure.indptr, np.zeros((0, 9), np.int64), qp)
+        start = np.zeros(m + 1, np.int64)
+        np.cumsum(count * count, out=start[1:])  # valid is row-major: spring by spring
+        return CoarseSpace(transfer, pattern, keys, np.searchsorted(keys, b * n_c + a), (value[:, :, None] * value[:, None, :])[valid], start)
+
+    def pairs_of(self, springs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(the pairs' positions, their springs) of the springs (k,), spring by spring."""
+        count = self.pair_start[springs + 1] - self.pair_start[springs]
+        owner = np.repeat(springs, count)
+        return np.repeat(self.pair_start[springs] - (np.cumsum(count) - count), count) + np.arange(owner.size), owner
+
+    def operator(self, fine_h: sp.csc_matrix) -> sp.csc_matrix:
+        """H_c = P^T H P (V_c, V_c) on the coupled pattern; the last one is kept (the gap laws' layer
+        keeps its operators over a run, and the kept factor is matched by H_c's data)."""
+        if self.galerkin is None or not np.array_equal(self.galerkin[0], fine_h.data):
+            product = (self.transfer.T @ fine_h @ self.transfer).tocoo()
+            n_c = self.transfer.shape[1]
+            data = np.zeros(self.keys.shape[0])
+            np.add.at(data, np.searchsorted(self.keys, product.col * n_c + product.row), product.data)
+            self.galerkin = (fine_h.data.copy(), self.pattern.matrix(data))
+        return self.galerkin[1]
+
+
 # Past this many changed spring weights the coupled matrix is refactored rather than corrected by
 # the Woodbury identity: each changed weight costs one solve with the old factor, and on the ankle
 # surfaces (14k vertices, half-bandwidth 156) a banded factorisation cost about 16 single solves
@@ -684,14 +866,20 @@ class SmoothingTerm:
     h: sp.csc_matrix  # (v, v) canonical CSC, mm^3/MPa
     weight: np.ndarray  # (m,) c_nl in mm/MPa
     pattern: OperatorPattern  # H's sparsity, slots and ordering (SurfaceMesh.operator_pattern)
+    coarse: CoarseSpace | None = None  # H, Z on a coarse space (H_c, Z_c, pattern its own), or None: on the springs' vertices
 
     def coupled_data(self, spring_weight: np.ndarray) -> np.ndarray:
         """Data (nnz,) of H + sigma Z diag(spring_weight) Z^T on H's pattern.
 
         Z diag(x) Z^T = Q^T diag(c_nl^2 x) Q puts c_nl^2 x / 9 on every corner pair of each
-        triangle, all of them entries of H, so only H's data changes.
+        triangle, all of them entries of H, so only H's data changes. On a coarse space, Q P
+        in place of Q (``CoarseSpace``): only the springs of nonzero weight are summed.
         """
-        return self.h.data + self.pattern.sum_at_slots(self.sigma * self.weight**2 * spring_weight / 9.0)
+        if self.coarse is None:
+            return self.h.data + self.pattern.sum_at_slots(self.sigma * self.weight**2 * spring_weight / 9.0)
+        pair, spring = self.coarse.pairs_of(np.flatnonzero(spring_weight))
+        added = self.sigma * self.weight[spring] ** 2 * spring_weight[spring] * self.coarse.pair_product[pair]
+        return self.h.data + np.bincount(self.coarse.pair_slot[pair], weights=added, minlength=self.h.data.shape[0])
 
 
 @dataclass(frozen=True)
@@ -798,21 +986,30 @@ def layer_compliance(
     poissons_ratio: float,
     edge_at_cells: bool = False,
     symbol: str = "pade",
+    smoothing_resolution: float = 0.0,
 ) -> LayerCompliance:
     """The thin-layer compliance on the springs ``cells`` (indices) with local thickness (m,) mm.
 
     ``edge_at_cells``: the layer ends at the boundary of ``cells`` (a free lateral face there),
-    rather than going on beyond them with a natural cut. ``symbol``: a name of LAYER_SYMBOLS."""
+    rather than going on beyond them with a natural cut. ``symbol``: a name of LAYER_SYMBOLS.
+    ``smoothing_resolution`` > 0: each term is solved on a coarse space (module docstring, "Coarse
+    smoothing space") of this many cells per smoothing length sqrt(b) h (at the median h), where
+    those cells are at least COARSE_MIN_SPRINGS springs across; 0: on the springs' vertices."""
     g = youngs_modulus_mpa / (2.0 * (1.0 + poissons_ratio))
     h = np.broadcast_to(np.asarray(thickness_mm, float), cells.shape)
     h_over_g = h / g
     model = LAYER_SYMBOLS[symbol](poissons_ratio)
+    spring_mm = float(np.sqrt(2.0 * np.median(mesh.area_mm2[cells]))) if cells.size else 0.0
     terms = []
     for strength, b, dirichlet in zip(model.strengths, model.screenings, model.dirichlet):
         # S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl (module docstring, variable thickness).
-        c_nl = abs(strength) * h_over_g
+        c_nl = np.broadcast_to(abs(strength) * h_over_g, cells.shape)
         smoothing, pattern = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl, edge_at_cells, dirichlet)
-        q = pattern.q  # Z^T = diag(c_nl) Q: Q's rows scaled, no sparse product
-        z_t = sp.csr_matrix((q.data * np.repeat(np.broadcast_to(c_nl, cells.shape), np.diff(q.indptr)), q.indices, q.indptr), shape=q.shape)
-        terms.append(SmoothingTerm(float(np.sign(strength)), z_t.T.tocsr(), smoothing, np.broadcast_to(c_nl, cells.shape), pattern))
+        size_mm = np.sqrt(b) * float(np.median(h)) / smoothing_resolution if smoothing_resolution > 0.0 and cells.size else 0.0
+        coarse = mesh.coarse_space(cells, edge_at_cells, dirichlet, size_mm) if size_mm > 0.0 and size_mm >= COARSE_MIN_SPRINGS * spring_mm else None
+        q = pattern.q if coarse is None else coarse.pattern.q  # Z^T = diag(c_nl) Q: Q's rows scaled, no sparse product
+        z_t = sp.csr_matrix((q.data * np.repeat(c_nl, np.diff(q.indptr)), q.indices, q.indptr), shape=q.shape)
+        if coarse is not None:
+            smoothing, pattern = coarse.operator(smoothing), coarse.pattern
+        terms.append(SmoothingTerm(float(np.sign(strength)), z_t.T.tocsr(), smoothing, c_nl, pattern, coarse))
     return LayerCompliance(model.local * h_over_g / mesh.area_mm2[cells], tuple(terms), mesh.memo.setdefault("factor", {}))

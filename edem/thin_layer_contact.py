@@ -434,7 +434,15 @@ class CoupledStep:
             thickness[geometry.candidate[domain]] = candidate_thickness  # domain is sorted: candidates in their order
         is_candidate = geometry.candidate[domain]
         length = geometry.spring_length_mm[domain]
-        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends, cartilage.thin_layer_symbol)
+        # The coarse smoothing space pays where it is built once per run: on the layer over the
+        # whole surface. A layer on the candidates (or a band around them) is a new cell set at
+        # every time point, where building it cost more than it saved (the threshold law's EDEM
+        # stance, 29k springs: 14.5x the springs against 6.3x fine, benchmarks/bench_coarse_smoothing.py),
+        # so such a layer stays on the springs' vertices.
+        whole = domain.shape[0] == mesh.triangles.shape[0]
+        resolution = cartilage.thin_layer_smoothing_resolution if whole else 0.0
+        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends, cartilage.thin_layer_symbol,
+                                 resolution)
         overlap = np.full(domain.shape, -np.inf)
         pushback = None
         if law.thin_layer == "carried":

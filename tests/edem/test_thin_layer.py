@@ -505,3 +505,84 @@ def test_a_cell_sets_pattern_restricted_from_the_surfaces_is_the_assembly_of_its
                 inside = number[tri[:, corner]] >= 0
                 q[np.flatnonzero(inside), number[tri[inside, corner]]] += 1.0 / 3.0
             np.testing.assert_array_equal(pattern.q.toarray(), q)
+
+
+# --------------------------------------------------------------------------- the coarse smoothing space
+
+
+def sphere(n_points: int, radius_mm: float) -> SurfaceMesh:
+    """A closed triangulated sphere (no free edge): the hull of a Fibonacci lattice."""
+    from scipy.spatial import ConvexHull
+
+    k = np.arange(n_points) + 0.5
+    z = 1.0 - 2.0 * k / n_points
+    phi = np.pi * (1.0 + 5.0**0.5) * k
+    points = radius_mm * np.column_stack([np.sqrt(1.0 - z * z) * np.cos(phi), np.sqrt(1.0 - z * z) * np.sin(phi), z])
+    return SurfaceMesh.from_surface(points, ConvexHull(points).simplices)
+
+
+def plate_mesh(n: int) -> SurfaceMesh:
+    plate = grid_plate(12.0, 12.0, n)
+    return SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
+
+
+def full_compliance(layer) -> np.ndarray:
+    return np.column_stack([layer.deflection(col) for col in np.eye(layer.local_mm_per_n.shape[0])])
+
+
+@pytest.mark.parametrize("symbol", tuple(LAYER_SYMBOLS))
+def test_coarse_smoothing_deflects_a_closed_layer_uniformly_under_uniform_pressure(symbol):
+    # On a closed surface (no free edge) the coarse functions sum to one (P 1 = 1) and K 1 = 0, so
+    # H_c 1 = P^T Q^T diag(A c_nl) 1 and S 1 = 1: h p / E' at every spring to round-off, as on the
+    # springs' own vertices (thickness varying: S 1 = 1 for any h).
+    mesh = sphere(3000, 15.0)  # springs sqrt(2 A) about 1 mm across
+    cells = np.arange(mesh.area_mm2.shape[0])
+    centroid = mesh.vertices_mm[mesh.triangles].mean(axis=1)
+    h = 3.0 + 0.5 * centroid[:, 2] / 15.0  # 2.5 .. 3.5 mm: the bulge term's coarse cells about 1.2 h = 3.7 mm
+    for nu in (0.42, 0.499):  # below nu 1/4 the Pade's term is short (sqrt(b) = 0.24 at nu 0.1) and stays fine
+        layer = layer_compliance(mesh, cells, h, E, nu, symbol=symbol, smoothing_resolution=1.0)
+        coarse = [t.coarse for t in layer.terms if t.coarse is not None]
+        assert coarse and all(c.transfer.shape[1] < c.transfer.shape[0] / 4 for c in coarse)  # it is coarse
+        w = layer.deflection(2.0 * mesh.area_mm2)
+        np.testing.assert_allclose(w, h * 2.0 / confined_modulus_mpa(E, nu), rtol=1e-9)
+
+
+def test_coarse_pade_compliance_is_symmetric_positive_definite_and_at_least_the_fine_one():
+    """A Galerkin space: P H_c^-1 P^T <= H^-1, so the bulge term's (sigma = -1) coarse part removes
+    less and C_coarse - C_fine is positive semidefinite; C_coarse is symmetric and, as the fine
+    one, at least the independent springs' diag((h/G) e / A) (module docstring). Round-off:
+    1e-12 of the largest entry."""
+    mesh = plate_mesh(16)  # springs 0.75 mm
+    cells = np.arange(mesh.area_mm2.shape[0])
+    thickness = 1.5 + 0.2 * np.arange(cells.size) / cells.size
+    for nu in (0.42, 0.499):
+        fine = full_compliance(layer_compliance(mesh, cells, thickness, E, nu))
+        layer = layer_compliance(mesh, cells, thickness, E, nu, smoothing_resolution=1.0)
+        assert layer.terms[0].coarse is not None
+        coarse = full_compliance(layer)
+        scale = np.abs(coarse).max()
+        np.testing.assert_allclose(coarse, coarse.T, atol=1e-12 * scale)
+        assert np.linalg.eigvalsh(0.5 * (coarse + coarse.T) - fine).min() > -1e-12 * scale
+        springs = np.diag(thickness / confined_modulus_mpa(E, nu) / mesh.area_mm2)
+        assert np.linalg.eigvalsh(0.5 * (coarse + coarse.T) - springs).min() > -1e-12 * scale
+
+
+def test_coarse_smoothing_converges_to_the_fine_operator_as_its_cells_shrink(monkeypatch):
+    """The deflection under a bump of pressure approaches the fine operator's as the coarse cells
+    shrink (4, 2.8, 2 springs across, the guard COARSE_MIN_SPRINGS lifted), and equals it to
+    round-off once every vertex is a coarse vertex (cells below the springs' spacing: P = I)."""
+    import edem.thin_layer as thin_layer
+
+    monkeypatch.setattr(thin_layer, "COARSE_MIN_SPRINGS", 0.0)
+    mesh = plate_mesh(24)  # 0.5 mm squares: springs sqrt(2 A) = 0.5 mm
+    cells = np.arange(mesh.area_mm2.shape[0])
+    centroid = mesh.vertices_mm[mesh.triangles].mean(axis=1)
+    force = np.exp(-np.sum(centroid[:, :2] ** 2, axis=1) / 4.0) * mesh.area_mm2
+    fine = layer_compliance(mesh, cells, 2.0, E, 0.49).deflection(force)
+    length = np.sqrt(pade_coefficients(0.49)[2]) * 2.0  # the smoothing length sqrt(b) h
+    errors = []
+    for size in (2.0, 1.4, 1.0, 0.2):  # mm; 0.2 < 0.5 / sqrt(3): at most one vertex per cube
+        w = layer_compliance(mesh, cells, 2.0, E, 0.49, smoothing_resolution=length / size).deflection(force)
+        errors.append(np.linalg.norm(w - fine) / np.linalg.norm(fine))
+    assert errors[0] > errors[1] > errors[2] > 1e3 * errors[3]
+    assert errors[3] < 1e-12
