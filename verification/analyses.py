@@ -553,7 +553,7 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
                                 "–" if l2_row is None else f"{100 * l2_row:.0f} %", fe_error_text(fe_relative_error(row, reference))], "flag": row["status"] == "flagged"})
     return {
         "columns": ["case", "verdict", "DEM |u| (mm)", "FE |u| (mm)", "displacement diff", "DEM regularised peak (MPa)", "FE regularised peak (MPa)", "peak diff",
-                    "DEM area (mm²)", "FE area (mm²)", "area diff", "pressure L2", "FE's own error (peak / area / |u|)"],
+                    "DEM area (mm²)", "FE area (mm²)", "area diff", "pressure L2", "FE's own error (regularised peak / area / |u| / L2)"],
         "rows": table,
         "status": FLAGGED if any(r["flag"] for r in table) else REPORTED,
         "notes": [s.get("fe_note", "")] if s.get("fe_note") else [],

@@ -40,9 +40,10 @@ ERROR_PANELS = ("regularised_peak_pressure_rel_error", "contact_area_rel_error",
 #: the FE reference's own estimated error (verification.fe_convergence; "unknown" when its run is
 #: not in the fe-convergence study): a model error below it cannot be told from the reference's
 FE_ERROR_COLUMNS = [
-    {"header": "FE's own err: peak", "fe_error": "peak_pressure_rel_error"},
+    {"header": "FE's own err: regularised peak", "fe_error": "regularised_peak_pressure_rel_error"},
     {"header": "area", "fe_error": "contact_area_rel_error"},
     {"header": "|u|", "fe_error": "displacement_rel_error"},
+    {"header": "L2", "fe_error": "pressure_l2_rel_error"},
 ]
 #: the table columns of DEM against the FE: values of both sides and the errors
 FE_VALUE_COLUMNS = [
