@@ -109,6 +109,7 @@ class RunResult:
             # the bed (the built-in scenes' defaults differ: the standing and toe-off ones couple, the stances do not)
             "coupling": self.scene.cartilage.coupling,
             "thin_layer_symbol": self.scene.cartilage.thin_layer_symbol if self.scene.cartilage.coupling != "none" else None,
+            "thin_layer_smoothing_resolution": self.scene.cartilage.thin_layer_smoothing_resolution if self.scene.cartilage.coupling != "none" else None,
             "warnings": list(self.scene.warnings) + list(self.warnings),
             **thickness_summary(self.scene.cartilage.layers),  # measured thickness only
             **({} if self.preflight is None else {"preflight": self.preflight.as_dict()}),

@@ -218,6 +218,8 @@ COUPLED_SETTINGS = {
     "load.force_scale": ["1", "1000", "1e6"],
     "solver.method": ['"dem"', '"edem"'],
     "viscoelastic.relaxation_time_s": ["1e-6", "0.1"],
+    # coarse cells of 0.5 smoothing lengths coarsen even the small bases; 1e9 never does
+    "cartilage.thin_layer_smoothing_resolution": ["0", "0.5", "3", "1e9"],
 }
 N_COUPLED_CASES = 80
 
