@@ -322,8 +322,10 @@ class SurfaceMesh:
     memo: dict = field(default_factory=dict, compare=False, repr=False)  # the operator patterns of the last cell set
 
     @staticmethod
-    def from_corners(triangles: np.ndarray, corners_mm: np.ndarray) -> "SurfaceMesh":
-        """From the vertex indices (n, 3) and the corner coordinates (n, 3, 3) in mm of each triangle."""
+    def from_corners(triangles: np.ndarray, corners_mm: np.ndarray, vertices_mm: np.ndarray | None = None) -> "SurfaceMesh":
+        """From the vertex indices (n, 3) and the corner coordinates (n, 3, 3) in mm of each triangle
+        (and the vertices (v, 3) in mm where there are such: a periodic mesh's corners differ
+        across its seams)."""
         out = np.empty(triangles.shape)
         area = 0.5 * np.linalg.norm(np.cross(corners_mm[:, 1] - corners_mm[:, 0], corners_mm[:, 2] - corners_mm[:, 0]), axis=1)
         for i in range(3):  # the three corners of every triangle at once
@@ -333,7 +335,8 @@ class SurfaceMesh:
         tri = np.asarray(triangles, np.int64)
         n = tri.shape[0]
         incidence = sp.csr_matrix((np.ones(3 * n), (np.repeat(np.arange(n), 3), tri.ravel())))
-        return SurfaceMesh(tri, area, out, incidence, boundary_vertices(tri, incidence.shape[1]))
+        return SurfaceMesh(tri, area, out, incidence, boundary_vertices(tri, incidence.shape[1]),
+                           None if vertices_mm is None else np.asarray(vertices_mm, float))
 
     def neighbourhood(self, cells: np.ndarray, width_mm: float, enough: int | None = None) -> np.ndarray:
         """Triangles within about ``width_mm`` of the triangles ``cells`` (bool mask, (n,)).
@@ -394,8 +397,7 @@ class SurfaceMesh:
 
     @staticmethod
     def from_surface(vertices_mm: np.ndarray, triangles: np.ndarray) -> "SurfaceMesh":
-        mesh = SurfaceMesh.from_corners(triangles, vertices_mm[triangles])
-        return SurfaceMesh(mesh.triangles, mesh.area_mm2, mesh.cotangents, mesh.incidence, mesh.free_edge_vertex, np.asarray(vertices_mm, float))
+        return SurfaceMesh.from_corners(triangles, vertices_mm[triangles], vertices_mm)
 
     def smoothing_operators(
         self, cells: np.ndarray, mass_weight: np.ndarray, stiffness_weight: np.ndarray, edge_at_cells: bool = False, dirichlet: bool = True
@@ -999,13 +1001,15 @@ def layer_compliance(
     h = np.broadcast_to(np.asarray(thickness_mm, float), cells.shape)
     h_over_g = h / g
     model = LAYER_SYMBOLS[symbol](poissons_ratio)
-    spring_mm = float(np.sqrt(2.0 * np.median(mesh.area_mm2[cells]))) if cells.size else 0.0
+    coarse_cells = smoothing_resolution > 0.0 and cells.size > 0
+    if coarse_cells:  # (medians over the cells: only where a coarse space may be built)
+        spring_mm, median_h = float(np.sqrt(2.0 * np.median(mesh.area_mm2[cells]))), float(np.median(h))
     terms = []
     for strength, b, dirichlet in zip(model.strengths, model.screenings, model.dirichlet):
         # S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl (module docstring, variable thickness).
         c_nl = np.broadcast_to(abs(strength) * h_over_g, cells.shape)
         smoothing, pattern = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl, edge_at_cells, dirichlet)
-        size_mm = np.sqrt(b) * float(np.median(h)) / smoothing_resolution if smoothing_resolution > 0.0 and cells.size else 0.0
+        size_mm = np.sqrt(b) * median_h / smoothing_resolution if coarse_cells else 0.0
         coarse = mesh.coarse_space(cells, edge_at_cells, dirichlet, size_mm) if size_mm > 0.0 and size_mm >= COARSE_MIN_SPRINGS * spring_mm else None
         q = pattern.q if coarse is None else coarse.pattern.q  # Z^T = diag(c_nl) Q: Q's rows scaled, no sparse product
         z_t = sp.csr_matrix((q.data * np.repeat(c_nl, np.diff(q.indptr)), q.indices, q.indptr), shape=q.shape)
