@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import Any
 
 from verification.campaign_model import THESIS_BED, VALUES_AT_REFERENCE_TIMES, Analysis, Campaign, Case, Figure, uniform_basis
+from verification.fe_convergence import FE_ERROR_TEXT_METRICS
 from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import INVARIANT, SANITY, Basis
 
@@ -39,12 +40,8 @@ FE_COMPARE_BASIS = {**SANITY_BASIS, "force_residual_rel": Basis(INVARIANT, "equi
 ERROR_PANELS = ("regularised_peak_pressure_rel_error", "contact_area_rel_error", "displacement_rel_error", "pressure_l2_rel_error")
 #: the FE reference's own estimated error (verification.fe_convergence; "unknown" when its run is
 #: not in the fe-convergence study): a model error below it cannot be told from the reference's
-FE_ERROR_COLUMNS = [
-    {"header": "FE's own err: regularised peak", "fe_error": "regularised_peak_pressure_rel_error"},
-    {"header": "area", "fe_error": "contact_area_rel_error"},
-    {"header": "|u|", "fe_error": "displacement_rel_error"},
-    {"header": "L2", "fe_error": "pressure_l2_rel_error"},
-]
+FE_ERROR_COLUMNS = [{"header": header, "fe_error": metric}
+                    for header, metric in zip(("FE's own err: regularised peak", "area", "|u|", "L2"), FE_ERROR_TEXT_METRICS, strict=True)]
 #: the table columns of DEM against the FE: values of both sides and the errors
 FE_VALUE_COLUMNS = [
     {"header": "DEM regularised peak (MPa)", "metric": "a_at_b_regularised_peak_pressure_mpa"},
