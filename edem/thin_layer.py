@@ -484,12 +484,24 @@ class SurfaceMesh:
         indptr = np.zeros(n_v + 1, np.int64)
         np.cumsum(np.bincount(renumber[col[entry]], minlength=n_v), out=indptr[1:])
         slots = np.where(entry[pairs], position[pairs], -1)
-        corner = kept[tri].ravel()
-        m = tri.shape[0]
-        q = sp.csr_matrix((np.full(int(corner.sum()), 1.0 / 3.0), (np.repeat(np.arange(m), 3)[corner], renumber[tri].ravel()[corner])), shape=(m, n_v))
+        q = _corner_means(np.where(kept[tri], renumber[tri], -1), n_v)
         pattern = OperatorPattern(renumber[row[entry]], indptr, slots, q)
         self.memo[(edge_at_cells, dirichlet)] = pattern
         return pattern
+
+
+def _corner_means(corner_vertex: np.ndarray, n_vertices: int) -> sp.csr_matrix:
+    """Q (m, n_vertices), Q_tv = 1/3 for each of triangle t's corners ``corner_vertex`` (m, 3)
+    int that is a vertex (-1: none), built in canonical CSR form directly (no COO sort)."""
+    columns = np.sort(corner_vertex, axis=1)
+    kept = columns >= 0
+    if np.any((columns[:, 1:] == columns[:, :-1]) & kept[:, 1:]):  # a corner twice: its weights add up
+        m = columns.shape[0]
+        return sp.csr_matrix((np.full(int(kept.sum()), 1.0 / 3.0), (np.repeat(np.arange(m), 3)[kept.ravel()], columns[kept])), shape=(m, n_vertices))
+    indptr = np.zeros(columns.shape[0] + 1, np.int64)
+    np.cumsum(kept.sum(axis=1), out=indptr[1:])
+    indices = columns[kept]
+    return sp.csr_matrix((np.full(indices.shape[0], 1.0 / 3.0), indices, indptr), shape=(columns.shape[0], n_vertices))
 
 
 # Past this half-bandwidth (after reverse Cuthill-McKee) the sparse LU is the cheaper factor: on
@@ -543,7 +555,9 @@ class OperatorPattern:
         storage (column-major, as LAPACK reads it), half-width) of the reverse Cuthill-McKee
         renumbering; built on first use."""
         n = self.n_vertices
-        order = reverse_cuthill_mckee(self.matrix(np.ones(self.indices.shape[0])).tocsr(), symmetric_mode=True).astype(np.int64)
+        # The pattern is symmetric, so its CSC arrays read as CSR are the same graph (no conversion).
+        graph = sp.csr_matrix((np.ones(self.indices.shape[0]), self.indices, self.indptr), shape=(n, n))
+        order = reverse_cuthill_mckee(graph, symmetric_mode=True).astype(np.int64)
         position = np.empty(n, np.int64)
         position[order] = np.arange(n)
         row = position[self.indices]
@@ -611,7 +625,7 @@ class OperatorPattern:
             cols = np.arange(max(start - width, 0), start)
             offset = rows[:, None] - cols[None, :]
             l21 = np.where(offset <= width, factor[np.minimum(offset, width), cols[None, :]], 0.0)
-            a, b = np.tril_indices(rows.size)
+            a, b = _lower_triangle(rows.size)
             band[a - b, start + b] -= (l21 @ l21.T)[a, b]
         trailing, info = dpbtrf(band[:, start:], lower=1, overwrite_ab=1)  # in place: the view is column-major
         if info > 0:
@@ -619,6 +633,14 @@ class OperatorPattern:
         if not np.shares_memory(trailing, band):  # LAPACK worked on a copy
             band[:, start:] = trailing
         return band
+
+
+@functools.lru_cache(maxsize=8)
+def _lower_triangle(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """np.tril_indices(n), kept (read-only): a run refactors with the same half-width over and over."""
+    rows, cols = np.tril_indices(n)
+    rows.flags.writeable = cols.flags.writeable = False
+    return rows, cols
 
 
 # --------------------------------------------------------------------------- the coarse smoothing space
@@ -770,8 +792,11 @@ class CoarseSpace:
 # Past this many changed spring weights the coupled matrix is refactored rather than corrected by
 # the Woodbury identity: each changed weight costs one solve with the old factor, and on the ankle
 # surfaces (14k vertices, half-bandwidth 156) a banded factorisation cost about 16 single solves
-# (benchmarks/bench_thin_layer.py).
+# (benchmarks/bench_thin_layer.py). The two-pole's indefinite block (QDLDL, each solve checked)
+# cost 24-25 checked single solves a factorisation at 3k and 29k springs (3k and 29k unknowns), so
+# it takes twice as many.
 LOW_RANK_MAX = 8
+LOW_RANK_MAX_INDEFINITE = 16
 
 
 @dataclass
@@ -798,7 +823,7 @@ class LowRankUpdate:
     def updated(self, z_t: sp.csr_matrix, changed: np.ndarray, delta: np.ndarray):
         """solve(rhs) with A(w) for the weights changed by ``delta`` (k,) on the springs ``changed``
         (k,); ``z_t`` (m, V): Z^T."""
-        z_k = z_t[changed].toarray().T  # (V, k): each spring's column has its triangle's corners
+        z_k = _dense_columns(z_t, changed)  # (V, k): each spring's column has its triangle's corners
         new = [j for j in changed.tolist() if j not in self.columns]
         if len(self.columns) + len(new) > 8 * LOW_RANK_MAX:  # bounded memory: keep the columns in use
             self.columns = {j: self.columns[j] for j in changed.tolist() if j in self.columns}
@@ -813,6 +838,17 @@ class LowRankUpdate:
             return x - y @ lu_solve(capacitance, delta[:, None] * (z_k.T @ x) if x.ndim > 1 else delta * (z_k.T @ x), check_finite=False)
 
         return solve
+
+
+def _dense_columns(z_t: sp.csr_matrix, rows: np.ndarray) -> np.ndarray:
+    """(V, k): the rows ``rows`` (k,) of the CSR matrix ``z_t`` (m, V) as dense columns (a CSR row cut
+    and conversion cost several times as much)."""
+    start, count = z_t.indptr[rows], np.diff(z_t.indptr)[rows]
+    column = np.repeat(np.arange(rows.shape[0]), count)
+    entry = np.repeat(start - (np.cumsum(count) - count), count) + np.arange(column.shape[0])
+    out = np.zeros((rows.shape[0], z_t.shape[1]))
+    out[column, z_t.indices[entry]] = z_t.data[entry]
+    return out.T
 
 
 def indefinite_solve(matrix: sp.csc_matrix):
@@ -864,11 +900,16 @@ class SmoothingTerm:
     """One term sigma Z^T H^-1 Z of the compliance (module docstring): Z = Q^T diag(weight)."""
 
     sigma: float  # +1 or -1
-    z: sp.csr_matrix  # (v, m) in mm/MPa
+    z_t: sp.csr_matrix  # (m, v) Z^T in mm/MPa
     h: sp.csc_matrix  # (v, v) canonical CSC, mm^3/MPa
     weight: np.ndarray  # (m,) c_nl in mm/MPa
     pattern: OperatorPattern  # H's sparsity, slots and ordering (SurfaceMesh.operator_pattern)
     coarse: CoarseSpace | None = None  # H, Z on a coarse space (H_c, Z_c, pattern its own), or None: on the springs' vertices
+
+    @property
+    def z(self) -> sp.csc_matrix:
+        """(v, m): Z, a view of ``z_t``."""
+        return self.z_t.T
 
     def coupled_data(self, spring_weight: np.ndarray) -> np.ndarray:
         """Data (nnz,) of H + sigma Z diag(spring_weight) Z^T on H's pattern.
@@ -903,8 +944,9 @@ class LayerCompliance:
 
     @functools.cached_property
     def z(self) -> sp.csr_matrix:
-        """(V, m): the terms' Z stacked (V the sum of their vertex counts)."""
-        return sp.vstack([t.z for t in self.terms]).tocsr() if len(self.terms) > 1 else self.terms[0].z
+        """(V, m): the terms' Z stacked (V the sum of their vertex counts), row-major (the
+        two-pole's block product); a product with a vector takes the view ``z_t.T``."""
+        return self.z_t.T.tocsr()
 
     @functools.cached_property
     def _signed_block(self) -> sp.csc_matrix:
@@ -913,8 +955,8 @@ class LayerCompliance:
 
     @functools.cached_property
     def z_t(self) -> sp.csr_matrix:
-        """(m, V): Z^T, row-major, built once (a transposed view re-checks its format at each product)."""
-        return self.z.T.tocsr()
+        """(m, V): Z^T, the terms' Z^T side by side, row-major."""
+        return sp.hstack([t.z_t for t in self.terms]).tocsr() if len(self.terms) > 1 else self.terms[0].z_t
 
     def factorise_coupled(self, spring_weight: np.ndarray):
         """Solve with sigma H + Z diag(spring_weight) Z^T (V, V) for weights (m,) in N/mm: solve(rhs).
@@ -922,8 +964,8 @@ class LayerCompliance:
         The active-set iteration and the viscoelastic increment ask for matrices that differ from
         the last factored one in a few springs' weights only (the springs that changed state), so
         the last factor is kept (``reuse``, shared by the layers built on the same operators): the
-        same weights reuse it as it is, a few changed weights (at most LOW_RANK_MAX) correct it by
-        the Woodbury identity (``LowRankUpdate``, exact to round-off), and more refactor.
+        same weights reuse it as it is, a few changed weights (at most ``low_rank_max``) correct it
+        by the Woodbury identity (``LowRankUpdate``, exact to round-off), and more refactor.
         """
         reuse = self.reuse
         if reuse is None:
@@ -934,11 +976,16 @@ class LayerCompliance:
             changed = np.flatnonzero(spring_weight != base.weight)
             if changed.size == 0:
                 return base.solve
-            if changed.size <= LOW_RANK_MAX:
+            if changed.size <= self.low_rank_max:
                 return base.updated(self.z_t, changed, spring_weight[changed] - base.weight[changed])
         solve = self._factorise(spring_weight)
         reuse["base"] = LowRankUpdate(key, spring_weight.copy(), solve)
         return solve
+
+    @property
+    def low_rank_max(self) -> int:
+        """Past this many changed weights a refactorisation is cheaper than the Woodbury correction."""
+        return LOW_RANK_MAX if len(self.terms) == 1 else LOW_RANK_MAX_INDEFINITE
 
     def factored_set(self) -> np.ndarray | None:
         """(m,) bool: the springs in contact (positive weight) in the kept factor, if it was
@@ -976,7 +1023,7 @@ class LayerCompliance:
         """Surface deflection w (m,) in mm under spring forces f (m,) in N."""
         w = self.local_mm_per_n * force_n
         for term in self.terms:
-            w = w + term.sigma * (term.z.T @ term.pattern.factorise(term.h.data)(term.z @ force_n))
+            w = w + term.sigma * (term.z_t @ term.pattern.factorise(term.h.data)(term.z @ force_n))
         return w
 
 
@@ -997,8 +1044,14 @@ def layer_compliance(
     ``smoothing_resolution`` > 0: each term is solved on a coarse space (module docstring, "Coarse
     smoothing space") of this many cells per smoothing length sqrt(b) h (at the median h), where
     those cells are at least COARSE_MIN_SPRINGS springs across; 0: on the springs' vertices."""
-    g = youngs_modulus_mpa / (2.0 * (1.0 + poissons_ratio))
     h = np.broadcast_to(np.asarray(thickness_mm, float), cells.shape)
+    # The gap laws' layer over the whole surface has the same cells and thickness at every time
+    # point of a run: its compliance is built once (kept with the cells' operator patterns).
+    key = (np.asarray(cells).tobytes(), h.tobytes(), youngs_modulus_mpa, poissons_ratio, edge_at_cells, symbol, smoothing_resolution)
+    kept = mesh.memo.get("layer")
+    if kept is not None and kept[0] == key:
+        return kept[1]
+    g = youngs_modulus_mpa / (2.0 * (1.0 + poissons_ratio))
     h_over_g = h / g
     model = LAYER_SYMBOLS[symbol](poissons_ratio)
     coarse_cells = smoothing_resolution > 0.0 and cells.size > 0
@@ -1015,5 +1068,7 @@ def layer_compliance(
         z_t = sp.csr_matrix((q.data * np.repeat(c_nl, np.diff(q.indptr)), q.indices, q.indptr), shape=q.shape)
         if coarse is not None:
             smoothing, pattern = coarse.operator(smoothing), coarse.pattern
-        terms.append(SmoothingTerm(float(np.sign(strength)), z_t.T.tocsr(), smoothing, c_nl, pattern, coarse))
-    return LayerCompliance(model.local * h_over_g / mesh.area_mm2[cells], tuple(terms), mesh.memo.setdefault("factor", {}))
+        terms.append(SmoothingTerm(float(np.sign(strength)), z_t, smoothing, c_nl, pattern, coarse))
+    layer = LayerCompliance(model.local * h_over_g / mesh.area_mm2[cells], tuple(terms), mesh.memo.setdefault("factor", {}))
+    mesh.memo["layer"] = (key, layer)
+    return layer

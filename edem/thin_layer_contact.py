@@ -101,21 +101,24 @@ class ActiveSystem:
         lam = 1.0 / local[active]
         rhs = np.column_stack([overlap_mm[active], directions[active]])  # (n_I, 7)
         forces = lam[:, None] * rhs
-        vertex = np.zeros((layer.z.shape[0] if layer.coupled else 0, 7))
+        vertex = np.zeros((layer.z_t.shape[1] if layer.coupled else 0, 7))
         if layer.coupled:
             # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T.
             weight = np.zeros(active.shape[0])
             weight[active] = lam
             solve = layer.factorise_coupled(weight)
             loads = np.zeros((active.shape[0], 7))
-            loads[active] = lam[:, None] * rhs
+            loads[active] = forces
+            # A zero column (DEM: no overlap before the increment; a fixed DOF) needs no solves.
+            nonzero = np.any(forces, axis=0)
             if carried_force_n is not None:
                 loads[:, 0] -= np.where(active, 0.0, carried_force_n)  # -Z_N c_N joins the u-free column
-            # A zero column (DEM: no overlap before the increment; a fixed DOF) needs no solves.
-            nonzero = np.flatnonzero(np.any(loads, axis=0))
+                nonzero[0] = np.any(loads[:, 0])
+            nonzero = np.flatnonzero(nonzero)
             if nonzero.size:
-                vertex[:, nonzero] = solve(np.asarray(layer.z @ loads[:, nonzero]))
-                forces[:, nonzero] -= lam[:, None] * (layer.z_t[active] @ vertex[:, nonzero])
+                vertex[:, nonzero] = solve(np.asarray(layer.z_t.T @ loads[:, nonzero]))
+                # Every spring's row, then those in contact: cheaper than cutting Z^T's rows.
+                forces[:, nonzero] -= lam[:, None] * (layer.z_t @ vertex[:, nonzero])[active]
         if carried_force_n is not None:
             forces[:, 0] += carried_force_n[active]
         return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local, carried_force_n)

@@ -13,7 +13,9 @@ from edem.thin_layer import (
     LAYER_SYMBOLS,
     TWO_POLE_MAX_KH,
     SurfaceMesh,
+    _corner_means,
     _definiteness_margin,
+    _dense_columns,
     boundary_vertices,
     exact_layer_compliance,
     layer_compliance,
@@ -378,7 +380,7 @@ def test_a_few_changed_springs_reuse_the_factor_and_still_solve_to_round_off(sym
     corrected by the Woodbury identity, solves it within the same 1e-11 of |A| |x| as a fresh
     factor (round-off times a condition below about 1e3, safety factor 50; the k x k capacitance
     adds a condition of the same order), with no new factorisation; the same weights again reuse
-    the factor as it is; more than LOW_RANK_MAX changed springs refactor."""
+    the factor as it is; more than the layer's ``low_rank_max`` changed springs refactor."""
     import edem.thin_layer as thin_layer
 
     plate = grid_plate(10.0, 10.0, 12)
@@ -392,7 +394,7 @@ def test_a_few_changed_springs_reuse_the_factor_and_still_solve_to_round_off(sym
     active = rng.uniform(size=cells.size) < 0.5
     layer.factorise_coupled(np.where(active, 1.0 / layer.local_mm_per_n, 0.0))
     assert len(factored) == 1
-    for n_changed, refactors in ((thin_layer.LOW_RANK_MAX, 0), (0, 0), (3 * thin_layer.LOW_RANK_MAX, 1)):
+    for n_changed, refactors in ((layer.low_rank_max, 0), (0, 0), (3 * layer.low_rank_max, 1)):
         active = active.copy()
         active[rng.choice(cells.size, n_changed, replace=False)] ^= True  # springs entering and leaving
         weight = np.where(active, 1.0 / layer.local_mm_per_n, 0.0)
@@ -505,6 +507,41 @@ def test_a_cell_sets_pattern_restricted_from_the_surfaces_is_the_assembly_of_its
                 inside = number[tri[:, corner]] >= 0
                 q[np.flatnonzero(inside), number[tri[inside, corner]]] += 1.0 / 3.0
             np.testing.assert_array_equal(pattern.q.toarray(), q)
+            assert pattern.q.has_canonical_format  # sorted rows: Z^T's products sum in the vertices' order
+
+
+def test_corner_means_add_up_a_corner_twice_and_give_the_csr_rows_of_z():
+    """Q built directly in CSR form (``_corner_means``) is the corner mean, canonical, also where a
+    triangle names a vertex twice (its weights add up) or has corners off the space (-1); the
+    dense columns of chosen rows of a CSR matrix (``_dense_columns``) are those rows."""
+    corners = np.array([[4, 0, 2], [1, -1, 3], [2, 2, 0], [-1, -1, -1], [3, 1, 4]])
+    expected = np.zeros((5, 5))
+    for t, row in enumerate(corners):
+        for v in row[row >= 0]:
+            expected[t, v] += 1.0 / 3.0
+    for rows in (corners, corners[[0, 1, 3, 4]]):  # with and without the repeated vertex
+        q = _corner_means(rows, 5)
+        np.testing.assert_array_equal(q.toarray(), expected[[0, 1, 2, 3, 4] if rows.shape[0] == 5 else [0, 1, 3, 4]])
+        assert q.has_canonical_format
+    matrix = sp.random(40, 30, density=0.1, random_state=np.random.default_rng(2), format="csr")
+    chosen = np.array([7, 0, 39, 7, 12])
+    np.testing.assert_array_equal(_dense_columns(matrix, chosen), matrix[chosen].toarray().T)
+
+
+def test_a_layer_on_the_same_cells_and_thickness_is_built_once():
+    """The gap laws' layer keeps its cells and thickness over a run: the second call returns the
+    kept compliance; another thickness builds a new one, equal to a build on a fresh mesh."""
+    plate = grid_plate(10.0, 10.0, 8)
+    mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
+    cells = np.arange(plate.n_triangles)
+    first = layer_compliance(mesh, cells, np.full(cells.size, 2.0), E, 0.45)
+    assert layer_compliance(mesh, cells, np.full(cells.size, 2.0), E, 0.45) is first
+    thicker = layer_compliance(mesh, cells, np.full(cells.size, 2.5), E, 0.45)
+    assert thicker is not first
+    fresh = layer_compliance(SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles), cells, np.full(cells.size, 2.5), E, 0.45)
+    force = np.linspace(0.0, 1.0, cells.size)
+    np.testing.assert_array_equal(thicker.deflection(force), fresh.deflection(force))
+    assert layer_compliance(mesh, cells, np.full(cells.size, 2.5), E, 0.3) is not thicker  # and another material
 
 
 # --------------------------------------------------------------------------- the coarse smoothing space
