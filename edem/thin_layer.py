@@ -652,6 +652,12 @@ def _lower_triangle(n: int) -> tuple[np.ndarray, np.ndarray]:
 COARSE_MIN_SPRINGS = 2.0
 
 
+def _ranges(start: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """The positions start[i], ..., start[i] + count[i] - 1 of every i, concatenated (a CSR
+    matrix's entries of chosen rows, given their indptr starts and lengths)."""
+    return np.repeat(start - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
+
+
 def _cube_seeds(points_mm: np.ndarray, size_mm: float) -> np.ndarray:
     """Indices into ``points_mm`` (k, 3): per cube of side ``size_mm`` that holds any, the point
     nearest the mean of those it holds."""
@@ -701,8 +707,7 @@ def coarse_transfer(vertices_mm: np.ndarray, triangles: np.ndarray, kept: np.nda
     around = sp.csr_matrix((np.ones(coarse.size), (coarse.ravel(), np.repeat(np.arange(coarse.shape[0]), 3))), shape=(seeds.size, coarse.shape[0]))
     count = np.where(own >= 0, np.diff(around.indptr)[np.maximum(own, 0)], 0)
     vertex = np.repeat(np.arange(kept.size), count)
-    first = np.repeat(around.indptr[np.maximum(own, 0)] - (np.cumsum(count) - count), count)
-    triangle = around.indices[first + np.arange(vertex.size)]
+    triangle = around.indices[_ranges(around.indptr[np.maximum(own, 0)], count)]
     corner = vertices_mm[seeds[coarse[triangle]]]  # (pairs, 3, 3)
     e1, e2, d = corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0], vertices_mm[kept[vertex]] - corner[:, 0]
     g11, g12, g22 = np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e1, e2), np.einsum("ij,ij->i", e2, e2)
@@ -730,7 +735,7 @@ def coarse_transfer(vertices_mm: np.ndarray, triangles: np.ndarray, kept: np.nda
     return p
 
 
-@dataclass
+@dataclass(frozen=True)
 class CoarseSpace:
     """One smoothing term's coarse space on a cell set: the transfer P (v, V_c) from the coarse to
     the fine vertices and the pattern of H_c + Z_c diag(x) Z_c^T (V_c, V_c), whose Q is Q P (m, V_c).
@@ -747,7 +752,6 @@ class CoarseSpace:
     pair_slot: np.ndarray
     pair_product: np.ndarray
     pair_start: np.ndarray  # (m + 1,)
-    galerkin: tuple[np.ndarray, sp.csc_matrix] | None = None  # the last fine H's data and its P^T H P
 
     @staticmethod
     def build(fine: OperatorPattern, transfer: sp.csr_matrix) -> "CoarseSpace":
@@ -774,19 +778,15 @@ class CoarseSpace:
     def pairs_of(self, springs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(the pairs' positions, their springs) of the springs (k,), spring by spring."""
         count = self.pair_start[springs + 1] - self.pair_start[springs]
-        owner = np.repeat(springs, count)
-        return np.repeat(self.pair_start[springs] - (np.cumsum(count) - count), count) + np.arange(owner.size), owner
+        return _ranges(self.pair_start[springs], count), np.repeat(springs, count)
 
     def operator(self, fine_h: sp.csc_matrix) -> sp.csc_matrix:
-        """H_c = P^T H P (V_c, V_c) on the coupled pattern; the last one is kept (the gap laws' layer
-        keeps its operators over a run, and the kept factor is matched by H_c's data)."""
-        if self.galerkin is None or not np.array_equal(self.galerkin[0], fine_h.data):
-            product = (self.transfer.T @ fine_h @ self.transfer).tocoo()
-            n_c = self.transfer.shape[1]
-            data = np.zeros(self.keys.shape[0])
-            np.add.at(data, np.searchsorted(self.keys, product.col * n_c + product.row), product.data)
-            self.galerkin = (fine_h.data.copy(), self.pattern.matrix(data))
-        return self.galerkin[1]
+        """H_c = P^T H P (V_c, V_c) on the coupled pattern."""
+        product = (self.transfer.T @ fine_h @ self.transfer).tocoo()
+        n_c = self.transfer.shape[1]
+        data = np.zeros(self.keys.shape[0])
+        np.add.at(data, np.searchsorted(self.keys, product.col * n_c + product.row), product.data)
+        return self.pattern.matrix(data)
 
 
 # Past this many changed spring weights the coupled matrix is refactored rather than corrected by
@@ -845,7 +845,7 @@ def _dense_columns(z_t: sp.csr_matrix, rows: np.ndarray) -> np.ndarray:
     and conversion cost several times as much)."""
     start, count = z_t.indptr[rows], np.diff(z_t.indptr)[rows]
     column = np.repeat(np.arange(rows.shape[0]), count)
-    entry = np.repeat(start - (np.cumsum(count) - count), count) + np.arange(column.shape[0])
+    entry = _ranges(start, count)
     out = np.zeros((rows.shape[0], z_t.shape[1]))
     out[column, z_t.indices[entry]] = z_t.data[entry]
     return out.T
