@@ -23,7 +23,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
-from edem.errors import InputError, SolverError
+from geometries.errors import InputError, SolverError
 
 if TYPE_CHECKING:
     from edem.plausibility import EdemWarning

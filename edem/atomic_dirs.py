@@ -15,7 +15,7 @@ missing, changed or extra file (two runs mixed in one directory) is refused.
 Output paths are checked before any solve (:func:`check_out_dir`): a path that is a file or
 lies under one, a name too long for the file system, a directory that cannot be written (read-
 only file system, permissions) and an existing result without ``overwrite`` are refused with
-:class:`edem.errors.InputError` (exit status 2). :func:`default_out_dir` keeps the default
+:class:`geometries.errors.InputError` (exit status 2). :func:`default_out_dir` keeps the default
 output under the results root whatever the scene's name, and gives runs with ``--set``
 overrides their own directory.
 """
@@ -38,7 +38,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from edem.errors import InputError
+from geometries.errors import InputError
 
 MANIFEST_NAME = "manifest.json"
 MANIFEST_FORMAT = 1

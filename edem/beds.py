@@ -31,7 +31,7 @@ from typing import ClassVar
 import numpy as np
 
 from edem.consistency import remeasured_imbalance
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.laws import LAWS, ElementLaw, LinearElements
 from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, assemble_stiffness, solve_unilateral, unrestrained_dofs
 from edem.raycast import RayCaster

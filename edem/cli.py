@@ -9,7 +9,7 @@ import sys
 import textwrap
 from pathlib import Path
 
-from edem.errors import InputError, SolverError
+from geometries.errors import InputError, SolverError
 from geometries.extras import MissingExtra, extra_of
 
 #: Default outputs go under ./results, whatever the scene's name (edem.atomic_dirs.default_out_dir).

@@ -26,7 +26,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from edem.errors import SolverError
+from geometries.errors import SolverError
 from edem.mechanics import DOF_NAMES, ShearTerms, generalised_directions, rotation_matrix
 from edem.raycast import RayCaster
 from edem.springs import Cartilage, Ligament, Placement, SpringGeometry, ligament_elements, spring_geometry

@@ -28,7 +28,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.joint_reaction import AXES_PRESETS, JointReactionColumns, axes_matrix
 from edem.tables import SceneTable, is_number, not_utf8
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg.lapack import dpotrf, dpotrs
 
-from edem.errors import SolverError
+from geometries.errors import SolverError
 from edem.laws import ElementLaw, LinearElements
 from edem.rowwise import rows_times
 from geometries.triangle_kernels import cross_rows

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.plausibility import check_load_bodies, check_motion_units
 from edem.tables import SceneTable
 from geometries.mesh_files import MAX_COORDINATE_MM

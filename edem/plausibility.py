@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 
 if TYPE_CHECKING:
     from edem.loads import LoadSeries

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from edem.errors import SolverError
+from geometries.errors import SolverError
 from edem.mechanics import DOF_NAMES, balanceable, generalised_directions, unrestrained_dofs
 from edem.rowwise import add_rows, row_dot
 from edem.springs import Placement, SpringGeometry, ligament_elements, spring_geometry

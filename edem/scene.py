@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from edem.beds import BEDS, IndependentSprings
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.joint_reaction import transfer_moment
 from edem.laws import LAWS
 from edem.loads import JointKinematics, LoadSeries, angle_series_from_table, load_series_from_table

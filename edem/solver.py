@@ -10,7 +10,7 @@ import numpy as np
 
 from edem.beds import ContactStep, scene_bed
 from edem.consistency import DEM_IMBALANCE_FRACTION, check_contact_kept, check_increment, remeasured_warning
-from edem.errors import InputError, SolverError
+from geometries.errors import InputError, SolverError
 from edem.laws import stack_elements
 from edem.mechanics import DOF_NAMES, generalised_directions, rotation_matrix, rotation_vector, turn_rows
 from edem.plausibility import emit, merge_repeated

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 
 
 def is_number(value: Any) -> bool:

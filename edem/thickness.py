@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.raycast import RayCaster
 from geometries.surface import TriangleSurface
 

@@ -127,7 +127,7 @@ from scipy.linalg.lapack import dpbtrf
 from scipy.sparse.csgraph import dijkstra, reverse_cuthill_mckee
 from scipy.sparse.linalg import splu
 
-from edem.errors import SolverError
+from geometries.errors import SolverError
 
 # --------------------------------------------------------------------------- symbols
 

@@ -61,7 +61,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from edem.errors import SolverError
+from geometries.errors import SolverError
 from edem.laws import LinearElements
 from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, singular_stiffness_error, unrestrained_dofs
 from edem.thin_layer import LAYER_SYMBOLS, LayerCompliance, SurfaceMesh, layer_compliance

@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 
 
 RK2_STABILITY_LIMIT = 2.0  # dt / tau

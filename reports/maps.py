@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.resultdir import read_result_dir
 from verification.metrics import pressure_at_cells, project_onto_surface, same_mesh
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.resultdir import read_result_dir
 
 DERIVED = {"disp_norm_mm": ("disp_x_mm", "disp_y_mm", "disp_z_mm")}

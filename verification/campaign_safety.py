@@ -27,7 +27,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from edem.errors import InputError
+from geometries.errors import InputError
 
 LOCK_NAME = ".lock"
 _PR_SET_PDEATHSIG = 1

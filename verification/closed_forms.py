@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.mechanics import confined_modulus_mpa
 from edem.resultdir import Frame, SurfaceFrame, timeseries_row, write_result_dir
 from edem.scene import Scene, apply_overrides, load_scene, resolve_scene_path

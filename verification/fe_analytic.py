@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.resultdir import write_static_result_dir
 
 MATERIAL = {"youngs_modulus_mpa": 10.35, "poissons_ratio": 0.42}  # docs/references.md#the-thesiss-figures cartilage

@@ -240,7 +240,7 @@ def fe_key(scene: str, side: str, overrides: dict[str, Any], options: dict[str, 
 def _scene_says(scene: str, dotted: str, value: Any) -> bool:
     """Whether the scene file already sets ``dotted`` to ``value`` (an override that changes
     nothing: the subject campaign's FE run and quick's at the scene's own nu are one run)."""
-    from edem.errors import InputError
+    from geometries.errors import InputError
     from edem.scene import read_scene_toml, resolve_scene_path
 
     try:
@@ -259,7 +259,7 @@ def load_reference(path: str | Path | None = None) -> dict[str, Any]:
     file = Path(path) if path is not None else REFERENCE_FILE
     if not file.exists():
         return {"entries": {}}
-    from edem.errors import InputError
+    from geometries.errors import InputError
 
     try:
         data = json.loads(file.read_text(encoding="utf-8"))
@@ -295,7 +295,7 @@ def write_reference(summary: dict[str, Any], path: str | Path | None = None) -> 
     when the summary holds no estimate (every point unavailable)."""
     import datetime as _dt
 
-    from edem.errors import InputError
+    from geometries.errors import InputError
 
     result = next((a for a in summary.get("analyses", []) if a.get("kind") == "fe-convergence"), None)
     entries = (result or {}).get("values", {}).get("entries") or {}

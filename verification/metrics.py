@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.pressure_metrics import PRESSURE_ON_MOBILE, surface_regularised_peak_mpa
 from edem.resultdir import read_result_dir
 from geometries.triangle_kernels import closest_points_on_triangles

@@ -68,7 +68,7 @@ from typing import Any
 import numpy as np
 
 from edem.atomic_dirs import manifest_problems
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.resultdir import non_finite_count, read_result_dir
 from edem.scene import apply_overrides, read_scene_toml, resolve_scene_path
 from verification import sources

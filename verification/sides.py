@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from edem.atomic_dirs import ResultWriteError
-from edem.errors import InputError, SolverError
+from geometries.errors import InputError, SolverError
 from edem.resultdir import Provenance, provenance
 from edem.results import write_results
 from edem.scene import apply_overrides, load_scene, read_scene_toml, resolve_scene_path

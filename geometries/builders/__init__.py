@@ -4,7 +4,7 @@ Every builder is a plain function with keyword parameters and documented default
 :class:`BuiltGeometry` (the mobile surface M = talus, the fixed surface F = tibia, the ankle axis,
 ligament attachment points, a description and the resolved parameters). ``build_geometry(name,
 params)`` is the entry point used by scene files: it looks the builder up by name, validates the
-parameters (unknown names, types, ranges) and raises :class:`edem.errors.InputError` naming the
+parameters (unknown names, types, ranges) and raises :class:`geometries.errors.InputError` naming the
 key ``geometry.<param>``.
 
 Coordinate convention (all builders, mm):

@@ -18,7 +18,7 @@ import pytest
 import edem.resultdir as resultdir
 import edem.results as results
 from edem.atomic_dirs import atomic_result_dir, manifest_problems, verify_manifest, write_manifest
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.scene import load_scene
 from edem.solver import run
 from verification.campaigns import SCENES_DIR

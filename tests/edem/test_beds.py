@@ -11,7 +11,7 @@ import pytest
 from support import grid_plate, plane
 
 from edem.beds import BEDS, IndependentSprings, scene_bed
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.mechanics import generalised_directions
 from edem.raycast import RayCaster
 from edem.scene import Scene, load_scene

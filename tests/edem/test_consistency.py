@@ -12,7 +12,7 @@ from support import grid_plate, make_scene, plane
 
 from edem.cli import main
 from edem.consistency import check_increment, describe_motion, motion_bound_mm, point_motion_mm
-from edem.errors import SolverError
+from geometries.errors import SolverError
 from edem.loads import JointKinematics
 from edem.solver import run
 from edem.springs import Cartilage, Ligament

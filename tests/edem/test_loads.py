@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.loads import (
     JointKinematics,
     LoadSeries,

@@ -22,7 +22,7 @@ from opensim_fixtures import (  # noqa: E402
 )
 
 from edem.cli import main  # noqa: E402
-from edem.errors import InputError  # noqa: E402
+from geometries.errors import InputError  # noqa: E402
 from edem.scene import load_scene  # noqa: E402
 
 pytestmark = pytest.mark.opensim

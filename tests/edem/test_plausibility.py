@@ -14,7 +14,7 @@ import pytest
 from support import grid_plate, make_scene, plane
 
 import edem
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.loads import LOAD_KEYS
 from edem.scene import load_scene
 from edem.solver import run

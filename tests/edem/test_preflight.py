@@ -11,7 +11,7 @@ import pytest
 from support import grid_plate, make_scene, paraboloid
 
 from edem.cli import main
-from edem.errors import SolverError
+from geometries.errors import SolverError
 from edem.mechanics import DOF_NAMES
 from edem.results import write_results
 from edem.solver import run

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from support import cylinder_patch, grid_plate, make_scene, plane
 
-from edem.errors import SolverError
+from geometries.errors import SolverError
 from edem.mechanics import confined_modulus_mpa, generalised_directions
 from edem.solver import StepResult, run
 from edem.springs import Ligament

@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.mechanics import confined_modulus_mpa
 from edem.scene import load_scene
 from edem.solver import solve

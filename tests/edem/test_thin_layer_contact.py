@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial import Delaunay
 from support import cylinder_patch, grid_plate, make_scene, plane
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.laws import LinearElements
 from edem.mechanics import confined_modulus_mpa, generalised_directions
 from edem.raycast import RayCaster

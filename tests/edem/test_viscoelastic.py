@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from support import cylinder_patch, grid_plate, make_scene, plane
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.mechanics import confined_modulus_mpa
 from edem.scene import Viscoelastic
 from edem.solver import run
@@ -84,7 +84,7 @@ def test_stiff_case_exact_integrator_follows_elastic_rk2_refused():
 
 def test_rk2_beyond_its_limit_diverges_loudly_when_forced():
     """allow_unstable runs RK2 at dt = 100 tau with a warning; the blow-up is reported, never NaN."""
-    from edem.errors import SolverError
+    from geometries.errors import SolverError
 
     scene = creep_scene(500.0, 0.1, 400, 1e-3, "rk2", allow_unstable=True)
     with pytest.raises(SolverError, match="diverged|no spring is a candidate|compressed past|ray window"):

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from geometries import builders as B
 from geometries import fe_solids as F
 from geometries.surface import TriangleSurface

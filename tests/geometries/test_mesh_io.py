@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 import pytest
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from geometries.errors import MeshWarning
 from geometries.mesh_files import read_surface, write_surface, write_vtp
 from geometries.repair import (

@@ -92,7 +92,7 @@ def test_pressure_maps_at_a_time_pick_that_map_in_both_directories(tmp_path):
     map against b's only one (a - b = 0: the difference panel is the neutral colour)."""
     from matplotlib.image import imread
 
-    from edem.errors import InputError
+    from geometries.errors import InputError
     from reports.maps import _frame_at, render_pressure_maps
 
     a = _frame_dir(tmp_path / "a", [0.0, 1.0, 2.0], [1.0, 3.0, 9.0])

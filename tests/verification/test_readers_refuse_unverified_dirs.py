@@ -66,7 +66,7 @@ def test_an_empty_map_list_is_read_only_when_the_summary_says_no_maps(tmp_path):
     """pressure.pvd may list no map only in a directory written without maps (summary
     pressure_maps = 0); a sealed directory whose list is empty for another reason is refused."""
     from edem.atomic_dirs import write_manifest
-    from edem.errors import InputError
+    from geometries.errors import InputError
     from edem.resultdir import read_result_dir, timeseries_row, write_result_dir
 
     row = timeseries_row(0, 0.0, [0.0, 0.0, 1.0], 1.0, 1.0, 1.0, [0.0] * 3, [0.0] * 3, 1, 0.0)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from edem.cli import main
-from edem.errors import InputError
+from geometries.errors import InputError
 from verification.campaigns import METRICS, campaigns, describe_campaigns, get_campaign, validate_campaign
 from verification.campaigns.quick import VISCOELASTIC_CASE
 from verification.runner import run_campaign

@@ -162,7 +162,7 @@ def test_refresh_without_fe_keeps_the_stored_fe_values_and_says_so(references, c
 
 
 def test_refresh_without_fe_refuses_fe_values_of_other_time_points(references):
-    from edem.errors import InputError
+    from geometries.errors import InputError
 
     _edit(references / "flat-plates.json", lambda d: d["fe"].__setitem__("time_s", [0.5]))
     before = (references / "flat-plates.json").read_text()

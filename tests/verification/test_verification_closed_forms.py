@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.solver import run
 from verification.campaigns import SCENES_DIR, ramp_overrides
 from verification.closed_forms import (

@@ -264,7 +264,7 @@ def test_compare_a_run_with_itself_is_zero_and_reads_edem_output(tmp_path):
 
 
 def test_bad_result_directory_is_an_input_error(tmp_path):
-    from edem.errors import InputError
+    from geometries.errors import InputError
 
     with pytest.raises(InputError, match="summary.json"):
         compare_result_dirs(tmp_path, tmp_path)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from edem.errors import InputError
+from geometries.errors import InputError
 from edem.scene import load_scene
 from verification.analyses import grid_of, run_analysis
 from verification.campaigns import SCENES_DIR, SENSITIVITY_HMAX_MM, SENSITIVITY_MODULUS_MPA, Analysis, get_campaign, sensitivity_campaign
