@@ -153,8 +153,8 @@ def test_fe_side_calls_run_scene_and_compares_nodal_pressure(tmp_path, monkeypat
     FE layout, nodal pressure F/A on a surface 2 mm above the plate) and the metrics read it."""
     import fem_reference
 
+    from edem.resultdir import write_surface_frame
     from edem.results import write_pvd
-    from verification.resultdirs import write_surface_frame
 
     calls = {}
 
