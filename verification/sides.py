@@ -3,8 +3,10 @@
 A side turns (scene, overrides, options) into a result directory (docs/result-format.md):
 
 * ``edem`` / ``dem``: the discrete solver (:func:`edem.solver.run`);
-* ``fe-slab`` / ``fe-layer``: the dolfinx reference (``fem_reference.run_scene``), reported as
-  "unavailable" (never faked) while that entry point or dolfinx is missing;
+* ``fe-<model>``: the dolfinx reference (``fem_reference.run_scene``) with one model of
+  :data:`fem_reference.models.FE_MODELS` (``fe-slab``, ``fe-layer``; a model added there is a side
+  here), reported as "unavailable" (never faked) while that entry point or dolfinx is missing (the
+  registry itself imports without dolfinx);
 * ``closed-form:<name>``: a closed form of :mod:`verification.closed_forms` (of the case's
   scene), or of an FE problem of :mod:`verification.fe_analytic` (``closed-form:hertz-line``,
   ``closed-form:confined-compression``: no scene, the case's options give the mesh);
@@ -53,6 +55,7 @@ from edem.resultdir import Provenance, provenance
 from edem.results import write_results
 from edem.scene import apply_overrides, load_scene, read_scene_toml, resolve_scene_path
 from edem.solver import run
+from fem_reference.models import FE_MODELS
 from verification.closed_forms import CLOSED_FORMS, solve_closed_form, write_closed_form_results
 from verification.fe_analytic import FE_PROBLEMS, run_fe_problem, write_exact_result
 from verification.status import ERROR, OK, REFUSED, UNAVAILABLE
@@ -283,8 +286,7 @@ _run_edem_truth.reads_options = ("frames",)
 SIDES: dict[str, SideRunner] = {
     "edem": _run_discrete("edem"),
     "dem": _run_discrete("dem"),
-    "fe-slab": _run_fe("slab"),
-    "fe-layer": _run_fe("layer"),
+    **{f"fe-{model}": _run_fe(model) for model in FE_MODELS},
     "fe-problem:hertz-line": _run_fe_problem("hertz-line"),
     "fe-problem:confined-compression": _run_fe_problem("confined-compression"),
     "fe-slab-truth": _run_fe_truth,

@@ -16,13 +16,13 @@ from pathlib import Path
 import pytest
 
 import edem.resultdir as resultdir
+from edem.resultdir import read_result_dir
 import edem.results as results
 from edem.atomic_dirs import atomic_result_dir, manifest_problems, verify_manifest, write_manifest
 from geometries.errors import InputError
 from edem.scene import load_scene
 from edem.solver import run
 from verification.campaigns import SCENES_DIR
-from verification.resultdirs import read_result_dir
 
 ROOT = Path(__file__).resolve().parents[2]
 PLATES = str(SCENES_DIR / "flat-plates.toml")

@@ -51,7 +51,7 @@ def timeseries(out: Path) -> tuple[list[str], list[dict[str, float]]]:
 
 
 def frame(out: Path, step: int = 0):
-    from verification.resultdirs import read_surface_frame
+    from edem.resultdir import read_surface_frame
 
     return read_surface_frame(out / f"pressure_{step:04d}.vtp")
 

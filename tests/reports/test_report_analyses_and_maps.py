@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from edem.atomic_dirs import write_manifest
+from edem.resultdir import read_result_dir, write_surface_frame
 from edem.results import write_pvd
 from reports.html import _wall_time_figure, write_campaign_report
-from verification.resultdirs import read_result_dir, write_surface_frame
 
 
 def _summary(**extra):

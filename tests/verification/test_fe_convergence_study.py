@@ -240,7 +240,7 @@ def test_a_table_gives_the_fe_error_of_the_metrics_it_compares_not_of_the_raw_pe
     """The tables compare the regularised peak (the raw one is reported only), so the FE's own
     error beside it is the regularised peak's: on the subject-like ankle the two differ by
     tens of percent (the raw peak sits on a rim that does not converge)."""
-    from verification.campaigns.cylinder_plane import ERROR_PANELS, FE_ERROR_COLUMNS
+    from verification.fe_comparison import ERROR_PANELS, FE_ERROR_COLUMNS
     from verification.fe_convergence import fe_error_text
 
     errors = {"regularised_peak_pressure_rel_error": 0.17, "peak_pressure_rel_error": 0.43,

@@ -11,10 +11,10 @@ import math
 import numpy as np
 import pytest
 
+from edem.resultdir import read_result_dir
 from verification.analyses import run_analysis
 from verification.campaigns import CONFINED_SIZES_MM, HERTZ_SIZES_MM, Analysis, Campaign, get_campaign
 from verification.fe_analytic import CONFINED, HERTZ, MATERIAL, half_width_errors, observed_orders, write_exact_result
-from verification.resultdirs import read_result_dir
 from reports.html import write_campaign_report
 from verification.runner import run_campaign
 from verification.sides import side_names

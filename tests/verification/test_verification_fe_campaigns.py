@@ -7,18 +7,11 @@ import math
 
 import pytest
 
-from verification.analyses import ANALYSES, run_analysis
+from verification.analyses import ANALYSES, pareto_front, run_analysis
 from verification.campaigns import METRICS, campaigns, describe_campaigns, get_campaign, validate_campaign
-from verification.fe_campaigns import (
-    SWEEP_LOADS_N,
-    SWEEP_NUS,
-    SWEEP_THICKNESS_MM,
-    TRUTH_STEPS,
-    pareto_front,
-    resample_load,
-)
+from verification.campaigns.cylinder_plane import SWEEP_LOADS_N, SWEEP_NUS, SWEEP_THICKNESS_MM
 from verification.runner import side_key
-from verification.sides import SIDES, is_fe_side, side_names
+from verification.sides import SIDES, TRUTH_STEPS, is_fe_side, resample_load, side_names
 
 NEW = ("cylinder-plane", "subject", "error-vs-runtime")
 

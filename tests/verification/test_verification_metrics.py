@@ -12,6 +12,7 @@ import pytest
 
 from edem.atomic_dirs import write_manifest
 from edem.pressure_metrics import regularised_peak_pressure_mpa
+from edem.resultdir import non_finite_count, read_result_dir, write_surface_frame
 from edem.results import TIMESERIES_COLUMNS, write_pvd
 from verification.metrics import (
     COMPARISON_METRICS,
@@ -27,7 +28,6 @@ from verification.metrics import (
     sample_cells_onto,
     sample_onto,
 )
-from verification.resultdirs import non_finite_count, read_result_dir, write_surface_frame
 
 
 # ---------------------------------------------------------------------------------------------

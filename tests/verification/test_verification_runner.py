@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import concurrent.futures
 import json
+import os
 import shutil
+import subprocess
+import sys
 import time
 import tomllib
 from pathlib import Path
@@ -17,6 +20,7 @@ import verification.runner as runner
 import verification.sides as sides
 from edem.atomic_dirs import manifest_problems, write_manifest
 from edem.cli import main
+from geometries.extras import EXTRA_OF_MODULE
 from verification.campaigns import SCENES_DIR, Campaign, Case, Expect, get_campaign
 from verification.metrics import COMPARISON_METRICS
 from verification.runner import case_key, run_campaign
@@ -148,13 +152,39 @@ def test_fe_availability_needs_run_scene(monkeypatch):
     assert "fem_reference.run_scene" in sides.fe_availability()
 
 
+def test_a_model_added_to_the_fe_registry_is_a_side_and_the_registry_needs_no_fe_extra(tmp_path):
+    """The ``fe-<model>`` sides are built from fem_reference.models.FE_MODELS: a model registered
+    there (a stand-in subclass, before verification.sides is imported) is a side with no edit to
+    verification.sides. On the core install (every extra blocked, as tests/geometries/test_extras.py
+    does) the registry and the sides import without dolfinx or gmsh, and the new side is reported
+    unavailable, naming dolfinx, instead of failing."""
+    code = (
+        f"import json, sys; sys.modules.update(dict.fromkeys({sorted(EXTRA_OF_MODULE)!r}))\n"
+        "from fem_reference.models import FE_MODELS, LayerModel\n"
+        "class TwoLayers(LayerModel):\n"
+        "    name = 'two-layers'\n"
+        "FE_MODELS['two-layers'] = TwoLayers()\n"
+        "import verification.sides as sides\n"
+        "outcome = sides.run_side('fe-two-layers', 'flat-plates.toml', {}, 'out')\n"
+        "print(json.dumps({'fe_model_sides': [s for s in sides.SIDES if s.removeprefix('fe-') in FE_MODELS],\n"
+        "                  'status': outcome.status, 'message': outcome.message}))\n"
+    )
+    root = Path(__file__).resolve().parents[2]
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(root)},
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]  # an import of a blocked extra is an ImportError here
+    out = json.loads(done.stdout.splitlines()[-1])
+    assert out["fe_model_sides"] == ["fe-slab", "fe-layer", "fe-two-layers"]
+    assert out["status"] == "unavailable" and "dolfinx" in out["message"]
+
+
 def test_fe_side_calls_run_scene_and_compares_nodal_pressure(tmp_path, monkeypatch):
     """The FE plumbing with a stand-in for fem_reference.run_scene (a test double: it writes the
     FE layout, nodal pressure F/A on a surface 2 mm above the plate) and the metrics read it."""
     import fem_reference
 
+    from edem.resultdir import write_surface_frame
     from edem.results import write_pvd
-    from verification.resultdirs import write_surface_frame
 
     calls = {}
 

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from edem.resultdir import read_result_dir
 from geometries.errors import InputError
 from edem.scene import load_scene
 from verification.analyses import grid_of, run_analysis
 from verification.campaigns import SCENES_DIR, SENSITIVITY_HMAX_MM, SENSITIVITY_MODULUS_MPA, Analysis, get_campaign, sensitivity_campaign
-from verification.resultdirs import read_result_dir
 from reports.html import write_campaign_report
 from verification.runner import run_campaign
 from verification.sides import expand_array_overrides, run_side

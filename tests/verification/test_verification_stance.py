@@ -9,6 +9,7 @@ import tomllib
 import numpy as np
 import pytest
 
+from edem.resultdir import read_timeseries_csv
 import verification.sides as sides
 from edem.scene import resolve_scene_path
 from verification.campaigns import (
@@ -22,7 +23,6 @@ from verification.campaigns import (
     scene_instants,
 )
 from verification.metrics import series_metrics
-from verification.resultdirs import read_timeseries_csv
 from reports.html import write_campaign_report
 from verification.runner import run_campaign
 

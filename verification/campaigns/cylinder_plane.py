@@ -14,55 +14,18 @@ from __future__ import annotations
 
 from typing import Any
 
-from verification.campaign_model import THESIS_BED, VALUES_AT_REFERENCE_TIMES, Analysis, Campaign, Case, Figure, uniform_basis
-from verification.fe_convergence import FE_ERROR_TEXT_METRICS
-from verification.metrics import COMPARISON_METRICS
-from verification.verdicts import INVARIANT, SANITY, Basis
+from verification.campaign_model import THESIS_BED, Analysis, Campaign, Case, Figure
+from verification.fe_comparison import ERROR_PANELS, FE_COARSE, FE_TABLE_COLUMNS, fe_comparison_case
 
 #: wall time with 2 jobs on 2 cores, nothing cached (measured: 551 s at load 3-5 with its 31 cases (the 11 coupled layer
 #: twins share their FE runs); 646 s under load 6-8 with the 20 springs cases before)
 EXPECTED_TIME_S = 550.0
 
 
-FE_COARSE = {"mesh_size_mm": 1.0, "degree": 2}  # P2 at 1.0 mm; Taylor-Hood (auto) from nu = 0.49
 SWEEP_LOADS_N = (100.0, 333.0, 1000.0, 4190.0)
 SWEEP_NUS = (0.0, 0.3, 0.42, 0.45, 0.49, 0.499)
 SWEEP_THICKNESS_MM = (1.0, 2.0, 3.0)
 BASE = {"load": 333.0, "nu": 0.42, "thickness": 2.0}
-VALUE_METRICS = VALUES_AT_REFERENCE_TIMES
-CHECK_METRICS = ("force_residual_rel", "non_finite_outputs")
-FE_COMPARE_METRICS = COMPARISON_METRICS + VALUE_METRICS + CHECK_METRICS
-#: generous: a relative error beyond 10 (1000 %) or a NaN means something is broken, not a model gap
-FE_COMPARE_TOL = {**{m: 10.0 for m in COMPARISON_METRICS}, "force_residual_rel": 1e-6, "non_finite_outputs": 0.0}
-#: why: these bounds catch a broken run only, so such a case "ran" (its errors are reported, not judged)
-SANITY_BASIS = uniform_basis(SANITY, "1000 %: catches a broken run (a wrong load, a lost contact), not a model gap; the errors are reported, not judged")
-FE_COMPARE_BASIS = {**SANITY_BASIS, "force_residual_rel": Basis(INVARIANT, "equilibrium of the discrete side, 1e-6 of the load")}
-ERROR_PANELS = ("regularised_peak_pressure_rel_error", "contact_area_rel_error", "displacement_rel_error", "pressure_l2_rel_error")
-#: the FE reference's own estimated error (verification.fe_convergence; "unknown" when its run is
-#: not in the fe-convergence study): a model error below it cannot be told from the reference's
-FE_ERROR_COLUMNS = [{"header": header, "fe_error": metric}
-                    for header, metric in zip(("FE's own err: regularised peak", "area", "|u|", "L2"), FE_ERROR_TEXT_METRICS, strict=True)]
-#: the table columns of DEM against the FE: values of both sides and the errors
-FE_VALUE_COLUMNS = [
-    {"header": "DEM regularised peak (MPa)", "metric": "a_at_b_regularised_peak_pressure_mpa"},
-    {"header": "FE regularised peak (MPa)", "metric": "b_regularised_peak_pressure_mpa"},
-    {"header": "regularised peak err", "metric": "regularised_peak_pressure_rel_error"},
-    {"header": "raw peak err (reported only)", "metric": "peak_pressure_rel_error"},
-    {"header": "DEM area (mm^2)", "metric": "a_at_b_mean_contact_area_mm2"},
-    {"header": "FE area (mm^2)", "metric": "b_mean_contact_area_mm2"},
-    {"header": "area err", "metric": "contact_area_rel_error"},
-    {"header": "DEM |u| (mm)", "metric": "a_at_b_displacement_norm_mm"},
-    {"header": "FE |u| (mm)", "metric": "b_displacement_norm_mm"},
-    {"header": "disp err", "metric": "displacement_rel_error"},
-    {"header": "L2 err", "metric": "pressure_l2_rel_error"},
-]
-#: ... and the FE reference's own error, from the fe-convergence study
-FE_TABLE_COLUMNS = [*FE_VALUE_COLUMNS, *FE_ERROR_COLUMNS]
-def fe_comparison_case(name: str, description: str, scene: str, sides: tuple[str, ...], *, overrides: dict[str, Any],
-                       options: dict[str, Any], maps: bool, params: dict[str, float] | None = None) -> Case:
-    """A discrete side against the FE with this module's metrics, generous tolerances and their basis."""
-    return Case(name, description, scene, sides, FE_COMPARE_METRICS, dict(FE_COMPARE_TOL), overrides=overrides,
-                options=dict(options), params=params or {}, maps=maps, basis=dict(FE_COMPARE_BASIS))
 
 
 #: the two models of the ideal ankle: (prefix, scene, sides, what)

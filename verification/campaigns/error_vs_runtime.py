@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from verification.campaign_model import THESIS_BED, Analysis, Campaign, Case, Figure
 from verification.campaign_model import ramp_overrides
-from verification.campaigns.cylinder_plane import CHECK_METRICS, FE_COMPARE_BASIS, SANITY_BASIS
+from verification.fe_comparison import CHECK_METRICS, FE_COMPARE_BASIS, SANITY_BASIS
 from verification.sides import TRUTH_STEPS
 
 #: wall time with 2 jobs on 2 cores, nothing cached (measured: 125 s at load 3-5 on the shared 2-core machine: one FE

@@ -30,7 +30,7 @@ from typing import Any
 
 from verification.analyses import run_analysis
 from verification.campaign_model import Analysis, Campaign, Case
-from verification.campaigns.cylinder_plane import FE_TABLE_COLUMNS, fe_comparison_case
+from verification.fe_comparison import FE_TABLE_COLUMNS, fe_comparison_case
 from verification.fe_convergence import FE_VALUE_METRICS, fe_values
 from verification.verdicts import INVARIANT, Basis
 

@@ -18,13 +18,13 @@ from __future__ import annotations
 import dataclasses
 
 from verification.campaign_model import COUPLED_BED, THESIS_BED, Analysis, Campaign, Case, Figure, uniform_basis, uniform_tolerance
-from verification.campaigns.cylinder_plane import FE_COARSE
 from verification.campaigns.cylinder_plane import campaign as cylinder_plane_campaign
 from verification.campaigns.edem_analytic import _analytic_cases, _analytic_figures
 from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, _fe_analytic_cases
 from verification.campaigns.stability import _stability_cases
 from verification.campaigns.subject import campaign as subject_campaign
 from verification.campaigns.viscoelastic import campaign as viscoelastic_campaign
+from verification.fe_comparison import FE_COARSE
 from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import BY_CONSTRUCTION, INVARIANT, MODEL_BAND, MODEL_BAND_REASON, MODEL_BAND_REL, Basis
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from geometries.errors import InputError
 from verification.campaign_model import Analysis, Campaign, Figure
-from verification.campaigns.cylinder_plane import ERROR_PANELS, FE_VALUE_COLUMNS, fe_comparison_case
+from verification.fe_comparison import ERROR_PANELS, FE_VALUE_COLUMNS, fe_comparison_case
 
 #: wall time with 2 jobs on 2 cores, nothing cached (measured: 484 s at load 15-20,
 #: docs/campaigns.md#real-knee-dem-against-the-fe-on-a-real-knee)

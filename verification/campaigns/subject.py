@@ -9,7 +9,7 @@ scene share one FE run (the FE never reads the coupling: verification.runner's s
 from __future__ import annotations
 
 from verification.campaign_model import COUPLED_BED, THESIS_BED, Analysis, Campaign
-from verification.campaigns.cylinder_plane import FE_COARSE, FE_ERROR_COLUMNS, fe_comparison_case
+from verification.fe_comparison import FE_COARSE, FE_ERROR_COLUMNS, fe_comparison_case
 
 #: wall time with 2 jobs on 2 cores, nothing cached (measured: 66 s at load 3-5 on the shared 2-core machine, its 8
 #: cases running 2 FE runs; before the coupled cases and the shared FE, 136 s for 4 cases running 4)

@@ -32,7 +32,7 @@ from __future__ import annotations
 from typing import Any
 
 from verification.campaign_model import THESIS_BED, Analysis, Campaign, Case, Figure
-from verification.campaigns.cylinder_plane import ERROR_PANELS, FE_COARSE, FE_TABLE_COLUMNS, fe_comparison_case
+from verification.fe_comparison import ERROR_PANELS, FE_COARSE, FE_TABLE_COLUMNS, fe_comparison_case
 
 #: the FE layer of the base cylinder sweep: the fe-convergence study's finest level (module docstring)
 FE_LAYER = {"mesh_size_mm": 0.7, "degree": 2}

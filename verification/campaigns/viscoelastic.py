@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from verification.campaign_model import Analysis, Campaign, Case, Figure
-from verification.campaigns.cylinder_plane import ERROR_PANELS, FE_TABLE_COLUMNS, fe_comparison_case
+from verification.fe_comparison import ERROR_PANELS, FE_TABLE_COLUMNS, fe_comparison_case
 
 #: wall time with 2 jobs on 2 cores, nothing cached: measured 502 s at load 2-7 (12 FE runs of 14-173 s);
 #: at load 12-15 the layer's FE runs took about 5 min each (docs/campaigns.md)
