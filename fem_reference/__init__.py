@@ -13,7 +13,10 @@ Importing this package does not import dolfinx; the solvers import the FE stack 
 * :mod:`fem_reference.scene_run`: :func:`run_scene`, the FE reference of a whole scene (every
   time point, the result directory of ``edem fe``); its models (slab, layer) are
   :data:`fem_reference.models.FE_MODELS` and its settings :mod:`fem_reference.settings`.
-* :mod:`fem_reference.closed_forms`: Hertz line contact, confined compression, observed orders.
+* :mod:`fem_reference.biphasic`: the linear biphasic (Biot, mixed u-p Taylor-Hood) FE of cartilage
+  that creeps by fluid flow, stepped by backward Euler or BDF2 (:class:`~fem_reference.biphasic.BiphasicFE`).
+* :mod:`fem_reference.closed_forms`: Hertz line contact, confined compression (elastic, Kelvin-Voigt,
+  biphasic), observed orders.
 * :mod:`fem_reference.meshes`: small tagged verification meshes (slab, Hertz block, cylinder
   layer). Facet tags: 1 bonded, 2 contact, 3 free, 4/5/6 zero x/y/z displacement.
 

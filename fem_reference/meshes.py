@@ -49,12 +49,10 @@ def box_slab(comm: Any, lx: float, ly: float, thickness: float, n: tuple[int, in
             (FREE_TAG, lambda x: np.isclose(x[0], lx, atol=tol) | np.isclose(x[1], ly, atol=tol)),
         ]
         return FEMesh(mesh, _tag_facets(dolfinx, mesh, fdim, markers))
-    markers += [
-        (TAG_ROLLER_X if confined else FREE_TAG,
-         lambda x: np.isclose(x[0], 0.0, atol=tol) | np.isclose(x[0], lx, atol=tol)),
-        (TAG_ROLLER_Y if confined else FREE_TAG,
-         lambda x: np.isclose(x[1], 0.0, atol=tol) | np.isclose(x[1], ly, atol=tol)),
-    ]
+    # one marker per plane: with one cell across, every vertex of a y face lies on x = 0 or
+    # x = lx, so a marker "x = 0 or x = lx" would take the y faces too
+    markers += [(TAG_ROLLER_X if confined else FREE_TAG, lambda x, c=c: np.isclose(x[0], c, atol=tol)) for c in (0.0, lx)]
+    markers += [(TAG_ROLLER_Y if confined else FREE_TAG, lambda x, c=c: np.isclose(x[1], c, atol=tol)) for c in (0.0, ly)]
     return FEMesh(mesh, _tag_facets(dolfinx, mesh, fdim, markers))
 
 
