@@ -62,7 +62,8 @@ from scipy.spatial import cKDTree
 from edem.mechanics import DOF_NAMES
 from edem.raycast import RayCaster
 from edem.resultdir import Frame, Provenance, SurfaceFrame, timeseries_row, write_run
-from fem_reference.contact import _fe_modules, solve_contact
+from fem_reference.contact import solve_contact
+from fem_reference.fe_stack import fe_modules
 from fem_reference.models import FE_MODELS, FEGeometry, contact_surface
 from fem_reference.problem import (
     AREA_DEFINITION_NITSCHE,
@@ -426,7 +427,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     n_times = len(scene.load.time_s)
     selected = _selected_steps(steps, n_times)
     try:
-        mods = _fe_modules()
+        mods = fe_modules()
     except ImportError as exc:
         raise InputError(f"the FE reference needs dolfinx ({exc})",
                            expected="the `fe` extra: pip install -e '.[fe]'") from None
@@ -589,7 +590,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
 def world_rank() -> int:
     """Rank in MPI.COMM_WORLD (0 without the FE stack)."""
     try:
-        return int(_fe_modules()["MPI"].COMM_WORLD.rank)
+        return int(fe_modules()["MPI"].COMM_WORLD.rank)
     except ImportError:
         return 0
 
@@ -695,7 +696,7 @@ def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FE
 def _area_on_mobile(res: Any, solid: Any) -> float:
     """The Nitsche contact-area integral with each contact facet weighted by (area of the
     bonded triangle below it) / (its own area): the contact area measured on M."""
-    m = _fe_modules()
+    m = fe_modules()
     fem, ufl, dmesh = m["fem"], m["ufl"], m["dolfinx"].mesh
     s, pressure = res.fields["setup"], res.fields["pressure"]
     mesh = s.mesh
