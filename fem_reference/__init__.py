@@ -15,7 +15,8 @@ Importing this package does not import dolfinx; the solvers import the FE stack 
   P1, axis-aligned plane).
 * :mod:`fem_reference.scene_run`: :func:`run_scene`, the FE reference of a whole scene (every
   time point, the result directory of ``edem fe``); its models (slab, layer) are
-  :data:`fem_reference.models.FE_MODELS` and its settings :mod:`fem_reference.settings`.
+  :data:`fem_reference.models.FE_MODELS`, its settings :mod:`fem_reference.settings` and how it
+  steps through time (elastic, Kelvin-Voigt) :mod:`fem_reference.time_stepping`.
 * :mod:`fem_reference.closed_forms`: Hertz line contact, confined compression, observed orders.
 * :mod:`fem_reference.meshes`: small tagged verification meshes (slab, Hertz block, cylinder
   layer). Facet tags: 1 bonded, 2 contact, 3 free, 4/5/6 zero x/y/z displacement.
