@@ -1,18 +1,22 @@
 """FEniCSx (dolfinx) reference models: linear-elastic frictionless contact with force control.
 
 Importing this package does not import dolfinx; the solvers import the FE stack on first use
-(:func:`fem_reference.contact._fe_modules`).
+(:func:`fem_reference.fe_stack.fe_modules`).
 
 * :mod:`fem_reference.problem`: :class:`FEContactProblem` (mesh source, material, element,
   obstacle, load, free translations, rollers, Nitsche and solver options) and
   :class:`FEContactResult`; obstacles :class:`RigidPlane`, :class:`RigidCylinder`,
   :class:`RigidSurface` (triangulated; gap along the nearest triangle's normal).
 * :mod:`fem_reference.contact`: :func:`solve_contact` (Nitsche, force control by a bordered
-  semi-smooth Newton in PETSc SNES; P1, P2, Taylor-Hood) and :func:`solve_contact_vi`
-  (variational-inequality cross-check, P1, axis-aligned plane).
+  semi-smooth Newton in PETSc SNES; P1, P2, Taylor-Hood); its inner linear solve (MUMPS LU or
+  Krylov: GAMG, Taylor-Hood field split) is :mod:`fem_reference.krylov`, the set-up it shares
+  with the cross-check :mod:`fem_reference.contact_setup`.
+* :mod:`fem_reference.contact_vi`: :func:`solve_contact_vi` (variational-inequality cross-check,
+  P1, axis-aligned plane).
 * :mod:`fem_reference.scene_run`: :func:`run_scene`, the FE reference of a whole scene (every
   time point, the result directory of ``edem fe``); its models (slab, layer) are
-  :data:`fem_reference.models.FE_MODELS` and its settings :mod:`fem_reference.settings`.
+  :data:`fem_reference.models.FE_MODELS`, its settings :mod:`fem_reference.settings` and how it
+  steps through time (elastic, Kelvin-Voigt) :mod:`fem_reference.time_stepping`.
 * :mod:`fem_reference.biphasic`: the linear biphasic (Biot, mixed u-p Taylor-Hood) FE of cartilage
   that creeps by fluid flow, stepped by backward Euler or BDF2 (:class:`~fem_reference.biphasic.BiphasicFE`).
 * :mod:`fem_reference.closed_forms`: Hertz line contact, confined compression (elastic, Kelvin-Voigt,
@@ -23,7 +27,8 @@ Importing this package does not import dolfinx; the solvers import the FE stack 
 Units: mm, N, MPa.
 """
 
-from .contact import solve_contact, solve_contact_vi
+from .contact import solve_contact
+from .contact_vi import solve_contact_vi
 from .problem import (
     FEContactProblem,
     FEContactResult,

@@ -294,7 +294,7 @@ class FEContactProblem:
     initial_translation_mm / initial_rotation_rad / initial_field: warm start (e.g. the
       previous time point; ``initial_field`` = ``fields["ut_owned"]`` of a solve on the same mesh
       object and element); default: a rigid approach along the load (see
-      ``_Setup.initial_translation``), no rotation, u~ = 0.
+      ``ContactSetup.initial_translation``), no rotation, u~ = 0.
     """
 
     mesh: Any

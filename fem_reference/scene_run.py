@@ -1,8 +1,9 @@
 """The FE reference of a whole scene (docs/method.md#6-the-fe-reference-and-its-discrete-twins, docs/result-format.md): ``edem fe SCENE``.
 
-:func:`run_scene` solves, for each selected time point of a scene, one static force-controlled
+:func:`run_scene` solves, for each selected time point of a scene, one force-controlled
 frictionless FE contact problem (:func:`fem_reference.contact.solve_contact`) and writes the same
-result directory as ``edem run``.
+result directory as ``edem run``. How the time points relate is the scene's time stepping
+(:mod:`fem_reference.time_stepping`).
 
 Models (docs/method.md#6-the-fe-reference-and-its-discrete-twins): :data:`fem_reference.models.FE_MODELS` (``slab``, the twin of the ``threshold``
 law, and ``layer``, the twin of the ``gap`` laws), built with :mod:`geometries.fe_solids`.
@@ -16,11 +17,13 @@ in the FE with a warning when the load has no component along it, and the time p
 otherwise. Ligaments are not modelled (warning when the scene has some).
 
 Each time point is independent (the DEM convention: displacement of G from the initial pose of
-that time point), except with ``[viscoelastic]``: the Kelvin-Voigt continuum
-(:mod:`fem_reference.viscoelastic`) solves every time point up to the last selected one, in
-order, on one mesh, and reports the creeping displacement. Consecutive time points with the same geometry (no kinematics, or the layer
-at the same joint angle) reuse the mesh and start Newton from the previous solution scaled to
-the new load (exact for a slab whose contact set does not change: 0 Newton iterations).
+that time point; :class:`fem_reference.time_stepping.ElasticStepping`), except with
+``[viscoelastic]``: the Kelvin-Voigt continuum (:class:`fem_reference.time_stepping.KelvinVoigtStepping`,
+:mod:`fem_reference.viscoelastic`) solves every time point up to the last selected one, in
+order, on one mesh, and reports the creeping displacement. Consecutive time points with the same
+geometry (no kinematics, or the layer at the same joint angle) reuse the mesh; the elastic ones
+start Newton from the previous solution scaled to the new load (exact for a slab whose contact
+set does not change: 0 Newton iterations).
 
 Defaults (arguments > the scene's ``[fe]`` table > these, :mod:`fem_reference.settings`): model = the twin of the scene's law;
 degree 2 (P2; Taylor-Hood P2-P1 from nu = 0.49) at ``mesh_size_mm`` = 1.0, or P1 at 0.5 with
@@ -62,21 +65,19 @@ from scipy.spatial import cKDTree
 from edem.mechanics import DOF_NAMES
 from edem.raycast import RayCaster
 from edem.resultdir import Frame, Provenance, SurfaceFrame, timeseries_row, write_run
-from fem_reference.contact import _fe_modules, solve_contact
+from fem_reference.fe_stack import fe_modules
 from fem_reference.models import FE_MODELS, FEGeometry, contact_surface
 from fem_reference.problem import (
     AREA_DEFINITION_NITSCHE,
     FEContactProblem,
-    FEConvergenceError,
     FEMesh,
     RigidSurface,
     SolverOptions,
 )
 from fem_reference.progress import SolveProgress
 from fem_reference.settings import FESettings, resolve_settings
-from fem_reference.viscoelastic import KelvinVoigtHistory, first_load_warning
+from fem_reference.time_stepping import TimePoint, time_stepping
 from geometries.errors import InputError, SolverError
-from geometries.fe_solids import CONTACT_TAG
 
 #: Free rigid motions whose contact stiffness is below this fraction of the largest are fixed.
 WEAK_MODE_RATIO = 1e-8
@@ -145,6 +146,7 @@ class FERunResult:
     out_dir: Path | None = None
     rank: int = 0
     peak_memory_bytes: float | None = None  # this rank's peak resident set during the run
+    time_stepping_summary: dict[str, Any] = field(default_factory=dict)  # its keys in summary.json
 
     @property
     def method(self) -> str:
@@ -201,9 +203,7 @@ class FERunResult:
             "law": self.scene.cartilage.law,
             "time_points": [int(x.step) for x in steps],
             "n_time_points": int(self.n_time_points),
-            **({} if self.scene.viscoelastic is None else {
-                "relaxation_time_s": float(self.scene.viscoelastic.relaxation_time_s),
-                "time_scheme": s.time_scheme}),
+            **self.time_stepping_summary,
         }
 
     def timeseries_rows(self) -> list[dict[str, float]]:
@@ -426,7 +426,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     n_times = len(scene.load.time_s)
     selected = _selected_steps(steps, n_times)
     try:
-        mods = _fe_modules()
+        mods = fe_modules()
     except ImportError as exc:
         raise InputError(f"the FE reference needs dolfinx ({exc})",
                            expected="the `fe` extra: pip install -e '.[fe]'") from None
@@ -439,13 +439,9 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     if scene.ligaments:
         warnings.append(f"the FE reference does not model ligaments: the scene's "
                         f"{len(scene.ligaments)} ligament(s) are left out")
-    viscous = scene.viscoelastic
-    history: KelvinVoigtHistory | None = None
-    rest_time: float | None = None  # an unloaded first time point: the Kelvin-Voigt body starts at rest there
-    solved = selected
-    if viscous is not None:
-        warnings += first_load_warning(loads[0, :3])
-        solved = list(range(selected[-1] + 1))  # the history needs every time point up to the last asked for
+    stepping = time_stepping(scene, settings)
+    warnings += stepping.start_warnings(loads[0, :3])
+    solved = stepping.time_points(selected)
     if scene.cartilage.shear_modulus_mpa:
         warnings.append("cartilage.shear_modulus_mpa is ignored by the FE reference (the "
                         "continuum has its own shear stiffness; the contact is frictionless)")
@@ -459,7 +455,6 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     step_log: list[tuple[str, str]] = []
     solid_cache: dict = {}
     mesh_cache: dict = {}
-    previous: dict | None = None
     results: list[FEStepResult] = []
     for k in solved:
         t = float(scene.load.time_s[k])
@@ -472,31 +467,21 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             raise
         step_warnings = list(geom.warnings)
         force, moment = loads[k, :3].astype(float), loads[k, 3:].astype(float)
-        if not np.any(force):
-            if history is not None:
-                step_warnings.append("no force: the cartilage creeps back, the bone follows it without force (zero pressure)")
-            else:
-                rest_time = t
-                step_warnings.append("no force: nothing to solve (zero pressure)")
-            relaxed = _relaxed(history, geom, mesh_cache, where, scene, t)
-            results.append(_zero_step(k, t, force, moment, geom, settings, clock, *relaxed))
-            results[-1].warnings = step_warnings
-            _add(step_log, step_warnings, where)
-            if progress is not None:
-                progress(k)
-            continue
-        try:
-            trans, rots, mode_warnings = _free_modes(scene, geom, settings, force, moment)
-        except (SolverError, InputError) as exc:
-            exc.args = (f"{where}: {exc}",)
-            raise
-        step_warnings += mode_warnings
-        if np.linalg.norm(trans @ force) == 0.0 and (
-                len(rots) == 0 or np.linalg.norm(rots @ moment) == 0.0):
-            relaxed = _relaxed(history, geom, mesh_cache, where, scene, t)
-            results.append(_zero_step(k, t, force, moment, geom, settings, clock, *relaxed))
-            step_warnings.append("the load has no component along the free DOFs: carried by "
-                                 "the constraints (zero pressure)")
+        point = TimePoint(k, t, where, geom, force, comm, solve_progress, mesh_cache.get("mesh"), mesh_cache.get("key"))
+        carried = False  # a load the constraints carry alone
+        if np.any(force):
+            try:
+                trans, rots, mode_warnings = _free_modes(scene, geom, settings, force, moment)
+            except (SolverError, InputError) as exc:
+                exc.args = (f"{where}: {exc}",)
+                raise
+            step_warnings += mode_warnings
+            carried = np.linalg.norm(trans @ force) == 0.0 and (len(rots) == 0 or np.linalg.norm(rots @ moment) == 0.0)
+        if carried or not np.any(force):
+            translation, rotation, what = stepping.unloaded(point)
+            step_warnings.append("the load has no component along the free DOFs: carried by the constraints (zero pressure)"
+                                 if carried else f"no force: {what} (zero pressure)")
+            results.append(_zero_step(k, t, force, moment, geom, settings, clock, translation, rotation))
             results[-1].warnings = step_warnings
             _add(step_log, step_warnings, where)
             if progress is not None:
@@ -508,11 +493,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             mesh_cache.clear()
             mesh, cell_tags, facet_tags = geom.solid.to_dolfinx(comm)
             mesh_cache.update(key=mesh_key, mesh=FEMesh(mesh, facet_tags, cell_tags))
-        warm = previous is not None and previous["key"] == geom.key and viscous is None
-        if warm:  # same mesh and obstacle: start from the previous solution, scaled to the load
-            ratio = float(np.linalg.norm(force)) / max(float(np.linalg.norm(previous["force"])),
-                                                       1e-300)
-            t_warm = previous["t"] * (ratio if fe_model.warm_start_scales_with_load else 1.0)
+        point.mesh, point.mesh_key = mesh_cache["mesh"], mesh_key
         problem = FEContactProblem(
             mesh=mesh_cache["mesh"],
             youngs_modulus_mpa=float(scene.cartilage.youngs_modulus_mpa),
@@ -524,48 +505,19 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
             free_rotations=[tuple(r) for r in rots] if len(rots) else None,
             moment_nmm=moment,
             reference_point_mm=np.asarray(scene.reference_point_mm, dtype=float),
-            initial_translation_mm=t_warm if warm else None,
-            initial_rotation_rad=previous["q"] * ratio if warm else None,
-            initial_field=previous["ut"] * ratio if warm else None,
             strain_warning=STRAIN_WARNING,
             solver=SolverOptions(linear_solver=settings.linear_solver),
         )
-
-        if viscous is not None:
-            if history is None:
-                history = KelvinVoigtHistory(mesh_cache["mesh"], settings.degree, float(viscous.relaxation_time_s),
-                                             settings.time_scheme)
-                if rest_time is not None:
-                    history.start_at_rest(rest_time)
-            _same_mesh(history, geom, mesh_cache, where, scene)
-            step = history.prepare(problem, t)
-        inside = None if solve_progress is None else solve_progress.for_solve(where)
+        stepping.prepare(point, problem)
         try:
-            try:
-                res = solve_contact(problem, comm, keep_fields=True, progress=inside)
-            except FEConvergenceError:
-                if not warm:
-                    raise
-                # the previous time point's motion was a bad start: start afresh
-                problem.initial_translation_mm = problem.initial_rotation_rad = None
-                problem.initial_field = None
-                inside = None if solve_progress is None else solve_progress.for_solve(f"{where}, restarted cold")
-                res = solve_contact(problem, comm, keep_fields=True, progress=inside)
-        except FEConvergenceError as exc:
-            exc.args = (f"{where}: {exc}",)
-            raise
-        except (SolverError, InputError) as exc:
+            res = stepping.solve(point, problem)
+        except (SolverError, InputError) as exc:  # FEConvergenceError too
             exc.args = (f"{where}: {exc}",)
             raise
         except Exception as exc:
             raise SolverError(f"{where}: the FE solve failed: {type(exc).__name__}: {exc}"
                                 ) from None
         step_warnings += [w for w in res.warnings if not w.startswith("max nominal strain")]
-        if viscous is not None:  # the solve's unknown was v = u + tau du/dt: report u's motion
-            res.bone_displacement_mm, res.bone_rotation_rad = history.commit(t, res, *step, problem)
-        previous = {"key": geom.key, "t": res.bone_displacement_mm.copy(),
-                    "q": res.bone_rotation_rad.copy(), "ut": res.fields["ut_owned"],
-                    "force": force}
         results.append(_step_result(k, t, force, moment, geom, settings, res, clock, scene))
         res.fields = None  # the dolfinx objects of this solve are no longer needed
         if results[-1].max_nominal_strain > STRAIN_WARNING:
@@ -579,7 +531,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     results = [r for r in results if r.step in selected]
     run = FERunResult(scene, settings, results, time.perf_counter() - started,
                       _merge_warnings(warnings, step_log), n_times, None, comm.rank,
-                      peak_memory_bytes())
+                      peak_memory_bytes(), stepping.summary())
     if out_dir is not None:
         run.out_dir = Path(out_dir)
         write_run(run, run.out_dir, overwrite=overwrite, provenance=provenance, comm=comm)  # rank 0 writes
@@ -589,7 +541,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
 def world_rank() -> int:
     """Rank in MPI.COMM_WORLD (0 without the FE stack)."""
     try:
-        return int(_fe_modules()["MPI"].COMM_WORLD.rank)
+        return int(fe_modules()["MPI"].COMM_WORLD.rank)
     except ImportError:
         return 0
 
@@ -647,36 +599,17 @@ def _mobile_mapping(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return x[solid.bottom_vertex[used]], lumped_top / lumped_bottom, a_top / a_bottom
 
 
-def _same_mesh(history: KelvinVoigtHistory, geom: FEGeometry, mesh_cache: dict, where: str, scene: Any) -> None:
-    """A Kelvin-Voigt history lives on one mesh: refuse a time point that needs another."""
-    fe_model_key = mesh_cache.get("key")
-    if history.mesh is not mesh_cache.get("mesh") or fe_model_key not in (geom.key, geom.key[0]):
-        raise InputError(f"{where}: the viscoelastic FE needs one mesh at every time point, and the FE slab follows "
-                         "the joint angle", file=scene.source, key="kinematics",
-                         expected="no [kinematics] with [viscoelastic], or the layer model (--model layer)")
-
-
-def _relaxed(history: KelvinVoigtHistory | None, geom: FEGeometry, mesh_cache: dict, where: str, scene: Any,
-             t: float) -> tuple[np.ndarray, np.ndarray]:
-    """The bone's translation and rotation at a time point without load: at rest before any
-    load, else the Kelvin-Voigt cartilage creeping back (:meth:`KelvinVoigtHistory.relax`)."""
-    if history is None:
-        return np.zeros(3), np.zeros(3)
-    _same_mesh(history, geom, mesh_cache, where, scene)
-    return history.relax(t, geom.obstacle, CONTACT_TAG)
-
-
 def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FEGeometry,
-               settings: FESettings, clock: float, displacement_mm: np.ndarray | None = None,
-               rotation_rad: np.ndarray | None = None) -> FEStepResult:
+               settings: FESettings, clock: float, displacement_mm: np.ndarray,
+               rotation_rad: np.ndarray) -> FEStepResult:
     pts, tris, used = contact_surface(geom.solid)
     z = np.zeros(len(pts))
     zc = np.zeros(len(tris))
     gap, _ = geom.obstacle.gap_and_normal(pts)
     return FEStepResult(
         step=k, time_s=t, force_n=force, moment_nmm=moment,
-        displacement_mm=np.zeros(3) if displacement_mm is None else np.asarray(displacement_mm, float),
-        rotation_rad=np.zeros(3) if rotation_rad is None else np.asarray(rotation_rad, float), peak_pressure_mpa=0.0, mean_pressure_mpa=0.0,
+        displacement_mm=np.asarray(displacement_mm, float), rotation_rad=np.asarray(rotation_rad, float),
+        peak_pressure_mpa=0.0, mean_pressure_mpa=0.0,
         contact_area_mm2=0.0, contact_area_on_mobile_mm2=0.0, iterations=0,
         force_residual_n=0.0, moment_residual_nmm=0.0,
         n_dofs=0, wall_time_s=time.perf_counter() - clock, max_nominal_strain=0.0,
@@ -695,7 +628,7 @@ def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FE
 def _area_on_mobile(res: Any, solid: Any) -> float:
     """The Nitsche contact-area integral with each contact facet weighted by (area of the
     bonded triangle below it) / (its own area): the contact area measured on M."""
-    m = _fe_modules()
+    m = fe_modules()
     fem, ufl, dmesh = m["fem"], m["ufl"], m["dolfinx"].mesh
     s, pressure = res.fields["setup"], res.fields["pressure"]
     mesh = s.mesh

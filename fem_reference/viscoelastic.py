@@ -112,11 +112,11 @@ class KelvinVoigtHistory:
     last_v: dict | None = None  # the last solve's v (translation, rotation, ut_owned): warm start
 
     def __post_init__(self) -> None:
-        from fem_reference.contact import _fe_modules
+        from fem_reference.fe_stack import fe_modules
 
         if self.scheme not in TIME_SCHEMES:
             raise ValueError(f"unknown time scheme {self.scheme!r}")
-        self._fem = _fe_modules()["fem"]
+        self._fem = fe_modules()["fem"]
         self._space = self._fem.functionspace(self.mesh.mesh, ("Lagrange", self.degree, (3,)))
 
     def _function(self) -> Any:
@@ -189,9 +189,9 @@ class KelvinVoigtHistory:
     def relax(self, time_s: float, obstacle: Any, contact_tag: int) -> tuple[np.ndarray, np.ndarray]:
         """An unloaded time point (module docstring): the deformation creeps back and the bone
         follows the layer without force. Returns its translation and rotation."""
-        from fem_reference.contact import _fe_modules
+        from fem_reference.fe_stack import fe_modules
 
-        mods = _fe_modules()
+        mods = fe_modules()
         fem, MPI = mods["fem"], mods["MPI"]
         c0, h, hd, hq = self._history(time_s)
         D = np.zeros(3)
@@ -238,9 +238,11 @@ def solve_history(base: FEContactProblem, times_s: Any, forces_n: Any, relaxatio
     """
     from dataclasses import replace
 
-    from fem_reference.contact import _fe_modules, materialize_mesh, solve_contact
+    from fem_reference.contact import solve_contact
+    from fem_reference.contact_setup import materialize_mesh
+    from fem_reference.fe_stack import fe_modules
 
-    MPI = _fe_modules()["MPI"]
+    MPI = fe_modules()["MPI"]
     comm = MPI.COMM_WORLD if comm is None else comm
     mesh = materialize_mesh(base, comm)
     history = KelvinVoigtHistory(mesh, 1 if base.resolved_element() == "P1" else 2, relaxation_time_s, scheme)

@@ -1,0 +1,212 @@
+"""How the FE reference of a scene steps through its time points: one seam for every material's
+time dependence (docs/method.md#6-the-fe-reference-and-its-discrete-twins).
+
+:func:`fem_reference.scene_run.run_scene` walks the time points in order. Per time point it
+builds the model's solid and the obstacle, finds the free rigid motions, builds (or reuses) the
+dolfinx mesh and a :class:`FEContactProblem` without history (mesh, material, obstacle, load,
+free motions), and writes the result. A :class:`TimeStepping` decides all that depends on time.
+An implementation provides:
+
+* :meth:`~TimeStepping.time_points`: the time points to solve for those asked for (a history
+  needs every one up to the last asked for);
+* :meth:`~TimeStepping.start_warnings`: what the run says about its start (the first load);
+* :meth:`~TimeStepping.unloaded`: at a time point with no load along the free motions, the
+  bone's translation and rotation (3,) and what the body does (``"nothing to solve"``);
+* :meth:`~TimeStepping.prepare`: before a loaded time point's solve, put the history into its
+  problem (a warm start, a shifted gap); refuse with :class:`geometries.errors.InputError`, naming
+  ``point.where``, a time point the history cannot take (another mesh);
+* :meth:`~TimeStepping.solve`: solve the prepared problem and advance the history. It returns an
+  :class:`FEContactResult` (:meth:`fem_reference.contact_setup.ContactSetup.result` builds one)
+  whose ``bone_displacement_mm`` / ``bone_rotation_rad`` are the bone's motion to report, whose
+  pressure, area and forces are the time point's, and whose ``fields`` hold at least ``"setup"``
+  (the :class:`ContactSetup` of ``point.mesh``) and ``"pressure"`` (the contact pressure, a UFL
+  expression on it), from which the contact area on M is integrated. Errors are named after the
+  time point by the caller;
+* :meth:`~TimeStepping.summary`: its keys in summary.json.
+
+Implementations: :class:`ElasticStepping` (each time point its own elastic problem, warm-started
+from the previous one on the same geometry) and :class:`KelvinVoigtStepping` (the Kelvin-Voigt
+continuum of :mod:`fem_reference.viscoelastic`: a history on one mesh, each time point an
+elastic contact problem for v = c0 u - h with a shifted gap). :func:`time_stepping` picks one for
+a scene. A model whose state is not a displacement alone (a biphasic u-p model: displacement and
+pore pressure, each step a coupled u-p contact problem) is one more implementation: its
+:meth:`~TimeStepping.prepare` takes the stored state on its one mesh, its
+:meth:`~TimeStepping.solve` solves its own step instead of :func:`solve_contact` and stores the
+new state, its :meth:`~TimeStepping.unloaded` lets the body consolidate without load.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fem_reference.contact import solve_contact
+from fem_reference.models import FE_MODELS, FEGeometry
+from fem_reference.problem import FEContactProblem, FEContactResult, FEConvergenceError, FEMesh
+from fem_reference.progress import SolveProgress
+from fem_reference.settings import FESettings
+from fem_reference.viscoelastic import KelvinVoigtHistory, first_load_warning
+from geometries.errors import InputError
+from geometries.fe_solids import CONTACT_TAG
+
+
+@dataclass
+class TimePoint:
+    """One time point of a run, as :func:`fem_reference.scene_run.run_scene` hands it over."""
+
+    index: int
+    time_s: float
+    where: str  # how messages name it: "time point k (t = ... s)"
+    geometry: FEGeometry  # the model's solid and the obstacle (F at this time point's pose)
+    force_n: np.ndarray  # (3,) the applied force
+    comm: Any  # the MPI communicator of the solves
+    progress: SolveProgress | None  # progress lines from inside the solves (None: none)
+    mesh: FEMesh | None = None  # the run's current mesh (a loaded time point's own; None before any)
+    mesh_key: Any = None  # what it was built for: geometry.key, or geometry.key[0] when it serves every pose
+
+    def solve_progress(self, label: str | None = None) -> SolveProgress | None:
+        """The progress of one solve at this time point, labelled ``label`` (default :attr:`where`)."""
+        return None if self.progress is None else self.progress.for_solve(self.where if label is None else label)
+
+
+class TimeStepping(ABC):
+    """How a run steps through time (module docstring: what an implementation provides)."""
+
+    def time_points(self, selected: Sequence[int]) -> list[int]:
+        """The time points to solve, in order, for the ``selected`` ones (sorted)."""
+        return list(selected)
+
+    def start_warnings(self, force_n: np.ndarray) -> list[str]:
+        """Warnings about the start, given the first time point's force (3,)."""
+        return []
+
+    @abstractmethod
+    def unloaded(self, point: TimePoint) -> tuple[np.ndarray, np.ndarray, str]:
+        """(translation (3,) mm, rotation (3,) rad, what the body does) at a time point with no load
+        along the free motions (``point.force_n`` zero, or carried by the constraints)."""
+
+    @abstractmethod
+    def prepare(self, point: TimePoint, problem: FEContactProblem) -> None:
+        """Put the history into the loaded time point's ``problem`` (solved on ``point.mesh``)."""
+
+    @abstractmethod
+    def solve(self, point: TimePoint, problem: FEContactProblem) -> FEContactResult:
+        """Solve the prepared ``problem`` and advance the history (module docstring)."""
+
+    def summary(self) -> dict[str, Any]:
+        """Its keys in summary.json."""
+        return {}
+
+
+class ElasticStepping(TimeStepping):
+    """The elastic FE: each time point independent (the DEM convention: the displacement of G from
+    the initial pose of that time point). Consecutive time points with the same geometry and pose
+    start Newton from the previous solution scaled to the new load (its translation scaled too
+    when ``warm_start_scales_with_load``: exact for a slab whose contact set does not change);
+    a warm start that fails is retried from the default start."""
+
+    def __init__(self, warm_start_scales_with_load: bool) -> None:
+        self.warm_start_scales_with_load = warm_start_scales_with_load
+        self.previous: dict | None = None  # the last solve: geometry key, motion, field, force
+        self.warm = False  # whether the prepared problem starts from it
+
+    def unloaded(self, point: TimePoint) -> tuple[np.ndarray, np.ndarray, str]:
+        return np.zeros(3), np.zeros(3), "nothing to solve"
+
+    def prepare(self, point: TimePoint, problem: FEContactProblem) -> None:
+        previous = self.previous
+        self.warm = previous is not None and previous["key"] == point.geometry.key
+        if self.warm:  # same mesh and obstacle: start from the previous solution, scaled to the load
+            ratio = float(np.linalg.norm(point.force_n)) / max(float(np.linalg.norm(previous["force"])), 1e-300)
+            problem.initial_translation_mm = previous["t"] * (ratio if self.warm_start_scales_with_load else 1.0)
+            problem.initial_rotation_rad = previous["q"] * ratio
+            problem.initial_field = previous["ut"] * ratio
+
+    def solve(self, point: TimePoint, problem: FEContactProblem) -> FEContactResult:
+        try:
+            res = solve_contact(problem, point.comm, keep_fields=True, progress=point.solve_progress())
+        except FEConvergenceError:
+            if not self.warm:
+                raise
+            # the previous time point's motion was a bad start: start afresh
+            problem.initial_translation_mm = problem.initial_rotation_rad = None
+            problem.initial_field = None
+            res = solve_contact(problem, point.comm, keep_fields=True,
+                                progress=point.solve_progress(f"{point.where}, restarted cold"))
+        self.previous = {"key": point.geometry.key, "t": res.bone_displacement_mm.copy(),
+                         "q": res.bone_rotation_rad.copy(), "ut": res.fields["ut_owned"], "force": point.force_n}
+        return res
+
+
+class KelvinVoigtStepping(TimeStepping):
+    """The Kelvin-Voigt continuum (:mod:`fem_reference.viscoelastic`): every time point up to the
+    last asked for, in order, on one mesh. The body starts at rest at the last unloaded time point
+    before the first load (else from the elastic solution under that load); a loaded time point
+    is an elastic contact problem for v = c0 u - h with the shifted gap, an unloaded one lets the
+    cartilage creep back. The motion reported is u's.
+
+    ``scheme``: :data:`fem_reference.viscoelastic.TIME_SCHEMES`; ``degree``: the displacement's;
+    ``scene_file``: named by the refusal of a second mesh.
+    """
+
+    def __init__(self, relaxation_time_s: float, scheme: str, degree: int, scene_file: Any) -> None:
+        self.relaxation_time_s = relaxation_time_s
+        self.scheme = scheme
+        self.degree = degree
+        self.scene_file = scene_file
+        self.history: KelvinVoigtHistory | None = None  # from the first loaded time point on
+        self.rest_time_s: float | None = None  # the last unloaded time point before it
+        self.step: tuple = ()  # what the prepared step's commit needs: (c0, h's translation, h's rotation)
+
+    def time_points(self, selected: Sequence[int]) -> list[int]:
+        return list(range(selected[-1] + 1))  # the history needs every time point up to the last asked for
+
+    def start_warnings(self, force_n: np.ndarray) -> list[str]:
+        return first_load_warning(force_n)
+
+    def unloaded(self, point: TimePoint) -> tuple[np.ndarray, np.ndarray, str]:
+        if self.history is None:
+            if not np.any(point.force_n):
+                self.rest_time_s = point.time_s
+            return np.zeros(3), np.zeros(3), "nothing to solve"
+        self._same_mesh(point)
+        translation, rotation = self.history.relax(point.time_s, point.geometry.obstacle, CONTACT_TAG)
+        return translation, rotation, "the cartilage creeps back, the bone follows it without force"
+
+    def prepare(self, point: TimePoint, problem: FEContactProblem) -> None:
+        if self.history is None:
+            self.history = KelvinVoigtHistory(point.mesh, self.degree, self.relaxation_time_s, self.scheme)
+            if self.rest_time_s is not None:
+                self.history.start_at_rest(self.rest_time_s)
+        self._same_mesh(point)
+        self.step = self.history.prepare(problem, point.time_s)
+
+    def solve(self, point: TimePoint, problem: FEContactProblem) -> FEContactResult:
+        res = solve_contact(problem, point.comm, keep_fields=True, progress=point.solve_progress())
+        # the solve's unknown was v = u + tau du/dt: report u's motion
+        res.bone_displacement_mm, res.bone_rotation_rad = self.history.commit(point.time_s, res, *self.step, problem)
+        return res
+
+    def summary(self) -> dict[str, Any]:
+        return {"relaxation_time_s": self.relaxation_time_s, "time_scheme": self.scheme}
+
+    def _same_mesh(self, point: TimePoint) -> None:
+        """A Kelvin-Voigt history lives on one mesh: refuse a time point that needs another."""
+        key = point.geometry.key
+        if self.history.mesh is not point.mesh or point.mesh_key not in (key, key[0]):
+            raise InputError(f"{point.where}: the viscoelastic FE needs one mesh at every time point, and the FE slab follows "
+                             "the joint angle", file=self.scene_file, key="kinematics",
+                             expected="no [kinematics] with [viscoelastic], or the layer model (--model layer)")
+
+
+def time_stepping(scene: Any, settings: FESettings) -> TimeStepping:
+    """The time stepping of ``scene`` (an :class:`edem.scene.Scene`): Kelvin-Voigt with
+    ``[viscoelastic]``, else elastic. A new time-dependent material is one more line here."""
+    if scene.viscoelastic is not None:
+        return KelvinVoigtStepping(float(scene.viscoelastic.relaxation_time_s), settings.time_scheme,
+                                   settings.degree, scene.source)
+    return ElasticStepping(FE_MODELS[settings.model].warm_start_scales_with_load)
