@@ -197,9 +197,9 @@ class BiphasicFE:
     conditions and the kept LU factors. Its states are :class:`BiphasicState`."""
 
     def __init__(self, mesh: FEMesh, material: BiphasicMaterial, boundaries: BiphasicBoundaries) -> None:
-        from fem_reference.contact import _fe_modules
+        from fem_reference.fe_stack import fe_modules
 
-        m = self._m = _fe_modules()
+        m = self._m = fe_modules()
         fem, ufl, bu = m["fem"], m["ufl"], m["basix_ufl"]
         self.material, self.boundaries = material, boundaries
         msh = self._mesh = mesh.mesh
