@@ -3,7 +3,7 @@
 The smoothing length sqrt(b) h of the Pade term is about 2.5 mm on a 2 mm layer while springs
 are 0.3-1 mm apart, so the vertex operators resolve far more than the smoothed field needs. With
 a resolution r > 0 each term is solved on a Galerkin P1 subspace about sqrt(b) h / r across
-(``edem.thin_layer``, "Coarse smoothing space"). This script prints
+(``edem.coarse_space``). This script prints
 
 1. the bonded cylinder layer (the thin-layer campaign's base point: 2 mm, 333 N, nu 0.42 and
    0.49, DEM, Pade) at the scene's springs and at a finer spring mesh: displacement, regularised

@@ -36,7 +36,7 @@ import scipy.sparse as sp  # noqa: E402
 from bench_edem import stance_like_scene  # noqa: E402
 from scipy.sparse.linalg import splu  # noqa: E402
 
-import edem.thin_layer as thin_layer  # noqa: E402
+import edem.sparse_factors as sparse_factors  # noqa: E402
 from edem.raycast import RayCaster  # noqa: E402
 from edem.solver import run  # noqa: E402
 
@@ -58,7 +58,7 @@ def pade_candidates(banded, pattern, data: np.ndarray, rhs: np.ndarray, kept: di
     """Each SPD solver on H + Z W Z^T with this pattern and data; ``banded``: the bed's
     ``OperatorPattern.factorise``; ``kept``: QDLDL's factor of the last pattern."""
     matrix = pattern.matrix(data)
-    fresh = thin_layer.OperatorPattern(pattern.indices, pattern.indptr, pattern.slots, pattern.q)
+    fresh = sparse_factors.OperatorPattern(pattern.indices, pattern.indptr, pattern.slots, pattern.q)
     fresh.__dict__["band"] = pattern.band  # the ordering is per pattern in both: only the factor is fresh
 
     def ldl():
@@ -92,7 +92,7 @@ def bench(mesh_size_mm: float, law: str, n_steps: int) -> None:
     caster = RayCaster(base.fixed.vertices_mm, base.fixed.triangles)
     cartilage = replace(base.cartilage, poissons_ratio=0.45, law=law, thickness_mm=2.0 if law != "threshold" else None)
     rng = np.random.default_rng(0)
-    factorise, indefinite_solve = thin_layer.OperatorPattern.factorise, thin_layer.indefinite_solve
+    factorise, indefinite_solve = sparse_factors.OperatorPattern.factorise, sparse_factors.indefinite_solve
     for symbol in ("pade", "two-pole"):
         figures: dict[str, list[tuple[float, float]]] = {}
         kept: dict = {}
@@ -116,11 +116,11 @@ def bench(mesh_size_mm: float, law: str, n_steps: int) -> None:
                 lambda: splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve(rhs), matrix, rhs))
             return holder[0]
 
-        thin_layer.OperatorPattern.factorise, thin_layer.indefinite_solve = pade, indefinite
+        sparse_factors.OperatorPattern.factorise, sparse_factors.indefinite_solve = pade, indefinite
         try:
             result = run(replace(base, cartilage=replace(cartilage, coupling="thin-layer", thin_layer_symbol=symbol)), "edem", caster=caster)
         finally:
-            thin_layer.OperatorPattern.factorise, thin_layer.indefinite_solve = factorise, indefinite_solve
+            sparse_factors.OperatorPattern.factorise, sparse_factors.indefinite_solve = factorise, indefinite_solve
         for name, rows in figures.items():
             seconds = [s for s, _ in rows]
             print(f"{law:9s} {result.n_springs:6d} springs, {symbol:8s} {name:28s}: {len(rows):3d} factorisations, total {1e3 * sum(seconds):8.1f} ms, "

@@ -30,6 +30,7 @@ from dataclasses import replace  # noqa: E402
 import numpy as np  # noqa: E402
 from bench_edem import stance_like_scene  # noqa: E402
 
+import edem.sparse_factors as sparse_factors  # noqa: E402
 import edem.thin_layer as thin_layer  # noqa: E402
 from edem.raycast import RayCaster  # noqa: E402
 from edem.solver import run  # noqa: E402
@@ -49,7 +50,7 @@ class FactorCount:
         self.banded = 0
         self.band_columns = [0, 0]  # factored, of
         self._factorise = thin_layer.LayerCompliance._factorise
-        banded_cholesky, dpbtrf = thin_layer.OperatorPattern._banded_cholesky, thin_layer.dpbtrf
+        banded_cholesky, dpbtrf = sparse_factors.OperatorPattern._banded_cholesky, sparse_factors.dpbtrf
         counter = self
 
         def counted(layer, weight):
@@ -66,8 +67,8 @@ class FactorCount:
             return dpbtrf(ab, **options)
 
         thin_layer.LayerCompliance._factorise = counted
-        thin_layer.OperatorPattern._banded_cholesky = columns
-        thin_layer.dpbtrf = factored
+        sparse_factors.OperatorPattern._banded_cholesky = columns
+        sparse_factors.dpbtrf = factored
 
 
 def bench(mesh_size_mm: float, law: str, n_steps: int, rounds: int, counter: FactorCount, resolution: float) -> None:

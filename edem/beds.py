@@ -17,7 +17,7 @@ ligaments, the shear springs) and hands it to the scene's bed, which owns
 
 ``[cartilage] coupling`` names the bed: ``"none"`` the independent springs, ``"thin-layer"`` the
 coupled thin layer (``[cartilage] thin_layer_symbol`` picks its symbol among
-:data:`edem.thin_layer.LAYER_SYMBOLS`: ``pade``, ``two-pole``).
+:data:`edem.layer_symbols.LAYER_SYMBOLS`: ``pade``, ``two-pole``).
 
 To add a bed: one subclass of :class:`Bed` here, added to :data:`BEDS`, plus its tests.
 """
@@ -37,7 +37,7 @@ from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, assemble_s
 from edem.raycast import RayCaster
 from edem.springs import Cartilage, Placement, SpringGeometry
 from edem.tables import SceneTable
-from edem.thin_layer import LAYER_SYMBOLS, taylor_coefficients
+from edem.layer_symbols import LAYER_SYMBOLS, taylor_coefficients
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 
 

@@ -26,7 +26,7 @@ from edem.mechanics import DOF_NAMES, rotation_matrix
 from edem.opensim_model import BodyPoses
 from edem.plausibility import scene_warnings
 from edem.springs import Cartilage, Ligament, Placement
-from edem.thin_layer import LAYER_SYMBOLS
+from edem.layer_symbols import LAYER_SYMBOLS
 from edem.thickness import CARTILAGE_KEYS, GEOMETRY_KEYS, array_layers, scene_layers, uses_layers
 from edem.tables import SceneTable, not_utf8
 from geometries.builders import build_geometry
@@ -222,7 +222,7 @@ class Scene:
             independent springs, or ``"thin-layer"``, the coupled thin layer.
         thin_layer_symbol : str, optional
             With ``coupling="thin-layer"``, the layer's symbol, a name of
-            :data:`edem.thin_layer.LAYER_SYMBOLS` (``"pade"``, the default, or ``"two-pole"``).
+            :data:`edem.layer_symbols.LAYER_SYMBOLS` (``"pade"``, the default, or ``"two-pole"``).
         thin_layer_smoothing_resolution : float, optional
             With ``coupling="thin-layer"``, cells of the coarse smoothing space per smoothing
             length (as ``[cartilage] thin_layer_smoothing_resolution``); default 0, the springs'

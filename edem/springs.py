@@ -63,7 +63,7 @@ class Cartilage:
     thickness_mm: float | None = None  # undeformed combined thickness t (gap laws)
     shear_modulus_mpa: float = 0.0
     coupling: str = "none"  # none (independent springs) | thin-layer (edem.thin_layer)
-    thin_layer_symbol: str = "pade"  # under the coupling, a name of edem.thin_layer.LAYER_SYMBOLS
+    thin_layer_symbol: str = "pade"  # under the coupling, a name of edem.layer_symbols.LAYER_SYMBOLS
     # under the coupling: cells of the coarse smoothing space per smoothing length (0: the springs' own vertices; edem.thin_layer)
     thin_layer_smoothing_resolution: float = 0.0
     # measured thickness (edem.thickness): each side's layer; None: thickness_mm is the combined one

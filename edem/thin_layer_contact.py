@@ -64,7 +64,8 @@ import numpy as np
 from geometries.errors import SolverError
 from edem.laws import LinearElements
 from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, singular_stiffness_error, unrestrained_dofs
-from edem.thin_layer import LAYER_SYMBOLS, LayerCompliance, SurfaceMesh, layer_compliance
+from edem.layer_symbols import LAYER_SYMBOLS
+from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance
 
 
 @dataclass

@@ -16,7 +16,7 @@ from edem.mechanics import generalised_directions
 from edem.raycast import RayCaster
 from edem.scene import Scene, load_scene
 from edem.solver import run
-from edem.thin_layer import LAYER_SYMBOLS
+from edem.layer_symbols import LAYER_SYMBOLS
 
 #: every bed of the registry with each of its symbols (coupling, thin_layer_symbol)
 BED_CHOICES = [("none", None)] + [("thin-layer", symbol) for symbol in LAYER_SYMBOLS]

@@ -1,4 +1,5 @@
-"""The thin-layer compliance operator against the bonded-layer closed forms (edem.thin_layer)."""
+"""The thin-layer compliance operator against the bonded-layer closed forms: its symbols (edem.layer_symbols),
+its factors (edem.sparse_factors), its coarse space (edem.coarse_space) and the operator (edem.thin_layer)."""
 
 from __future__ import annotations
 
@@ -9,21 +10,18 @@ from scipy.sparse.linalg import spsolve
 from support import grid_plate
 
 from edem.mechanics import confined_modulus_mpa
-from edem.thin_layer import (
+from edem.layer_symbols import (
     LAYER_SYMBOLS,
     TWO_POLE_MAX_KH,
-    SurfaceMesh,
-    _corner_means,
     _definiteness_margin,
-    _dense_columns,
-    boundary_vertices,
     exact_layer_compliance,
-    layer_compliance,
     pade_coefficients,
     pade_symbol,
     taylor_coefficients,
     two_pole_symbol,
 )
+from edem.sparse_factors import _dense_columns
+from edem.thin_layer import SurfaceMesh, _corner_means, boundary_vertices, layer_compliance
 
 E = 10.35
 NUS = (0.0, 0.1, 0.3, 0.42, 0.45, 0.49, 0.499)
@@ -287,10 +285,10 @@ def test_coupled_factor_solves_to_round_off_on_both_paths(banded, monkeypatch):
     at kh ~ 1 on the mesh scale), times a safety factor of 50. Also checks the band layout reused
     by a second factorisation with other weights on the same pattern.
     """
-    import edem.thin_layer as thin_layer
+    import edem.sparse_factors as sparse_factors
 
     if not banded:
-        monkeypatch.setattr(thin_layer, "MAX_BANDED_HALF_WIDTH", -1)
+        monkeypatch.setattr(sparse_factors, "MAX_BANDED_HALF_WIDTH", -1)
     plate = grid_plate(10.0, 10.0, 12)
     mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
     cells = np.arange(plate.n_triangles)
@@ -305,7 +303,7 @@ def test_coupled_factor_solves_to_round_off_on_both_paths(banded, monkeypatch):
         x = layer.factorise_coupled(weight)(rhs)
         scale = abs(matrix).max() * np.abs(x).max()
         assert np.abs(matrix @ x - rhs).max() <= 1e-11 * scale
-    assert (term.pattern.band[3] <= thin_layer.MAX_BANDED_HALF_WIDTH) == banded
+    assert (term.pattern.band[3] <= sparse_factors.MAX_BANDED_HALF_WIDTH) == banded
 
 
 def test_two_term_factor_solves_the_indefinite_block_to_round_off():
@@ -338,7 +336,7 @@ def test_two_pole_block_ldlt_agrees_with_pivoted_lu_within_its_condition(monkeyp
     same x as SuperLU's pivoted LU: both are accepted at a normwise backward error of at most
     V eps, so each is within cond(A) V eps of the exact solution (the forward-error bound of a
     backward-stable solve) and they differ by at most twice that."""
-    import edem.thin_layer as thin_layer
+    import edem.sparse_factors as sparse_factors
     from scipy.sparse.linalg import splu
 
     plate = grid_plate(10.0, 10.0, 12)
@@ -349,7 +347,7 @@ def test_two_pole_block_ldlt_agrees_with_pivoted_lu_within_its_condition(monkeyp
     weight = np.where(rng.uniform(size=cells.size) < 0.5, 1.0 / layer.local_mm_per_n, 0.0)
     matrix = (sp.block_diag([t.sigma * t.h for t in layer.terms]) + layer.z @ sp.diags(weight) @ layer.z.T).tocsc()
     pivoted = []
-    monkeypatch.setattr(thin_layer, "splu", lambda *a, **k: pivoted.append(1) or splu(*a, **k))
+    monkeypatch.setattr(sparse_factors, "splu", lambda *a, **k: pivoted.append(1) or splu(*a, **k))
     rhs = rng.standard_normal((matrix.shape[0], 3))
     x = layer.factorise_coupled(weight)(rhs)
     assert not pivoted  # the LDL^T's own solve was accepted
@@ -364,7 +362,7 @@ def test_indefinite_solve_pivots_where_diagonal_pivots_would_grow():
     by 1/d (QDLDL's own answer is off by 3e-5); the checked solve sees the backward error and
     solves by SuperLU's pivoted LU instead: within cond(A) n eps of numpy's dense LU, twice over
     (both backward stable)."""
-    from edem.thin_layer import indefinite_solve
+    from edem.sparse_factors import indefinite_solve
 
     n, d = 4, 1e-12
     dense = np.diag(np.full(n, d)) + np.diag(np.ones(n - 1), 1) + np.diag(np.ones(n - 1), -1)

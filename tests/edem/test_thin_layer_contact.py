@@ -16,7 +16,7 @@ from edem.raycast import RayCaster
 from edem.scene import Viscoelastic, load_scene
 from edem.solver import run
 from edem.springs import Ligament, Placement, spring_geometry
-from edem.thin_layer import pade_symbol, taylor_coefficients, two_pole_symbol
+from edem.layer_symbols import pade_symbol, taylor_coefficients, two_pole_symbol
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh, solve_thin_layer, thin_layer_viscoelastic_increment
 from geometries.surface import TriangleSurface
 
