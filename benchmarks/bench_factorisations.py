@@ -37,6 +37,7 @@ from bench_edem import stance_like_scene  # noqa: E402
 from scipy.sparse.linalg import splu  # noqa: E402
 
 import edem.sparse_factors as sparse_factors  # noqa: E402
+from edem.beds import CoupledThinLayer, on_bed  # noqa: E402
 from edem.raycast import RayCaster  # noqa: E402
 from edem.solver import run  # noqa: E402
 
@@ -118,7 +119,7 @@ def bench(mesh_size_mm: float, law: str, n_steps: int) -> None:
 
         sparse_factors.OperatorPattern.factorise, sparse_factors.indefinite_solve = pade, indefinite
         try:
-            result = run(replace(base, cartilage=replace(cartilage, coupling="thin-layer", thin_layer_symbol=symbol)), "edem", caster=caster)
+            result = run(replace(base, cartilage=on_bed(cartilage, CoupledThinLayer.coupling, thin_layer_symbol=symbol)), "edem", caster=caster)
         finally:
             sparse_factors.OperatorPattern.factorise, sparse_factors.indefinite_solve = factorise, indefinite_solve
         for name, rows in figures.items():

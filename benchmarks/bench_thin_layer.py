@@ -31,6 +31,7 @@ import numpy as np  # noqa: E402
 from bench_edem import stance_like_scene  # noqa: E402
 
 import edem.sparse_factors as sparse_factors  # noqa: E402
+from edem.beds import CoupledThinLayer, IndependentSprings, on_bed  # noqa: E402
 import edem.thin_layer as thin_layer  # noqa: E402
 from edem.raycast import RayCaster  # noqa: E402
 from edem.solver import run  # noqa: E402
@@ -76,12 +77,12 @@ def bench(mesh_size_mm: float, law: str, n_steps: int, rounds: int, counter: Fac
     caster = RayCaster(base.fixed.vertices_mm, base.fixed.triangles)
     # The gap law: a 2 mm layer bonded to all of the talus (its coupled layer is the whole surface).
     cartilage = replace(base.cartilage, poissons_ratio=0.45, law=law, thickness_mm=2.0 if law != "threshold" else None)
-    scenes = {"none": replace(base, cartilage=replace(cartilage, coupling="none"))}
+    scenes = {"none": replace(base, cartilage=on_bed(cartilage, IndependentSprings.coupling))}
     for symbol in GOALS:
-        scenes[symbol] = replace(base, cartilage=replace(cartilage, coupling="thin-layer", thin_layer_symbol=symbol))
+        scenes[symbol] = replace(base, cartilage=on_bed(cartilage, CoupledThinLayer.coupling, thin_layer_symbol=symbol))
         if resolution > 0.0:
-            scenes[f"{symbol} r{resolution:g}"] = replace(base, cartilage=replace(cartilage, coupling="thin-layer", thin_layer_symbol=symbol,
-                                                                                  thin_layer_smoothing_resolution=resolution))
+            scenes[f"{symbol} r{resolution:g}"] = replace(base, cartilage=on_bed(cartilage, CoupledThinLayer.coupling, thin_layer_symbol=symbol,
+                                                                                 thin_layer_smoothing_resolution=resolution))
     couplings = tuple(scenes)
     totals: dict[str, list[float]] = {c: [] for c in couplings}
     solves: dict[str, list[float]] = {c: [] for c in couplings}

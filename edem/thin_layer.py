@@ -66,7 +66,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from edem.coarse_space import COARSE_MIN_SPRINGS, CoarseSpace, coarse_transfer
-from edem.layer_symbols import LAYER_SYMBOLS
+from edem.layer_symbols import LayerSymbol, pade_symbol
 from edem.sparse_factors import LOW_RANK_MAX, LOW_RANK_MAX_INDEFINITE, LowRankUpdate, OperatorPattern, indefinite_solve
 
 
@@ -429,15 +429,16 @@ def layer_compliance(
     youngs_modulus_mpa: float,
     poissons_ratio: float,
     edge_at_cells: bool = False,
-    symbol: str = "pade",
+    symbol: LayerSymbol | None = None,
     smoothing_resolution: float = 0.0,
 ) -> LayerCompliance:
     """The thin-layer compliance on the springs ``cells`` (indices) with local thickness (m,) mm.
 
     ``edge_at_cells``: the layer ends at the boundary of ``cells`` (a free lateral face there),
-    rather than going on beyond them with a natural cut. ``symbol``: a name of LAYER_SYMBOLS.
-    ``smoothing_resolution`` > 0: each term is solved on a coarse space (module docstring, "Coarse
-    smoothing space") of this many cells per smoothing length sqrt(b) h (at the median h), where
+    rather than going on beyond them with a natural cut. ``symbol``: the layer's symbol at
+    ``poissons_ratio`` (:data:`edem.layer_symbols.LAYER_SYMBOLS`; None: the Pade).
+    ``smoothing_resolution`` > 0: each term is solved on a coarse space (:mod:`edem.coarse_space`)
+    of this many cells per smoothing length sqrt(b) h (at the median h), where
     those cells are at least COARSE_MIN_SPRINGS springs across; 0: on the springs' vertices."""
     h = np.broadcast_to(np.asarray(thickness_mm, float), cells.shape)
     # The gap laws' layer over the whole surface has the same cells and thickness at every time
@@ -448,7 +449,7 @@ def layer_compliance(
         return kept[1]
     g = youngs_modulus_mpa / (2.0 * (1.0 + poissons_ratio))
     h_over_g = h / g
-    model = LAYER_SYMBOLS[symbol](poissons_ratio)
+    model = pade_symbol(poissons_ratio) if symbol is None else symbol
     coarse_cells = smoothing_resolution > 0.0 and cells.size > 0
     if coarse_cells:  # (medians over the cells: only where a coarse space may be built)
         spring_mm, median_h = float(np.sqrt(2.0 * np.median(mesh.area_mm2[cells]))), float(np.median(h))

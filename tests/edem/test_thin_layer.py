@@ -92,7 +92,7 @@ def test_sinusoidal_pressure_reproduces_the_discrete_symbol_to_round_off(nu, sym
     for mode in ((1, 0), (3, 2), (6, 0)):
         k = 2 * np.pi * np.array(mode) / (n * spacing)
         p = np.cos(centroid[:, :2] @ k)
-        layer = layer_compliance(mesh, np.arange(mesh.area_mm2.shape[0]), h, E, nu, symbol=symbol)
+        layer = layer_compliance(mesh, np.arange(mesh.area_mm2.shape[0]), h, E, nu, symbol=model)
         w = layer.deflection(p * mesh.area_mm2)
         cell_offsets = np.array([[2, 1], [1, 2], [-1, 1], [-1, -2], [-2, -1], [1, -1]]) / 3 * spacing
         load = np.exp(1j * cell_offsets @ k).sum() / 3 * spacing**2 / 2
@@ -127,7 +127,7 @@ def test_discrete_symbol_converges_to_the_continuum_symbol_at_second_order(nu, s
         for n in (48, 96):
             mesh, centroid = periodic_grid(n, length / n)
             p = np.cos(centroid[:, 0] * k)
-            w = layer_compliance(mesh, np.arange(mesh.area_mm2.shape[0]), h, E, nu, symbol=symbol).deflection(p * mesh.area_mm2)
+            w = layer_compliance(mesh, np.arange(mesh.area_mm2.shape[0]), h, E, nu, symbol=model).deflection(p * mesh.area_mm2)
             lower = slice(0, n * n)
             ratio = w[lower] @ p[lower] / (p[lower] @ p[lower]) * g / h
             errors.append(ratio - model(k * h))
@@ -208,7 +208,7 @@ def test_flat_plate_under_uniform_pressure_deflects_uniformly(symbol):
     mesh, _ = periodic_grid(24, 0.7)
     cells = np.arange(mesh.area_mm2.shape[0])
     for nu in NUS:
-        w = layer_compliance(mesh, cells, 2.0, E, nu, symbol=symbol).deflection(1.5 * mesh.area_mm2)
+        w = layer_compliance(mesh, cells, 2.0, E, nu, symbol=LAYER_SYMBOLS[symbol](nu)).deflection(1.5 * mesh.area_mm2)
         np.testing.assert_allclose(w, 2.0 * 1.5 / confined_modulus_mpa(E, nu), rtol=1e-10)
 
 
@@ -220,7 +220,7 @@ def test_uniform_pressure_on_a_layer_of_varying_thickness_deflects_each_spring_b
     cells = np.arange(mesh.area_mm2.shape[0])
     h = 1.5 + np.sin(centroid[:, 0] * 2 * np.pi / (24 * 0.7)) ** 2  # 1.5 .. 2.5 mm
     for nu in (0.1, 0.42, 0.499):
-        w = layer_compliance(mesh, cells, h, E, nu, symbol=symbol).deflection(2.0 * mesh.area_mm2)
+        w = layer_compliance(mesh, cells, h, E, nu, symbol=LAYER_SYMBOLS[symbol](nu)).deflection(2.0 * mesh.area_mm2)
         np.testing.assert_allclose(w, h * 2.0 / confined_modulus_mpa(E, nu), rtol=1e-9)
 
 
@@ -234,10 +234,10 @@ def test_compliance_is_symmetric_positive_definite(symbol):
     cells = np.arange(plate.n_triangles)
     thickness = 1.0 + 0.1 * np.arange(cells.size) / cells.size  # varying h keeps the symmetry
     for nu in (0.1, 0.42, 0.499):
-        layer = layer_compliance(mesh, cells, thickness, E, nu, symbol=symbol)
+        model = LAYER_SYMBOLS[symbol](nu)
+        layer = layer_compliance(mesh, cells, thickness, E, nu, symbol=model)
         c = np.column_stack([layer.deflection(col) for col in np.eye(cells.size)])
         np.testing.assert_allclose(c, c.T, atol=1e-12 * np.abs(c).max())
-        model = LAYER_SYMBOLS[symbol](nu)
         margin = _definiteness_margin(np.array([model.local]), np.array([model.strengths + (0.0,) * (2 - len(model.strengths))]),
                                       np.array([model.screenings + (1.0,) * (2 - len(model.screenings))]))[0]
         floor = margin * thickness * 2 * (1 + nu) / E / mesh.area_mm2  # mm/N
@@ -314,7 +314,7 @@ def test_two_term_factor_solves_the_indefinite_block_to_round_off():
     plate = grid_plate(10.0, 10.0, 12)
     mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
     cells = np.arange(plate.n_triangles)
-    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol="two-pole")
+    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=two_pole_symbol(0.49))
     assert [t.sigma for t in layer.terms] == [1.0, -1.0]
     rng = np.random.default_rng(4)
     active = rng.uniform(size=cells.size) < 0.5
@@ -342,7 +342,7 @@ def test_two_pole_block_ldlt_agrees_with_pivoted_lu_within_its_condition(monkeyp
     plate = grid_plate(10.0, 10.0, 12)
     mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
     cells = np.arange(plate.n_triangles)
-    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol="two-pole")
+    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=two_pole_symbol(0.49))
     rng = np.random.default_rng(7)
     weight = np.where(rng.uniform(size=cells.size) < 0.5, 1.0 / layer.local_mm_per_n, 0.0)
     matrix = (sp.block_diag([t.sigma * t.h for t in layer.terms]) + layer.z @ sp.diags(weight) @ layer.z.T).tocsc()
@@ -384,7 +384,7 @@ def test_a_few_changed_springs_reuse_the_factor_and_still_solve_to_round_off(sym
     plate = grid_plate(10.0, 10.0, 12)
     mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
     cells = np.arange(plate.n_triangles)
-    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=symbol)
+    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=LAYER_SYMBOLS[symbol](0.49))
     factored = []
     fresh = thin_layer.LayerCompliance._factorise
     monkeypatch.setattr(thin_layer.LayerCompliance, "_factorise", lambda self, w: factored.append(1) or fresh(self, w))
@@ -398,7 +398,7 @@ def test_a_few_changed_springs_reuse_the_factor_and_still_solve_to_round_off(sym
         weight = np.where(active, 1.0 / layer.local_mm_per_n, 0.0)
         before = len(factored)
         # A layer rebuilt on the same operators (the next time point) shares the kept factor.
-        layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=symbol)
+        layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=LAYER_SYMBOLS[symbol](0.49))
         x_solve = layer.factorise_coupled(weight)
         assert len(factored) - before == refactors
         matrix = sp.block_diag([t.sigma * t.h for t in layer.terms]) + layer.z @ sp.diags(weight) @ layer.z.T
@@ -575,7 +575,7 @@ def test_coarse_smoothing_deflects_a_closed_layer_uniformly_under_uniform_pressu
     centroid = mesh.vertices_mm[mesh.triangles].mean(axis=1)
     h = 3.0 + 0.5 * centroid[:, 2] / 15.0  # 2.5 .. 3.5 mm: the bulge term's coarse cells about 1.2 h = 3.7 mm
     for nu in (0.42, 0.499):  # below nu 1/4 the Pade's term is short (sqrt(b) = 0.24 at nu 0.1) and stays fine
-        layer = layer_compliance(mesh, cells, h, E, nu, symbol=symbol, smoothing_resolution=1.0)
+        layer = layer_compliance(mesh, cells, h, E, nu, symbol=LAYER_SYMBOLS[symbol](nu), smoothing_resolution=1.0)
         coarse = [t.coarse for t in layer.terms if t.coarse is not None]
         assert coarse and all(c.transfer.shape[1] < c.transfer.shape[0] / 4 for c in coarse)  # it is coarse
         w = layer.deflection(2.0 * mesh.area_mm2)

@@ -10,6 +10,7 @@ from scipy.spatial import Delaunay
 from support import cylinder_patch, grid_plate, make_scene, plane
 
 from geometries.errors import InputError
+from edem.beds import CoupledThinLayer, on_bed
 from edem.laws import LinearElements
 from edem.mechanics import confined_modulus_mpa, generalised_directions
 from edem.raycast import RayCaster
@@ -24,8 +25,9 @@ E = 10.35
 CYLINDER_DOFS = ("tx", "rx", "ry", "rz")
 
 
-def coupled(scene, **cartilage):
-    return replace(scene, cartilage=replace(scene.cartilage, coupling="thin-layer", **cartilage))
+def coupled(scene, **keys):
+    """The scene on the coupled layer, with the layer's own keys ``keys``."""
+    return replace(scene, cartilage=on_bed(scene.cartilage, CoupledThinLayer.coupling, **keys))
 
 
 def ramp(force: float, n_up: int, n_down: int = 0) -> np.ndarray:
@@ -425,7 +427,7 @@ def test_thin_layer_symbol_is_refused_without_the_coupling_or_when_unknown():
         assert pade_symbol(nu).local >= taylor_coefficients(nu)[0] * (1 - 1e-12)
         load_scene("cylinder-layer", {**log, "cartilage.poissons_ratio": nu})
     scene = load_scene("cylinder-layer", {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole"})
-    assert scene.cartilage.thin_layer_symbol == "two-pole"
+    assert scene.cartilage.bed_keys.thin_layer_symbol == "two-pole"
 
 
 def test_an_under_resolved_smoothing_term_is_warned():
@@ -434,7 +436,7 @@ def test_an_under_resolved_smoothing_term_is_warned():
     Pade's single term (~1.3 h) does not."""
     scene = load_scene("cylinder-layer", {"cartilage.coupling": "thin-layer", "cartilage.poissons_ratio": 0.49})
     assert not [w for w in run(scene).warnings if "smoothing length" in w]
-    two_pole = run(replace(scene, cartilage=replace(scene.cartilage, thin_layer_symbol="two-pole"))).warnings
+    two_pole = run(coupled(scene, thin_layer_symbol="two-pole")).warnings
     (warning,) = [w for w in two_pole if "smoothing length" in w]
     length = np.sqrt(min(two_pole_symbol(0.49).screenings)) * scene.cartilage.thickness_mm
     size = np.sqrt(2.0 * np.median(scene.spring_area_mm2))
