@@ -18,7 +18,7 @@ from edem.laws import LAWS, ContactLaw, ElementLaw, LinearElements
 from edem.layer_symbols import LAYER_SYMBOLS, LayerSymbol
 from edem.mechanics import ShearTerms, confined_modulus_mpa, generalised_directions
 from edem.raycast import RayCaster, Rays
-from edem.rowwise import add_rows, rows_times
+from geometries.rowwise import add_rows, rows_times
 
 if TYPE_CHECKING:
     from edem.thickness import Layers

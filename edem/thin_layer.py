@@ -67,6 +67,7 @@ import scipy.sparse as sp
 
 from edem.coarse_space import COARSE_MIN_SPRINGS, CoarseSpace, coarse_transfer
 from edem.layer_symbols import LayerSymbol, pade_symbol
+from geometries.triangle_kernels import triangle_areas
 from edem.sparse_factors import LOW_RANK_MAX, LOW_RANK_MAX_INDEFINITE, LowRankUpdate, OperatorPattern, indefinite_solve
 
 
@@ -110,7 +111,7 @@ class SurfaceMesh:
         (and the vertices (v, 3) in mm where there are such: a periodic mesh's corners differ
         across its seams)."""
         out = np.empty(triangles.shape)
-        area = 0.5 * np.linalg.norm(np.cross(corners_mm[:, 1] - corners_mm[:, 0], corners_mm[:, 2] - corners_mm[:, 0]), axis=1)
+        area = triangle_areas(corners_mm[:, 0], corners_mm[:, 1], corners_mm[:, 2])
         for i in range(3):  # the three corners of every triangle at once
             u = corners_mm[:, (i + 1) % 3] - corners_mm[:, i]
             v = corners_mm[:, (i + 2) % 3] - corners_mm[:, i]
