@@ -146,7 +146,7 @@ class CoarseSpace:
         vertex[row, position], value[row, position] = qp.indices, qp.data
         valid = (vertex[:, :, None] >= 0) & (vertex[:, None, :] >= 0)
         a, b = np.broadcast_to(vertex[:, :, None], valid.shape)[valid], np.broadcast_to(vertex[:, None, :], valid.shape)[valid]
-        pattern = OperatorPattern(structure.indices, structure.indptr, np.zeros((0, 9), np.int64), qp)
+        pattern = OperatorPattern(structure.indices, structure.indptr, np.zeros((0, 9), np.int64), qp, fine.whole_surface)
         start = np.zeros(m + 1, np.int64)
         np.cumsum(count * count, out=start[1:])  # valid is row-major: spring by spring
         return CoarseSpace(transfer, pattern, keys, np.searchsorted(keys, b * n_c + a), (value[:, :, None] * value[:, None, :])[valid], start)

@@ -7,11 +7,18 @@ surfaces (1.1k-14k vertices). The ordering depends on the sparsity only and is f
 cell set (``OperatorPattern``); past ``MAX_BANDED_HALF_WIDTH`` the sparse LU takes over. A
 refactorisation on the same pattern keeps the factor's columns before the first one whose
 entries changed and factors only the trailing block (``OperatorPattern._banded_cholesky``).
-Fill-reducing sparse factors did not beat it on the stances' matrices (0.6k-14k vertices,
-``benchmarks/bench_factorisations.py``, docs/method.md): QDLDL's LDL^T with its ordering kept
+Of the fill-reducing sparse factors measured on the stances' matrices (0.6k-14k vertices,
+``benchmarks/bench_factorisations.py``, docs/method.md), QDLDL's LDL^T with its ordering kept
 and only the numbers refactored took 1.2-3.6x the banded path's time, CHOLMOD through cholespy
-(no numeric-only refactorisation) 3.1-6.2x, SuperLU 2.7-4.1x. The two-pole's block matrix is
-indefinite; QDLDL factors it, each solve checked against its backward error (``indefinite_solve``).
+(no numeric-only refactorisation) 3.1-6.2x, SuperLU 2.7-4.1x; CHOLMOD through cvxopt (the
+optional extra ``cholmod``: a supernodal Cholesky, its symbolic analysis once per pattern, then
+the numbers only) beat it where the pattern is kept over a run and large, the gap laws' layer
+over the whole surface at 5k-14k vertices (0.5-0.8x), and lost on smaller layers and on the
+threshold law's, a new pattern at every time point (1.2-2.8x). So CHOLMOD factors the whole
+surface's pattern past ``CHOLMOD_MIN_BAND_WORK`` where cvxopt is installed
+(``SupernodalCholesky``), the banded path everything else; the two agree to round-off. The
+two-pole's block matrix is indefinite; QDLDL factors it, each solve checked against its backward
+error (``indefinite_solve``).
 
 A factor is kept over a run and corrected rather than refactored where only a few springs'
 weights changed (``LowRankUpdate``, the Woodbury identity).
@@ -32,11 +39,30 @@ from scipy.sparse.linalg import splu
 from geometries.errors import SolverError
 
 
+@functools.cache
+def cholmod_module():
+    """cvxopt's CHOLMOD (the optional extra "cholmod": SuiteSparse inside cvxopt's wheels), or
+    None where cvxopt is not installed (imported on first use: the independent springs never need it)."""
+    try:
+        from cvxopt import cholmod
+    except ImportError:
+        return None
+    return cholmod
+
+
 def concatenated_ranges(start: np.ndarray, count: np.ndarray) -> np.ndarray:
     """The positions start[i], ..., start[i] + count[i] - 1 of every i, concatenated (a CSR
     matrix's entries of chosen rows, given their indptr starts and lengths)."""
     return np.repeat(start - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
 
+
+# CHOLMOD (cvxopt) factors the whole surface's pattern where the banded factor's work, n w^2 for
+# n vertices of half-bandwidth w, is at least this. On the stances' gap-law layers (the whole
+# surface) it took 1.5-1.8x the banded path's time at n w^2 = 3e6 (1.5k vertices) and 0.5-0.8x
+# from 4e7 on (5k-14k vertices, and the 30k-spring layer's coarse space); on the threshold law,
+# whose pattern is new at every time point, the symbolic analysis each time made it 1.2-2.8x
+# slower (benchmarks/bench_factorisations.py, docs/method.md).
+CHOLMOD_MIN_BAND_WORK = 1e7
 
 # Past this half-bandwidth (after reverse Cuthill-McKee) the sparse LU is the cheaper factor: on
 # the ankle surfaces LAPACK's banded Cholesky took 0.35-0.65x SuperLU's time at half-bandwidths
@@ -60,6 +86,9 @@ class OperatorPattern:
     indptr: np.ndarray
     slots: np.ndarray  # (m, 9) int
     q: sp.csr_matrix  # (m, v)
+    #: the pattern of the whole surface (or of its coarse space): the cell set a run keeps at
+    #: every time point (the gap laws' layer), where one symbolic analysis serves the whole run
+    whole_surface: bool = False
     #: the stored lower entries and band factor of the last banded factorisation on this pattern
     last_factor: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
 
@@ -103,13 +132,16 @@ class OperatorPattern:
     def factorise(self, data: np.ndarray):
         """Factor of the SPD matrix with this pattern and ``data`` (nnz,); returns solve(rhs (v,) or (v, k)).
 
-        Banded Cholesky in reverse Cuthill-McKee order up to MAX_BANDED_HALF_WIDTH (of the
-        trailing part only where the last factor on this pattern can be kept, ``_banded_cholesky``),
-        SuperLU's symmetric-mode LU (diagonal pivots, minimum-degree ordering) beyond.
+        CHOLMOD where it wins (``uses_cholmod``); otherwise the banded Cholesky in reverse
+        Cuthill-McKee order up to MAX_BANDED_HALF_WIDTH (of the trailing part only where the last
+        factor on this pattern can be kept, ``_banded_cholesky``), SuperLU's symmetric-mode LU
+        (diagonal pivots, minimum-degree ordering) beyond.
         """
         n = self.n_vertices
         if n == 0:  # every vertex on a free edge: the smoothed field vanishes, the layer is local
             return np.zeros_like
+        if self.uses_cholmod:
+            return self.supernodal.factorise(data)
         order, lower, flat, width = self.band
         try:
             if width > MAX_BANDED_HALF_WIDTH:
@@ -126,6 +158,20 @@ class OperatorPattern:
             return out
 
         return solve
+
+    @property
+    def uses_cholmod(self) -> bool:
+        """Whether the factorisations on this pattern go to CHOLMOD (``SupernodalCholesky``):
+        where it is installed, on the whole surface's pattern (its symbolic analysis once serves
+        the run), where the banded factor's work n w^2 is at least CHOLMOD_MIN_BAND_WORK."""
+        if not self.whole_surface or cholmod_module() is None:
+            return False
+        width = self.band[3]
+        return self.n_vertices * width * width >= CHOLMOD_MIN_BAND_WORK
+
+    @functools.cached_property
+    def supernodal(self) -> "SupernodalCholesky":
+        return SupernodalCholesky(self.indices, self.indptr)
 
     def _banded_cholesky(self, entries: np.ndarray) -> np.ndarray:
         """LAPACK's lower band factor (width + 1, v), column-major, of the matrix whose lower band
@@ -167,6 +213,49 @@ class OperatorPattern:
         if not np.shares_memory(trailing, band):  # LAPACK worked on a copy
             band[:, start:] = trailing
         return band
+
+
+class SupernodalCholesky:
+    """CHOLMOD's Cholesky factor (cvxopt) of the matrices on one sparsity pattern: the symbolic
+    analysis (fill-reducing ordering, elimination tree, supernodes) once, then a numeric
+    factorisation per matrix into the same factor object."""
+
+    def __init__(self, indices: np.ndarray, indptr: np.ndarray) -> None:
+        from cvxopt import matrix, spmatrix
+
+        self.cholmod, self.dense = cholmod_module(), matrix
+        n = indptr.shape[0] - 1
+        column = np.repeat(np.arange(n), np.diff(indptr))
+        self.lower = np.flatnonzero(indices >= column)  # CHOLMOD reads the lower triangle, in CSC order
+        self.matrix = spmatrix(1.0, indices[self.lower], column[self.lower], (n, n))
+        self.factor = self.cholmod.symbolic(self.matrix)
+        self.numbers = None  # the lower entries the factor holds now
+
+    def factorise(self, data: np.ndarray):
+        """solve(rhs (v,) or (v, k)) with the matrix of this pattern and ``data`` (nnz,), SPD.
+
+        The factor object is shared by every factorisation on the pattern, so a solve whose
+        numbers it no longer holds (another factorisation came since) factors them again first."""
+        entries = data[self.lower]
+        self._numeric(entries)
+
+        def solve(rhs: np.ndarray) -> np.ndarray:
+            if self.numbers is not entries:
+                self._numeric(entries)
+            x = self.dense(rhs)
+            self.cholmod.solve(self.factor, x)
+            return np.array(x).reshape(rhs.shape)
+
+        return solve
+
+    def _numeric(self, entries: np.ndarray) -> None:
+        self.matrix.V = self.dense(entries)
+        try:
+            self.cholmod.numeric(self.matrix, self.factor)
+        except ArithmeticError as error:
+            self.numbers = None
+            raise SolverError(f"the coupled thin-layer matrix is not positive definite (CHOLMOD: {error})") from None
+        self.numbers = entries
 
 
 @functools.lru_cache(maxsize=8)

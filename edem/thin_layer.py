@@ -269,7 +269,7 @@ class SurfaceMesh:
         np.cumsum(np.bincount(renumber[col[entry]], minlength=n_v), out=indptr[1:])
         slots = np.where(entry[pairs], position[pairs], -1)
         q = _corner_means(np.where(kept[tri], renumber[tri], -1), n_v)
-        pattern = OperatorPattern(renumber[row[entry]], indptr, slots, q)
+        pattern = OperatorPattern(renumber[row[entry]], indptr, slots, q, tri.shape[0] == self.triangles.shape[0])
         self.memo[(edge_at_cells, dirichlet)] = pattern
         return pattern
 

@@ -276,19 +276,26 @@ def test_incompressible_flat_punch_has_the_thin_layer_parabolic_pressure():
     assert np.all(pressure > 0)
 
 
-@pytest.mark.parametrize("banded", [True, False])
-def test_coupled_factor_solves_to_round_off_on_both_paths(banded, monkeypatch):
-    """(sigma H + Z diag(x) Z^T) x = b through the banded Cholesky and through the sparse LU.
+@pytest.mark.parametrize("path", ["banded", "sparse LU", "cholmod"])
+def test_coupled_factor_solves_to_round_off_on_every_path(path, monkeypatch):
+    """(sigma H + Z diag(x) Z^T) x = b through the banded Cholesky, the sparse LU and CHOLMOD (the
+    optional extra; its bar lowered so that it takes this small whole-surface pattern).
 
     Residual against the assembled matrix within 1e-11 of |A| |x|: round-off (2e-16) times the
     matrix's condition, which for these operators stays below about 1e3 (mass plus a Laplacian
-    at kh ~ 1 on the mesh scale), times a safety factor of 50. Also checks the band layout reused
-    by a second factorisation with other weights on the same pattern.
+    at kh ~ 1 on the mesh scale), times a safety factor of 50. Also checks the band layout (or
+    CHOLMOD's symbolic analysis) reused by a second factorisation with other weights on the same
+    pattern.
     """
     import edem.sparse_factors as sparse_factors
 
-    if not banded:
+    if path == "sparse LU":
         monkeypatch.setattr(sparse_factors, "MAX_BANDED_HALF_WIDTH", -1)
+    if path == "cholmod":
+        pytest.importorskip("cvxopt")
+        monkeypatch.setattr(sparse_factors, "CHOLMOD_MIN_BAND_WORK", 0.0)
+    else:
+        monkeypatch.setattr(sparse_factors, "cholmod_module", lambda: None)
     plate = grid_plate(10.0, 10.0, 12)
     mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
     cells = np.arange(plate.n_triangles)
@@ -303,7 +310,45 @@ def test_coupled_factor_solves_to_round_off_on_both_paths(banded, monkeypatch):
         x = layer.factorise_coupled(weight)(rhs)
         scale = abs(matrix).max() * np.abs(x).max()
         assert np.abs(matrix @ x - rhs).max() <= 1e-11 * scale
-    assert (term.pattern.band[3] <= sparse_factors.MAX_BANDED_HALF_WIDTH) == banded
+    assert term.pattern.uses_cholmod == (path == "cholmod")
+    assert (term.pattern.band[3] <= sparse_factors.MAX_BANDED_HALF_WIDTH) == (path != "sparse LU")
+
+
+def test_cholmod_takes_the_whole_surface_past_its_bar_and_matches_the_banded_factor(monkeypatch):
+    """CHOLMOD (the optional extra) factors the whole surface's pattern where the banded work
+    n w^2 reaches CHOLMOD_MIN_BAND_WORK and never a part of the surface (a cell set the run does
+    not keep); its solves equal the banded factor's to round-off (both backward stable: within
+    2 cond(A) eps, cond below 1e3 here (see above), times 50), a solve whose numbers the shared
+    factor no longer holds (another factorisation came since) still solves its own matrix, and a
+    matrix that is not positive definite is a SolverError."""
+    pytest.importorskip("cvxopt")
+    import edem.sparse_factors as sparse_factors
+    from geometries.errors import SolverError
+
+    plate = grid_plate(10.0, 10.0, 12)
+    mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
+    cells = np.arange(plate.n_triangles)
+    whole = mesh.operator_pattern(cells)
+    n, width = whole.n_vertices, whole.band[3]
+    monkeypatch.setattr(sparse_factors, "CHOLMOD_MIN_BAND_WORK", float(n * width * width))
+    assert whole.uses_cholmod and not mesh.operator_pattern(cells[: cells.size // 2]).uses_cholmod
+    monkeypatch.setattr(sparse_factors, "CHOLMOD_MIN_BAND_WORK", float(n * width * width) + 1.0)
+    assert not mesh.operator_pattern(cells).uses_cholmod
+    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49)
+    (term,) = layer.terms
+    rng = np.random.default_rng(8)
+    data = [term.coupled_data(np.where(rng.uniform(size=cells.size) < 0.5, 1.0 / layer.local_mm_per_n, 0.0)) for _ in range(2)]
+    rhs = rng.standard_normal((n, 3))
+    supernodal = sparse_factors.SupernodalCholesky(term.pattern.indices, term.pattern.indptr)
+    first = supernodal.factorise(data[0])
+    second = supernodal.factorise(data[1])  # the factor object now holds the second matrix
+    for values, solve in ((data[0], first), (data[1], second), (data[0], first)):
+        banded = sparse_factors.OperatorPattern(term.pattern.indices, term.pattern.indptr, term.pattern.slots, term.pattern.q)
+        expected = banded.factorise(values)(rhs)
+        assert np.abs(solve(rhs) - expected).max() <= 50 * 2e3 * np.finfo(float).eps * np.abs(expected).max()
+        assert np.abs(solve(rhs[:, 0]) - expected[:, 0]).max() <= 50 * 2e3 * np.finfo(float).eps * np.abs(expected).max()
+    with pytest.raises(SolverError, match="not positive definite"):
+        supernodal.factorise(-data[0])
 
 
 def test_two_term_factor_solves_the_indefinite_block_to_round_off():
