@@ -50,8 +50,7 @@ def _cube_seeds(points_mm: np.ndarray, size_mm: float) -> np.ndarray:
 
 def coarse_transfer(vertices_mm: np.ndarray, triangles: np.ndarray, kept: np.ndarray, fixed: np.ndarray, size_mm: float) -> sp.csr_matrix:
     """P (kept.size, V_c): the values at the fine vertices ``kept`` of the P1 functions of a coarse
-    triangulation, about ``size_mm`` across, of the surface ``triangles`` (m, 3) (module docstring,
-    "Coarse smoothing space").
+    triangulation, about ``size_mm`` across, of the surface ``triangles`` (m, 3) (module docstring).
 
     Coarse vertices: one fine vertex per cube of side ``size_mm`` among ``kept``, and among
     ``fixed`` (the vertices where the field vanishes), whose functions are then dropped. Each fine

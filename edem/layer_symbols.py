@@ -84,7 +84,7 @@ def pade_coefficients(poissons_ratio: float) -> tuple[float, float, float]:
 class LayerSymbol:
     """A rational model of the layer's compliance, C G / h ~ local + sum_i s_i / (1 + b_i (kh)^2).
 
-    Each term s_i / (1 + b_i x) is one screened-Poisson smoothing on the surface (module docstring:
+    Each term s_i / (1 + b_i x) is one screened-Poisson smoothing on the surface (:mod:`edem.thin_layer`:
     w = c_loc p + sum_i s_i (h/G) S_i p). ``dirichlet[i]``: whether term i's smoothed field vanishes
     at a free edge (else the edge is natural for it).
     """

@@ -51,7 +51,7 @@ the squeeze-film paraboloid (3 G d / 2 h^3)(a^2 - x^2) plus a uniform offset d /
 pressure w / c_loc), so the edge is stiffer than the thin-layer condition p = 0; the solid lies
 between the two (its free face still carries some pressure: docs/method.md, section 3). A no-flux
 edge would confine the incompressible layer and make it rigid. Of the two-pole symbol's terms
-(``two_pole_symbol``) the bulge term vanishes there, the sag term is natural. Where the contact
+(``edem.layer_symbols.two_pole_symbol``) the bulge term vanishes there, the sag term is natural. Where the contact
 solve cuts the surface to a band around the candidates (``edem.thin_layer_contact``), the layer goes on, and the cut is natural.
 Where the layer itself ends inside the surface (the threshold law's cartilage fills the gap only
 where the springs are candidates), its edge is free like the surface's (``edge_at_cells``).
