@@ -19,6 +19,8 @@ import math
 
 import numpy as np
 
+from geometries.triangle_kernels import triangle_areas
+
 #: area (mm^2) of the disc the regularised peak averages the pressure over
 PEAK_DISC_AREA_MM2 = 1.0
 #: quadrature points per disc radius along a triangle edge: the disc's area is then integrated to
@@ -47,7 +49,7 @@ def _subdivided(points_mm: np.ndarray, triangles: np.ndarray, n: int) -> tuple[n
     corners = points_mm[triangles]  # (m, 3, 3)
     positions = np.einsum("qk,mkx->mqx", weights, corners)
     a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1) / (n * n)
+    area = triangle_areas(a, b, c) / (n * n)
     return positions, weights, np.repeat(area[:, None], len(uv), axis=1)
 
 

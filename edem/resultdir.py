@@ -89,6 +89,7 @@ import numpy as np
 from edem.atomic_dirs import ResultWriteError, atomic_result_dir, verify_manifest
 from edem.pressure_metrics import REGULARISED_PEAK_DEFINITION, has_pressure, surface_regularised_peak_mpa
 from geometries.errors import InputError, SolverError
+from geometries.triangle_kernels import triangle_areas
 
 SUMMARY_FILE = "summary.json"
 TIMESERIES_FILE = "timeseries.csv"
@@ -137,8 +138,7 @@ class SurfaceFrame:
 
     @property
     def areas_mm2(self) -> np.ndarray:
-        a, b, c = (self.points_mm[self.triangles[:, i]] for i in range(3))
-        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        return triangle_areas(*(self.points_mm[self.triangles[:, i]] for i in range(3)))
 
 
 @dataclass(frozen=True)

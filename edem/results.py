@@ -16,6 +16,7 @@ from edem.loads import JointKinematics
 from edem.opensim_model import BodyPoses
 from edem.resultdir import TIMESERIES_COLUMNS, Frame, Provenance, SurfaceFrame, timeseries_row, write_pvd, write_run
 from edem.scene import Scene
+from edem.beds import bed_summary
 from edem.preflight import Preflight
 from edem.springs import Placement
 from edem.thickness import thickness_summary
@@ -107,9 +108,7 @@ class RunResult:
             "max_moment_residual_nmm": max(s.moment_residual_nmm for s in steps),
             "law": self.scene.cartilage.law,
             # the bed (the built-in scenes' defaults differ: the standing and toe-off ones couple, the stances do not)
-            "coupling": self.scene.cartilage.coupling,
-            "thin_layer_symbol": self.scene.cartilage.thin_layer_symbol if self.scene.cartilage.coupling != "none" else None,
-            "thin_layer_smoothing_resolution": self.scene.cartilage.thin_layer_smoothing_resolution if self.scene.cartilage.coupling != "none" else None,
+            **bed_summary(self.scene.cartilage),
             "warnings": list(self.scene.warnings) + list(self.warnings),
             **thickness_summary(self.scene.cartilage.layers),  # measured thickness only
             **({} if self.preflight is None else {"preflight": self.preflight.as_dict()}),

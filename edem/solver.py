@@ -17,7 +17,7 @@ from edem.plausibility import emit, merge_repeated
 from edem.preflight import patch_resolution_warning, preflight
 from edem.raycast import RayCaster
 from edem.results import RunResult, StepResult
-from edem.rowwise import add_rows, row_dot
+from geometries.rowwise import add_rows, row_dot
 from edem.scene import Scene
 from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, ligament_table, shear_terms, spring_geometry
 from edem.viscoelastic import check_rk2_stability, integrator_weights

@@ -64,7 +64,7 @@ import numpy as np
 from geometries.errors import SolverError
 from edem.laws import LinearElements
 from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, singular_stiffness_error, unrestrained_dofs
-from edem.thin_layer import LAYER_SYMBOLS, LayerCompliance, SurfaceMesh, layer_compliance
+from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance
 
 
 @dataclass
@@ -422,7 +422,7 @@ class CoupledStep:
         cand = np.flatnonzero(geometry.candidate)
         law = cartilage.spring_law
         candidate_thickness = law.shear_length_mm(geometry.spring_length_mm[cand], geometry.candidate_thickness_mm(cartilage))  # the h of k_s = G / h
-        screenings = LAYER_SYMBOLS[cartilage.thin_layer_symbol](cartilage.poissons_ratio).screenings
+        screenings = cartilage.layer_symbol.screenings
         b = max(screenings, default=0.0)
         ends = law.thin_layer_extent == "candidates"
         if ends or b == 0.0:  # the layer is the candidates
@@ -443,8 +443,8 @@ class CoupledStep:
         # stance, 29k springs: 14.5x the springs against 6.3x fine, benchmarks/bench_coarse_smoothing.py),
         # so such a layer stays on the springs' vertices.
         whole = domain.shape[0] == mesh.triangles.shape[0]
-        resolution = cartilage.thin_layer_smoothing_resolution if whole else 0.0
-        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends, cartilage.thin_layer_symbol,
+        resolution = cartilage.bed_keys.thin_layer_smoothing_resolution if whole else 0.0
+        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends, cartilage.layer_symbol,
                                  resolution)
         overlap = np.full(domain.shape, -np.inf)
         pushback = None

@@ -244,7 +244,7 @@ def test_summary_and_report_line_name_the_bed_the_run_used(tmp_path, capsys):
         runs[name] = (json.loads((out / "summary.json").read_text()), capsys.readouterr().out)
     (coupled, coupled_line), (springs, springs_line) = runs["default"], runs["springs"]
     assert (coupled["coupling"], coupled["thin_layer_symbol"], coupled["thin_layer_smoothing_resolution"]) == ("thin-layer", "pade", 0.0)
-    assert "coupled thin layer (pade)" in coupled_line
+    assert "coupled layer (pade)" in coupled_line
     assert (springs["coupling"], springs["thin_layer_symbol"], springs["thin_layer_smoothing_resolution"]) == ("none", None, None)
     assert "independent springs" in springs_line
     assert coupled["final_displacement_mm"][2] > springs["final_displacement_mm"][2]

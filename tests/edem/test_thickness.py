@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from geometries.errors import InputError
+from edem.beds import CoupledThinLayer, on_bed
 from edem.mechanics import confined_modulus_mpa
 from edem.scene import load_scene
 from edem.solver import solve
@@ -107,12 +108,12 @@ def test_measured_uniform_layers_are_the_uniform_coupled_layer(law):
     # The coupled thin layer's operator takes the local thickness: a measured T = t_M + t_F
     # everywhere must give the bed of thickness_mm = T (same surfaces, same numbers).
     measured = _plates("mobile", 0.0, law)
-    coupled = replace(measured, cartilage=replace(measured.cartilage, coupling="thin-layer"))
+    coupled = replace(measured, cartilage=on_bed(measured.cartilage, CoupledThinLayer.coupling))
     mobile = grid_plate(20.0, 20.0, 10, z_mm=-T_M)
     fixed = grid_plate(20.0, 20.0, 10, z_mm=T_F, facing_up=False)
     uniform = make_scene(mobile, fixed, [0.0, 0.0, FORCE_N], law=law, max_spring_length_mm=4.0, fixed_dofs=PLATE_FIXED,
                          thickness_mm=T_M + T_F)
-    uniform = replace(uniform, cartilage=replace(uniform.cartilage, coupling="thin-layer"))
+    uniform = replace(uniform, cartilage=on_bed(uniform.cartilage, CoupledThinLayer.coupling))
     a, b = solve(coupled, method="dem").steps[0], solve(uniform, method="dem").steps[0]
     # same equations on the same surfaces: round-off only
     assert a.displacement_mm[2] == pytest.approx(b.displacement_mm[2], rel=1e-9)
