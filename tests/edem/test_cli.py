@@ -205,6 +205,20 @@ def test_load_pulling_apart_ends_with_a_clear_status(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+def test_sto_moment_that_overflows_in_n_mm_exits_2_naming_file_column_and_line(tmp_path, capsys):
+    """An OpenSim JointReaction .sto whose moment, -1e308 N m, is finite in the file but not in
+    N mm: exit 2 naming the file, the column and the line (it ended in a traceback)."""
+    names = ["time"] + [f"ankle_r_on_talus_r_in_ground_{c}" for c in ("fx", "fy", "fz", "mx", "my", "mz")]
+    rows = [[0.0, 0.0, 0.0, -400.0, 0.0, 0.0, 0.0], [0.1, 0.0, 0.0, -400.0, -1e308, 0.0, 0.0]]
+    (tmp_path / "jr.sto").write_text("\n".join(["JointReaction_ReactionLoads", "version=1", "nRows=2", "nColumns=7", "inDegrees=no",
+                                                "endheader", "\t".join(names)] + ["\t".join(repr(v) for v in row) for row in rows]) + "\n")
+    scene = write_plates_scene(tmp_path, load='file = "jr.sto"\naxes = "same"\nmobile_body = "talus_r"')
+    assert main(["run", str(scene), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert str(tmp_path / "jr.sto") in err and "ankle_r_on_talus_r_in_ground_mx" in err and "line 9" in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
 def test_unknown_builtin_scene(capsys):
     assert main(["run", "no-such-scene"]) == 2
     assert "ideal-standing" in capsys.readouterr().err
