@@ -80,10 +80,11 @@ class RunResult:
     scene: Scene
     method: str
     steps: list[StepResult]
-    wall_time_s: float
+    wall_time_s: float  # the solve of the time points (their geometry, solves and results)
     warnings: list[str]
     seconds: dict[str, float]  # wall time of the geometry stage (ray casting) and of the solves
     preflight: Preflight | None = None  # what the springs saw before the first solve (edem.preflight)
+    setup_time_s: float = 0.0  # before the first time point: the ray caster, the bed, the pre-flight, lazy imports
 
     @property
     def n_springs(self) -> int:
@@ -99,6 +100,7 @@ class RunResult:
             "steps": len(steps),
             "n_springs": self.n_springs,
             "wall_time_s": self.wall_time_s,
+            "setup_time_s": self.setup_time_s,
             "peak_pressure_mpa": max(s.peak_pressure_mpa for s in steps),
             "max_contact_area_mm2": max(s.contact_area_mm2 for s in steps),
             "final_displacement_mm": [float(x) for x in last.displacement_mm],
