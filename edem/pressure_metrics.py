@@ -20,11 +20,17 @@ from typing import Any
 
 import numpy as np
 
+from geometries.errors import InputError
+
 #: area (mm^2) of the disc the regularised peak averages the pressure over
 PEAK_DISC_AREA_MM2 = 1.0
 #: quadrature points per disc radius along a triangle edge: the disc's area is then integrated to
 #: a few per cent (~60 points per disc), far below the 10 % bands the metric is judged against
 _POINTS_PER_RADIUS = 3.0
+#: quadrature points the disc averaging of one surface may hold (measured 113-121 bytes each on
+#: coarse meshes, ~260 a triangle on fine ones with their centres: 2.4 GB); a mesh that needs
+#: more is refused before its run (check_quadrature_size)
+MAX_QUADRATURE_POINTS = 20_000_000
 #: (centre, quadrature point) pairs evaluated at once: ~60 bytes each while a chunk is formed
 _CHUNK_PAIRS = 2_000_000
 #: the first chunk's pairs (each next one twice as many)
@@ -105,10 +111,7 @@ class DiscMeans:
         self.at_points, self.radius_mm = at_points, math.sqrt(disc_area_mm2 / math.pi)
         self.chunk_pairs, self.cache_pairs = max(int(chunk_pairs), 1), int(cache_pairs)
         self._triangles, self._n_points = tris, len(points)
-        corners = points[tris]
-        edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
-        centroids = corners.mean(axis=1)
-        del corners
+        edge, centroids = _longest_edges(points, tris)
         # centre indices: the centroid of triangle t is centre t, point v is centre m + v
         if only_for is None:
             self._centres = None  # all of them
@@ -124,9 +127,12 @@ class DiscMeans:
             quadrature_on = np.flatnonzero(reach <= self.radius_mm + edge)
         # each triangle split into n^2 sub-triangles, n by its longest edge; the quadrature points
         # grouped by n, each group's triangles in their order: the order every sum runs in
-        subdivisions = np.maximum(1, np.ceil(edge[quadrature_on] * _POINTS_PER_RADIUS / self.radius_mm)).astype(np.int64)
+        subdivisions = _subdivisions(edge[quadrature_on], self.radius_mm)
+        if int((subdivisions**2).sum()) > MAX_QUADRATURE_POINTS:
+            raise InputError(f"the regularised peak of this surface needs {int((subdivisions**2).sum()):,} quadrature points, more than the "
+                             f"{MAX_QUADRATURE_POINTS:,} it holds in memory", expected=_QUADRATURE_EXPECTED)
         self._groups, positions, areas = [], [], []
-        for n in np.unique(subdivisions):
+        for n in np.flatnonzero(np.bincount(subdivisions)):
             group = quadrature_on[subdivisions == n]
             q_pos, weights, q_area = _subdivided(points, tris[group], int(n))
             self._groups.append((group, weights))
@@ -223,8 +229,11 @@ class DiscMeans:
             index = np.floor((everything - origin) / side).astype(np.int64) + 1  # (an empty layer of cells on every side)
             del everything
             dims = index.max(axis=0) + 2
-            cells, cell_of = np.unique(np.ravel_multi_index(index.T, dims), return_inverse=True)
+            keys = np.ravel_multi_index(index.T, dims)
             del index
+            cells = _sorted_unique(keys)
+            cell_of = np.searchsorted(cells, keys)
+            del keys
             n_q, n_cells = len(self._q_area), len(cells)
             q_cell, centre_cell = cell_of[:n_q], cell_of[n_q:]
             shifts = np.array([[i, j, k] for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)]) @ np.array([dims[1] * dims[2], dims[2], 1])
@@ -236,7 +245,7 @@ class DiscMeans:
             # a triangle's quadrature points are the cells' only values, and none exceeds the
             # triangle's largest value: the bound needs each (cell, triangle) pair once
             q_triangle = np.concatenate([np.repeat(group, weights.shape[0]) for group, weights in self._groups]) if self._groups else np.zeros(0, np.int64)
-            pair = np.unique(q_cell * len(self._triangles) + q_triangle)
+            pair = _sorted_unique(q_cell * len(self._triangles) + q_triangle)
             pair_cell = pair // len(self._triangles)
             self._cells = (pair - pair_cell * len(self._triangles), np.searchsorted(pair_cell, np.arange(n_cells)), neighbour, centre_cell,
                            count[neighbour].sum(axis=0))
@@ -252,7 +261,7 @@ class DiscMeans:
         occupied = np.flatnonzero(np.diff(np.append(starts, len(pair_triangle))) > 0)
         if occupied.size:
             largest[occupied] = np.maximum.reduceat(triangle_largest[pair_triangle], starts[occupied])
-        return largest[neighbour[:, centre_cell[candidates]]].max(axis=0)
+        return largest[neighbour].max(axis=0)[centre_cell[candidates]]  # (27 x cells: fewer than the candidates of a fine mesh)
 
     def _chunks(self, candidates: np.ndarray) -> list[tuple[int, int]]:
         """Consecutive slices of ``candidates`` of at most ``chunk_pairs`` pairs each (counted by
@@ -318,6 +327,50 @@ class DiscMeans:
             self.rows_evaluated += stop - start
             self._keep(chunk, rows, area)
         return best
+
+
+_QUADRATURE_EXPECTED = ("a surface of fewer or shorter triangles: each is split into n^2 sub-triangles, n its longest edge over "
+                        "a third of the disc radius (0.19 mm), so long thin ones need many; remesh them")
+
+
+def _longest_edges(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The longest edge (m,) and the centroid (m, 3) of each triangle, mm."""
+    a, b, c = points[triangles[:, 0]], points[triangles[:, 1]], points[triangles[:, 2]]
+    return np.sqrt(np.maximum(np.maximum(_squared(b - a), _squared(c - b)), _squared(a - c))), (a + b + c) / 3.0
+
+
+def _subdivisions(edge_mm: np.ndarray, radius_mm: float) -> np.ndarray:
+    """n of each triangle's n^2 sub-triangles: its longest edge over a third of the radius."""
+    return np.maximum(1, np.ceil(edge_mm * _POINTS_PER_RADIUS / radius_mm)).astype(np.int64)
+
+
+def quadrature_size(points_mm: np.ndarray, triangles: np.ndarray, disc_area_mm2: float = PEAK_DISC_AREA_MM2) -> int:
+    """The quadrature points the disc averaging of a whole surface holds (:class:`DiscMeans`)."""
+    points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
+    edge, _ = _longest_edges(points, np.asarray(triangles, dtype=np.int64).reshape(-1, 3))
+    return int((_subdivisions(edge, math.sqrt(disc_area_mm2 / math.pi)) ** 2).sum())
+
+
+def check_quadrature_size(points_mm: np.ndarray, triangles: np.ndarray, *, file: str | None, key: str) -> None:
+    """InputError (before a run) when the regularised peak of its maps on this surface would need
+    more than :data:`MAX_QUADRATURE_POINTS` quadrature points."""
+    n = quadrature_size(points_mm, triangles)
+    if n > MAX_QUADRATURE_POINTS:
+        raise InputError(f"the regularised peak pressure of its results (docs/method.md#7-comparison-metrics) needs {n:,} quadrature "
+                         f"points on this mesh of {len(triangles):,} triangles, more than the {MAX_QUADRATURE_POINTS:,} it holds in memory",
+                         file=file, key=key, expected=_QUADRATURE_EXPECTED)
+
+
+def _squared(v: np.ndarray) -> np.ndarray:
+    """|v|^2 of rows (k, 3), summed in the order np.linalg.norm sums them."""
+    return v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2]
+
+
+def _sorted_unique(values: np.ndarray) -> np.ndarray:
+    """np.unique of integers by a sort (several times faster than its hashing for millions of
+    distinct values)."""
+    ordered = np.sort(values)
+    return ordered[np.concatenate([[True], ordered[1:] != ordered[:-1]])] if len(ordered) else ordered
 
 
 def _kdtree(points: np.ndarray):

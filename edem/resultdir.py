@@ -259,11 +259,12 @@ class RunOutput(Protocol):
         """timeseries.csv, one row per time point: :func:`timeseries_row`'s columns, then extra ones."""
         ...
 
-    def frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
-        """The pressure maps of the time points at ``positions`` in the run (default: all)."""
+    def frames(self, positions: Sequence[int] | None = None) -> Sequence[Frame]:
+        """The pressure maps of the time points at ``positions`` in the run (default: all); the
+        writer reads each once, in order (a sequence may make each map when it is read)."""
         ...
 
-    def fixed_frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
+    def fixed_frames(self, positions: Sequence[int] | None = None) -> Sequence[Frame]:
         """The fixed body placed at those time points (fixed.pvd; empty: not written)."""
         ...
 

@@ -219,6 +219,20 @@ def test_sto_moment_that_overflows_in_n_mm_exits_2_naming_file_column_and_line(t
     assert not (tmp_path / "o").exists()
 
 
+def test_mesh_whose_regularised_peak_would_not_fit_in_memory_exits_2_before_the_solve(tmp_path, capsys):
+    """Eight triangles 1 m across (a joint-sized mesh, 1.98 m diagonal) need 2.2e8 quadrature points for the regularised peak of the
+    result (n^2 sub-triangles, n = edge / (radius / 3)): refused before the solve, naming the
+    mesh and the size it can hold, not after it in a MemoryError."""
+    from edem.pressure_metrics import MAX_QUADRATURE_POINTS
+
+    scene = write_plates_scene(tmp_path)
+    write_surface(tmp_path / "talus.stl", grid_plate(1400, 1400, 2))
+    assert main(["run", str(scene), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "talus.stl" in err and "geometry.mobile" in err and f"{MAX_QUADRATURE_POINTS:,}" in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
 def test_unknown_builtin_scene(capsys):
     assert main(["run", "no-such-scene"]) == 2
     assert "ideal-standing" in capsys.readouterr().err

@@ -9,8 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from edem.pressure_metrics import (PEAK_DISC_AREA_MM2, DiscMeans, RegularisedPeaks, disc_mean_pressure_mpa,
-                                   regularised_peak_pressure_mpa)
+from edem.pressure_metrics import (MAX_QUADRATURE_POINTS, PEAK_DISC_AREA_MM2, DiscMeans, RegularisedPeaks, check_quadrature_size,
+                                   disc_mean_pressure_mpa, quadrature_size, regularised_peak_pressure_mpa)
+from geometries.errors import InputError
 from edem.resultdir import SurfaceFrame
 
 RADIUS_MM = math.sqrt(PEAK_DISC_AREA_MM2 / math.pi)
@@ -165,3 +166,19 @@ def test_maps_of_a_rigidly_moving_surface_share_one_averaging():
     value = peaks(SurfaceFrame(stretched, triangles, {}, {"pressure_mpa": fields[0]}))
     assert peaks._discs is not built[0]
     assert value == regularised_peak_pressure_mpa(stretched, triangles, fields[0], at_points=False)
+
+
+def test_a_surface_whose_quadrature_would_not_fit_is_refused_by_name():
+    """Two triangles 3 km across would need ~1e9 quadrature points (n^2 sub-triangles a third of
+    the disc radius across): InputError, before any array of that size exists; the count is the
+    one the averaging would build (quadrature_size, exact on a small mesh)."""
+    points, triangles = square_mesh(8.0, 0.4)
+    assert quadrature_size(points, triangles) == DiscMeans(points, triangles, at_points=False).n_quadrature_points
+    huge = np.array([[0.0, 0.0, 0.0], [3000.0, 0.0, 0.0], [3000.0, 3000.0, 0.0], [0.0, 3000.0, 0.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    assert quadrature_size(huge, faces) > MAX_QUADRATURE_POINTS
+    with pytest.raises(InputError) as info:
+        check_quadrature_size(huge, faces, file="big.stl", key="geometry.mobile")
+    assert info.value.key == "geometry.mobile" and f"{MAX_QUADRATURE_POINTS:,}" in str(info.value)
+    with pytest.raises(InputError):
+        DiscMeans(huge, faces, at_points=False)
