@@ -77,9 +77,11 @@ def write_scene(root: Path, mesh_size_mm: float) -> tuple[Path, int]:
     return scene, built.mobile.n_triangles
 
 
-def timed(args: list[str], env: dict[str, str]) -> float:
+def timed(args: list[str], env: dict[str, str], cwd: Path) -> float:
+    """Wall time of a subprocess, run outside any source tree (``python -c`` puts its working
+    directory first on sys.path: PYTHONPATH alone picks the tree)."""
     start = time.perf_counter()
-    subprocess.run(args, env=env, check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(args, env=env, cwd=cwd, check=True, stdout=subprocess.DEVNULL)
     return time.perf_counter() - start
 
 
@@ -101,15 +103,15 @@ def main() -> None:
             def run(out: Path) -> list[str]:
                 return [sys.executable, "-c", _RUN_AND_RECORD, "run", str(scene), "--out", str(out)]
 
-            timed(run(case / "warm-up"), env)  # file caches, compiled bytecode
+            timed(run(case / "warm-up"), env, root)  # file caches, compiled bytecode
             whole, imports, solve, setup = [], [], [], []
             for k in range(args.rounds):
                 out = case / f"result-{k}"
-                whole.append(timed(run(out), env))
+                whole.append(timed(run(out), env, root))
                 summary = json.loads((out / "summary.json").read_text())
                 solve.append(summary["wall_time_s"])
                 setup.append(summary.get("setup_time_s"))
-                imports.append(timed([sys.executable, "-c", _IMPORT_ONLY], env))
+                imports.append(timed([sys.executable, "-c", _IMPORT_ONLY], env, root))
             w, i, s = statistics.median(whole), statistics.median(imports), statistics.median(solve)
             setup_text = "" if setup[0] is None else f", set-up {statistics.median(setup):.3f} s"
             print(f"{summary['n_springs']:6d} springs ({n_triangles} triangles) x {summary['steps']} points: whole {w:.2f} s, "

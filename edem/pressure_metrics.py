@@ -77,10 +77,10 @@ class DiscMeans:
       areas) computed for one pressure field are kept (up to ``cache_pairs`` pairs) and reused
       by the next: over a run a time point is one sparse product for the centres seen before;
     * a centre whose disc cannot beat the best mean found so far is never evaluated: a disc's
-      mean is at most the largest pressure in the disc, and that is at most the largest pressure
-      at the quadrature points of the 27 cubic cells (side >= the radius) around the centre's.
-      The rest are evaluated in chunks (at most ``chunk_pairs`` pairs each) from the largest
-      bound down, until the next bound is below the best.
+      mean is at most the largest pressure in the disc, and that is at most the largest value of
+      the triangles with quadrature points in the 27 cubic cells (side >= the radius) around the
+      centre's. The rest are evaluated in chunks (at most ``chunk_pairs`` pairs each) from the
+      largest bound down, until the next bound is below the best.
 
     Memory is then linear in the quadrature (the mesh), plus one chunk and the kept rows,
     whatever the size of the contact.
@@ -128,8 +128,9 @@ class DiscMeans:
         # each triangle split into n^2 sub-triangles, n by its longest edge; the quadrature points
         # grouped by n, each group's triangles in their order: the order every sum runs in
         subdivisions = _subdivisions(edge[quadrature_on], self.radius_mm)
-        if int((subdivisions**2).sum()) > MAX_QUADRATURE_POINTS:
-            raise InputError(f"the regularised peak of this surface needs {int((subdivisions**2).sum()):,} quadrature points, more than the "
+        needed = int((subdivisions**2).sum())
+        if needed > MAX_QUADRATURE_POINTS:
+            raise InputError(f"the regularised peak of this surface needs {needed:,} quadrature points, more than the "
                              f"{MAX_QUADRATURE_POINTS:,} it holds in memory", expected=_QUADRATURE_EXPECTED)
         self._groups, positions, areas = [], [], []
         for n in np.flatnonzero(np.bincount(subdivisions)):
@@ -218,10 +219,10 @@ class DiscMeans:
 
     def _cell_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The bounding cells (mesh only): cubes of side >= the radius, so that a disc lies within
-        the 27 cells around its centre's. Returns the (cell, triangle) pairs of the triangles with
-        quadrature points in each cell, cell by cell, and where each cell's start; the 27
-        neighbours of each cell (27, n_cells; n_cells for none); every candidate's cell; and how many quadrature points the
-        27 cells around each cell hold (an upper bound on the pairs of a disc centred there)."""
+        the 27 cells around its centre's. Returns the triangles with quadrature points in each
+        cell, cell by cell, and where each cell's start; the 27 neighbours of each cell (27,
+        n_cells; n_cells for none); every candidate's cell; and how many quadrature points the 27
+        cells around each cell hold (an upper bound on the pairs of a disc centred there)."""
         if self._cells is None:
             everything = np.concatenate([self._q_mm, self._centre_mm])
             origin = everything.min(axis=0)

@@ -7,7 +7,6 @@ family's quads and polygons, lives here too; VTK itself is the ``vtk`` extra."""
 from __future__ import annotations
 
 import base64
-import contextlib
 import html
 import importlib
 import os
@@ -17,7 +16,6 @@ import sys
 import threading
 import warnings
 import zlib
-from concurrent.futures import Executor, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -351,21 +349,16 @@ _VTK_XML_TYPES = {
 #: bytes per zlib block, as VTK's own writer cuts them
 _BLOCK_BYTES = 1 << 15
 #: zlib's fastest level: on a run's pressure maps (float64 points and pressures, int8 flags) it
-#: compresses 3x faster than the default level 6, to files a few per cent larger
+#: compresses 2.6x faster than the default level 6 (a 13k-triangle map: 4.0 against 10.2 ms of
+#: CPU), to arrays 5 % larger
 _ZLIB_LEVEL = 1
-#: at most this many threads compress the blocks of one file
-_COMPRESS_THREADS = 8
 
 
-def _compress_block(block: bytes) -> bytes:
-    return zlib.compress(block, _ZLIB_LEVEL)
-
-
-def _xml_data_array(values: np.ndarray, name: str | None = None, pool: Executor | None = None) -> str:
+def _xml_data_array(values: np.ndarray, name: str | None = None) -> str:
     """One ``<DataArray>`` in VTK XML's inline binary format, zlib-compressed as VTK writes it:
     the base64 of a UInt64 header (number of blocks, block size, size of the last block, the
     compressed size of each block), then the base64 of the compressed blocks of the
-    little-endian values, row by row; the blocks compressed by ``pool``'s threads if given."""
+    little-endian values, row by row."""
     values = np.asarray(values)
     if values.dtype == np.bool_:
         values = values.astype(np.uint8)
@@ -373,8 +366,7 @@ def _xml_data_array(values: np.ndarray, name: str | None = None, pool: Executor 
         raise ValueError(f"write_vtp: array {name!r} of {values.dtype} and shape {values.shape} "
                          "(expected (n,) or (n, k) numbers)")
     data = np.ascontiguousarray(values, dtype=values.dtype.newbyteorder("<")).tobytes()
-    pieces = [data[start:start + _BLOCK_BYTES] for start in range(0, len(data), _BLOCK_BYTES)]
-    blocks = list(map(_compress_block, pieces) if pool is None else pool.map(_compress_block, pieces))
+    blocks = [zlib.compress(data[start:start + _BLOCK_BYTES], _ZLIB_LEVEL) for start in range(0, len(data), _BLOCK_BYTES)]
     last = len(data) - (len(blocks) - 1) * _BLOCK_BYTES if blocks else 0
     header = np.array([len(blocks), _BLOCK_BYTES, last, *map(len, blocks)], dtype="<u8").tobytes()
     encoded = (base64.b64encode(header) + base64.b64encode(b"".join(blocks))).decode("ascii")
@@ -385,13 +377,13 @@ def _xml_data_array(values: np.ndarray, name: str | None = None, pool: Executor 
     return f'<DataArray {attributes} NumberOfComponents="{components}" format="binary">{encoded}</DataArray>'
 
 
-def vtp_polys(triangles: np.ndarray, pool: Executor | None = None) -> str:
+def vtp_polys(triangles: np.ndarray) -> str:
     """The ``<Polys>`` element of a .vtp of these triangles (int64 connectivity and offsets,
     compressed): what :func:`write_vtp` writes for them, to be given to it as ``polys`` by a
     writer of many files on one mesh (a run's time points), which then encodes it once."""
     connectivity = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     offsets = 3 * np.arange(1, len(connectivity) + 1, dtype=np.int64)
-    return "<Polys>" + _xml_data_array(connectivity.ravel(), "connectivity", pool) + _xml_data_array(offsets, "offsets", pool) + "</Polys>"
+    return "<Polys>" + _xml_data_array(connectivity.ravel(), "connectivity") + _xml_data_array(offsets, "offsets") + "</Polys>"
 
 
 def write_vtp(
@@ -425,29 +417,21 @@ def write_vtp(
     """
     points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
     n_triangles = np.asarray(triangles).reshape(-1, 3).shape[0]
-    size = points.nbytes + sum(np.asarray(v).nbytes for arrays in (cell_data, point_data) for v in (arrays or {}).values())
-    threads = min(os.cpu_count() or 1, _COMPRESS_THREADS)
-    # zlib releases the GIL: the blocks of a large file are compressed side by side
-    with ThreadPoolExecutor(threads) if threads > 1 and size > 8 * _BLOCK_BYTES else contextlib.nullcontext() as pool:
-        text = _vtp_text(points, n_triangles, triangles, cell_data, point_data, polys, pool)
-    with open(path, "w", encoding="ascii") as f:
-        f.write(text)
 
-
-def _vtp_text(points: np.ndarray, n_triangles: int, triangles: np.ndarray, cell_data: dict[str, np.ndarray] | None,
-              point_data: dict[str, np.ndarray] | None, polys: str | None, pool: Executor | None) -> str:
     def data_section(tag: str, arrays: dict[str, np.ndarray] | None) -> str:
-        return f"<{tag}>" + "".join(_xml_data_array(values, name, pool) for name, values in (arrays or {}).items()) + f"</{tag}>"
+        return f"<{tag}>" + "".join(_xml_data_array(values, name) for name, values in (arrays or {}).items()) + f"</{tag}>"
 
-    return ('<?xml version="1.0"?>\n'
+    text = ('<?xml version="1.0"?>\n'
             '<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" header_type="UInt64" '
             'compressor="vtkZLibDataCompressor">\n<PolyData>\n'
             f'<Piece NumberOfPoints="{len(points)}" NumberOfVerts="0" NumberOfLines="0" NumberOfStrips="0" '
             f'NumberOfPolys="{n_triangles}">\n'
             + data_section("PointData", point_data) + "\n" + data_section("CellData", cell_data) + "\n"
-            + "<Points>" + _xml_data_array(points, "Points", pool) + "</Points>\n"
-            + (vtp_polys(triangles, pool) if polys is None else polys)
+            + "<Points>" + _xml_data_array(points, "Points") + "</Points>\n"
+            + (vtp_polys(triangles) if polys is None else polys)
             + "\n</Piece>\n</PolyData>\n</VTKFile>\n")
+    with open(path, "w", encoding="ascii") as f:
+        f.write(text)
 
 
 def write(path: Path, surface: TriangleSurface, binary: bool | None) -> None:
