@@ -26,6 +26,7 @@ SUMMARY_KEYS = {
     "steps",
     "n_springs",
     "wall_time_s",
+    "setup_time_s",
     "peak_pressure_mpa",
     "max_contact_area_mm2",
     "final_displacement_mm",
