@@ -18,6 +18,7 @@ RESULTS_ROOT = Path("results")
 
 def _run(args: argparse.Namespace) -> int:
     from edem.beds import bed_text
+    from edem.pressure_metrics import check_quadrature_size
     from edem.resultdir import provenance
     from edem.results import write_results
     from edem.scene import load_scene, parse_override
@@ -28,6 +29,9 @@ def _run(args: argparse.Namespace) -> int:
     for warning in scene.warnings:  # said before the solve, so a refused run keeps them
         print(f"edem run: warning: {warning}", file=sys.stderr)
     method = args.method or scene.method
+    # the regularised peak of the pressure maps is computed after the solve: refuse a mesh it
+    # cannot hold now, not after the solve
+    check_quadrature_size(scene.mobile.vertices_mm, scene.mobile.triangles, file=scene.mobile.source or scene.source, key="geometry.mobile")
     out = _out_dir(args, scene.name, method, overrides=overrides)
     record = provenance(args.scene, overrides, method=method)
     n = len(scene.load.time_s)
