@@ -35,8 +35,17 @@ At short waves the Pade levels off at a/b while the layer stiffens as (1 - nu)/k
 compliant at kh = 12, which widens contacts (docs/method.md, section 3). ``two_pole_symbol`` adds a
 second, short-range term fitted over 0 <= kh <= 12; ``LAYER_SYMBOLS`` names both.
 
+Two layers (the sandwich)
+-------------------------
+Two flat layers h1, h2, each bonded to its rigid base and frictionless against the other, carry
+the same pressure p cos(kx) on both faces (action and reaction) and no shear on either, so each
+is the problem above and the bones approach by (C(k; h1) + C(k; h2)) p: the sandwich's symbol is
+the sum of the layers' (docs/method.md checks it against the two-layer stack solved directly).
+Its Taylor series has c1 (h1^3 + h2^3) / G in the k^2 term, a quarter of one layer of thickness
+h1 + h2 for equal layers; at short waves it is two half-spaces, 2 (1 - nu) / (G k).
+
 Each symbol is a ``LayerSymbol``: a local part and screened-Poisson terms, which the layer
-operator (``edem.thin_layer``) turns into sparse surface operators.
+operator (``edem.thin_layer``) turns into sparse surface operators, one set per layer.
 """
 
 from __future__ import annotations
