@@ -59,13 +59,14 @@ import numpy as np
 def exact_layer_compliance(kh: np.ndarray, poissons_ratio: float) -> np.ndarray:
     """C G / h of the bonded layer under p cos(kx) (module docstring), dimensionless, shape of ``kh``."""
     nu = poissons_ratio
-    q = np.minimum(np.asarray(kh, float), 150.0)  # beyond, sinh overflows and C G/h = (1 - nu)/q anyway
+    given = np.asarray(kh, float)
+    q = np.minimum(given, 150.0)  # beyond, sinh overflows and C G/h = (1 - nu)/q (the half-space) to e^-300
     kappa = 3.0 - 4.0 * nu
     small = q < 1e-4
     qs = np.where(small, 1.0, q)
     value = (1.0 - nu) * (kappa * np.sinh(2.0 * qs) - 2.0 * qs) / (2.0 * qs * (kappa * np.sinh(qs) ** 2 + qs * qs + 4.0 * (1.0 - nu) ** 2))
     c0, c1, _ = taylor_coefficients(nu)
-    return np.where(small, c0 + c1 * q * q, value)
+    return np.where(small, c0 + c1 * q * q, np.where(given > 150.0, (1.0 - nu) / np.maximum(given, 150.0), value))
 
 
 def taylor_coefficients(poissons_ratio: float) -> tuple[float, float, float]:
