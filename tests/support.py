@@ -78,15 +78,17 @@ def make_scene(
     )
 
 
-def periodic_grid(n: int, spacing_mm: float) -> tuple[SurfaceMesh, np.ndarray]:
-    """Flat n x n square grid, two right triangles per square, periodic both ways (a flat torus).
+def periodic_grid(n: int, spacing_mm: float, n_y: int | None = None) -> tuple[SurfaceMesh, np.ndarray]:
+    """Flat n x n (or n x n_y) square grid, two right triangles per square, periodic both ways (a
+    flat torus; n_y = 3 squares across is a plane-strain strip for loads uniform along y).
 
     Returns the mesh and the triangle centroids (unwrapped, mm). Square (i, j): L = (v00, v10, v11),
     U = (v00, v11, v01); L triangles come first.
     """
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    n_y = n if n_y is None else n_y
+    i, j = np.meshgrid(np.arange(n), np.arange(n_y), indexing="ij")
     i, j = i.ravel(), j.ravel()
-    vid = lambda a, b: (a % n) * n + (b % n)  # noqa: E731
+    vid = lambda a, b: (a % n) * n_y + (b % n_y)  # noqa: E731
     xy = lambda a, b: np.column_stack([a * spacing_mm, b * spacing_mm, np.zeros(a.shape)])  # noqa: E731
     lower = (np.column_stack([vid(i, j), vid(i + 1, j), vid(i + 1, j + 1)]), np.stack([xy(i, j), xy(i + 1, j), xy(i + 1, j + 1)], axis=1))
     upper = (np.column_stack([vid(i, j), vid(i + 1, j + 1), vid(i, j + 1)]), np.stack([xy(i, j), xy(i + 1, j + 1), xy(i, j + 1)], axis=1))
