@@ -37,7 +37,7 @@ def _arrays(surface: TriangleSurface) -> tuple[np.ndarray, np.ndarray]:
 
 def _plates(which: str, gap_mm: float, law: str, force_n=(0.0, 0.0, FORCE_N)):
     """Two plates whose articular surfaces are ``gap_mm`` apart; ``which`` says where bones are
-    given ("mobile", "fixed", "both"); a side without one is its bone with a uniform layer."""
+    given ("mobile", "fixed", "both"; "neither": none); a side without one is its bone with a uniform layer."""
     mobile_bone = which in ("mobile", "both")
     fixed_bone = which in ("fixed", "both")
     # articular surfaces at z = 0 (M) and z = gap (F); bones T_M below and T_F above them
