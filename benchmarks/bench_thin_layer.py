@@ -15,8 +15,12 @@ its smoothing on the coarse space (``[cartilage] thin_layer_smoothing_resolution
 to the gap law's layer on the whole surface, at springs finer than half its cells; elsewhere it
 is the fine layer). Where cvxopt is installed (the extra ``cholmod``) every coupled model also
 runs without it (``banded only``: the LAPACK banded path alone), so both ratios are printed.
+With ``--layers t_M,t_F`` the cartilage is a uniform layer on each bone (mm; the gap law's 2 mm
+is 1,1) and each coupled model runs as the sandwich (``[cartilage] thin_layer_stack``: one
+operator per layer) and lumped (one layer of their summed thickness); the ratio sandwich /
+lumped is printed too.
 
-    .venv/bin/python benchmarks/bench_thin_layer.py [--steps 20] [--rounds 3] [--sizes 0.94,0.3] [--laws threshold,gap] [--resolution 3] [--symbols pade,two-pole]
+    .venv/bin/python benchmarks/bench_thin_layer.py [--steps 20] [--rounds 3] [--sizes 0.94,0.3] [--laws threshold,gap] [--resolution 3] [--symbols pade,two-pole] [--layers 1,1]
 """
 
 from __future__ import annotations
@@ -95,19 +99,24 @@ def banded_only(active: bool):
         sparse_factors.cholmod_module = found
 
 
-def bench(mesh_size_mm: float, law: str, n_steps: int, rounds: int, counter: FactorCount, resolution: float, symbols: list[str]) -> None:
-    base = stance_like_scene(mesh_size_mm, n_steps)
+def bench(mesh_size_mm: float, law: str, n_steps: int, rounds: int, counter: FactorCount, resolution: float, symbols: list[str],
+          layers: tuple[float, float] | None = None) -> None:
+    sides = {} if layers is None else {"mobile_thickness_mm": layers[0], "fixed_thickness_mm": layers[1], "law": "gap", "max_spring_length_mm": 3.5}
+    base = stance_like_scene(mesh_size_mm, n_steps, **sides)
     caster = RayCaster(base.fixed.vertices_mm, base.fixed.triangles)
     # The gap law: a 2 mm layer bonded to all of the talus (its coupled layer is the whole surface).
-    cartilage = replace(base.cartilage, poissons_ratio=0.45, law=law, thickness_mm=2.0 if law != "threshold" else None)
+    cartilage = replace(base.cartilage, poissons_ratio=0.45, law=law, thickness_mm=2.0 if law != "threshold" and layers is None else None)
     variants = [False, True] if sparse_factors.cholmod_module() is not None else [True]  # banded only?
     models = {"springs": (replace(base, cartilage=on_bed(cartilage, IndependentSprings.coupling)), False)}
     for symbol in symbols:
         for coarse in (0.0, resolution) if resolution > 0.0 else (0.0,):
-            layer = on_bed(cartilage, CoupledThinLayer.coupling, thin_layer_symbol=symbol, thin_layer_smoothing_resolution=coarse)
-            for banded in variants:
-                name = f"{symbol}{f' r{coarse:g}' if coarse else ''}{', banded only' if banded and len(variants) > 1 else ''}"
-                models[name] = (replace(base, cartilage=layer), banded)
+            for stack in ("sandwich", "lumped") if layers is not None else ("sandwich",):
+                layer = on_bed(cartilage, CoupledThinLayer.coupling, thin_layer_symbol=symbol, thin_layer_smoothing_resolution=coarse,
+                               thin_layer_stack=stack)
+                for banded in variants:
+                    name = (f"{symbol}{f' r{coarse:g}' if coarse else ''}{f' {stack}' if layers is not None else ''}"
+                            f"{', banded only' if banded and len(variants) > 1 else ''}")
+                    models[name] = (replace(base, cartilage=layer), banded)
     totals: dict[str, list[float]] = {name: [] for name in models}
     solves: dict[str, list[float]] = {name: [] for name in models}
     factorisations: dict[str, int] = {}
@@ -141,6 +150,10 @@ def bench(mesh_size_mm: float, law: str, n_steps: int, rounds: int, counter: Fac
         verdict = f"goal <= {goal:g}x: {'met' if ratio <= goal else 'MISSED'}" if goal is not None else "no goal here"
         print(f"  {law} {n_springs} springs, coupled ({name}) / independent: run {ratio:.2f}x, "
               f"solve stage {medians[name][1] / medians['springs'][1]:.2f}x ({verdict})", flush=True)
+    for name in (n for n in models if " sandwich" in n):
+        lumped = name.replace(" sandwich", " lumped")
+        print(f"  {law} {n_springs} springs, {name} / {lumped}: run {medians[name][0] / medians[lumped][0]:.2f}x, "
+              f"solve stage {medians[name][1] / medians[lumped][1]:.2f}x", flush=True)
 
 
 if __name__ == "__main__":
@@ -151,11 +164,13 @@ if __name__ == "__main__":
     parser.add_argument("--laws", default="threshold,gap")
     parser.add_argument("--resolution", type=float, default=3.0, help="coarse smoothing cells per smoothing length (0: the fine layer only)")
     parser.add_argument("--symbols", default="pade,two-pole")
+    parser.add_argument("--layers", default=None, help="t_M,t_F: a uniform layer on each bone (mm), sandwich against lumped")
     args = parser.parse_args()
+    layers = None if args.layers is None else tuple(float(t) for t in args.layers.split(","))
     counter = FactorCount()
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; CHOLMOD (cvxopt) "
           f"{'installed' if sparse_factors.cholmod_module() is not None else 'not installed: the banded path alone'}")
     for size in (float(s) for s in args.sizes.split(",")):
         for law in args.laws.split(","):
-            bench(size, law, args.steps, args.rounds, counter, args.resolution, args.symbols.split(","))
+            bench(size, law, args.steps, args.rounds, counter, args.resolution, args.symbols.split(","), layers)
     print(f"load average {os.getloadavg()[0]:.1f}")

@@ -23,7 +23,7 @@ ligaments, the shear springs) and hands it to the scene's bed, which owns
 
 ``[cartilage] coupling`` names the bed (:data:`BEDS`): the independent springs by default, or the
 coupled layer (its keys ``thin_layer_symbol``, a name of :data:`edem.layer_symbols.LAYER_SYMBOLS`,
-and ``thin_layer_smoothing_resolution``).
+``thin_layer_smoothing_resolution`` and ``thin_layer_stack``).
 
 To add a bed, with or without keys of its own: one subclass of :class:`Bed` here, added to
 :data:`BEDS`, plus its tests.
@@ -233,6 +233,10 @@ class IndependentSprings(Bed):
         return imbalance / scale if scale > 0 else 0.0
 
 
+#: ``[cartilage] thin_layer_stack``: how the coupled layer takes a layer on each side
+THIN_LAYER_STACKS = ("sandwich", "lumped")
+
+
 class CoupledThinLayer(Bed):
     """The coupled thin layer (:mod:`edem.thin_layer_contact`): the springs' forces answer the
     layer's deflection through its compliance (symbol ``cartilage.thin_layer_symbol``), built
@@ -248,6 +252,10 @@ class CoupledThinLayer(Bed):
         thin_layer_symbol: str = "pade"  # a name of edem.layer_symbols.LAYER_SYMBOLS (Cartilage.layer_symbol)
         # cells of the coarse smoothing space per smoothing length (0: the springs' own vertices; edem.coarse_space)
         thin_layer_smoothing_resolution: float = 0.0
+        # where both sides have a layer (edem.thickness): "sandwich", each layer bonded to its bone and
+        # frictionless against the other (their compliances add), or "lumped", one layer of their summed
+        # thickness (the model error docs/method.md measures, kept for comparison)
+        thin_layer_stack: str = "sandwich"
 
     def __init__(self, scene, caster: RayCaster) -> None:
         super().__init__(scene, caster)
@@ -263,12 +271,14 @@ class CoupledThinLayer(Bed):
             table.string("thin_layer_symbol", default.thin_layer_symbol, tuple(LAYER_SYMBOLS)),
             table.number("thin_layer_smoothing_resolution", default.thin_layer_smoothing_resolution, nonnegative=True,
                          what="cells of the coarse smoothing space per smoothing length (>= 0; 0: the springs' own mesh)"),
+            table.string("thin_layer_stack", default.thin_layer_stack, THIN_LAYER_STACKS),
         )
 
     @classmethod
     def text(cls, keys: Keys) -> str:
         coarse = f", coarse smoothing at {keys.thin_layer_smoothing_resolution:g} cells per smoothing length" if keys.thin_layer_smoothing_resolution else ""
-        return f"{cls.label} ({keys.thin_layer_symbol}{coarse})"
+        lumped = ", both sides' layers lumped into one" if keys.thin_layer_stack == "lumped" else ""
+        return f"{cls.label} ({keys.thin_layer_symbol}{coarse}{lumped})"
 
     @classmethod
     def check(cls, cartilage: Cartilage, table: SceneTable) -> None:

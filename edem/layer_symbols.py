@@ -35,8 +35,17 @@ At short waves the Pade levels off at a/b while the layer stiffens as (1 - nu)/k
 compliant at kh = 12, which widens contacts (docs/method.md, section 3). ``two_pole_symbol`` adds a
 second, short-range term fitted over 0 <= kh <= 12; ``LAYER_SYMBOLS`` names both.
 
+Two layers (the sandwich)
+-------------------------
+Two flat layers h1, h2, each bonded to its rigid base and frictionless against the other, carry
+the same pressure p cos(kx) on both faces (action and reaction) and no shear on either, so each
+is the problem above and the bones approach by (C(k; h1) + C(k; h2)) p: the sandwich's symbol is
+the sum of the layers' (docs/method.md checks it against the two-layer stack solved directly).
+Its Taylor series has c1 (h1^3 + h2^3) / G in the k^2 term, a quarter of one layer of thickness
+h1 + h2 for equal layers; at short waves it is two half-spaces, 2 (1 - nu) / (G k).
+
 Each symbol is a ``LayerSymbol``: a local part and screened-Poisson terms, which the layer
-operator (``edem.thin_layer``) turns into sparse surface operators.
+operator (``edem.thin_layer``) turns into sparse surface operators, one set per layer.
 """
 
 from __future__ import annotations
@@ -50,13 +59,14 @@ import numpy as np
 def exact_layer_compliance(kh: np.ndarray, poissons_ratio: float) -> np.ndarray:
     """C G / h of the bonded layer under p cos(kx) (module docstring), dimensionless, shape of ``kh``."""
     nu = poissons_ratio
-    q = np.minimum(np.asarray(kh, float), 150.0)  # beyond, sinh overflows and C G/h = (1 - nu)/q anyway
+    given = np.asarray(kh, float)
+    q = np.minimum(given, 150.0)  # beyond, sinh overflows and C G/h = (1 - nu)/q (the half-space) to e^-300
     kappa = 3.0 - 4.0 * nu
     small = q < 1e-4
     qs = np.where(small, 1.0, q)
     value = (1.0 - nu) * (kappa * np.sinh(2.0 * qs) - 2.0 * qs) / (2.0 * qs * (kappa * np.sinh(qs) ** 2 + qs * qs + 4.0 * (1.0 - nu) ** 2))
     c0, c1, _ = taylor_coefficients(nu)
-    return np.where(small, c0 + c1 * q * q, value)
+    return np.where(small, c0 + c1 * q * q, np.where(given > 150.0, (1.0 - nu) / np.maximum(given, 150.0), value))
 
 
 def taylor_coefficients(poissons_ratio: float) -> tuple[float, float, float]:

@@ -55,6 +55,19 @@ edge would confine the incompressible layer and make it rigid. Of the two-pole s
 solve cuts the surface to a band around the candidates (``edem.thin_layer_contact``), the layer goes on, and the cut is natural.
 Where the layer itself ends inside the surface (the threshold law's cartilage fills the gap only
 where the springs are candidates), its edge is free like the surface's (``edge_at_cells``).
+
+Two layers (the sandwich)
+-------------------------
+Two layers, each bonded to its own bone and frictionless against the other, carry the same
+pressure and no shear on their faces, so they deflect independently: the sandwich's symbol is
+the sum of the layers' (``edem.layer_symbols``), and so is its operator, each layer with its own
+thickness field h_i: C = diag((h_1 + h_2) c_loc / (G A)) + the terms of every layer, each
+sigma Z^T H^-1 Z with that layer's c_nl and b h_i^2 (``layer_compliance`` with thicknesses
+(L, m)). Symmetric and positive definite as each layer's part is; a uniform pressure deflects by
+(h_1 + h_2) p / E'; the long-wave term is -(c1/G) div((h_1^3 + h_2^3) grad p), where one lumped
+layer of thickness h_1 + h_2 would have (h_1 + h_2)^3. A layer of zero thickness brings no term;
+where it is zero on part of the surface its field is held at zero at the vertices with no
+thickness around them (their rows of H and Z are empty) and its edge there is natural.
 """
 
 from __future__ import annotations
@@ -325,9 +338,10 @@ class SmoothingTerm:
 class LayerCompliance:
     """w = C f on a set of springs: C = diag(local) + sum_i sigma_i Z_i^T H_i^-1 Z_i (module docstring).
 
-    ``local`` is c_loc / A in mm/N. No term means no coupling (independent springs). The contact
-    solve works on the terms' vertex fields stacked, z = (sigma H)^-1 Z f with Z = [Z_1; Z_2 ...]
-    and sigma H = diag(sigma_i H_i), so that w = local f + Z^T z.
+    ``local`` is c_loc / A in mm/N. No term means no coupling (independent springs); the terms are
+    the symbol's (one for the Pade, two for the two-pole) for each layer (two for a sandwich).
+    The contact solve works on the terms' vertex fields stacked, z = (sigma H)^-1 Z f with
+    Z = [Z_1; Z_2 ...] and sigma H = diag(sigma_i H_i), so that w = local f + Z^T z.
     """
 
     local_mm_per_n: np.ndarray  # (m,)
@@ -401,8 +415,9 @@ class LayerCompliance:
         """Factor of sigma H + Z diag(spring_weight) Z^T: solve(rhs).
 
         One term: sigma (H + sigma Z diag(x) Z^T), SPD (module docstring), by the pattern's
-        banded Cholesky. Two: the block matrix is symmetric but indefinite (its blocks' signs
-        differ), factored by QDLDL's LDL^T, checked (``indefinite_solve``). Its pattern follows the
+        banded Cholesky. More (the two-pole's two, a sandwich's two or four): the block matrix is
+        symmetric, indefinite where its blocks' signs differ, factored by QDLDL's LDL^T, checked
+        (``indefinite_solve``). Its pattern follows the
         contact set (the two terms' fields are coupled only through springs in contact), so the
         ordering is found anew each time: one pattern holding every spring of the layer would keep
         it, but on the gap law's 30k-spring layer (the whole surface) its fill made each
@@ -433,39 +448,66 @@ def layer_compliance(
     symbol: LayerSymbol | None = None,
     smoothing_resolution: float = 0.0,
 ) -> LayerCompliance:
-    """The thin-layer compliance on the springs ``cells`` (indices) with local thickness (m,) mm.
+    """The thin-layer compliance on the springs ``cells`` (indices, m) with local thickness in mm.
 
+    ``thickness_mm``: (m,) (or a number) for one layer bonded to its bone against a rigid body;
+    (L, m) for L layers, each bonded to its own bone and frictionless against the next (the
+    sandwich, module docstring): their compliances add, the local terms into one and each layer
+    with its own smoothing terms (a layer of zero thickness everywhere brings none).
     ``edge_at_cells``: the layer ends at the boundary of ``cells`` (a free lateral face there),
     rather than going on beyond them with a natural cut. ``symbol``: the layer's symbol at
     ``poissons_ratio`` (:data:`edem.layer_symbols.LAYER_SYMBOLS`; None: the Pade).
     ``smoothing_resolution`` > 0: each term is solved on a coarse space (:mod:`edem.coarse_space`)
-    of this many cells per smoothing length sqrt(b) h (at the median h), where
+    of this many cells per smoothing length sqrt(b) h (at its layer's median h), where
     those cells are at least COARSE_MIN_SPRINGS springs across; 0: on the springs' vertices."""
-    h = np.broadcast_to(np.asarray(thickness_mm, float), cells.shape)
+    given = np.asarray(thickness_mm, float)
+    layers = np.broadcast_to(given, given.shape[:1] + cells.shape) if given.ndim == 2 else np.broadcast_to(given, cells.shape)[None]
+    h = layers[0] if layers.shape[0] == 1 else layers.sum(axis=0)
     # The gap laws' layer over the whole surface has the same cells and thickness at every time
     # point of a run: its compliance is built once (kept with the cells' operator patterns).
-    key = (np.asarray(cells).tobytes(), h.tobytes(), youngs_modulus_mpa, poissons_ratio, edge_at_cells, symbol, smoothing_resolution)
+    key = (np.asarray(cells).tobytes(), layers.shape[0], np.ascontiguousarray(layers).tobytes(), youngs_modulus_mpa, poissons_ratio,
+           edge_at_cells, symbol, smoothing_resolution)
     kept = mesh.memo.get("layer")
     if kept is not None and kept[0] == key:
         return kept[1]
     g = youngs_modulus_mpa / (2.0 * (1.0 + poissons_ratio))
-    h_over_g = h / g
     model = pade_symbol(poissons_ratio) if symbol is None else symbol
     coarse_cells = smoothing_resolution > 0.0 and cells.size > 0
-    if coarse_cells:  # (medians over the cells: only where a coarse space may be built)
-        spring_mm, median_h = float(np.sqrt(2.0 * np.median(mesh.area_mm2[cells]))), float(np.median(h))
+    if coarse_cells:  # (the springs' size: only where a coarse space may be built)
+        spring_mm = float(np.sqrt(2.0 * np.median(mesh.area_mm2[cells])))
     terms = []
-    for strength, b, dirichlet in zip(model.strengths, model.screenings, model.dirichlet):
-        # S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl (module docstring, variable thickness).
-        c_nl = np.broadcast_to(abs(strength) * h_over_g, cells.shape)
-        smoothing, pattern = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl, edge_at_cells, dirichlet)
-        size_mm = np.sqrt(b) * median_h / smoothing_resolution if coarse_cells else 0.0
-        coarse = mesh.coarse_space(cells, edge_at_cells, dirichlet, size_mm) if size_mm > 0.0 and size_mm >= COARSE_MIN_SPRINGS * spring_mm else None
-        q = pattern.q if coarse is None else coarse.pattern.q  # Z^T = diag(c_nl) Q: Q's rows scaled, no sparse product
-        z_t = sp.csr_matrix((q.data * np.repeat(c_nl, np.diff(q.indptr)), q.indices, q.indptr), shape=q.shape)
-        if coarse is not None:
-            smoothing, pattern = coarse.operator(smoothing), coarse.pattern
-        terms.append(SmoothingTerm(float(np.sign(strength)), z_t, smoothing, c_nl, pattern, coarse))
-    layer = LayerCompliance(model.local * h_over_g / mesh.area_mm2[cells], tuple(terms), mesh.memo.setdefault("factor", {}))
+    for layer_h in layers:
+        if not np.any(layer_h):
+            continue  # no cartilage on this side: a rigid body, no term
+        for strength, b, dirichlet in zip(model.strengths, model.screenings, model.dirichlet):
+            terms.append(_smoothing_term(mesh, cells, layer_h, g, strength, b, dirichlet, edge_at_cells,
+                                         np.sqrt(b) * float(np.median(layer_h)) / smoothing_resolution if coarse_cells else 0.0,
+                                         spring_mm if coarse_cells else 0.0))
+    layer = LayerCompliance(model.local * (h / g) / mesh.area_mm2[cells], tuple(terms), mesh.memo.setdefault("factor", {}))
     mesh.memo["layer"] = (key, layer)
     return layer
+
+
+def _smoothing_term(
+    mesh: SurfaceMesh, cells: np.ndarray, thickness_mm: np.ndarray, g: float, strength: float, b: float, dirichlet: bool,
+    edge_at_cells: bool, size_mm: float, spring_mm: float,
+) -> SmoothingTerm:
+    """One layer's term s / (1 + b (kh)^2) on the cells (its thickness (m,) mm, shear modulus
+    ``g`` MPa; module docstring), on a coarse space of cells ``size_mm`` across where that is at
+    least COARSE_MIN_SPRINGS springs (``spring_mm``) across."""
+    h = thickness_mm
+    # S = (c_nl - div(b h^2 c_nl grad))^-1 c_nl (module docstring, variable thickness).
+    c_nl = np.broadcast_to(abs(strength) * (h / g), cells.shape)
+    smoothing, pattern = mesh.smoothing_operators(cells, c_nl, b * h * h * c_nl, edge_at_cells, dirichlet)
+    if not np.all(c_nl):
+        # Where the layer has no thickness the term vanishes: a vertex whose triangles all have
+        # c_nl = 0 has an empty row in H and in Z, so its field is 0 for any positive diagonal.
+        slots = np.flatnonzero(pattern.indices == np.repeat(np.arange(pattern.n_vertices), np.diff(pattern.indptr)))
+        empty = slots[smoothing.data[slots] == 0.0]
+        smoothing.data[empty] = smoothing.data[slots].max()
+    coarse = mesh.coarse_space(cells, edge_at_cells, dirichlet, size_mm) if size_mm > 0.0 and size_mm >= COARSE_MIN_SPRINGS * spring_mm else None
+    q = pattern.q if coarse is None else coarse.pattern.q  # Z^T = diag(c_nl) Q: Q's rows scaled, no sparse product
+    z_t = sp.csr_matrix((q.data * np.repeat(c_nl, np.diff(q.indptr)), q.indices, q.indptr), shape=q.shape)
+    if coarse is not None:
+        smoothing, pattern = coarse.operator(smoothing), coarse.pattern
+    return SmoothingTerm(float(np.sign(strength)), z_t, smoothing, c_nl, pattern, coarse)

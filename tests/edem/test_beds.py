@@ -93,6 +93,8 @@ def test_an_unknown_bed_is_refused_naming_the_key():
     ({"coupling": "thin-layer", "law": "gap-log", "thin_layer_symbol": "two-pole"}, "thin_layer_symbol"),  # columns not linearisable
     ({"thin_layer_smoothing_resolution": 3.0}, "thin_layer_smoothing_resolution"),  # a coarse smoothing without the coupling
     ({"coupling": "thin-layer", "thin_layer_smoothing_resolution": -1.0}, "thin_layer_smoothing_resolution"),
+    ({"thin_layer_stack": "lumped"}, "thin_layer_stack"),  # how two layers couple, without the coupling
+    ({"coupling": "thin-layer", "thin_layer_stack": "bonded"}, "thin_layer_stack"),
     ({"shear_modulus_mpa": -1.0}, "shear_modulus_mpa"),
     ({"law": "elastic"}, "law"),
 ])

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
-from support import grid_plate
+from support import grid_plate, periodic_grid
 
 from edem.mechanics import confined_modulus_mpa
 from edem.layer_symbols import (
@@ -25,23 +25,6 @@ from edem.thin_layer import SurfaceMesh, _corner_means, boundary_vertices, layer
 
 E = 10.35
 NUS = (0.0, 0.1, 0.3, 0.42, 0.45, 0.49, 0.499)
-
-
-def periodic_grid(n: int, spacing_mm: float) -> tuple[SurfaceMesh, np.ndarray]:
-    """Flat n x n square grid, two right triangles per square, periodic both ways (a flat torus).
-
-    Returns the mesh and the triangle centroids (unwrapped, mm). Square (i, j): L = (v00, v10, v11),
-    U = (v00, v11, v01); L triangles come first.
-    """
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    i, j = i.ravel(), j.ravel()
-    vid = lambda a, b: (a % n) * n + (b % n)  # noqa: E731
-    xy = lambda a, b: np.column_stack([a * spacing_mm, b * spacing_mm, np.zeros(a.shape)])  # noqa: E731
-    lower = (np.column_stack([vid(i, j), vid(i + 1, j), vid(i + 1, j + 1)]), np.stack([xy(i, j), xy(i + 1, j), xy(i + 1, j + 1)], axis=1))
-    upper = (np.column_stack([vid(i, j), vid(i + 1, j + 1), vid(i, j + 1)]), np.stack([xy(i, j), xy(i + 1, j + 1), xy(i, j + 1)], axis=1))
-    tri = np.vstack([lower[0], upper[0]])
-    corners = np.concatenate([lower[1], upper[1]])
-    return SurfaceMesh.from_corners(tri, corners), corners.mean(axis=1)
 
 
 def test_taylor_coefficients_are_the_exact_compliance_series():

@@ -6,8 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from scipy.spatial import Delaunay
-from support import cylinder_patch, grid_plate, make_scene, plane
+from support import cylinder_patch, disk_plate, grid_plate, make_scene, plane
 
 from geometries.errors import InputError
 from edem.beds import CoupledThinLayer, on_bed
@@ -123,20 +122,6 @@ def test_gap_log_edem_and_viscoelastic_edem_balance_on_the_coupled_layer():
     for step in edem.steps + slow.steps:
         assert abs(balance(scene, step)[2]) <= 1e-9 * step.force_n[2]
     assert all(s.displacement_mm[2] < e.displacement_mm[2] for s, e in zip(slow.steps[1:], edem.steps[1:]))
-
-
-def disk_plate(radius_mm: float, n_rings: int) -> TriangleSurface:
-    """A flat disk facing up (+z), Delaunay-triangulated rings of 6k points (k = 0 .. n_rings)."""
-    points = [np.zeros((1, 2))]
-    for k in range(1, n_rings + 1):
-        angle = np.linspace(0.0, 2 * np.pi, 6 * k, endpoint=False)
-        points.append(radius_mm * k / n_rings * np.column_stack([np.cos(angle), np.sin(angle)]))
-    xy = np.vstack(points)
-    tri = Delaunay(xy).simplices
-    u, v = xy[tri[:, 1]] - xy[tri[:, 0]], xy[tri[:, 2]] - xy[tri[:, 0]]
-    cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
-    tri = np.where((cross > 0)[:, None], tri, tri[:, ::-1])
-    return TriangleSurface(np.column_stack([xy, np.zeros(len(xy))]), tri)
 
 
 def test_squeeze_film_under_a_plate_with_a_free_edge():
