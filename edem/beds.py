@@ -210,23 +210,21 @@ class IndependentSprings(Bed):
         self.previous_displacement: np.ndarray | None = None
 
     def solve(self, step, load):
-        law, shear = (step.law, step.shear) if step.creep is None else step.creep.elements(step)
+        law = step.law if step.creep is None else step.creep.law(step)
         solution = solve_unilateral(
-            step.directions, law, load, fixed_dofs=step.fixed_dofs, shear=shear, length_scale_mm=step.length_scale_mm,
+            step.directions, law, load, fixed_dofs=step.fixed_dofs, shear=step.shear, length_scale_mm=step.length_scale_mm,
             start_displacement=self.previous_displacement,
         )
         self.previous_displacement = solution.displacement
         return solution
 
     def spring_gaps_mm(self, step, solution):
-        law, _ = step.creep.elements(step)
-        n_c = step.n_candidates
+        law, n_c = step.creep.law(step), step.n_candidates
         # an independent spring's force is -(c0 k) x its gap out of contact
         return np.maximum(-solution.element_force_n[:n_c], 0.0) / law.stiffness_n_per_mm[:n_c]
 
     def force_free(self, step, direction):
-        law, _ = step.creep.elements(step)
-        n_c = step.n_candidates
+        law, n_c = step.creep.law(step), step.n_candidates
         stiffness = law.stiffness_n_per_mm[:n_c]
         u = touch_motion(-law.offset_n[:n_c] / stiffness, step.directions[:n_c], step.ligament_rows, step.ligament_law, direction)
         if u is None:
@@ -328,27 +326,25 @@ class CoupledThinLayer(Bed):
                     "(the Pade symbol takes it at nu = 0, 1/4 and above)",
                 )
 
-    def _build(self, step: ContactStep) -> ShearTerms | None:
-        """The time point's layer (``self.layer``); returns the shear springs to solve with.
+    def _build(self, step: ContactStep) -> None:
+        """The time point's layer (``self.layer``).
 
         A creeping step (:class:`edem.viscoelastic.Creep`) is the elastic one with the layer's
         compliance over c0 (its modulus c0 E), the carried forces c0 times theirs, the history's
         push-back -S_n over the layer's springs and a carried law's gaps."""
         n_c, creep = step.n_candidates, step.creep
-        cartilage, carried, shear, history, gap = self.scene.cartilage, step.stored_normal_n, step.shear, None, None
+        cartilage, carried, history, gap = self.scene.cartilage, step.stored_normal_n, None, None
         if creep is not None:
             if self._stiffer is None or self._stiffer[0] != creep.scale:  # (one per scale: the layer is built once for it)
                 self._stiffer = creep.scale, replace(cartilage, youngs_modulus_mpa=creep.scale * cartilage.youngs_modulus_mpa)
             cartilage, carried = self._stiffer[1], creep.scale * carried
-            _, shear = creep.elements(step)
             history, gap = -creep.normal_history_n(step.geometry.normal), creep.gap_mm
         self.layer = CoupledStep.build(self.mesh, step.geometry, cartilage, carried, step.directions[:n_c], step.ligament_rows, step.ligament_law,
                                        history, gap)
-        return shear
 
     def solve(self, step, load):
-        shear = self._build(step)
-        solution = self.layer.solve(load, step.fixed_dofs, shear, step.length_scale_mm, self.released)
+        self._build(step)
+        solution = self.layer.solve(load, step.fixed_dofs, step.shear, step.length_scale_mm, self.released)
         self._release(step, solution)
         return solution
 

@@ -202,8 +202,8 @@ def run(
                 "check the load's units and scale and the cartilage modulus"
             )
         contact = directions[:n_c].T @ total_force[:n_c]
-        if shear is not None:
-            contact = contact + shear.generalised_force(solution.displacement, solution.active[:n_c])
+        if shear is not None:  # (the step's: a creeping step's shear springs carry their dashpots' share too)
+            contact = contact + contact_step.shear.generalised_force(solution.displacement, solution.active[:n_c])
         spring_force = total_force[:n_c]
         # sum f (R X + b) / sum f = R (sum f X / sum f) + b: the candidates' centroids are only
         # placed at the pose if check_increment needs them.

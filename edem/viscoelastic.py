@@ -139,24 +139,27 @@ class Creep:
         history = self.history_force_n if index is None else self.history_force_n.take(index, axis=1)
         return row_dot(history.T, normals)
 
-    def elements(self, step) -> tuple[LinearElements, ShearTerms | None]:
-        """The element law (springs then ligaments) and the shear springs of the creeping step of
-        ``step`` (an :class:`edem.beds.ContactStep`, elastic)."""
+    def law(self, step) -> LinearElements:
+        """The element law (springs then ligaments) of the creeping step of ``step`` (an
+        :class:`edem.beds.ContactStep`; its law the elastic one at the pose)."""
         law, n_c = step.law, step.n_candidates
         if not isinstance(law, LinearElements):
-            raise ValueError("the creeping contact set takes linear laws only (edem.scene.Viscoelastic refuses the others)")
+            raise ValueError("the creeping contact set takes linear laws only (CreepingContactSet refuses the others)")
         index, normals = step.geometry.candidate_index, step.directions[:n_c, :3]
         offset, stiffness = law.offset_n.copy(), law.stiffness_n_per_mm.copy()
         spring_stiffness = stiffness[:n_c]
         offset[:n_c] = self.scale * (offset[:n_c] - spring_stiffness * self.gap_mm.take(index)) - self.normal_history_n(normals, index)
         stiffness[:n_c] = self.scale * spring_stiffness
-        shear = step.shear
-        if shear is not None:
-            history = self.history_force_n.take(index, axis=1).T
-            tangential = history - row_dot(history, normals)[:, None] * normals
-            shear = replace(shear, stiffness_n_per_mm=self.scale * shear.stiffness_n_per_mm,
-                            stored_force_n=self.scale * shear.stored_force_n - tangential)
-        return LinearElements(offset, stiffness), shear
+        return LinearElements(offset, stiffness)
+
+    def shear(self, shear: ShearTerms | None, index: np.ndarray, normals: np.ndarray) -> ShearTerms | None:
+        """The candidates' (``index``, their ``normals`` (c, 3)) shear springs in the creeping step:
+        c0 k_s, and the stored tangential force c0 e_t - S_t."""
+        if shear is None:
+            return None
+        history = self.history_force_n.take(index, axis=1).T
+        tangential = history - row_dot(history, normals)[:, None] * normals
+        return replace(shear, stiffness_n_per_mm=self.scale * shear.stiffness_n_per_mm, stored_force_n=self.scale * shear.stored_force_n - tangential)
 
 
 def touch_motion(free_gap_mm: np.ndarray, rows: np.ndarray, ligament_rows: np.ndarray, ligament_law: LinearElements,
@@ -188,9 +191,9 @@ def touch_motion(free_gap_mm: np.ndarray, rows: np.ndarray, ligament_rows: np.nd
         high = min(high, float(bound[up].min(initial=np.inf)))
         low = max(low, float(bound[~up].max(initial=-np.inf)))
     if direction is None:
-        low = high = 0.0 if low <= 0.0 <= high else np.nan
-    s = high if np.isfinite(high) else max(low, 0.0)
-    if not (low <= s * (1.0 + 1e-12) + 1e-300 and math.isfinite(s)):
+        low = high = 0.0 if low <= 0.0 <= high else math.nan
+    s = high if math.isfinite(high) else max(low, 0.0)
+    if not math.isfinite(s) or low > s + 1e-12 * abs(s):
         return None
     return s * motion
 
@@ -294,7 +297,8 @@ class CreepingContactSet(ViscoelasticStepping):
             # (the trapezoidal first step's rate term e r_0 vanishes: the body is at rest at t_0)
             history = sum(c * e for c, e in zip(weights, self.elastic))
         self.creep = Creep(c0, history, self.gap_mm)
-        return replace(step, creep=self.creep)
+        index, normals = step.geometry.candidate_index, step.directions[: step.n_candidates, :3]
+        return replace(step, creep=self.creep, shear=self.creep.shear(step.shear, index, normals))
 
     def solve(self, bed, step, load):
         if not np.any(load[self.free]):

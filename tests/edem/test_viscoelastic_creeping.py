@@ -57,24 +57,32 @@ def test_a_contact_set_that_never_changes_creeps_as_the_scalar_scheme_and_its_pr
     """Flat plates touching at rest, every spring in contact while loaded: each spring's force is
     then q_i (c0 u_n - s_n) with q the elastic force per unit approach, so balance gives the scalar
     scheme c0 u_n - s_n = F_n / K (K = sum q, the plates' elastic stiffness, from DEM) and the
-    pressure is the elastic one under F_n (it follows the load). Variable steps, a ramp, a hold
-    and an unload to zero (the plate then follows the springs creeping back: u_n = s_n / c0). To
-    round-off (1e-9 of the largest displacement: the solves' accuracy)."""
+    pressure is the elastic one under F_n (it follows the load). The shear springs (G = 1 MPa)
+    creep the same way along x under a tangential load of 0.1 F_n. Variable steps, a ramp, a hold
+    and an unload to zero (the plate then follows the springs creeping back, u_n = s_n / c0, along
+    the last load's direction). To round-off (1e-9 of the largest displacement: the solves'
+    accuracy)."""
     time = np.array([0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 2.25, 2.5, 3.0, 4.0, 5.0, 5.5])
-    force = np.array([0.0, 200.0, 400.0, 400.0, 400.0, 400.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    common = dict(law="gap", thickness_mm=T, max_spring_length_mm=2 * T, fixed_dofs=("tx", "ty", "rx", "ry", "rz"))
+    normal = np.array([0.0, 200.0, 400.0, 400.0, 400.0, 400.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    load = np.column_stack([0.1 * normal, np.zeros_like(normal), normal])
+    common = dict(law="gap", thickness_mm=T, max_spring_length_mm=2 * T, fixed_dofs=("ty", "rx", "ry", "rz"), shear_modulus_mpa=1.0)
     plates = grid_plate(20, 20, 8), plane(lambda x, y: T)
-    dem = run(on(make_scene(*plates, [0.0, 0.0, 400.0], **common), coupling), "dem").steps[0]
-    stiffness = 400.0 / dem.displacement_mm[2]
-    scene = on(make_scene(*plates, np.outer(force, [0, 0, 1]), time_s=time, viscoelastic=Viscoelastic(TAU), **common), coupling)
+    dem = run(on(make_scene(*plates, load[2], **common), coupling), "dem").steps[0]
+    compliance = np.divide(dem.displacement_mm, load[2], out=np.zeros(3), where=load[2] != 0)  # mm/N along x (shear springs), z (bed)
+    scene = on(make_scene(*plates, load, time_s=time, viscoelastic=Viscoelastic(TAU), **common), coupling)
     result = run(scene, "edem")
-    expected = [0.0]
+    expected = [np.zeros(3)]
     for n in range(1, time.size):
         c0, c, _ = scheme_weights("bdf2", time[n] - time[n - 1], time[n - 1] - time[n - 2] if n > 1 else None, TAU)
-        expected.append((force[n] / stiffness + sum(cj * uj for cj, uj in zip(c, expected[::-1]))) / c0)
-    scale = max(expected)
-    np.testing.assert_allclose(z_of(result), expected, rtol=0, atol=1e-9 * scale)
-    for step, f in zip(result.steps, force):
+        expected.append((load[n] * compliance + sum(cj * uj for cj, uj in zip(c, expected[::-1]))) / c0)
+    expected = np.array(expected)
+    # Unloaded, nothing holds the plate sideways: it follows the springs back along the last
+    # load's direction (the limit of a vanishing load), x moving by 0.1 of z's motion.
+    last = int(np.flatnonzero(normal)[-1])
+    expected[last + 1:, 0] = expected[last, 0] + 0.1 * (expected[last + 1:, 2] - expected[last, 2])
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose([s.displacement_mm for s in result.steps], expected, rtol=0, atol=1e-9 * scale)
+    for step, f in zip(result.steps, normal):
         assert np.all(step.in_contact) if f else not np.any(step.in_contact)
         np.testing.assert_allclose(step.pressure_mpa, dem.pressure_mpa * f / 400.0, rtol=0, atol=1e-9 * dem.peak_pressure_mpa)
 
@@ -406,8 +414,11 @@ def test_the_thesis_increment_is_named_and_an_integrator_of_the_other_set_is_ref
 
 
 def test_a_load_at_the_first_time_point_starts_from_the_elastic_solution_with_a_warning():
-    """As the FE twin: a load at t_0 has been held since long before (the elastic solution); said."""
+    """As the FE twin: a load at t_0 has been held since long before (the elastic solution); said,
+    and summary.json names the contact set and the integrator."""
     result = run(cylinder_layer([0.0, 0.25], [333.0, 333.0], "none"), "edem")
     dem = run(load_scene("cylinder-layer", {"constraints.fixed_dofs": ["tx", "ty", "rx", "ry", "rz"]}), "dem").steps[0]
     np.testing.assert_allclose(result.steps[0].pressure_mpa, dem.pressure_mpa, rtol=0, atol=1e-9 * dem.peak_pressure_mpa)
     assert any("first time point carries a load" in w for w in result.warnings)
+    summary = result.summary()  # summary.json says how the springs stepped
+    assert (summary["relaxation_time_s"], summary["contact_set"], summary["integrator"]) == (TAU, "creeping", "bdf2")
