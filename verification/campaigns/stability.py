@@ -10,8 +10,9 @@ from verification.campaigns.edem_analytic import PLATE_AREA_MM2, PLATES, cylinde
 from verification.closed_forms import confined_modulus_mpa
 from verification.verdicts import CLOSED_FORM
 
-#: wall time with 2 jobs on 2 cores, nothing cached (measured: 12 s at load 5 on the shared 2-core machine, 4.7 s of CPU)
-EXPECTED_TIME_S = 12.0
+#: wall time, nothing cached: measured 39 s with 1 job at load 4-7 on the shared 2-core machine (81 cases;
+#: before the creeping Kelvin-Voigt cases, 12 s with 2 jobs at load 5)
+EXPECTED_TIME_S = 40.0
 
 
 STABILITY_CHECKS = ("outcome_mismatch", "non_finite_outputs", "force_residual_rel")
