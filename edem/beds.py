@@ -6,7 +6,10 @@ ligaments, the shear springs) and hands it to the scene's bed, which owns
 
 * its static solve at the time point (:meth:`Bed.solve`), the unilateral equilibrium
   (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs);
-* its Kelvin-Voigt increment (:meth:`Bed.viscoelastic_increment`, docs/method.md#4-viscoelastic-edem-thesis-chapter-6);
+* its Kelvin-Voigt steps (docs/method.md#4-viscoelastic-edem-thesis-chapter-6): the thesis's increment
+  (:meth:`Bed.viscoelastic_increment`); for the contact set of the creeping displacement, its solve
+  of a step that carries a :class:`edem.viscoelastic.Creep`, the springs' gaps after it
+  (:meth:`Bed.spring_gaps_mm`) and the force-free pose of an unloaded time point (:meth:`Bed.force_free`);
 * its warnings, at every time point (:meth:`Bed.step_warnings`) and at the first
   (:meth:`Bed.first_step_warnings`: the weak-DOF rule, the coupled layer's resolution);
 * its re-measure rule (:meth:`Bed.remeasured_imbalance`): DEM re-measures the independent
@@ -46,6 +49,7 @@ from edem.springs import Cartilage, Placement, SpringGeometry
 from edem.tables import SceneTable
 from edem.layer_symbols import LAYER_SYMBOLS, taylor_coefficients
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
+from edem.viscoelastic import Creep, touch_motion
 
 
 @dataclass(frozen=True)
@@ -65,6 +69,8 @@ class ContactStep:
     shear: ShearTerms | None  # the candidates' shear springs (None: frictionless)
     fixed_dofs: tuple[str, ...]
     length_scale_mm: float  # RMS distance of the springs from G: weighs moments against forces
+    # a Kelvin-Voigt step with the contact set of the creeping displacement (edem.viscoelastic); None: elastic
+    creep: Creep | None = None
 
     @property
     def n_candidates(self) -> int:
@@ -163,6 +169,17 @@ class Bed(ABC):
         element forces (n_c + n_l,) to commit.
         """
 
+    @abstractmethod
+    def spring_gaps_mm(self, step: ContactStep, solution: UnilateralSolution) -> np.ndarray:
+        """The candidates' gaps (n_c,) in mm after :meth:`solve` of a creeping ``step``: 0 in
+        contact, the opening out of it."""
+
+    @abstractmethod
+    def force_free(self, step: ContactStep, direction: np.ndarray | None) -> UnilateralSolution | None:
+        """An unloaded time point of a creeping ``step``: M moved along ``direction`` (3,) to touch
+        the cartilage with no force anywhere (:func:`edem.viscoelastic.touch_motion`); None where
+        no pose on that line is force-free (the ligaments hold M against the cartilage)."""
+
     def step_warnings(self, step: ContactStep, solution: UnilateralSolution, where: str) -> list[str]:
         """Warnings about one time point's solution (``where`` names it)."""
         return []
@@ -193,12 +210,27 @@ class IndependentSprings(Bed):
         self.previous_displacement: np.ndarray | None = None
 
     def solve(self, step, load):
+        law = step.law if step.creep is None else step.creep.law(step)
         solution = solve_unilateral(
-            step.directions, step.law, load, fixed_dofs=step.fixed_dofs, shear=step.shear, length_scale_mm=step.length_scale_mm,
+            step.directions, law, load, fixed_dofs=step.fixed_dofs, shear=step.shear, length_scale_mm=step.length_scale_mm,
             start_displacement=self.previous_displacement,
         )
         self.previous_displacement = solution.displacement
         return solution
+
+    def spring_gaps_mm(self, step, solution):
+        law, n_c = step.creep.law(step), step.n_candidates
+        # an independent spring's force is -(c0 k) x its gap out of contact
+        return np.maximum(-solution.element_force_n[:n_c], 0.0) / law.stiffness_n_per_mm[:n_c]
+
+    def force_free(self, step, direction):
+        law, n_c = step.creep.law(step), step.n_candidates
+        stiffness = law.stiffness_n_per_mm[:n_c]
+        u = touch_motion(-law.offset_n[:n_c] / stiffness, step.directions[:n_c], step.ligament_rows, step.ligament_law, direction)
+        if u is None:
+            return None
+        force, _ = law.force_and_stiffness(step.directions @ u)
+        return UnilateralSolution(u, force, np.zeros(force.shape[0], bool), 0, 0.0, 0.0)
 
     def viscoelastic_increment(self, step, elastic, previous_load, load, weights):
         """Every spring that holds an elastic force creeps with its dashpot over the step (its total
@@ -263,6 +295,7 @@ class CoupledThinLayer(Bed):
         # The candidates out of contact at the previous time point: the next solve's first guess.
         self.released: np.ndarray | None = None
         self.layer: CoupledStep | None = None  # the time point last solved
+        self._stiffer: tuple[float, Cartilage] | None = None  # (c0, the cartilage c0 times stiffer) of creeping steps
 
     @classmethod
     def read_keys(cls, table: SceneTable) -> Keys:
@@ -303,14 +336,40 @@ class CoupledThinLayer(Bed):
                     "(the Pade symbol takes it at nu = 0, 1/4 and above)",
                 )
 
+    def _build(self, step: ContactStep) -> None:
+        """The time point's layer (``self.layer``).
+
+        A creeping step (:class:`edem.viscoelastic.Creep`) is the elastic one with the layer's
+        compliance over c0 (its modulus c0 E), the carried forces c0 times theirs, the history's
+        push-back -S_n over the layer's springs and a carried law's gaps."""
+        n_c, creep = step.n_candidates, step.creep
+        cartilage, carried, history, gap = self.scene.cartilage, step.stored_normal_n, None, None
+        if creep is not None:
+            if self._stiffer is None or self._stiffer[0] != creep.scale:  # (one per scale: the layer is built once for it)
+                self._stiffer = creep.scale, replace(cartilage, youngs_modulus_mpa=creep.scale * cartilage.youngs_modulus_mpa)
+            cartilage, carried = self._stiffer[1], creep.scale * carried
+            history, gap = -creep.normal_history_n(step.geometry.normal), creep.gap_mm
+        self.layer = CoupledStep.build(self.mesh, step.geometry, cartilage, carried, step.directions[:n_c], step.ligament_rows, step.ligament_law,
+                                       history, gap)
+
     def solve(self, step, load):
-        n_c = step.n_candidates
-        self.layer = CoupledStep.build(
-            self.mesh, step.geometry, self.scene.cartilage, step.stored_normal_n, step.directions[:n_c], step.ligament_rows, step.ligament_law
-        )
+        self._build(step)
         solution = self.layer.solve(load, step.fixed_dofs, step.shear, step.length_scale_mm, self.released)
+        self._release(step, solution)
+        return solution
+
+    def _release(self, step: ContactStep, solution: UnilateralSolution) -> None:
         self.released = np.zeros(self.scene.spring_area_mm2.shape[0], bool)
-        self.released[step.geometry.candidate_index] = ~solution.active[:n_c]
+        self.released[step.geometry.candidate_index] = ~solution.active[: step.n_candidates]
+
+    def spring_gaps_mm(self, step, solution):
+        return solution.gap_mm
+
+    def force_free(self, step, direction):
+        self._build(step)
+        solution = self.layer.force_free(direction)
+        if solution is not None:
+            self._release(step, solution)
         return solution
 
     def viscoelastic_increment(self, step, elastic, previous_load, load, weights):

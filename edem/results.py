@@ -113,8 +113,16 @@ class RunResult:
             **bed_summary(self.scene.cartilage),
             "warnings": list(self.scene.warnings) + list(self.warnings),
             **thickness_summary(self.scene.cartilage.layers),  # measured thickness only
+            **self._viscoelastic_summary(),
             **({} if self.preflight is None else {"preflight": self.preflight.as_dict()}),
         }
+
+    def _viscoelastic_summary(self) -> dict[str, Any]:
+        """The Kelvin-Voigt springs of a viscoelastic EDEM run (docs/method.md#4-viscoelastic-edem-thesis-chapter-6); none otherwise."""
+        viscous = self.scene.viscoelastic
+        if viscous is None or self.method != "edem":
+            return {}
+        return {"relaxation_time_s": viscous.relaxation_time_s, "contact_set": viscous.contact_set, "integrator": viscous.integrator}
 
     def timeseries_rows(self) -> list[dict[str, float]]:
         """One timeseries.csv row per time point of the run: the common columns, then the joint's

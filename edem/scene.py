@@ -26,6 +26,7 @@ from edem.mechanics import DOF_NAMES, rotation_matrix
 from edem.opensim_model import BodyPoses
 from edem.plausibility import scene_warnings
 from edem.springs import Cartilage, Ligament, Placement
+from edem.viscoelastic import CONTACT_SETS, DEFAULT_CONTACT_SET, integrator_problem
 from edem.thickness import CARTILAGE_KEYS, GEOMETRY_KEYS, array_layers, scene_layers, uses_layers
 from edem.tables import SceneTable, not_utf8
 from geometries.builders import build_geometry
@@ -49,7 +50,7 @@ SECTIONS = {
     "kinematics": None,  # checked by edem.loads
     "constraints": {"fixed_dofs"},
     "ligaments": {"name", "mobile_point_mm", "fixed_point_mm", "youngs_modulus_mpa", "area_mm2", "rest_length_mm"},
-    "viscoelastic": {"relaxation_time_s", "integrator", "allow_unstable"},
+    "viscoelastic": {"relaxation_time_s", "contact_set", "integrator", "allow_unstable"},
     "solver": {"method"},
     "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness", "time_scheme"},
     "opensim": None,  # checked by edem.opensim_model
@@ -59,11 +60,27 @@ FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm", "spring_
 
 @dataclass(frozen=True)
 class Viscoelastic:
-    """Kelvin-Voigt springs, damping = tau * stiffness (docs/method.md#4-viscoelastic-edem-thesis-chapter-6, eq. 6.13)."""
+    """Kelvin-Voigt springs, damping = tau * stiffness (docs/method.md#4-viscoelastic-edem-thesis-chapter-6, eq. 6.13).
+
+    ``contact_set``: how a time point decides the contact (:data:`edem.viscoelastic.CONTACT_SETS`:
+    "creeping", each spring's creeping compression, or "frozen", the thesis's increment);
+    ``integrator``: one of that contact set's (None: its default, "bdf2" or "exact"). InputError
+    naming the key for an integrator of the other set.
+    """
 
     relaxation_time_s: float
-    integrator: str = "exact"  # exact | rk2
+    integrator: str | None = None  # creeping: bdf2 | backward-euler; frozen: exact | rk2
     allow_unstable: bool = False  # run RK2 beyond dt > 2 tau (with a warning) instead of refusing
+    contact_set: str = DEFAULT_CONTACT_SET
+
+    def __post_init__(self) -> None:
+        if self.contact_set not in CONTACT_SETS:
+            raise InputError(f"unknown contact set {self.contact_set!r}", key="viscoelastic.contact_set", expected=" or ".join(CONTACT_SETS))
+        if self.integrator is None:
+            object.__setattr__(self, "integrator", CONTACT_SETS[self.contact_set].integrators[0])
+        problem = integrator_problem(self.contact_set, self.integrator)
+        if problem:
+            raise InputError(problem, key="viscoelastic.integrator", expected=" or ".join(CONTACT_SETS[self.contact_set].integrators))
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -523,10 +540,17 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
     viscoelastic = None
     if "viscoelastic" in data:
         ve = SceneTable(data["viscoelastic"], file, "viscoelastic", SECTIONS["viscoelastic"])
+        contact_set = ve.string("contact_set", DEFAULT_CONTACT_SET, tuple(CONTACT_SETS))
+        integrators = CONTACT_SETS[contact_set].integrators
+        integrator = ve.string("integrator", integrators[0], tuple(i for each in CONTACT_SETS.values() for i in each.integrators))
+        problem = integrator_problem(contact_set, integrator)
+        if problem:
+            raise ve.error("integrator", problem, " or ".join(integrators) + f' with contact_set = "{contact_set}"')
         viscoelastic = Viscoelastic(
             relaxation_time_s=ve.number("relaxation_time_s", positive=True, what="the relaxation time tau in s (> 0)"),
-            integrator=ve.string("integrator", "exact", ("exact", "rk2")),
+            integrator=integrator,
             allow_unstable=ve.boolean("allow_unstable", False),
+            contact_set=contact_set,
         )
 
     solver = SceneTable(data.get("solver", {}), file, "solver", SECTIONS["solver"])

@@ -20,7 +20,7 @@ from edem.results import RunResult, StepResult
 from geometries.rowwise import add_rows, row_dot
 from edem.scene import Scene
 from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, ligament_table, shear_terms, spring_geometry
-from edem.viscoelastic import check_rk2_stability, integrator_weights
+from edem.viscoelastic import viscoelastic_stepping
 
 
 #: the discrete methods: DEM (static, from M's initial pose at every time point) and EDEM (docs/method.md#2-edem-the-time-dependent-incremental-method)
@@ -101,11 +101,12 @@ def run(
     load = scene.load
     loads = scene.applied_loads()
     warnings: list[str] = constrained_moment_warning(loads, scene.fixed_dofs)
-    viscous = scene.viscoelastic if method == "edem" else None
+    # the Kelvin-Voigt springs' time steps (edem.viscoelastic: the contact set frozen as in the thesis, or creeping)
+    viscous = viscoelastic_stepping(scene, loads) if method == "edem" and scene.viscoelastic is not None else None
     if scene.viscoelastic is not None and viscous is None:
         warnings.append("[viscoelastic] is ignored by DEM, a static method: use --method edem")
-    if viscous is not None and viscous.integrator == "rk2":
-        warnings += check_rk2_stability(load.time_s, viscous.relaxation_time_s, viscous.allow_unstable, scene.source)
+    if viscous is not None:
+        warnings += viscous.warnings
     # Committed (elastic) spring forces, the EDEM push-back, one row per axis (3, n): gathers and
     # scatters of the candidates' columns run along contiguous rows (several times cheaper than
     # over (n, 3) rows).
@@ -168,7 +169,11 @@ def run(
         law = stack_elements(contact_law(geometry, cartilage, stored_normal), lig_law)
         contact_step = ContactStep(geometry, directions, law, stored_normal, lig_rows, lig_law, shear, scene.fixed_dofs, length_scale)
         try:
-            solution = bed.solve(contact_step, loads[k])
+            if viscous is None:
+                solution = bed.solve(contact_step, loads[k])
+            else:
+                contact_step = viscous.prepare(k, contact_step)
+                solution = viscous.solve(bed, contact_step, loads[k])
         except SolverError as exc:
             cause = (
                 f" (no spring is a candidate here: no part of the fixed body lies within h_max = "
@@ -191,10 +196,7 @@ def run(
         if viscous is None:
             u, elastic_force = solution.displacement, total_force
         else:
-            dt = float(t - load.time_s[k - 1]) if k else 0.0
-            previous = loads[k - 1] if k else np.zeros(6)
-            weights = integrator_weights(dt, viscous.relaxation_time_s, viscous.integrator)
-            u, elastic_force = bed.viscoelastic_increment(contact_step, solution, previous, loads[k], weights)
+            u, elastic_force = viscous.increment(bed, contact_step, solution, k, loads)
             if not np.all(np.isfinite(u)):
                 raise SolverError(f"time point {k} (t = {t:g} s): the viscoelastic integration diverged (non-finite displacement)")
         # Overflowed numbers pass every comparison below (NaN > limit is False): refuse them here.
@@ -206,8 +208,8 @@ def run(
                 "check the load's units and scale and the cartilage modulus"
             )
         contact = directions[:n_c].T @ total_force[:n_c]
-        if shear is not None:
-            contact = contact + shear.generalised_force(solution.displacement, solution.active[:n_c])
+        if shear is not None:  # (the step's: a creeping step's shear springs carry their dashpots' share too)
+            contact = contact + contact_step.shear.generalised_force(solution.displacement, solution.active[:n_c])
         spring_force = total_force[:n_c]
         # sum f (R X + b) / sum f = R (sum f X / sum f) + b: the candidates' centroids are only
         # placed at the pose if check_increment needs them.
@@ -225,6 +227,10 @@ def run(
         stored = np.zeros((3, n_springs))
         for axis in range(3):  # one contiguous scatter per axis: twice as fast as one 2-D scatter
             stored[axis, cand_idx] = committed[axis]
+        in_contact = np.zeros(n_springs, bool)
+        in_contact[cand_idx] = solution.active[:n_c]
+        if viscous is not None:
+            stored = viscous.commit(stored, in_contact)
         pose = Placement(rotation_matrix(u[3:]) @ pose.rotation, pose.translation_mm + u[:3], g0)
         remeasured = None
         if method == "dem":
@@ -239,8 +245,6 @@ def run(
         viscous_pressure = np.zeros(n_springs)
         if viscous is not None:
             viscous_pressure[cand_idx] = (total_force[:n_c] - elastic_force[:n_c]) / area_c
-        in_contact = np.zeros(n_springs, bool)
-        in_contact[cand_idx] = solution.active[:n_c]
         seconds["solve"] += time.perf_counter() - clock
         steps.append(
             StepResult(

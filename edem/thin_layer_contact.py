@@ -65,6 +65,7 @@ from geometries.errors import SolverError
 from edem.laws import LinearElements
 from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, singular_stiffness_error, unrestrained_dofs
 from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance
+from edem.viscoelastic import touch_motion
 
 
 @dataclass
@@ -437,8 +438,14 @@ class CoupledStep:
     pushback_force_n: np.ndarray | None = None  # (n_d,) a "carried" law's forces c, whose push-back C c adds to overlap_mm
 
     @staticmethod
-    def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law) -> "CoupledStep":
-        """``directions`` (n_c, 6) and ``carried_force_n`` (n_c,) are those of the candidates."""
+    def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law,
+              history_force_n: np.ndarray | None = None, gap_mm: np.ndarray | None = None) -> "CoupledStep":
+        """``directions`` (n_c, 6) and ``carried_force_n`` (n_c,) are those of the candidates.
+
+        A creeping Kelvin-Voigt step (:class:`edem.viscoelastic.Creep`; ``cartilage`` then c0 times
+        stiffer): ``history_force_n`` (n_springs,), forces over all of M's springs whose push-back
+        joins the carried forces' (-S_n), and ``gap_mm`` (n_springs,), a carried law's gaps at the
+        step's start (its overlap is then -gap instead of 0)."""
         cand = np.flatnonzero(geometry.candidate)
         law = cartilage.spring_law
         candidate_thickness = law.shear_length_mm(geometry.spring_length_mm[cand], geometry.candidate_thickness_mm(cartilage))  # the h of k_s = G / h
@@ -470,12 +477,14 @@ class CoupledStep:
         overlap = np.full(domain.shape, -np.inf)
         pushback = None
         if law.thin_layer == "carried":
-            overlap[is_candidate] = 0.0
+            overlap[is_candidate] = 0.0 if gap_mm is None else -gap_mm[domain[is_candidate]]
             if np.any(carried_force_n):
                 pushback = np.zeros(domain.shape)
                 pushback[is_candidate] = carried_force_n
         else:
             overlap[is_candidate] = (thickness - length)[is_candidate]
+        if history_force_n is not None:
+            pushback = history_force_n[domain] if pushback is None else pushback + history_force_n[domain]
         rows = np.zeros((domain.shape[0], 6))
         rows[is_candidate] = directions  # domain is sorted, so candidates keep their order
         column = None
@@ -530,6 +539,27 @@ class CoupledStep:
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
                 initial_active=initial, column=self.column, pushback_force_n=self.pushback_force_n,
             )
+        )
+
+    def force_free(self, direction: np.ndarray | None) -> ThinLayerSolution | None:
+        """The unloaded time point of a creeping step (``edem.beds.Bed.force_free``): with no force
+        anywhere the layer keeps the deflection of its carried forces, so a candidate's gap at u is
+        -d0 - g . u with d0 = o + C c (module docstring, "Carried forces")."""
+        carried = np.zeros(int(self.candidate.sum()))  # C c at the candidates
+        if self.pushback_force_n is not None:
+            carried = self.layer.deflection(self.pushback_force_n)[self.candidate]
+        overlap = self.overlap_mm[self.candidate] + carried
+        rows = self.directions[self.candidate]
+        u = touch_motion(-overlap, rows, self.ligament_rows, self.ligament_law, direction)
+        if u is None:
+            return None
+        gap = -overlap - rows @ u
+        tension = self.ligament_law.offset_n + self.ligament_law.stiffness_n_per_mm * (self.ligament_rows @ u)
+        n_c = rows.shape[0]
+        return ThinLayerSolution(
+            displacement=u, element_force_n=np.concatenate([np.zeros(n_c), tension]), active=np.zeros(n_c + tension.shape[0], bool),
+            iterations=0, force_residual_n=0.0, moment_residual_nmm=0.0, deflection_mm=-carried,  # w - C c with f = 0
+            gap_mm=gap, max_penetration_mm=0.0,
         )
 
     def _shear(self, shear: ShearTerms | None) -> ShearTerms | None:

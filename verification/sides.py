@@ -74,7 +74,9 @@ ANY_MODULES = ("geometries", "edem", "fem_reference", "verification")
 #: scene keys only the discrete bed reads: the FE continuum has no such option (the thin-layer
 #: coupling approximates the lateral coupling the continuum has anyway). The FE sides are run
 #: without them (side_inputs), so their results cannot depend on them.
-DEM_ONLY_OVERRIDES = tuple(f"cartilage.{key}" for key in bed_keys())
+DEM_ONLY_OVERRIDES = tuple(f"cartilage.{key}" for key in bed_keys()) + (
+    # how the discrete Kelvin-Voigt springs step (edem.viscoelastic); the FE twin steps by [fe] time_scheme
+    "viscoelastic.contact_set", "viscoelastic.integrator", "viscoelastic.allow_unstable")
 #: options of a case that reach the FE reference of its scene as fem_reference.run_scene's
 #: settings (fem_reference.settings.resolve_settings: they override the scene's [fe] table)
 FE_SCENE_OPTIONS = ("mesh_size_mm", "degree", "element", "layers_through_thickness")

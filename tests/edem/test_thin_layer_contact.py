@@ -109,15 +109,16 @@ def test_gap_log_on_the_coupled_layer_is_the_gap_law_at_small_strain_and_stiffer
 
 
 def test_gap_log_edem_and_viscoelastic_edem_balance_on_the_coupled_layer():
-    """EDEM's first step is DEM's; every step of EDEM and of viscoelastic EDEM balances the load
-    (elastic + viscous forces), and the dashpots hold the body back while loading."""
+    """EDEM's first step is DEM's; every step of EDEM and of viscoelastic EDEM (the thesis's
+    increment: the creeping contact set takes linear laws only) balances the load (elastic +
+    viscous forces), and the dashpots hold the body back while loading."""
     load = np.column_stack([np.zeros(5), np.zeros(5), np.linspace(300.0, 1500.0, 5)])
     common = dict(fixed_dofs=CYLINDER_DOFS, time_s=np.arange(5.0), poissons_ratio=0.45, law="gap-log", thickness_mm=2.0)
     cylinder, tibia = cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 2.0)
     scene = coupled(make_scene(cylinder, tibia, load, **common))
     dem, edem = run(scene, "dem"), run(scene, "edem")
     np.testing.assert_allclose(edem.steps[0].pressure_mpa, dem.steps[0].pressure_mpa, rtol=1e-12, atol=1e-14)
-    slow_scene = coupled(make_scene(cylinder, tibia, load, viscoelastic=Viscoelastic(2.0), **common))
+    slow_scene = coupled(make_scene(cylinder, tibia, load, viscoelastic=Viscoelastic(2.0, contact_set="frozen"), **common))
     slow = run(slow_scene, "edem")
     for step in edem.steps + slow.steps:
         assert abs(balance(scene, step)[2]) <= 1e-9 * step.force_n[2]
@@ -319,16 +320,18 @@ def test_edem_load_then_unload_retraces_its_path_on_the_coupled_layer():
     assert gaps[0] / gaps[1] == pytest.approx(2.0, rel=0.1)
 
 
+@pytest.mark.parametrize("contact_set", ("creeping", "frozen"))
 @pytest.mark.parametrize("symbol", ("pade", "two-pole"))
-def test_viscoelastic_edem_on_the_coupled_layer(symbol):
+def test_viscoelastic_edem_on_the_coupled_layer(symbol, contact_set):
     """tau -> 0 is elastic EDEM; with tau, elastic + viscous forces balance the load every step."""
     load = np.column_stack([np.zeros(6), np.zeros(6), np.linspace(0.0, 1500.0, 6)])
     common = dict(fixed_dofs=CYLINDER_DOFS, time_s=np.arange(6.0), poissons_ratio=0.45)
     cylinder, tibia = cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5)
     elastic = run(coupled(make_scene(cylinder, tibia, load, **common), thin_layer_symbol=symbol), "edem")
-    fast = run(coupled(make_scene(cylinder, tibia, load, viscoelastic=Viscoelastic(1e-9), **common), thin_layer_symbol=symbol), "edem")
+    fast = run(coupled(make_scene(cylinder, tibia, load, viscoelastic=Viscoelastic(1e-9, contact_set=contact_set), **common),
+                       thin_layer_symbol=symbol), "edem")
     np.testing.assert_allclose([s.displacement_mm[2] for s in fast.steps], [s.displacement_mm[2] for s in elastic.steps], rtol=1e-7)
-    scene = coupled(make_scene(cylinder, tibia, load, viscoelastic=Viscoelastic(2.0), **common), thin_layer_symbol=symbol)
+    scene = coupled(make_scene(cylinder, tibia, load, viscoelastic=Viscoelastic(2.0, contact_set=contact_set), **common), thin_layer_symbol=symbol)
     slow = run(scene, "edem")
     for step in slow.steps:
         assert np.all(step.pressure_mpa - step.viscous_pressure_mpa >= 0.0)
