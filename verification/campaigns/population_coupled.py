@@ -1,9 +1,9 @@
 """``population-coupled``: the 1000 subjects of ``population`` on the coupled thin layer (Pade symbol).
 
 The same seeded subject-like ankles, stance and 1.5 mm spring mesh as :mod:`.population`, with
-``cartilage.coupling = "thin-layer"``: the scene's threshold law, whose layer is the candidate
-springs with a free lateral face at their edge. The spread of the population under the accurate
-bed, beside the independent springs' (a second campaign, so the two stay cached side by side).
+``cartilage.coupling = "thin-layer"`` (the scene's default): the gap law's layer bonded to the talus
+over its whole surface. The spread of the population under the accurate bed, beside the
+independent springs' (a second campaign, so the two stay cached side by side).
 """
 
 from __future__ import annotations
