@@ -13,7 +13,7 @@ On the plafond t is taken along the radius, towards the plafond's axis: the subj
 plafond's depressions have shoulders curved more tightly than the layer is thick (radius 0.4-0.8
 mm), over which an offset along the normal folds; along the radius the layer stays a graph, and
 measured along the normal it is t on the idealised plafond and the ridge's crest, within 2 % of t
-on the ridge's flanks and 0.75-1.09 t on the default subject's depression shoulders.
+on the ridge's flanks and 0.76-1.11 t on the default subject's depression shoulders.
 The thickness is the centre value times a taper of each margin (:func:`layer_thickness_mm`),
 which reaches zero on the articular margin with a zero slope: the articular surface meets its
 bone tangentially, and no rim is a step.
@@ -33,11 +33,12 @@ from geometries.surface import TriangleSurface
 #: margin to its centre value over this distance
 DEFAULT_TAPER_MM = 3.0
 #: default centre (plateau) thickness of the talar and tibial layers (mm): with the default 3 mm
-#: taper their area-weighted means on the ideal ankle come out at 1.09 and 1.04 mm (docs/references.md,
-#: Millington et al. 2007: talar 1.10 +- 0.18 mm, tibial 1.16 +- 0.14 mm), and their sum, 2.5 mm,
-#: is the radiographic joint space of the ankle (Goker et al. 2009: 2.44-2.56 mm)
+#: taper their area-weighted means on the ideal ankle come out at 1.09 mm (talus) and 1.14 mm (the
+#: plafond), the published means (docs/references.md, Millington et al. 2007: talar 1.10 +- 0.18 mm,
+#: tibial 1.16 +- 0.14 mm), and their sum, 2.7 mm, is within a standard deviation of the ankle's
+#: radiographic joint space (Goker et al. 2009: 2.44-2.56 +- 0.5 mm)
 DEFAULT_TALAR_MM = 1.3
-DEFAULT_TIBIAL_MM = 1.2
+DEFAULT_TIBIAL_MM = 1.4
 #: how far below the tibial mesh the nearest talar spring origin is placed (mm): touching, and no
 #: spring starts compressed
 TOUCH_CLEARANCE_MM = 1e-4

@@ -45,12 +45,12 @@ SUBJECT_RANGES: dict[str, tuple[float, float]] = {
     "tilt_deg": (0.0, 4.0),
     # gap between the medial talar rim and the medial malleolus facet: ~1-2.5 mm
     "malleolus_gap_mm": (1.0, 2.5),
-    # centre thickness of the talar and tibial cartilage (with cartilage = true): the published
-    # means (docs/references.md: talar 1.10 +- 0.18 mm and tibial 1.16 +- 0.14 mm by
-    # stereophotography, talar 1.34 +- 0.14 mm by MRI) within about two standard deviations, as
-    # the centre value of a layer whose tapered margins bring its mean about 0.2 mm lower
+    # centre thickness of the talar and tibial cartilage (with cartilage = true): a layer whose
+    # tapered margins bring its mean to 0.81-0.84 of its centre value, so that the means cover the
+    # published ones (docs/references.md: talar 1.10 +- 0.18 mm and tibial 1.16 +- 0.14 mm by
+    # stereophotography, talar 1.34 +- 0.14 mm by MRI) within about two standard deviations
     "talar_cartilage_mm": (1.0, 1.7),
-    "tibial_cartilage_mm": (0.9, 1.5),
+    "tibial_cartilage_mm": (1.0, 1.7),
 }
 #: the parameters of one mode only (docs/method.md#8-built-in-geometries): the thesis's kind of
 #: plafond, placed plafond_gap_mm above the talus (cartilage = false), or the bones with cartilage,
