@@ -85,11 +85,12 @@ def ideal_ankle(
         radius R_F = (R + t_talus) (1 + ``incongruity``) (default 0.08: flatter than the talar
         articular surface, so the two do not conform), ``plafond_length_mm`` (default 30) long
         (arc length, centred over the dome) and as wide as the talus plus ``malleolus_gap_mm`` on
-        each side; its bone lies ``tibial_cartilage_mm`` (default 1.2) above it, the layer tapered
+        each side; its bone lies ``tibial_cartilage_mm`` (default 1.4) above it, the layer tapered
         at the plafond's margins as the talar one. ``plafond_tilt_deg`` (default 0) turns the
         tibia about y. The tibia is lifted until its articular surface touches the talar one (a
-        line along x over the dome top without tilt, a point with it; the meshes' facets to
-        1e-4 mm, so that no spring starts compressed): the patch grows from there with the load. The malleolus (``malleolus=True``): the vertical wall x = -(width/2 +
+        line along x over the dome top without tilt, a point with it; the meshes to 1e-4 mm, so
+        that no spring starts compressed): the patch grows from there with the load;
+      * the malleolus (``malleolus=True``): the vertical wall x = -(width/2 +
         ``malleolus_gap_mm``) facing laterally, 0.6 R deep below the plafond's medial edge,
         with a uniform layer of the tibial thickness (its bone the wall moved medially); the
         dome's rays never reach it.
@@ -247,11 +248,11 @@ def _ideal_with_cartilage(p: dict, R: float, W: float, arc: float, tilt: float, 
     half_width, half_arc_mm, half_length = W / 2.0, R * arc / 2.0, p["plafond_length_mm"] / 2.0
     medial_x = -(half_width + p["malleolus_gap_mm"])
     lateral_x = half_width + p["malleolus_gap_mm"]
-    widest = min(half_width, half_arc_mm, half_length)
-    if taper > widest:
+    narrowest = min(half_width, half_arc_mm, half_length)
+    if taper > narrowest:
         raise InputError(
-            f"ideal_ankle: a {taper:g} mm taper leaves no plateau of the centre thickness on a layer {2 * widest:g} mm across",
-            key="geometry.cartilage_taper_mm", expected=f"at most {widest:g} mm (half the narrowest of width_mm, the talar arc length and plafond_length_mm)",
+            f"ideal_ankle: a {taper:g} mm taper leaves no plateau of the centre thickness on a layer {2 * narrowest:g} mm across",
+            key="geometry.cartilage_taper_mm", expected=f"at most {narrowest:g} mm (half the narrowest of width_mm, the talar arc length and plafond_length_mm)",
         )
     radius_f = (R + t_talus) * (1.0 + p["incongruity"])  # the plafond's articular radius
     if half_length / radius_f > math.radians(80.0):

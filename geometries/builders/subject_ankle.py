@@ -172,8 +172,8 @@ def subject_ankle(
 
     With ``cartilage = true`` (the default) the surfaces above are the subchondral bones and both
     carry an articular layer (:mod:`geometries.builders.articular`), as on the idealised ankle:
-    the talar one ``talar_cartilage_mm`` thick at its centre, out along the radius from the
-    bone, the tibial one ``tibial_cartilage_mm`` towards the plafond's axis, each tapered to 0
+    the talar one ``talar_cartilage_mm`` thick at its centre, out along the bone's normal, the
+    tibial one ``tibial_cartilage_mm`` towards the plafond's axis, each tapered to 0
     at its margin over ``cartilage_taper_mm`` (default 3); the malleolus wall carries a uniform
     layer of the tibial thickness. The plafond's articular radius is then (R + t_talus) (1 +
     ``incongruity``): it is incongruent with the talar articular surface, keeps its ridge and
