@@ -356,8 +356,10 @@ def solve(scene: Scene, method: str | None = None, *, progress: Callable[[int], 
     InputError
         An unknown method.
     SolverError
-        A time point without equilibrium (the message names it and says why), or a scene the
-        pre-flight refuses (springs out of reach, a load the constraints carry entirely).
+        A time point without equilibrium (the message names it and says why), a scene the
+        pre-flight refuses (springs out of reach, a load the constraints carry entirely), or a
+        result whose springs are compressed past their length, the bones through each other
+        (the time points and shares named; ``scene.allow_bone_overlap`` keeps it, warned).
 
     Warns
     -----

@@ -22,7 +22,9 @@ import numpy as np
 from geometries.builders import SUBJECT_RANGES, SUBJECT_THESIS_ONLY
 from verification.campaign_model import Campaign, Case, Figure
 
-#: measured: 284 s for the 1000 subjects with --jobs 2 on the shared 2-core machine (load 3-9)
+#: measured: 284 s for the 1000 subjects with --jobs 2 on the shared 2-core machine (load 3-9), on the
+#: threshold law; on the gap law and the subjects' cartilage (2026-11-28) a sample of 40 took a median
+#: 0.37 s a subject in one process at load 3-4, 185 s projected for 1000 on 2 cores: the figure stands
 EXPECTED_TIME_S = 284.0
 
 POPULATION_SCENE = "subject-stance"
