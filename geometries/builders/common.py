@@ -200,6 +200,18 @@ def mode_parameters(builder: str, checked: dict[str, Any], thesis_defaults: dict
 # --------------------------------------------------------------------------------------------
 
 
+def ankle_geometry(radius_mm: float, mobile: TriangleSurface, fixed: TriangleSurface, ligaments: tuple[LigamentAttachment, ...],
+                   description: str, parameters: dict, bones: tuple[TriangleSurface, TriangleSurface] | None = None,
+                   contact_point_mm: np.ndarray | None = None) -> BuiltGeometry:
+    """An ankle builder's result: the ankle axis is the talar cylinder's, along x through (0, 0,
+    -R); G the centroid of M (the default); ``bones`` (talar, tibial) under the articular
+    surfaces M and F when the ankle has cartilage."""
+    mobile_bone, fixed_bone = bones if bones is not None else (None, None)
+    return BuiltGeometry(mobile=mobile, fixed=fixed, reference_point_mm=None, ankle_axis_point_mm=np.array([0.0, 0.0, -radius_mm]),
+                         ankle_axis_direction=np.array([1.0, 0.0, 0.0]), ligaments=ligaments, description=description, parameters=parameters,
+                         mobile_bone=mobile_bone, fixed_bone=fixed_bone, contact_point_mm=contact_point_mm)
+
+
 def lifted(ligaments: tuple[LigamentAttachment, ...], lift_mm: float) -> tuple[LigamentAttachment, ...]:
     """The ligaments with their fixed (tibial, fibular) points moved up by ``lift_mm`` with the tibia."""
     up = np.array([0.0, 0.0, lift_mm])

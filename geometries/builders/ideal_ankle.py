@@ -10,7 +10,7 @@ import numpy as np
 
 from geometries.builders.articular import (DEFAULT_TALAR_MM, DEFAULT_TAPER_MM, DEFAULT_TIBIAL_MM, layer_thickness_mm,
                                            talus_with_cartilage, tibia_with_cartilage)
-from geometries.builders.common import BuiltGeometry, Param, ankle_ligaments, lifted, mode_parameters, rotation_about_y, validate_parameters
+from geometries.builders.common import BuiltGeometry, Param, ankle_geometry, ankle_ligaments, lifted, mode_parameters, rotation_about_y, validate_parameters
 from geometries.builders.gmsh_session import gmsh_model, gmsh_triangles, orient_like
 from geometries.errors import InputError
 from geometries.surface import TriangleSurface
@@ -194,16 +194,7 @@ def ideal_ankle(
            if p["malleolus"] else "")
         + "; no cartilage (the thesis's idealisation). Ligament attachments are plausible anatomical placements, not measured."
     )
-    return BuiltGeometry(
-        mobile=mobile,
-        fixed=fixed,
-        reference_point_mm=None,
-        ankle_axis_point_mm=np.array([0.0, 0.0, -R]),
-        ankle_axis_direction=np.array([1.0, 0.0, 0.0]),
-        ligaments=ankle_ligaments(R, W / 2.0, medial_x - 2.0, W / 2.0 + 6.0, rotation_about_y(tilt), pivot),
-        description=description,
-        parameters=p,
-    )
+    return ankle_geometry(R, mobile, fixed, ankle_ligaments(R, W / 2.0, medial_x - 2.0, W / 2.0 + 6.0, rotation_about_y(tilt), pivot), description, p)
 
 
 def _check_malleolus(R: float, W: float, arc: float, tilt: float, pivot_z: float, malleolus_gap: float) -> None:
@@ -291,19 +282,8 @@ def _ideal_with_cartilage(p: dict, R: float, W: float, arc: float, tilt: float, 
         f"{fixed.n_triangles} tibial triangles, gmsh, size {size:.3g} mm). Ligament attachments are plausible "
         "anatomical placements, not measured."
     )
-    return BuiltGeometry(
-        mobile=mobile,
-        fixed=fixed,
-        reference_point_mm=None,
-        ankle_axis_point_mm=np.array([0.0, 0.0, -R]),
-        ankle_axis_direction=np.array([1.0, 0.0, 0.0]),
-        ligaments=lifted(ankle_ligaments(R, half_width, medial_x - 2.0, half_width + 6.0, rotation, pivot), lift),
-        description=description,
-        parameters=p,
-        mobile_bone=mobile_bone,
-        fixed_bone=fixed_bone,
-        contact_point_mm=touch,
-    )
+    ligaments = lifted(ankle_ligaments(R, half_width, medial_x - 2.0, half_width + 6.0, rotation, pivot), lift)
+    return ankle_geometry(R, mobile, fixed, ligaments, description, p, bones=(mobile_bone, fixed_bone), contact_point_mm=touch)
 
 
 def ideal_candidate_fraction(radius_mm: float, gap_mm: float, max_spring_length_mm: float,

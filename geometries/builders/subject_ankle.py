@@ -12,7 +12,7 @@ import numpy as np
 
 from geometries.builders.articular import (DEFAULT_TALAR_MM, DEFAULT_TAPER_MM, DEFAULT_TIBIAL_MM, layer_thickness_mm,
                                            talus_with_cartilage, tibia_with_cartilage)
-from geometries.builders.common import BuiltGeometry, Param, ankle_ligaments, lifted, mode_parameters, rotation_about_y, validate_parameters
+from geometries.builders.common import BuiltGeometry, Param, ankle_geometry, ankle_ligaments, lifted, mode_parameters, rotation_about_y, validate_parameters
 from geometries.builders.gmsh_session import mesh_planar_domain, orient_like
 from geometries.errors import InputError
 from geometries.surface import TriangleSurface
@@ -315,16 +315,7 @@ def subject_ankle(
         + ". Both surfaces: gmsh-meshed planar domains mapped onto the parametric surfaces; no cartilage. "
         "Ligament attachments are plausible anatomical placements, not measured."
     )
-    return BuiltGeometry(
-        mobile=mobile,
-        fixed=fixed,
-        reference_point_mm=None,
-        ankle_axis_point_mm=np.array([0.0, 0.0, -R]),
-        ankle_axis_direction=np.array([1.0, 0.0, 0.0]),
-        ligaments=ankle_ligaments(R, W / 2.0, medial_x - 2.0, hw_max + 6.0, rotation_about_y(tilt), pivot),
-        description=description,
-        parameters=resolved,
-    )
+    return ankle_geometry(R, mobile, fixed, ankle_ligaments(R, W / 2.0, medial_x - 2.0, hw_max + 6.0, rotation_about_y(tilt), pivot), description, resolved)
 
 
 def _subject_with_cartilage(resolved: dict[str, Any], params: np.ndarray, triangles: np.ndarray, R: float, U: float, S: float,
@@ -367,16 +358,5 @@ def _subject_with_cartilage(resolved: dict[str, Any], params: np.ndarray, triang
         + (f"parameters drawn with seed {seed} within documented anatomical ranges" if seed is not None else "default parameters")
         + ". Ligament attachments are plausible anatomical placements, not measured."
     )
-    return BuiltGeometry(
-        mobile=mobile,
-        fixed=fixed,
-        reference_point_mm=None,
-        ankle_axis_point_mm=np.array([0.0, 0.0, -R]),
-        ankle_axis_direction=np.array([1.0, 0.0, 0.0]),
-        ligaments=lifted(ankle_ligaments(R, resolved["talar_width_mm"] / 2.0, medial_x - 2.0, lateral_x + 4.0, rotation, pivot), lift),
-        description=description,
-        parameters=resolved,
-        mobile_bone=mobile_bone,
-        fixed_bone=fixed_bone,
-        contact_point_mm=touch,
-    )
+    ligaments = lifted(ankle_ligaments(R, resolved["talar_width_mm"] / 2.0, medial_x - 2.0, lateral_x + 4.0, rotation, pivot), lift)
+    return ankle_geometry(R, mobile, fixed, ligaments, description, resolved, bones=(mobile_bone, fixed_bone), contact_point_mm=touch)
