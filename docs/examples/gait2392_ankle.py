@@ -19,11 +19,12 @@ columns are in the tibia's axes and turn with it).
 Cartilage: a talar layer of 1.3 mm and a tibial layer of 1.4 mm at their centres, tapered to 0 at
 their margins (``[geometry] talar_cartilage_mm``, ``tibial_cartilage_mm`` of the built-in ankle,
 whose bones the thickness is measured to: docs/method.md#measured-cartilage-thickness), the linear
-gap law on the two layers in series, the coupled thin layer (the built-in scenes' default bed),
-E 10.35 MPa, nu 0.42 (the thesis's values). The talus carries the builder's 3046 springs (0.63
-mm across); the script prints their size and the pre-flight's count of springs in the expected
-contact patch (about 480). With ``SPRING_SPACING_MM = 0.5`` (edges of at most 0.5 mm, 15.7k springs) the
-peak contact area moves by 0.6 % and the peak pressure by 0.4 %.
+gap law on the two layers in series, the coupled thin layer (the built-in scenes' default bed:
+the sandwich of the two layers), E 10.35 MPa, nu 0.42 (the thesis's values). The talus carries
+the builder's 3046 springs (0.63 mm across); the script prints their size and the pre-flight's
+count of springs in the expected contact patch (about 480). With ``SPRING_SPACING_MM = 0.5``
+(edges of at most 0.5 mm, 15.7k springs) the peak contact area moves by 0.4 % and the peak
+pressure by 0.2 %.
 
 This set-up replaces one on bone surfaces without cartilage driven by the same reaction, whose
 springs passed through the bones at nearly every time point: such a run is refused now (exit 2,
@@ -42,8 +43,8 @@ The constraints hold the rest: frictionless layers on cylinders about the ankle 
 load along that axis, so the reaction's component along it goes to the ``tx`` constraint and
 its moments to the fixed rotations (``edem`` warns about these); the concave plafond carries the
 antero-posterior shear (up to about 220 N). The script also prints the peak contact area and
-peak pressure: 703 mm^2 and 8.2 MPa near 81 % stance (2026-11-28; reported, not asserted), the
-area 482-703 mm^2 over the instants above 1 kN, as the patch spreads over the plafond's 30 mm.
+peak pressure: 696 mm^2 and 8.3 MPa near 81 % stance (2026-11-28; reported, not asserted), the
+area 469-696 mm^2 over the instants above 1 kN, as the patch spreads over the plafond's 30 mm.
 
 Data
 ----
