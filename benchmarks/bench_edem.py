@@ -24,7 +24,7 @@ from geometries.builders import build_geometry
 
 def stance_like_scene(mesh_size_mm: float, n_steps: int, **cartilage) -> Scene:
     """The idealised ankle's stance; ``cartilage``: Scene.from_arrays's cartilage keys beyond E and nu."""
-    geometry = build_geometry("ideal_ankle", {"mesh_size_mm": mesh_size_mm})
+    geometry = build_geometry("ideal_ankle", {"mesh_size_mm": mesh_size_mm, "cartilage": False})  # the thesis's cylinder under a plane
     t = np.linspace(0.0, 0.64, n_steps)
     s = t / t[-1]
     force = np.column_stack([60.0 * s, -40.0 * np.sin(np.pi * s), 50.0 + 4140.0 * s])

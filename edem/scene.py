@@ -51,7 +51,7 @@ SECTIONS = {
     "constraints": {"fixed_dofs"},
     "ligaments": {"name", "mobile_point_mm", "fixed_point_mm", "youngs_modulus_mpa", "area_mm2", "rest_length_mm"},
     "viscoelastic": {"relaxation_time_s", "contact_set", "integrator", "allow_unstable"},
-    "solver": {"method"},
+    "solver": {"method", "allow_bone_overlap"},
     "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness", "time_scheme"},
     "opensim": None,  # checked by edem.opensim_model
 }
@@ -106,6 +106,9 @@ class Scene:
     viscoelastic: Viscoelastic | None = None
     method: str = "edem"
     fe: dict | None = None
+    # [solver] allow_bone_overlap: a result whose springs are compressed past their layer (the bones
+    # through each other) is kept with a warning instead of refused (stability studies)
+    allow_bone_overlap: bool = False
     warnings: tuple[str, ...] = ()
 
     # The springs' arrays are formed once per scene (a run reads them, and every RunResult's
@@ -192,6 +195,7 @@ class Scene:
         ligaments: tuple[Ligament, ...] = (),
         viscoelastic: Viscoelastic | None = None,
         method: str = "edem",
+        allow_bone_overlap: bool = False,
         name: str = "scene",
         description: str = "",
         mobile_bone: tuple[np.ndarray, np.ndarray] | None = None,
@@ -237,9 +241,9 @@ class Scene:
         reference_point_mm : (3,) float, optional
             G, the point M's rotations and moments refer to; default the area-weighted centroid
             of M's triangles.
-        kinematics, ligaments, viscoelastic, method, name, description
+        kinematics, ligaments, viscoelastic, method, allow_bone_overlap, name, description
             As the scene file's ``[kinematics]``, ``[[ligaments]]``, ``[viscoelastic]``,
-            ``[solver] method`` and ``[scene]``.
+            ``[solver] method`` and ``allow_bone_overlap`` and ``[scene]``.
         mobile_bone, fixed_bone : (vertices (m, 3) mm, triangles (k, 3) int), optional
             Subchondral bone under M's / F's surface: that side's cartilage thickness is measured
             (docs/method.md#measured-cartilage-thickness); with either, or a per-side thickness,
@@ -324,6 +328,7 @@ class Scene:
             ligaments=tuple(ligaments),
             viscoelastic=viscoelastic,
             method=method,
+            allow_bone_overlap=bool(allow_bone_overlap),
             warnings=tuple(notes),
         )
 
@@ -361,7 +366,8 @@ def cartilage_from_table(table: dict[str, Any], file: str | Path, section: str =
     spring_law = LAWS[law]
     thickness = cart.optional_number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
     if layered and thickness is not None:
-        raise cart.error("thickness_mm", "per-side layers replace thickness_mm", "no thickness_mm with a bone mesh or a per-side thickness")
+        raise cart.error("thickness_mm", "per-side layers replace thickness_mm",
+                         "no thickness_mm with a bone mesh, a per-side thickness or a built-in ankle's cartilage (geometry.cartilage = false: the thesis's geometry without it)")
     if spring_law.needs_thickness and thickness is None and not layered:
         raise cart.error("thickness_mm", f"the '{law}' law needs the undeformed thickness", "a thickness in mm > 0")
     # Beyond a kilometre the ray window is no longer a length on a joint (and its float32 reach overflows).
@@ -506,9 +512,9 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         from edem.opensim_model import model_geometry
 
         mobile, fixed, reference_point, kinematics, load = model_geometry(data, path, cartilage, load, notes)
-        attachments, geo_description = {}, ""
+        attachments, geo_description, built_bones = {}, "", None
     else:
-        mobile, fixed, reference_point, attachments, geo_description = _load_geometry(data["geometry"], path, cartilage, notes)
+        mobile, fixed, reference_point, attachments, geo_description, built_bones = _load_geometry(data["geometry"], path, cartilage, notes)
         kinematics = None
         if "kinematics" in data:
             kinematics = angle_series_from_table(data["kinematics"], path, load.time_s, load.given_time_s)
@@ -526,7 +532,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             file=mobile.source or file, key="geometry.mobile" if mobile.source else "geometry",
             expected="a surface mesh whose triangles have distinct corners",
         )
-    layers = scene_layers(data, path, mobile, fixed, np.flatnonzero(mobile.areas_mm2 > 0.0), cartilage.max_spring_length_mm, notes)
+    layers = scene_layers(data, path, mobile, fixed, np.flatnonzero(mobile.areas_mm2 > 0.0), cartilage.max_spring_length_mm, notes, built_bones)
     if layers is not None:
         cartilage = replace(cartilage, layers=layers)
 
@@ -555,6 +561,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
 
     solver = SceneTable(data.get("solver", {}), file, "solver", SECTIONS["solver"])
     method = solver.string("method", "edem", ("edem", "dem"))
+    allow_bone_overlap = solver.boolean("allow_bone_overlap", False)
     fe = data.get("fe")
     if fe is not None:
         SceneTable(fe, file, "fe", SECTIONS["fe"])
@@ -574,6 +581,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         viscoelastic=viscoelastic,
         method=method,
         fe=fe,
+        allow_bone_overlap=allow_bone_overlap,
         warnings=tuple(notes),
     )
 
@@ -615,9 +623,11 @@ def _ligament(entry: dict[str, Any], index: int, file: str, attachments: dict[st
 
 
 def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warnings_out: list[str]):
-    """Mobile and fixed surfaces from a built-in generator or mesh files, oriented and checked."""
+    """Mobile and fixed surfaces from a built-in generator or mesh files, oriented and checked,
+    with the bones a built-in ankle builds under its cartilage (by side; None without them)."""
     file = str(path)
     reference_point = None
+    built_bones = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if "builtin" in table:
@@ -632,6 +642,8 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
             reference_point = built.reference_point_mm
             attachments = {lig.name: (lig.mobile_point_mm, lig.fixed_point_mm) for lig in built.ligaments}
             description = built.description
+            if built.mobile_bone is not None:
+                built_bones = {"mobile": built.mobile_bone, "fixed": built.fixed_bone}
         else:
             from geometries.repair import prepare_pair
 
@@ -652,4 +664,4 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
         # Area-weighted centroid of the articular surface (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs default for G).
         areas = mobile.areas_mm2
         reference_point = (mobile.centroids_mm * areas[:, None]).sum(axis=0) / areas.sum()
-    return mobile, fixed, np.asarray(reference_point, float), attachments, description
+    return mobile, fixed, np.asarray(reference_point, float), attachments, description, built_bones

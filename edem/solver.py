@@ -27,14 +27,23 @@ from edem.viscoelastic import viscoelastic_stepping
 METHODS = ("edem", "dem")
 
 
+#: a gap-law spring overlapping by less than this share of its thickness touches rather than
+#: starts compressed: its preload, p = 0.01 E' (0.26 MPa on the ankles' cartilage), is well below
+#: the pressures a load makes. The built-in ankles' articular surfaces, placed touching at the
+#: neutral pose, overlap by up to 0.02 mm (0.7 % of T) at the stance's first ankle angle, -3 deg:
+#: the subject-like trochlea is wider anteriorly, so the mortise tightens as the tibia turns
+TOUCHING_OVERLAP = 1e-2
+
+
 def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> list[str]:
-    """Say so when a gap-law bed starts compressed (t larger than the gap h): it pushes the
-    bodies apart before any load, so the first time point's result includes that preload."""
+    """Say so when a gap-law bed starts compressed (t larger than the gap h, beyond
+    :data:`TOUCHING_OVERLAP`): it pushes the bodies apart before any load, so the first time
+    point's result includes that preload."""
     t = geometry.candidate_thickness_mm(cartilage)  # (measured thickness: one per candidate)
     if t is None or not cartilage.spring_law.needs_thickness:
         return []
     h = geometry.candidate_length_mm
-    compressed = h < t * (1.0 - 1e-9)
+    compressed = h < t * (1.0 - TOUCHING_OVERLAP)
     if not np.any(compressed):
         return []
     thickness = f"thickness t = {float(t):g} mm" if np.ndim(t) == 0 else "local total thickness t_M + t_F"
@@ -48,6 +57,40 @@ def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> li
 def compression_ratio(geometry: SpringGeometry, cartilage: Cartilage, approach_mm: np.ndarray) -> np.ndarray:
     """Compression over undeformed length of the candidate springs after an approach (strain)."""
     return cartilage.spring_law.strain(geometry.candidate_length_mm, approach_mm, geometry.candidate_thickness_mm(cartilage))
+
+
+def _index_runs(indices: list[int]) -> str:
+    """'1-20, 22, 24-47': consecutive time point indices as runs."""
+    runs: list[list[int]] = []
+    for k in indices:
+        if runs and k == runs[-1][1] + 1:
+            runs[-1][1] = k
+        else:
+            runs.append([k, k])
+    return ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in runs)
+
+
+def bone_overlap_message(overlaps: list[tuple[int, float, int, float]], n_times: int, method: str) -> str:
+    """Why a result whose springs are compressed past their length is refused: the time points
+    (index runs and times), the springs and their share of those in contact, the worst time point
+    (``overlaps``: (k, t, springs, share) per time point), and what to do."""
+    k, t, count, share = (list(x) for x in zip(*overlaps))
+    worst = max(overlaps, key=lambda item: item[3])
+
+    def span(values: list, fmt: str) -> str:
+        low, high = min(values), max(values)
+        return format(low, fmt) if low == high else f"{format(low, fmt)}-{format(high, fmt)}"
+
+    return (
+        f"springs are compressed past their length (strain >= 100 %: the bone-to-bone length is below 0, the bones pass "
+        f"through each other) at {len(k)} of {n_times} time points (k = {_index_runs(k)}; t = {span(t, 'g')} s): "
+        f"{span(count, 'd')} springs, {span([100 * x for x in share], '.3g')} % of those in contact (worst: k = {worst[0]}, "
+        f"t = {worst[1]:g} s, {worst[2]} springs, {100 * worst[3]:.3g} %). The spring bed cannot represent that contact: "
+        "give the bodies their cartilage (bone meshes under articular surfaces, or a thickness that matches the gap), "
+        "a load in the joint's range"
+        + (", or more time points ([load] max_step_s)" if method == "edem" else "")
+        + "; [solver] allow_bone_overlap = true keeps such a result (stability studies)"
+    )
 
 
 def constrained_moment_warning(loads: np.ndarray, fixed_dofs: tuple[str, ...]) -> list[str]:
@@ -115,6 +158,7 @@ def run(
     bed = scene_bed(scene, caster)
     steps: list[StepResult] = []
     unbalanced: list[tuple[int, float]] = []  # DEM time points whose re-measured springs miss the load
+    overlaps: list[tuple[int, float, int, float]] = []  # time points whose springs pass their length: (k, t, springs, share in contact)
     free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
     ligaments = ligament_table(scene.ligaments)
     reference_rows = generalised_directions(spring_centroid, spring_normal, g0)
@@ -189,10 +233,13 @@ def run(
             warnings += bed.first_step_warnings(contact_step, solution)
         overstrained = int((solution.active[:n_c] & (compression_ratio(geometry, cartilage, directions[:n_c] @ solution.displacement) >= 1.0)).sum())
         if overstrained:
-            warnings.append(
-                f"time point {k} (t = {t:g} s): {overstrained} springs compressed past their length "
-                "(strain >= 100 %): the spring bed is outside its range" + (", use more time points ([load] max_step_s)" if method == "edem" else "")
-            )
+            in_contact_now = max(int(solution.active[:n_c].sum()), 1)
+            overlaps.append((k, float(t), overstrained, overstrained / in_contact_now))
+            if scene.allow_bone_overlap:
+                warnings.append(
+                    f"time point {k} (t = {t:g} s): {overstrained} springs compressed past their length "
+                    "(strain >= 100 %): the spring bed is outside its range" + (", use more time points ([load] max_step_s)" if method == "edem" else "")
+                )
         if viscous is None:
             u, elastic_force = solution.displacement, total_force
         else:
@@ -273,6 +320,8 @@ def run(
         )
         if progress is not None:
             progress(k)
+    if overlaps and not scene.allow_bone_overlap:
+        raise SolverError(bone_overlap_message(overlaps, len(load.time_s), method))
     if unbalanced:
         worst = max(unbalanced, key=lambda item: item[1])
         warnings.append(remeasured_warning(len(unbalanced), worst[0], worst[1]))
@@ -307,8 +356,10 @@ def solve(scene: Scene, method: str | None = None, *, progress: Callable[[int], 
     InputError
         An unknown method.
     SolverError
-        A time point without equilibrium (the message names it and says why), or a scene the
-        pre-flight refuses (springs out of reach, a load the constraints carry entirely).
+        A time point without equilibrium (the message names it and says why), a scene the
+        pre-flight refuses (springs out of reach, a load the constraints carry entirely), or a
+        result whose springs are compressed past their length, the bones through each other
+        (the time points and shares named; ``scene.allow_bone_overlap`` keeps it, warned).
 
     Warns
     -----

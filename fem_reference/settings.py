@@ -120,8 +120,9 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     if layered is not None and fe_model.name != "layer":
         # (measured thickness, edem.thickness): the slab fills the gap, whatever the bone says
         raise InputError(f"the FE {fe_model.name} model does not take measured or per-side cartilage thickness",
-                         file=file, key="geometry.mobile_bone, geometry.fixed_bone, cartilage.mobile_thickness_mm, cartilage.fixed_thickness_mm",
-                         expected="the layer model (--model layer), or one combined thickness_mm")
+                         file=file, key="geometry.mobile_bone, geometry.fixed_bone, geometry.cartilage, cartilage.mobile_thickness_mm, cartilage.fixed_thickness_mm",
+                         expected="the layer model (--model layer), or one combined thickness_mm (a built-in ankle without its cartilage: "
+                                  "geometry.cartilage = false, the thesis's geometry)")
     if layered is not None and (layered.fixed.has_bone or float(layered.fixed.thickness_mm.max()) > 0.0):
         # the FE bonds M's cartilage to M and takes F rigid: a layer on F would be left out
         raise InputError("the FE layer model takes the fixed body rigid: it has no cartilage on it",

@@ -234,6 +234,24 @@ def test_mesh_whose_regularised_peak_would_not_fit_in_memory_exits_2_before_the_
     assert not (tmp_path / "o").exists()
 
 
+def test_bones_through_each_other_exit_2_naming_the_time_points_unless_allowed(tmp_path, capsys):
+    """Plates 2 mm apart (threshold law: the springs are the gap) pressed 3 and 3.2 mm together at
+    time points 1 and 2 (d = F h / (E' A)): the bones pass through each other there, exit 2 naming
+    those time points and the share of the springs in contact (all of them), no result; with
+    [solver] allow_bone_overlap the run is kept, warned."""
+    e_conf = 10.35 * (1 - 0.42) / ((1 + 0.42) * (1 - 2 * 0.42))
+    forces = [[0.0, 0.0, 400.0]] + [[0.0, 0.0, d * e_conf * 400.0 / 2.0] for d in (3.0, 3.2)]
+    scene = write_plates_scene(tmp_path, load=f"time_s = [0.0, 1.0, 2.0]\nforce_n = {forces}")
+    assert main(["run", str(scene), "--method", "dem", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "bones pass through each other" in err and "at 2 of 3 time points (k = 1-2; t = 1-2 s)" in err
+    assert "100 % of those in contact" in err and "[solver] allow_bone_overlap = true" in err
+    assert not (tmp_path / "o").exists()
+    assert main(["run", str(scene), "--method", "dem", "--out", str(tmp_path / "kept"), "--set", "solver.allow_bone_overlap=true"]) == 0
+    warnings = json.loads((tmp_path / "kept" / "summary.json").read_text())["warnings"]
+    assert any("at 2 time points (k = 1-2" in w and "compressed past their length" in w for w in warnings)
+
+
 def test_unknown_builtin_scene(capsys):
     assert main(["run", "no-such-scene"]) == 2
     assert "ideal-standing" in capsys.readouterr().err

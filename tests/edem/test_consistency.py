@@ -25,7 +25,7 @@ ROTATIONS = ("rx", "ry", "rz")
 
 @pytest.fixture(scope="module")
 def ankle():
-    return build_geometry("ideal_ankle", {})
+    return build_geometry("ideal_ankle", {"cartilage": False})  # the thesis's cylinder under a plane
 
 
 def ankle_ligaments(ankle) -> tuple[Ligament, ...]:
