@@ -36,7 +36,7 @@ import numpy as np
 from .contact_setup import ContactSetup
 from .fe_stack import fe_modules, options_prefix, snes_reason_name
 from .krylov import InnerSolver
-from .problem import AREA_DEFINITION_NITSCHE, FEContactProblem, FEContactResult, FEConvergenceError
+from .problem import AREA_DEFINITION_NITSCHE, DeformableCounterpart, FEContactProblem, FEContactResult, FEConvergenceError
 from .progress import SolveProgress
 
 
@@ -54,7 +54,7 @@ class _BorderedSystem:
         self.Ea = [e.x.array.copy() for e in E]
         self.load_free = s.gen_load
         self.delta = np.zeros(self.k)
-        self.A = s.m["fem_petsc"].create_matrix(forms["J"])
+        self.A = self._create_matrix()
         self.A.setOptionsPrefix(f"{prefix}A_")
         self.inner = InnerSolver(s, self.A, prefix)
         self.wu, self.zu = self.A.createVecs()
@@ -69,6 +69,26 @@ class _BorderedSystem:
         self.limited_steps = 0
         self.ehat: np.ndarray | None = None  # set with t_touch to enable the step limit
         self.t_touch = 0.0
+
+    @staticmethod
+    def forms(s: ContactSetup, F: Any, uh: Any, E: list, pressure: Any, nu: Any) -> dict:
+        """The compiled forms this system assembles from the residual form ``F`` (test function
+        and trial direction of ``uh``'s space): the residual, its Jacobian, and its derivatives
+        along the rigid modes ``E`` (K: dR/dt, G: d(E . R)/du, H: d(E . R)/dt)."""
+        fem, ufl = s.m["fem"], s.m["ufl"]
+        w = F.arguments()[0]
+        FE = [ufl.replace(F, {w: e}) for e in E]
+        return {
+            "F": fem.form(F),
+            "J": fem.form(ufl.derivative(F, uh, ufl.TrialFunction(s.V))),
+            "K": [fem.form(ufl.derivative(F, uh, e)) for e in E],
+            "G": [fem.form(ufl.derivative(fe, uh, w)) for fe in FE],
+            "H": [[fem.form(ufl.derivative(fe, uh, e)) for e in E] for fe in FE],
+        }
+
+    def _create_matrix(self) -> Any:
+        """The PETSc matrix A (its sparsity) the Jacobian is assembled into."""
+        return self.s.m["fem_petsc"].create_matrix(self.f["J"])
 
     # ---- helpers ----
     def dot(self, a: np.ndarray, b: np.ndarray) -> float:
@@ -121,16 +141,21 @@ class _BorderedSystem:
             self.error = exc
             raise
 
+    def _residual_vector(self) -> np.ndarray:
+        """The owned residual R(u) at the current state (before the bonded rows are set)."""
+        return self.s.vector_owned(self.f["F"])
+
     def _residual(self, X: Any, F: Any) -> None:
         self.set_state(X)
-        b = self.s.vector_owned(self.f["F"])
+        b = self._residual_vector()
         r = np.array([self.dot(self.Eo[j], b) for j in range(self.k)]) - self.load_free
         b[self.s.cons_owned] = self.ut.x.array[self.s.cons_owned]
         self.join(F, b, r)
 
-    def _jacobian(self, X: Any, J: Any) -> None:
+    def _assemble_jacobian(self) -> None:
+        """A (bonded and roller rows and columns identity), K, G (zero on those rows) and H at
+        the current state."""
         s, fp = self.s, self.s.m["fem_petsc"]
-        self.set_state(X)
         self.A.zeroEntries()
         fp.assemble_matrix(self.A, self.f["J"], bcs=s.bcs, diag=1.0)
         self.A.assemble()
@@ -141,6 +166,10 @@ class _BorderedSystem:
             self.G[j][s.cons_owned] = 0.0
             for m_ in range(self.k):
                 self.H[j, m_] = s.scalar(self.f["H"][j][m_])
+
+    def _jacobian(self, X: Any, J: Any) -> None:
+        self.set_state(X)
+        self._assemble_jacobian()
         self.inner.set_operator(self.A)
         for j in range(self.k):
             self.Xs[j] = self.solve_A(self.K[j])
@@ -242,7 +271,12 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     fem, ufl, PETSc, MPI = m["fem"], m["ufl"], m["PETSc"], m["MPI"]
     comm = MPI.COMM_WORLD if comm is None else comm
     element = problem.resolved_element()
-    s = ContactSetup(problem, comm, element)
+    setup, system_class = ContactSetup, _BorderedSystem
+    if isinstance(problem.obstacle, DeformableCounterpart):  # F deformable too
+        from .two_body import TwoBodySetup, TwoBodySystem
+
+        setup, system_class = TwoBodySetup, TwoBodySystem
+    s = setup(problem, comm, element)
     warnings: list[str] = []
     if element == "P1" and problem.poissons_ratio >= 0.49:
         warnings.append(f"P1 elements lock at nu = {problem.poissons_ratio}: displacements are "
@@ -251,7 +285,6 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     uh = fem.Function(s.V, name="displacement")
     ut = fem.Function(s.V)
     w = ufl.TestFunction(s.V)
-    dw = ufl.TrialFunction(s.V)
     E = s.rigid_modes()
 
     if element == "TH":
@@ -277,22 +310,15 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     theta = fem.Constant(s.mesh, float(problem.nitsche.theta))
     sn_u = ufl.dot(ufl.dot(sig_u, nu), nu)
     sn_v = ufl.dot(ufl.dot(sig_v, nu), nu)
-    un, vn = -ufl.dot(u, nu), -ufl.dot(v, nu)  # along the body's outward normal n = -nu
+    # along the body's outward normal n = -nu (against a deformable F: relative to F's displacement)
+    un, vn = -ufl.dot(s.relative_displacement(u), nu), -ufl.dot(v, nu)
     pressure = ufl.max_value(0.0, gamma * (un - gap) - sn_u)
     F = (a_int - theta / gamma * sn_u * sn_v * s.ds_c - theta / gamma * pressure * sn_v * s.ds_c
          + pressure * vn * s.ds_c)
 
-    FE = [ufl.replace(F, {w: e}) for e in E]
-    forms = {
-        "F": fem.form(F),
-        "J": fem.form(ufl.derivative(F, uh, dw)),
-        "K": [fem.form(ufl.derivative(F, uh, e)) for e in E],
-        "G": [fem.form(ufl.derivative(fe, uh, w)) for fe in FE],
-        "H": [[fem.form(ufl.derivative(fe, uh, e)) for e in E] for fe in FE],
-    }
-
+    forms = system_class.forms(s, F, uh, E, pressure, nu)
     prefix = options_prefix("fecontact")
-    system = _BorderedSystem(s, uh, ut, E, forms, prefix)
+    system = system_class(s, uh, ut, E, forms, prefix)
     load_norm = float(np.linalg.norm(s.load))
     k = s.k
     nloc = s.n_owned + (k if s.comm.rank == 0 else 0)
