@@ -36,7 +36,7 @@ import numpy as np
 from .contact_setup import ContactSetup
 from .fe_stack import fe_modules, options_prefix, snes_reason_name
 from .krylov import InnerSolver
-from .problem import AREA_DEFINITION_NITSCHE, DeformableCounterpart, FEContactProblem, FEContactResult, FEConvergenceError
+from .problem import AREA_DEFINITION_NITSCHE, FEContactProblem, FEContactResult, FEConvergenceError
 from .progress import SolveProgress
 
 
@@ -248,6 +248,12 @@ class _BorderedSystem:
         self.zu.destroy()
 
 
+#: The set-up and bordered system of an obstacle that is not rigid, by its type (the rigid ones
+#: use :class:`ContactSetup` and :class:`_BorderedSystem`); registered by the module that solves it:
+#: :class:`fem_reference.problem.DeformableCounterpart` by :mod:`fem_reference.two_body`.
+OBSTACLE_SOLVERS: dict[type, tuple[type, type]] = {}
+
+
 class _ShellContext:
     def __init__(self, system: _BorderedSystem) -> None:
         self.system = system
@@ -271,11 +277,7 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     fem, ufl, PETSc, MPI = m["fem"], m["ufl"], m["PETSc"], m["MPI"]
     comm = MPI.COMM_WORLD if comm is None else comm
     element = problem.resolved_element()
-    setup, system_class = ContactSetup, _BorderedSystem
-    if isinstance(problem.obstacle, DeformableCounterpart):  # F deformable too
-        from .two_body import TwoBodySetup, TwoBodySystem
-
-        setup, system_class = TwoBodySetup, TwoBodySystem
+    setup, system_class = OBSTACLE_SOLVERS.get(type(problem.obstacle), (ContactSetup, _BorderedSystem))
     s = setup(problem, comm, element)
     warnings: list[str] = []
     if element == "P1" and problem.poissons_ratio >= 0.49:

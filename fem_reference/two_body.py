@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .contact import _BorderedSystem
+from .contact import OBSTACLE_SOLVERS, _BorderedSystem
 from .contact_setup import ContactSetup
 from .problem import DeformableCounterpart, FEContactProblem
 
@@ -247,3 +247,6 @@ class TwoBodySystem(_BorderedSystem):
         super().release()
         for mat in (*self.blocks.values(), *self.products):
             mat.destroy()
+
+
+OBSTACLE_SOLVERS[DeformableCounterpart] = (TwoBodySetup, TwoBodySystem)
