@@ -185,6 +185,10 @@ class ContactSetup:
         deformable one subtracts its own, :class:`fem_reference.two_body.TwoBodySetup`)."""
         return u
 
+    def moved_pairing(self, uh: Any) -> Any:
+        """A rigid obstacle's pairing never moves: None (see :meth:`fem_reference.two_body.TwoBodySetup.moved_pairing`)."""
+        return None
+
     def rigid_modes(self) -> list:
         """The fields of the rigid unknowns: free translations, then free rotations."""
         return ([self.constant_field(d) for d in self.dirs]

@@ -215,6 +215,9 @@ class DeformableCounterpart:
     (n, 3) F's outward normals, ``triangles`` (m, 3) the shared connectivity (indices into the n
     points); F's material, and M's (``mobile_*``, None: F's; :class:`FEContactProblem` sets it to its
     own). :meth:`from_solid` reads the geometry from a paired :class:`geometries.fe_solids.FESolid`.
+    ``follow_slip``: :func:`fem_reference.contact.solve_contact` re-pairs each node of M with the
+    point of F its relative tangential displacement carried it to (:meth:`slid`) and solves again,
+    until the pairing stops moving (the deformed configuration's pairing, to first order).
     """
 
     mobile_points_mm: np.ndarray
@@ -229,6 +232,11 @@ class DeformableCounterpart:
     bonded_tag: int = FIXED_BONDED_TAG
     contact_tag: int = FIXED_CONTACT_TAG
     cell_tag: int = FIXED_VOLUME_TAG
+    follow_slip: bool = False
+    #: per node of M's contact face (vertices, then edge midpoints): the triangle of F's face it
+    #: faces after sliding and the barycentric weights there (-1: its own partner node); :meth:`slid`
+    slide_triangle: np.ndarray | None = field(default=None, repr=False)
+    slide_weights: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         y, z = (np.asarray(a, dtype=float).reshape(-1, 3) for a in (self.mobile_points_mm, self.fixed_points_mm))
@@ -255,8 +263,16 @@ class DeformableCounterpart:
         # the P1 and P2 nodes of the shared triangulation: vertices, then edge midpoints
         edges = np.unique(np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1), axis=0)
         mid_n = nu_v[edges[:, 0]] + nu_v[edges[:, 1]]
+        partner = np.vstack([z, 0.5 * (z[edges[:, 0]] + z[edges[:, 1]])])
+        facing = partner.copy()
+        if self.slide_triangle is not None:
+            moved = np.asarray(self.slide_triangle) >= 0
+            corners = z[t[np.asarray(self.slide_triangle)[moved]]]  # (k, 3 corners, 3)
+            facing[moved] = np.einsum("kc,kcx->kx", np.asarray(self.slide_weights)[moved], corners)
+        object.__setattr__(self, "_edges", edges)
         object.__setattr__(self, "_nodes_mobile", np.vstack([y, 0.5 * (y[edges[:, 0]] + y[edges[:, 1]])]))
-        object.__setattr__(self, "_nodes_fixed", np.vstack([z, 0.5 * (z[edges[:, 0]] + z[edges[:, 1]])]))
+        object.__setattr__(self, "_nodes_partner", partner)
+        object.__setattr__(self, "_nodes_fixed", facing)
         object.__setattr__(self, "_nodes_normal", np.vstack([nu_v, mid_n / np.linalg.norm(mid_n, axis=1)[:, None]]))
         object.__setattr__(self, "_tree", None)
 
@@ -305,8 +321,54 @@ class DeformableCounterpart:
         return np.einsum("ij,ij->i", y - z, nu), nu
 
     def facing_points(self, points: np.ndarray) -> np.ndarray:
-        """The node of F's contact face (n, 3) paired with each node of M's (n, 3)."""
+        """The point of F's contact face (n, 3) paired with each node of M's (n, 3)."""
         return self._nodes_fixed[self._nodes(points)]  # type: ignore[attr-defined]
+
+    def stencil(self, points: np.ndarray, degree: int) -> tuple[np.ndarray, np.ndarray]:
+        """F's displacement at the points paired with nodes of M's face (n, 3), as weights on F's
+        nodes of a Lagrange field of ``degree`` (1 or 2): the nodes' coordinates (n, k, 3) and the
+        weights (n, k), k = 3 or 6 (zero weights pad a node paired with a node)."""
+        i = self._nodes(points)
+        z = np.asarray(self.fixed_points_mm, dtype=float)
+        k = 3 if degree == 1 else 6
+        coords = np.repeat(self._nodes_partner[i][:, None, :], k, axis=1)  # type: ignore[attr-defined]
+        weights = np.zeros((len(i), k))
+        weights[:, 0] = 1.0
+        tri = np.full(len(i), -1) if self.slide_triangle is None else np.asarray(self.slide_triangle)[i]
+        moved = tri >= 0
+        if moved.any():
+            corners = z[np.asarray(self.triangles)[tri[moved]]]
+            lam = np.asarray(self.slide_weights)[i[moved]]
+            if degree == 1:
+                coords[moved], weights[moved] = corners, lam
+            else:  # P2 on the triangle: corners lam (2 lam - 1), edge midpoints 4 lam_a lam_b
+                pairs = ((0, 1), (1, 2), (2, 0))
+                mids = np.stack([0.5 * (corners[:, a] + corners[:, b]) for a, b in pairs], axis=1)
+                coords[moved] = np.concatenate([corners, mids], axis=1)
+                weights[moved] = np.column_stack([lam * (2.0 * lam - 1.0)] + [4.0 * lam[:, a] * lam[:, b] for a, b in pairs])
+        return coords, weights
+
+    def slid(self, points: np.ndarray, slip_mm: np.ndarray) -> "DeformableCounterpart":
+        """This counterpart with the nodes of M's face at ``points`` (n, 3) paired instead with the
+        point of F's face their slip (n, 3) carries their partner node to (the closest point of F's
+        face to partner + slip): the pairing of the deformed configuration, to first order."""
+        from scipy.spatial import cKDTree
+
+        i = self._nodes(points)
+        z = np.asarray(self.fixed_points_mm, dtype=float)
+        tris = np.asarray(self.triangles)
+        target = self._nodes_partner[i] + np.asarray(slip_mm, dtype=float).reshape(-1, 3)  # type: ignore[attr-defined]
+        candidates = min(12, len(tris))
+        _, near = cKDTree(z[tris].mean(axis=1)).query(target, k=candidates)
+        near = np.asarray(near).reshape(len(target), candidates)
+        d2, lam = closest_points_on_triangles(target[:, None, :], z[tris[near, 0]], z[tris[near, 1]], z[tris[near, 2]])
+        best = np.argmin(d2, axis=1)
+        n_nodes = len(self._nodes_mobile)  # type: ignore[attr-defined]
+        triangle = np.full(n_nodes, -1) if self.slide_triangle is None else np.asarray(self.slide_triangle).copy()
+        weights = np.zeros((n_nodes, 3)) if self.slide_weights is None else np.asarray(self.slide_weights, dtype=float).copy()
+        triangle[i] = near[np.arange(len(i)), best]
+        weights[i] = lam[np.arange(len(i)), best]
+        return replace(self, slide_triangle=triangle, slide_weights=weights)
 
     def lame(self) -> tuple[float, float]:
         """F's (lambda, mu) in MPa."""

@@ -41,6 +41,13 @@ from .contact_setup import ContactSetup
 from .problem import DeformableCounterpart, FEContactProblem
 
 
+#: The pairing follows the slip (:meth:`TwoBodySetup.moved_pairing`) until a pass moves no paired
+#: point by more than this fraction of the largest slip. Each pass shrank that move about 40-fold on
+#: the cylindrical layer on a flat one (docs/method.md#two-deformable-layers), and the answer changed
+#: below 1e-4 after the move fell under 5 % of the slip.
+PAIRING_RTOL = 0.05
+
+
 class TwoBodySetup(ContactSetup):
     """:class:`ContactSetup` for M's layer against F's deformable one in the same mesh.
 
@@ -119,27 +126,31 @@ class TwoBodySetup(ContactSetup):
         return self.V.dofmap.index_map.local_to_global((local // bs).astype(np.int32)) * bs + local % bs
 
     def _pairing_operator(self) -> Any:
-        """P (W x V, 0/1): row (slave node i, component c) has a 1 in the column of the same
-        component of F's paired node. Sets ``offset`` and ``fixed_normal`` on M's contact face.
-        Parallel: F's contact nodes are gathered on every rank (a face, small beside the volume)."""
+        """P (W x V): row (node i of M's contact face, component c) holds the weights of the same
+        component of F's nodes at i's paired point (one 1 at its partner node, or after sliding the
+        Lagrange weights of F's facet there). Sets ``offset`` and ``fixed_normal`` on M's contact
+        face. Parallel: F's contact nodes are gathered on every rank (a face, small beside the volume)."""
         fem, PETSc, MPI = self.m["fem"], self.m["PETSc"], self.m["MPI"]
         W = self.W
         x = W.tabulate_dof_coordinates()
         imap = W.dofmap.index_map
         slave = fem.locate_dofs_topological(W, self.fdim, self.contact_facets)
-        slave = np.sort(slave[slave < imap.size_local])
+        self.slave = slave = np.sort(slave[slave < imap.size_local])
         master = fem.locate_dofs_topological(W, self.fdim, self.fixed_contact_facets)
         master_v = self._v_global(self.w_to_v[(3 * master[:, None] + np.arange(3)).ravel()]).reshape(-1, 3)
         coords = np.concatenate(self.comm.allgather(x[master]))
         columns = np.concatenate(self.comm.allgather(master_v))
         y = x[slave]
-        gap, normal = self.counterpart.gap_and_normal(y)
+        _, normal = self.counterpart.gap_and_normal(y)
         z = self.counterpart.facing_points(y)
-        size = float(np.ptp(coords, axis=0).max()) if len(coords) else 1.0
-        if len(y):
+        stencil, weights = self.counterpart.stencil(y, self.degree)
+        k = weights.shape[1]
+        used = weights != 0.0
+        if used.any():
             if not len(coords):
                 raise ValueError("no node on F's contact face")
-            dist, j = cKDTree(coords).query(z)
+            dist, j = cKDTree(coords).query(stencil[used])
+            size = float(np.ptp(coords, axis=0).max())
             if float(dist.max()) > 1e-8 * size:
                 raise ValueError(f"{int(np.sum(dist > 1e-8 * size))} paired points of F's contact face are not nodes "
                                  f"of the mesh (farthest {float(dist.max()):.3g} mm): the mesh does not match the pairing")
@@ -149,16 +160,34 @@ class TwoBodySetup(ContactSetup):
         self.fixed_normal.x.array.reshape(-1, 3)[slave] = normal
         for f in (self.offset, self.fixed_normal):
             f.x.scatter_forward()
-        n_rows = 3 * imap.size_local
-        P = PETSc.Mat().createAIJ(((n_rows, PETSc.DECIDE), (self.n_owned, PETSc.DECIDE)), nnz=(1, 1), comm=self.comm)
+        P = PETSc.Mat().createAIJ(((3 * imap.size_local, PETSc.DECIDE), (self.n_owned, PETSc.DECIDE)), nnz=(k, k), comm=self.comm)
         P.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-        rows = imap.local_to_global(slave.astype(np.int32))
+        rows = np.repeat(imap.local_to_global(slave.astype(np.int32)), k).reshape(-1, k)[used]
         for c in range(3):
-            for r, col in zip(3 * rows + c, columns[j, c]):
-                P.setValue(int(r), int(col), 1.0)
+            for r, col, value in zip(3 * rows + c, columns[j, c], weights[used]):
+                P.setValue(int(r), int(col), float(value), addv=PETSc.InsertMode.ADD_VALUES)
         P.assemble()
-        self.paired_nodes = self.comm.allreduce(len(slave), op=MPI.SUM)
         return P
+
+    def moved_pairing(self, uh: Any) -> DeformableCounterpart | None:
+        """The counterpart paired in the deformed configuration (:meth:`DeformableCounterpart.slid`
+        by the relative tangential displacement (u - w) - ((u - w) . nu) nu of each node of M's
+        contact face), or None when it would move no paired point by more than
+        :data:`PAIRING_RTOL` of the largest slip (or the counterpart does not follow the slip)."""
+        if not self.counterpart.follow_slip:
+            return None
+        y = self.W.tabulate_dof_coordinates()[self.slave]
+        u = uh.x.array[self.w_to_v[(3 * self.slave[:, None] + np.arange(3)).ravel()]].reshape(-1, 3)
+        relative = u - self.w.x.array.reshape(-1, 3)[self.slave]
+        _, nu = self.counterpart.gap_and_normal(y)
+        slip = relative - np.einsum("ij,ij->i", relative, nu)[:, None] * nu
+        y, slip = (np.concatenate(self.comm.allgather(a)) for a in (y, slip))
+        moved = self.counterpart.slid(y, slip)
+        change = float(np.abs(moved.facing_points(y) - self.counterpart.facing_points(y)).max(initial=0.0))
+        largest = float(np.abs(slip).max(initial=0.0))
+        extent = float(np.ptp(y, axis=0).max()) if len(y) else 1.0
+        # (a slip of round-off, as in confined compression, moves nothing: 1e-9 of the face's extent)
+        return None if change <= max(PAIRING_RTOL * largest, 1e-9 * extent) else moved
 
     def update_counterpart(self, uh: Any) -> None:
         """w = P u: F's displacement at the paired points of M's contact face."""
