@@ -39,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from edem.mechanics import generalised_directions  # noqa: E402
 from edem.raycast import RayCaster  # noqa: E402
-from edem.rowwise import row_dot, rows_times  # noqa: E402
+from geometries.rowwise import row_dot, rows_times  # noqa: E402
 from edem.scene import load_scene  # noqa: E402
 from edem.solver import run  # noqa: E402
 from edem.springs import Placement  # noqa: E402

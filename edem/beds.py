@@ -13,20 +13,27 @@ ligaments, the shear springs) and hands it to the scene's bed, which owns
   springs at the solved pose; the coupled layer's forces are not a function of each spring's
   length, so there is nothing to re-measure;
 * its refusals of a cartilage it cannot take (:meth:`Bed.check`, called by the one cartilage
-  validator :func:`edem.scene.cartilage_from_table`).
+  validator :func:`edem.scene.cartilage_from_table`);
+* its own ``[cartilage]`` keys: declared as the fields of its :attr:`Bed.Keys` dataclass, read
+  and checked by :meth:`Bed.read_keys` (through :func:`read_bed`, which refuses another bed's
+  keys), held by the cartilage (``Cartilage.bed_keys``) and written to summary.json by
+  :func:`bed_summary`; the scene files, :meth:`edem.scene.Scene.from_arrays` and the campaigns'
+  FE sides (which never see them) take the keys from :func:`bed_keys`;
+* its label, as the reports and the command line name it (:attr:`Bed.label`).
 
-``[cartilage] coupling`` names the bed: ``"none"`` the independent springs, ``"thin-layer"`` the
-coupled thin layer (``[cartilage] thin_layer_symbol`` picks its symbol among
-:data:`edem.thin_layer.LAYER_SYMBOLS`: ``pade``, ``two-pole``).
+``[cartilage] coupling`` names the bed (:data:`BEDS`): the independent springs by default, or the
+coupled layer (its keys ``thin_layer_symbol``, a name of :data:`edem.layer_symbols.LAYER_SYMBOLS`,
+``thin_layer_smoothing_resolution`` and ``thin_layer_stack``).
 
-To add a bed: one subclass of :class:`Bed` here, added to :data:`BEDS`, plus its tests.
+To add a bed, with or without keys of its own: one subclass of :class:`Bed` here, added to
+:data:`BEDS`, plus its tests.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
-from typing import ClassVar
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -37,7 +44,7 @@ from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, assemble_s
 from edem.raycast import RayCaster
 from edem.springs import Cartilage, Placement, SpringGeometry
 from edem.tables import SceneTable
-from edem.thin_layer import LAYER_SYMBOLS, taylor_coefficients
+from edem.layer_symbols import LAYER_SYMBOLS, taylor_coefficients
 from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
 
 
@@ -95,6 +102,11 @@ def weak_dofs_warning(
     ]
 
 
+@dataclass(frozen=True)
+class NoKeys:
+    """The keys of a bed that reads none of its own."""
+
+
 class Bed(ABC):
     """A spring bed over one run of a scene (it may keep state from one time point to the next).
 
@@ -105,12 +117,31 @@ class Bed(ABC):
 
     #: the value of ``[cartilage] coupling`` that picks this bed (its key in :data:`BEDS`)
     coupling: ClassVar[str]
-    #: what the bed is, for messages ("the coupled thin layer")
-    description: ClassVar[str]
+    #: the bed as the reports and messages name it ("independent springs", "coupled layer")
+    label: ClassVar[str]
+    #: the bed's own ``[cartilage]`` keys: a frozen dataclass whose fields are the keys, with
+    #: their defaults (a scene that names the bed without them gets those)
+    Keys: ClassVar[type] = NoKeys
 
     def __init__(self, scene, caster: RayCaster) -> None:
         self.scene = scene
         self.caster = caster
+
+    @classmethod
+    def own_keys(cls) -> tuple[str, ...]:
+        """The names of the bed's own ``[cartilage]`` keys (the fields of :attr:`Keys`)."""
+        return tuple(f.name for f in fields(cls.Keys))
+
+    @classmethod
+    def read_keys(cls, table: SceneTable) -> Any:
+        """The bed's own keys from ``table`` (``[cartilage]``), checked: a :attr:`Keys`.
+        InputError naming the key for a value the bed cannot take."""
+        return cls.Keys()
+
+    @classmethod
+    def text(cls, keys: Any) -> str:
+        """The bed with its keys ``keys`` (a :attr:`Keys`), for a run's one-line report."""
+        return cls.label
 
     @classmethod
     def check(cls, cartilage: Cartilage, table: SceneTable) -> None:
@@ -153,13 +184,7 @@ class IndependentSprings(Bed):
     """Independent springs (the thesis's bed): each spring's force depends on its own length only."""
 
     coupling = "none"
-    description = "independent springs"
-
-    @classmethod
-    def check(cls, cartilage: Cartilage, table: SceneTable) -> None:
-        for key in ("thin_layer_symbol", "thin_layer_smoothing_resolution"):
-            if table.has(key):
-                raise table.error(key, f"{key} only applies to the coupled thin layer", f'coupling = "{CoupledThinLayer.coupling}" with it, or no {key}')
+    label = "independent springs"
 
     def __init__(self, scene, caster: RayCaster) -> None:
         super().__init__(scene, caster)
@@ -208,13 +233,29 @@ class IndependentSprings(Bed):
         return imbalance / scale if scale > 0 else 0.0
 
 
+#: ``[cartilage] thin_layer_stack``: how the coupled layer takes a layer on each side
+THIN_LAYER_STACKS = ("sandwich", "lumped")
+
+
 class CoupledThinLayer(Bed):
     """The coupled thin layer (:mod:`edem.thin_layer_contact`): the springs' forces answer the
     layer's deflection through its compliance (symbol ``cartilage.thin_layer_symbol``), built
     per time point on the spring-bearing surface."""
 
     coupling = "thin-layer"
-    description = "coupled thin layer"
+    label = "coupled layer"
+
+    @dataclass(frozen=True)
+    class Keys:
+        """The coupled layer's ``[cartilage]`` keys (README.md#scene-files)."""
+
+        thin_layer_symbol: str = "pade"  # a name of edem.layer_symbols.LAYER_SYMBOLS (Cartilage.layer_symbol)
+        # cells of the coarse smoothing space per smoothing length (0: the springs' own vertices; edem.coarse_space)
+        thin_layer_smoothing_resolution: float = 0.0
+        # where both sides have a layer (edem.thickness): "sandwich", each layer bonded to its bone and
+        # frictionless against the other (their compliances add), or "lumped", one layer of their summed
+        # thickness (the model error docs/method.md measures, kept for comparison)
+        thin_layer_stack: str = "sandwich"
 
     def __init__(self, scene, caster: RayCaster) -> None:
         super().__init__(scene, caster)
@@ -224,8 +265,24 @@ class CoupledThinLayer(Bed):
         self.layer: CoupledStep | None = None  # the time point last solved
 
     @classmethod
+    def read_keys(cls, table: SceneTable) -> Keys:
+        default = cls.Keys()
+        return cls.Keys(
+            table.string("thin_layer_symbol", default.thin_layer_symbol, tuple(LAYER_SYMBOLS)),
+            table.number("thin_layer_smoothing_resolution", default.thin_layer_smoothing_resolution, nonnegative=True,
+                         what="cells of the coarse smoothing space per smoothing length (>= 0; 0: the springs' own mesh)"),
+            table.string("thin_layer_stack", default.thin_layer_stack, THIN_LAYER_STACKS),
+        )
+
+    @classmethod
+    def text(cls, keys: Keys) -> str:
+        coarse = f", coarse smoothing at {keys.thin_layer_smoothing_resolution:g} cells per smoothing length" if keys.thin_layer_smoothing_resolution else ""
+        lumped = ", both sides' layers lumped into one" if keys.thin_layer_stack == "lumped" else ""
+        return f"{cls.label} ({keys.thin_layer_symbol}{coarse}{lumped})"
+
+    @classmethod
     def check(cls, cartilage: Cartilage, table: SceneTable) -> None:
-        law, symbol = cartilage.spring_law, cartilage.thin_layer_symbol
+        law, symbol = cartilage.spring_law, cartilage.bed_keys.thin_layer_symbol
         if law.thin_layer is None:
             coupled_laws = " or ".join(f'"{name}"' for name, each in LAWS.items() if each.thin_layer is not None)
             raise table.error(
@@ -236,7 +293,7 @@ class CoupledThinLayer(Bed):
             # Linearised at a force f, a nonlinear column takes up to (G/E') h/(G A) off the local
             # compliance (ContactLaw.column_excess_mm: t/(A E') (1 - exp(-f/(A E')))), which must stay
             # positive for every f: the symbol's local part must be at least G/E' (up to round-off).
-            local, confined = LAYER_SYMBOLS[symbol](cartilage.poissons_ratio).local, taylor_coefficients(cartilage.poissons_ratio)[0]
+            local, confined = cartilage.layer_symbol.local, taylor_coefficients(cartilage.poissons_ratio)[0]
             if local < confined * (1.0 - 1e-12):
                 raise table.error(
                     "thin_layer_symbol" if table.has("thin_layer_symbol") else "law",
@@ -272,6 +329,47 @@ class CoupledThinLayer(Bed):
 
 #: the beds by ``[cartilage] coupling``
 BEDS: dict[str, type[Bed]] = {bed.coupling: bed for bed in (IndependentSprings, CoupledThinLayer)}
+#: the bed of a scene that names none
+DEFAULT_COUPLING = IndependentSprings.coupling
+
+
+def bed_keys() -> tuple[str, ...]:
+    """The ``[cartilage]`` keys the beds read: ``coupling``, then every registered bed's own keys."""
+    return ("coupling", *dict.fromkeys(key for bed in BEDS.values() for key in bed.own_keys()))
+
+
+def read_bed(table: SceneTable) -> tuple[type[Bed], Any]:
+    """The bed ``table``'s (``[cartilage]``'s) ``coupling`` names (:data:`DEFAULT_COUPLING` where
+    it names none) and its own keys, checked (:meth:`Bed.read_keys`). InputError naming the key for
+    an unknown bed, and for another bed's key given to this one."""
+    bed = BEDS[table.string("coupling", DEFAULT_COUPLING, tuple(BEDS))]
+    for other in BEDS.values():
+        for key in other.own_keys():
+            if table.has(key) and key not in bed.own_keys():
+                raise table.error(key, f"{key} only applies to the {other.label}", f'coupling = "{other.coupling}" with it, or no {key}')
+    return bed, bed.read_keys(table)
+
+
+def on_bed(cartilage: Cartilage, coupling: str, **keys: Any) -> Cartilage:
+    """``cartilage`` on the bed ``coupling`` with its own ``keys`` (the others at their defaults),
+    checked as a scene's ``[cartilage]`` is (InputError naming the key)."""
+    table = SceneTable({"coupling": coupling, **keys}, "<arrays>", "", None)
+    bed, own = read_bed(table)
+    placed = replace(cartilage, coupling=bed.coupling, bed_keys=own)
+    bed.check(placed, table)
+    return placed
+
+
+def bed_summary(cartilage: Cartilage) -> dict[str, Any]:
+    """summary.json's bed (docs/result-format.md): ``coupling`` and every bed's own keys, with the
+    cartilage's values for its bed's and null for the others'."""
+    own = asdict(cartilage.bed_keys)
+    return {"coupling": cartilage.coupling, **{key: own.get(key) for key in bed_keys()[1:]}}
+
+
+def bed_text(cartilage: Cartilage) -> str:
+    """The bed a run used, with its keys, for its one-line report (:meth:`Bed.text`)."""
+    return bed_class(cartilage.coupling).text(cartilage.bed_keys)
 
 
 def bed_class(coupling: str) -> type[Bed]:

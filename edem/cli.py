@@ -16,15 +16,9 @@ from geometries.extras import MissingExtra, extra_of
 RESULTS_ROOT = Path("results")
 
 
-def _bed_text(cartilage) -> str:
-    """The bed a run used, for its one-line report: "independent springs" or "coupled thin layer (pade)"."""
-    from edem.beds import bed_class
-
-    text = bed_class(cartilage.coupling).description
-    return text if cartilage.coupling == "none" else f"{text} ({cartilage.thin_layer_symbol})"
-
-
 def _run(args: argparse.Namespace) -> int:
+    from edem.beds import bed_text
+    from edem.pressure_metrics import check_quadrature_size
     from edem.resultdir import provenance
     from edem.results import write_results
     from edem.scene import load_scene, parse_override
@@ -35,6 +29,9 @@ def _run(args: argparse.Namespace) -> int:
     for warning in scene.warnings:  # said before the solve, so a refused run keeps them
         print(f"edem run: warning: {warning}", file=sys.stderr)
     method = args.method or scene.method
+    # the regularised peak of the pressure maps is computed after the solve: refuse a mesh it
+    # cannot hold now, not after the solve
+    check_quadrature_size(scene.mobile.vertices_mm, scene.mobile.triangles, file=scene.mobile.source or scene.source, key="geometry.mobile")
     out = _out_dir(args, scene.name, method, overrides=overrides)
     record = provenance(args.scene, overrides, method=method)
     n = len(scene.load.time_s)
@@ -50,7 +47,7 @@ def _run(args: argparse.Namespace) -> int:
     last = result.steps[-1]
     print("\n".join(result.preflight.lines()))
     print(
-        f"{scene.name}: {method.upper()}, {len(result.steps)} time point(s), {result.n_springs} springs, {_bed_text(scene.cartilage)}, "
+        f"{scene.name}: {method.upper()}, {len(result.steps)} time point(s), {result.n_springs} springs, {bed_text(scene.cartilage)}, "
         f"{result.wall_time_s:.3f} s\n"
         f"  peak pressure {max(s.peak_pressure_mpa for s in result.steps):.4g} MPa, "
         f"max contact area {max(s.contact_area_mm2 for s in result.steps):.4g} mm^2, "

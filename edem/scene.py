@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from edem.beds import BEDS, IndependentSprings
+from edem.beds import DEFAULT_COUPLING, bed_keys, read_bed
 from geometries.errors import InputError
 from edem.joint_reaction import transfer_moment
 from edem.laws import LAWS
@@ -26,7 +26,6 @@ from edem.mechanics import DOF_NAMES, rotation_matrix
 from edem.opensim_model import BodyPoses
 from edem.plausibility import scene_warnings
 from edem.springs import Cartilage, Ligament, Placement
-from edem.thin_layer import LAYER_SYMBOLS
 from edem.thickness import CARTILAGE_KEYS, GEOMETRY_KEYS, array_layers, scene_layers, uses_layers
 from edem.tables import SceneTable, not_utf8
 from geometries.builders import build_geometry
@@ -44,11 +43,8 @@ SECTIONS = {
         "max_spring_length_mm",
         "thickness_mm",
         "shear_modulus_mpa",
-        "coupling",
-        "thin_layer_symbol",
-        "thin_layer_smoothing_resolution",
         *CARTILAGE_KEYS,  # measured thickness (edem.thickness)
-    },
+    },  # and the beds' keys (edem.beds.bed_keys: coupling and each bed's own)
     "load": None,  # checked by edem.loads
     "kinematics": None,  # checked by edem.loads
     "constraints": {"fixed_dofs"},
@@ -172,9 +168,7 @@ class Scene:
         max_spring_length_mm: float | None = None,
         thickness_mm: float | None = None,
         shear_modulus_mpa: float = 0.0,
-        coupling: str = IndependentSprings.coupling,
-        thin_layer_symbol: str | None = None,
-        thin_layer_smoothing_resolution: float | None = None,
+        coupling: str = DEFAULT_COUPLING,
         fixed_dofs: tuple[str, ...] = (),
         reference_point_mm: np.ndarray | None = None,
         kinematics: JointKinematics | None = None,
@@ -188,6 +182,7 @@ class Scene:
         mobile_thickness_mm: float | None = None,
         fixed_thickness_mm: float | None = None,
         spring_spacing_mm: float | None = None,
+        **bed_settings: Any,
     ) -> Scene:
         """A scene from meshes and loads already in memory (no TOML file, no mesh cleaning).
 
@@ -218,15 +213,8 @@ class Scene:
         shear_modulus_mpa : float
             Shear spring modulus (0: frictionless).
         coupling : str
-            The bed, a key of :data:`edem.beds.BEDS` (as ``[cartilage] coupling``): ``"none"``,
-            independent springs, or ``"thin-layer"``, the coupled thin layer.
-        thin_layer_symbol : str, optional
-            With ``coupling="thin-layer"``, the layer's symbol, a name of
-            :data:`edem.thin_layer.LAYER_SYMBOLS` (``"pade"``, the default, or ``"two-pole"``).
-        thin_layer_smoothing_resolution : float, optional
-            With ``coupling="thin-layer"``, cells of the coarse smoothing space per smoothing
-            length (as ``[cartilage] thin_layer_smoothing_resolution``); default 0, the springs'
-            own mesh (docs/method.md, "Coarse smoothing space").
+            The bed, a key of :data:`edem.beds.BEDS` (as ``[cartilage] coupling``); default
+            :data:`edem.beds.DEFAULT_COUPLING`, the independent springs.
         fixed_dofs : tuple of str
             Fixed DOFs of M among tx, ty, tz, rx, ry, rz.
         reference_point_mm : (3,) float, optional
@@ -245,6 +233,11 @@ class Scene:
         spring_spacing_mm : float, optional
             Resample M so that no spring triangle has an edge longer than this (mm), as
             ``[geometry] spring_spacing_mm``; default: one spring per given triangle.
+        **bed_settings
+            The bed's own keys, as ``[cartilage]``'s (:attr:`edem.beds.Bed.Keys`); e.g. for the
+            coupled layer ``thin_layer_symbol`` (a name of :data:`edem.layer_symbols.LAYER_SYMBOLS`,
+            default ``"pade"``) and ``thin_layer_smoothing_resolution`` (cells of the coarse
+            smoothing space per smoothing length; default 0, the springs' own mesh). None: not given.
 
         Returns
         -------
@@ -277,8 +270,7 @@ class Scene:
             mobile = subdivide_to_spacing(mobile, float(spring_spacing_mm), key="spring_spacing_mm")
         given = {
             "youngs_modulus_mpa": youngs_modulus_mpa, "poissons_ratio": poissons_ratio, "law": law, "max_spring_length_mm": max_spring_length_mm,
-            "thickness_mm": thickness_mm, "shear_modulus_mpa": shear_modulus_mpa, "coupling": coupling, "thin_layer_symbol": thin_layer_symbol,
-            "thin_layer_smoothing_resolution": thin_layer_smoothing_resolution,
+            "thickness_mm": thickness_mm, "shear_modulus_mpa": shear_modulus_mpa, "coupling": coupling, **bed_settings,
         }
         # numpy scalars as the plain numbers a TOML table holds; None: not given
         bones, uniform = {"mobile": mobile_bone, "fixed": fixed_bone}, {"mobile": mobile_thickness_mm, "fixed": fixed_thickness_mm}
@@ -326,7 +318,8 @@ def cartilage_from_table(table: dict[str, Any], file: str | Path, section: str =
     Parameters
     ----------
     table : dict
-        The keys of ``SECTIONS["cartilage"]`` (README.md#scene-files) to TOML values.
+        The keys of ``SECTIONS["cartilage"]`` and of the beds (:func:`edem.beds.bed_keys`;
+        README.md#scene-files) to TOML values.
     file : str or Path
         The scene file (or ``"<arrays>"``), named in the errors.
     section : str
@@ -346,7 +339,7 @@ def cartilage_from_table(table: dict[str, Any], file: str | Path, section: str =
     InputError
         Naming the file, the key and what was expected.
     """
-    cart = SceneTable(table, file, section, SECTIONS["cartilage"])
+    cart = SceneTable(table, file, section, (*SECTIONS["cartilage"], *bed_keys()))
     law = cart.string("law", "threshold", tuple(LAWS))
     spring_law = LAWS[law]
     thickness = cart.optional_number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
@@ -364,12 +357,10 @@ def cartilage_from_table(table: dict[str, Any], file: str | Path, section: str =
             f"the ray window h_max = {window:g} mm is shorter than the thickness {thickness:g} mm",
             f"h_max >= thickness_mm for the {law} law (springs beyond h_max are not seen)",
         )
-    coupling = cart.string("coupling", IndependentSprings.coupling, tuple(BEDS))
+    bed, own_keys = read_bed(cart)
     cartilage = Cartilage(
-        coupling=coupling,
-        thin_layer_symbol=cart.string("thin_layer_symbol", "pade", tuple(LAYER_SYMBOLS)),
-        thin_layer_smoothing_resolution=cart.number("thin_layer_smoothing_resolution", 0.0, nonnegative=True,
-                                                    what="cells of the coarse smoothing space per smoothing length (>= 0; 0: the springs' own mesh)"),
+        coupling=bed.coupling,
+        bed_keys=own_keys,
         youngs_modulus_mpa=cart.number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
         poissons_ratio=cart.number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
         law=law,
@@ -377,7 +368,7 @@ def cartilage_from_table(table: dict[str, Any], file: str | Path, section: str =
         thickness_mm=thickness,
         shear_modulus_mpa=cart.number("shear_modulus_mpa", 0.0, nonnegative=True, what="a shear modulus in MPa (>= 0)"),
     )
-    BEDS[coupling].check(cartilage, cart)
+    bed.check(cartilage, cart)
     return cartilage
 
 

@@ -78,6 +78,7 @@ from fem_reference.progress import SolveProgress
 from fem_reference.settings import FESettings, resolve_settings
 from fem_reference.time_stepping import TimePoint, time_stepping
 from geometries.errors import InputError, SolverError
+from geometries.triangle_kernels import triangle_areas
 
 #: Free rigid motions whose contact stiffness is below this fraction of the largest are fixed.
 WEAK_MODE_RATIO = 1e-8
@@ -590,8 +591,7 @@ def _mobile_mapping(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     bottom = solid.bottom_vertex[top]
 
     def areas(ix: np.ndarray) -> np.ndarray:
-        a, b, c = x[ix[:, 0]], x[ix[:, 1]], x[ix[:, 2]]
-        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        return triangle_areas(x[ix[:, 0]], x[ix[:, 1]], x[ix[:, 2]])
 
     a_top, a_bottom = areas(top), areas(bottom)
     lumped_top, lumped_bottom = np.zeros(len(pts)), np.zeros(len(pts))
@@ -640,8 +640,7 @@ def _area_on_mobile(res: Any, solid: Any) -> float:
     x = solid.points_mm
 
     def areas(ix: np.ndarray) -> np.ndarray:
-        a, b, c = x[ix[:, 0]], x[ix[:, 1]], x[ix[:, 2]]
-        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        return triangle_areas(x[ix[:, 0]], x[ix[:, 1]], x[ix[:, 2]])
 
     ratio_of = areas(bottom) / areas(top)
     V0 = fem.functionspace(mesh, ("DG", 0))

@@ -31,6 +31,7 @@ import numpy as np
 
 from geometries.builders.gmsh_session import gmsh_model
 from geometries.surface import TriangleSurface, midpoint_subdivision
+from geometries.triangle_kernels import triangle_areas
 
 
 __all__ = [
@@ -223,9 +224,7 @@ def _vertex_values(vertices: np.ndarray, triangles: np.ndarray, values: np.ndarr
     """
     nv = len(vertices)
     cent = vertices[triangles].mean(axis=1)
-    v0 = vertices[triangles[:, 0]]
-    area = 0.5 * np.linalg.norm(np.cross(vertices[triangles[:, 1]] - v0,
-                                         vertices[triangles[:, 2]] - v0), axis=1)
+    area = triangle_areas(*(vertices[triangles[:, k]] for k in range(3)))
     # vertex -> triangles (CSR)
     vt = np.repeat(np.arange(len(triangles)), 3)
     vv = triangles.ravel()

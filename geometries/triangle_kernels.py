@@ -1,5 +1,5 @@
 """Array kernels on triangles and 3-vectors, one of each for the whole project: row-wise cross
-products and closest points on triangles.
+products, triangle areas (and area vectors) and closest points on triangles.
 
 Both are vectorised numpy over rows (points, springs, triangles); the DEM solver (``edem``), the
 FE reference's rigid obstacles and the verification's surface projections use these, never a
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["closest_points_on_triangles", "cross_rows"]
+__all__ = ["closest_points_on_triangles", "cross_rows", "triangle_area_vectors", "triangle_areas"]
 
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -25,6 +25,18 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
     out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
     return out
+
+
+def triangle_area_vectors(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(n, 3) half the cross product of two edges of the triangles with corners ``a``, ``b``, ``c``
+    (each (n, 3), mm): area (mm^2) times the unit normal of the right-hand rule."""
+    return 0.5 * cross_rows(b - a, c - a)
+
+
+def triangle_areas(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(n,) areas (mm^2) of the triangles with corners ``a``, ``b``, ``c`` (each (n, 3), mm); 0 for
+    a degenerate one."""
+    return np.linalg.norm(triangle_area_vectors(a, b, c), axis=1)
 
 
 def _dot(u: list[np.ndarray], v: list[np.ndarray]) -> np.ndarray:

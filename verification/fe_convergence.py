@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from geometries.triangle_kernels import triangle_areas
+
 #: the stored study (written by ``edem verify fe-convergence --refresh-reference``)
 REFERENCE_FILE = Path(__file__).resolve().parent / "references" / "fe_convergence.json"
 #: the observed order is believed (the meshes in the asymptotic range) inside these bounds; P2's
@@ -184,7 +186,7 @@ def pressure_percentile_by_area(pressure_mpa: np.ndarray, vertices_mm: np.ndarra
     p = np.asarray(pressure_mpa, dtype=np.float64)
     tri = np.asarray(triangles)
     v = np.asarray(vertices_mm, dtype=np.float64)
-    area = 0.5 * np.linalg.norm(np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]]), axis=1)
+    area = triangle_areas(v[tri[:, 0]], v[tri[:, 1]], v[tri[:, 2]])
     node_area = np.bincount(tri.ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(p))
     contact = p > 0
     if not np.any(contact):

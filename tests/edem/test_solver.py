@@ -241,6 +241,21 @@ def test_edem_load_then_unload_returns_to_start():
     assert last.peak_pressure_mpa * last.contact_area_mm2 < 1e-6 * 2000.0
 
 
+def test_wall_time_is_the_time_points_and_setup_time_what_came_before():
+    """The clocks partition the run: wall_time_s holds every time point's geometry and solve
+    (the first one's ray cast included), setup_time_s what ran once before them, and neither
+    counts anything twice (their sum is at most the call's elapsed time)."""
+    import time
+
+    scene = make_scene(cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), ramp(800.0, 5), fixed_dofs=("tx", "rx", "ry", "rz"))
+    start = time.perf_counter()
+    result = run(scene, "edem")
+    elapsed = time.perf_counter() - start
+    assert result.seconds["geometry"] + result.seconds["solve"] <= result.wall_time_s
+    assert result.setup_time_s > 0.0
+    assert result.wall_time_s + result.setup_time_s <= elapsed
+
+
 def test_dem_and_edem_agree_on_the_first_step():
     """From rest, the first EDEM increment is the DEM solve (no push-back yet, docs/method.md#2-edem-the-time-dependent-incremental-method)."""
     scene = make_scene(cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), ramp(800.0, 3), fixed_dofs=("tx", "rx", "ry", "rz"))
