@@ -10,14 +10,17 @@ they stay strain-free and testing with them still gives M's force balance.
 The contact faces share one triangulation and the pairing is DOF to DOF, fixed in the reference
 configuration (small sliding): a sparse 0/1 operator P maps each displacement DOF of F's contact
 face onto the paired DOF of M's, ``w = P u`` (F's displacement carried to M's contact face, a
-function of the collapsed displacement space W). The contact terms are the one-body Nitsche form
+function of the collapsed displacement space W). With ``DeformableCounterpart.follow_slip`` a
+node may instead face a point inside one of F's facets (P then holds that facet's Lagrange
+weights) and :func:`fem_reference.contact.solve_contact` repeats the solve until that pairing
+stops moving (:meth:`TwoBodySetup.moved_pairing`). The contact terms are the one-body Nitsche form
 (biased: M's stress) with M's displacement u replaced by the relative one u - w, plus the virtual
 work of the contact pressure on F, tested through W:
 
     F_u(u, w; v) = one-body form with u_n = -(u - w) . nu        (test v in V)
     F_w(u, w; z) = p(u, w) z . nu ds_M                            (test z in W)
 
-nu = F's outward normal at the paired point, gap = (Y - Z) . nu (:class:`DeformableCounterpart`).
+nu = the interface's normal at the pair (out of F), gap = (Y - Z) . nu (:class:`DeformableCounterpart`).
 Since w = P u, the residual and the Jacobian in V are
 
     R = F_u + P^T F_w,      J = J_uu + J_uw P + P^T J_wu + P^T J_ww P
@@ -54,7 +57,7 @@ class TwoBodySetup(ContactSetup):
     Adds to the one-body set-up: F's bonded face held (with M's bonded face, the conditions on
     u~), Lame's parameters per cell (DG0: M's and F's materials), rigid modes that vanish on F,
     the pairing operator ``P`` (PETSc, W x V), F's displacement at M's contact face ``w`` and the
-    paired geometry (``offset`` Z - Y and F's normal, functions of W on M's contact face)."""
+    paired geometry (``offset`` Z - Y and the contact normal, functions of W on M's contact face)."""
 
     def __init__(self, problem: FEContactProblem, comm: Any, element: str) -> None:
         counterpart = problem.obstacle
@@ -79,7 +82,7 @@ class TwoBodySetup(ContactSetup):
             self.w_to_v = np.arange(3 * (imap.size_local + imap.num_ghosts), dtype=np.int64)
         self.w = fem.Function(self.W, name="fixed_displacement_at_mobile")
         self.offset = fem.Function(self.W)  # Z - Y on M's contact face
-        self.fixed_normal = fem.Function(self.W)  # F's outward normal at Z
+        self.contact_normal = fem.Function(self.W)  # nu at the pair, out of F
         self.P = self._pairing_operator()
 
     # ---- hooks of ContactSetup ----
@@ -114,9 +117,9 @@ class TwoBodySetup(ContactSetup):
         return u - self.w
 
     def _obstacle_ufl(self) -> tuple[Any, Any]:
-        """gap = (Y - Z) . nu and nu, F's unit outward normal at the paired point."""
+        """gap = (Y - Z) . nu and nu, the unit contact normal at the pair (out of F)."""
         ufl = self.m["ufl"]
-        nu = self.fixed_normal / ufl.sqrt(ufl.dot(self.fixed_normal, self.fixed_normal))
+        nu = self.contact_normal / ufl.sqrt(ufl.dot(self.contact_normal, self.contact_normal))
         return -ufl.dot(self.offset, nu), nu
 
     # ---- the pairing ----
@@ -128,9 +131,9 @@ class TwoBodySetup(ContactSetup):
     def _pairing_operator(self) -> Any:
         """P (W x V): row (node i of M's contact face, component c) holds the weights of the same
         component of F's nodes at i's paired point (one 1 at its partner node, or after sliding the
-        Lagrange weights of F's facet there). Sets ``offset`` and ``fixed_normal`` on M's contact
+        Lagrange weights of F's facet there). Sets ``offset`` and ``contact_normal`` on M's contact
         face. Parallel: F's contact nodes are gathered on every rank (a face, small beside the volume)."""
-        fem, PETSc, MPI = self.m["fem"], self.m["PETSc"], self.m["MPI"]
+        fem, PETSc = self.m["fem"], self.m["PETSc"]
         W = self.W
         x = W.tabulate_dof_coordinates()
         imap = W.dofmap.index_map
@@ -157,15 +160,22 @@ class TwoBodySetup(ContactSetup):
         else:
             j = np.zeros(0, dtype=np.int64)
         self.offset.x.array.reshape(-1, 3)[slave] = z - y
-        self.fixed_normal.x.array.reshape(-1, 3)[slave] = normal
-        for f in (self.offset, self.fixed_normal):
+        self.contact_normal.x.array.reshape(-1, 3)[slave] = normal
+        for f in (self.offset, self.contact_normal):
             f.x.scatter_forward()
-        P = PETSc.Mat().createAIJ(((3 * imap.size_local, PETSc.DECIDE), (self.n_owned, PETSc.DECIDE)), nnz=(k, k), comm=self.comm)
-        P.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-        rows = np.repeat(imap.local_to_global(slave.astype(np.int32)), k).reshape(-1, k)[used]
-        for c in range(3):
-            for r, col, value in zip(3 * rows + c, columns[j, c], weights[used]):
-                P.setValue(int(r), int(col), float(value), addv=PETSc.InsertMode.ADD_VALUES)
+        # CSR of the owned rows (3 per node of W, node by node): row (i, c) of a node of M's face
+        # holds its stencil's weights at component c of F's nodes, other rows are empty
+        n_rows = 3 * imap.size_local
+        count = np.zeros(n_rows, dtype=np.int64)
+        node_of = np.repeat(np.arange(len(slave)), k).reshape(-1, k)[used]
+        rows = (3 * slave[node_of][:, None] + np.arange(3)).T  # (3, m): component-major
+        np.add.at(count, rows.ravel(), 1)
+        cols = np.concatenate([columns[j, c] for c in range(3)])
+        order = np.lexsort((cols, rows.ravel()))  # by row, columns ascending within a row
+        indptr = np.concatenate([[0], np.cumsum(count)]).astype(PETSc.IntType)
+        cols = cols[order].astype(PETSc.IntType)
+        vals = np.tile(weights[used], 3)[order]
+        P = PETSc.Mat().createAIJ(((n_rows, PETSc.DECIDE), (self.n_owned, PETSc.DECIDE)), csr=(indptr, cols, vals), comm=self.comm)
         P.assemble()
         return P
 
@@ -205,7 +215,6 @@ class TwoBodySystem(_BorderedSystem):
         """F_u (``F``: its contact term holds u - w), F_w = p z . nu ds on M's contact face, and
         their derivatives in u and w."""
         fem, ufl = s.m["fem"], s.m["ufl"]
-        assert isinstance(s, TwoBodySetup)
         z = ufl.TestFunction(s.W)
         Fw = pressure * ufl.dot(z, nu) * s.ds_c
         du, dw = ufl.TrialFunction(s.V), ufl.TrialFunction(s.W)
