@@ -41,7 +41,7 @@ from .problem import AREA_DEFINITION_NITSCHE, FEContactProblem, FEContactResult,
 from .progress import SolveProgress
 
 
-class _BorderedSystem:
+class BorderedSystem:
     """Residual, Jacobian (shell) and exact block preconditioner of the bordered Newton system."""
 
     def __init__(self, s: ContactSetup, uh: Any, ut: Any, E: list, forms: dict, prefix: str) -> None:
@@ -250,13 +250,13 @@ class _BorderedSystem:
 
 
 #: The set-up and bordered system of an obstacle that is not rigid, by its type (the rigid ones
-#: use :class:`ContactSetup` and :class:`_BorderedSystem`); registered by the module that solves it:
+#: use :class:`ContactSetup` and :class:`BorderedSystem`); registered by the module that solves it:
 #: :class:`fem_reference.problem.DeformableCounterpart` by :mod:`fem_reference.two_body`.
 OBSTACLE_SOLVERS: dict[type, tuple[type, type]] = {}
 
 
 class _ShellContext:
-    def __init__(self, system: _BorderedSystem) -> None:
+    def __init__(self, system: BorderedSystem) -> None:
         self.system = system
 
     def mult(self, mat: Any, x: Any, y: Any) -> None:
@@ -311,7 +311,7 @@ def _solve(problem: FEContactProblem, comm: Any, progress: SolveProgress | None)
     fem, ufl, PETSc, MPI = m["fem"], m["ufl"], m["PETSc"], m["MPI"]
     comm = MPI.COMM_WORLD if comm is None else comm
     element = problem.resolved_element()
-    setup, system_class = OBSTACLE_SOLVERS.get(type(problem.obstacle), (ContactSetup, _BorderedSystem))
+    setup, system_class = OBSTACLE_SOLVERS.get(type(problem.obstacle), (ContactSetup, BorderedSystem))
     s = setup(problem, comm, element)
     warnings: list[str] = []
     if element == "P1" and problem.poissons_ratio >= 0.49:
@@ -503,7 +503,7 @@ def _solve(problem: FEContactProblem, comm: Any, progress: SolveProgress | None)
     return result
 
 
-def _monitor_progress(snes: Any, system: _BorderedSystem, s: ContactSetup, pressure: Any, progress: SolveProgress) -> None:
+def _monitor_progress(snes: Any, system: BorderedSystem, s: ContactSetup, pressure: Any, progress: SolveProgress) -> None:
     """Newton and (iterative path) Krylov monitors writing ``progress`` lines (rank 0).
 
     The contact nodes are the P1 nodes of the contact surface whose lumped pressure is positive
@@ -534,7 +534,7 @@ def _monitor_progress(snes: Any, system: _BorderedSystem, s: ContactSetup, press
 
 def _destroy(*objs: Any) -> None:
     for o in objs:
-        if isinstance(o, _BorderedSystem):
+        if isinstance(o, BorderedSystem):
             o.release()
         elif o is not None:
             o.destroy()

@@ -265,7 +265,7 @@ class ContactSetup:
         half that of a Winkler bed (springs E' / L per unit area, L = extent of the body along
         the load) carrying the load (:meth:`_winkler_penetration`). Newton steps are damped so
         that the penetration changes by at most a factor 4 per step
-        (:meth:`fem_reference.contact._BorderedSystem.step_limit`).
+        (:meth:`fem_reference.contact.BorderedSystem.step_limit`).
         """
         fem, ufl, MPI = self.m["fem"], self.m["ufl"], self.m["MPI"]
         obs = self.problem.obstacle

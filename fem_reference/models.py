@@ -23,6 +23,7 @@ names it as its ``fe_twin``.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
@@ -260,30 +261,41 @@ def scene_layer_solid(scene: Any, mesh_size_mm: float, n_layers: int | None) -> 
     and its bone (:func:`geometries.cartilage_solids.measured_layer_solid`), each vertex measured
     by the ray cast the springs' triangles are measured by (:func:`edem.thickness.measure_layer`,
     up to :data:`edem.thickness.BONE_SEARCH_MM`; where no bone lies below, the value M's unmeasured
-    springs carry), or M's uniform layer. F is rigid (:func:`fem_reference.settings.resolve_settings`
-    refuses a layer on it). The construction's repairs are issued as warnings (the run's notes)."""
+    springs carry), or M's uniform layer. The layer model takes F rigid (:func:`fem_reference.settings.resolve_settings`
+    refuses a layer on it); the two-layer model builds F's on this one's contact face. The
+    construction's repairs are issued as warnings (the run's notes)."""
     layers = scene.cartilage.layers
     if layers is None:
         return fe_solids.layer_solid(scene.mobile, float(scene.cartilage.thickness_mm), mesh_size_mm, n_layers)
     mobile = layers.mobile
     if not mobile.has_bone:
         return fe_solids.layer_solid(scene.mobile, float(mobile.thickness_mm.max()), mesh_size_mm, n_layers)
-    from edem.thickness import measure_layer
-    from geometries.cartilage_solids import measured_layer_solid
-
-    unmeasured = mobile.thickness_mm[~mobile.measured]
-    fallback = float(unmeasured.min()) if unmeasured.size else float(np.median(mobile.thickness_mm))
-
-    def thickness_at(vertices_mm: np.ndarray, inward: np.ndarray) -> np.ndarray:
-        depth, measured = measure_layer(vertices_mm, -inward, mobile.bone)
-        return np.where(measured, depth, fallback)
-
     import warnings as python_warnings
 
-    solid, notes = measured_layer_solid(scene.mobile, scene.mobile.areas_mm2 > 0, thickness_at, mesh_size_mm, n_layers)
+    from geometries.cartilage_solids import measured_layer_solid
+
+    solid, notes = measured_layer_solid(scene.mobile, scene.mobile.areas_mm2 > 0, _measured_thickness(mobile, mobile.bone),
+                                        mesh_size_mm, n_layers)
     for note in notes:  # collected by _build_solid as the construction's notes
         python_warnings.warn(note, stacklevel=2)
     return solid
+
+
+def _measured_thickness(side: Any, bone: Any) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """``thickness_at(vertices (k, 3) mm, inward directions (k, 3)) -> (k,) mm`` of a side's layer
+    (:class:`edem.thickness.SideLayer`): measured to ``bone`` (placed as the vertices are) by the
+    ray cast the springs' triangles are measured by (:func:`edem.thickness.measure_layer`), and
+    where no bone lies below, the value the side's unmeasured triangles carry."""
+    from edem.thickness import measure_layer
+
+    unmeasured = side.thickness_mm[~side.measured]
+    fallback = float(unmeasured.min()) if unmeasured.size else float(np.median(side.thickness_mm))
+
+    def thickness_at(vertices_mm: np.ndarray, inward: np.ndarray) -> np.ndarray:
+        depth, measured = measure_layer(vertices_mm, -inward, bone)
+        return np.where(measured, depth, fallback)
+
+    return thickness_at
 
 
 def fixed_has_cartilage(scene: Any) -> bool:
@@ -336,7 +348,6 @@ class TwoLayerModel(FEModel):
     def _paired(scene: Any, mobile: Any, f_pose: Placement, n_layers: int | None) -> Any:
         """M's layer and F's built on its contact face (F at ``f_pose``); the build's notes are
         issued as warnings (collected by :func:`_build_solid`)."""
-        from edem.thickness import measure_layer
         from geometries.cartilage_solids import offset_surface, opposing_layer_solid
 
         fixed = scene.cartilage.layers.fixed
@@ -350,14 +361,8 @@ class TwoLayerModel(FEModel):
         facing = np.full_like(mobile.points_mm, np.nan)
         ok = np.isfinite(hits.spring_length_mm)
         facing[top[ok]] = mobile.points_mm[top[ok]] + hits.spring_length_mm[ok, None] * direction[ok]
-        if fixed.has_bone:
-            bone = replace(fixed.bone, vertices_mm=f_pose.points(fixed.bone.vertices_mm))
-            unmeasured = fixed.thickness_mm[~fixed.measured]
-            fallback = float(unmeasured.min()) if unmeasured.size else float(np.median(fixed.thickness_mm))
-
-            def thickness_at(vertices_mm: np.ndarray, inward: np.ndarray) -> np.ndarray:
-                depth, measured = measure_layer(vertices_mm, -inward, bone)
-                return np.where(measured, depth, fallback)
+        if fixed.has_bone:  # F's bone where F is at this time point
+            thickness_at = _measured_thickness(fixed, replace(fixed.bone, vertices_mm=f_pose.points(fixed.bone.vertices_mm)))
         else:
             def thickness_at(vertices_mm: np.ndarray, inward: np.ndarray) -> np.ndarray:
                 return np.full(len(vertices_mm), float(fixed.thickness_mm.max()))

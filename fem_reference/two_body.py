@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .contact import OBSTACLE_SOLVERS, _BorderedSystem
+from .contact import OBSTACLE_SOLVERS, BorderedSystem
 from .contact_setup import ContactSetup
 from .problem import DeformableCounterpart, FEContactProblem
 
@@ -205,7 +205,7 @@ class TwoBodySetup(ContactSetup):
         self.w.x.scatter_forward()
 
 
-class TwoBodySystem(_BorderedSystem):
+class TwoBodySystem(BorderedSystem):
     """The bordered Newton system of :mod:`fem_reference.contact` for two layers: the residual
     R = F_u + P^T F_w and the Jacobian J = J_uu + J_uw P + P^T J_wu + P^T J_ww P in one matrix of
     fixed sparsity; K = J E, G = J^T E, H = E^T J E from it (E: M's rigid modes)."""
