@@ -141,7 +141,7 @@ def krylov_fieldsplit(ksp: Any, s: ContactSetup) -> tuple[list, list[str]]:
     like.destroy()
     is_u.compose("nearnullspace", nsp)
     p, q = ufl.TrialFunction(Q), ufl.TestFunction(Q)
-    scale = fem.Constant(s.mesh, -(1.0 / float(s.mu.value) + 1.0 / float(s.lam.value)))
+    scale = -(1.0 / s.mu + 1.0 / s.lam)  # UFL: constants, or per-cell values (two layers)
     Mp = s.m["fem_petsc"].assemble_matrix(fem.form(scale * p * q * s.dx))
     Mp.assemble()
     pc = ksp.getPC()

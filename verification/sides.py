@@ -290,8 +290,7 @@ SIDES: dict[str, SideRunner] = {
     "edem": _run_discrete("edem"),
     "dem": _run_discrete("dem"),
     **{f"fe-{model}": _run_fe(model) for model in FE_MODELS},
-    "fe-problem:hertz-line": _run_fe_problem("hertz-line"),
-    "fe-problem:confined-compression": _run_fe_problem("confined-compression"),
+    **{f"fe-problem:{name}": _run_fe_problem(name) for name in FE_PROBLEMS},
     "fe-slab-truth": _run_fe_truth,
     "edem-128-steps": _run_edem_truth,
 }

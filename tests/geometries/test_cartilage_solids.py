@@ -96,3 +96,56 @@ def test_offset_surface_moves_every_vertex_by_the_distance_along_its_normal():
     inside = np.abs(articular.vertices_mm[:, :2]).max(axis=1) < 8.0 - 1e-9
     np.testing.assert_allclose(np.linalg.norm(moved.vertices_mm[inside] - centre, axis=1), CAP_RADIUS_MM + 2.0, atol=1e-3)
     np.testing.assert_allclose(np.linalg.norm(moved.vertices_mm - articular.vertices_mm, axis=1), 2.0, atol=1e-12)
+
+
+def test_opposing_layer_is_built_on_the_mobile_contact_face_and_paired_point_to_point():
+    """F's layer under a curved M layer: its articular face is M's contact triangulation carried
+    along M's columns onto the plane z = 1 (the points given), its columns reach F's bone 0.8 mm
+    beyond (the thickness asked for, along F's normal +z: exactly, F's face being flat), every
+    paired point of M faces its partner, and a triangle whose ray misses F becomes a free face."""
+    from geometries.cartilage_solids import opposing_layer_solid
+    from geometries.fe_solids import FIXED_CONTACT_TAG, FIXED_VOLUME_TAG, FREE_TAG
+
+    surface = cap()
+    mobile, _ = measured_layer_solid(TriangleSurface(surface.vertices_mm, surface.triangles), np.ones(surface.n_triangles, bool),
+                                     lambda v, d: np.full(len(v), 1.0), None, 2)
+    top = np.unique(mobile.faces(CONTACT_TAG))
+    column = mobile.points_mm[top] - mobile.points_mm[mobile.bottom_vertex[top]]
+    column /= np.linalg.norm(column, axis=1)[:, None]
+    facing = np.full_like(mobile.points_mm, np.nan)
+    s = (1.0 - mobile.points_mm[top, 2]) / column[:, 2]  # rays onto z = 1
+    facing[top] = mobile.points_mm[top] + s[:, None] * column
+    facing[top[np.argmax(np.hypot(mobile.points_mm[top, 0], mobile.points_mm[top, 1]))]] = np.nan  # a corner's ray misses
+    solid, notes = opposing_layer_solid(mobile, facing, lambda v, d: np.full(len(v), 0.8), 2)
+    assert np.all(tet_volumes(solid.points_mm, solid.tets) > 0)
+    paired = np.unique(solid.faces(CONTACT_TAG))
+    np.testing.assert_allclose(solid.points_mm[solid.partner[paired]], facing[paired], atol=1e-12)
+    assert np.all(solid.partner[solid.partner[paired]] == paired)
+    fixed_face = np.unique(solid.faces(FIXED_CONTACT_TAG))
+    np.testing.assert_allclose(solid.points_mm[fixed_face, 2], 1.0, atol=1e-12)
+    bottom = solid.bottom_vertex[fixed_face]
+    np.testing.assert_allclose(solid.points_mm[bottom] - solid.points_mm[fixed_face], [[0.0, 0.0, 0.8]] * len(bottom), atol=1e-9)
+    assert int(np.sum(solid.cell_tags == FIXED_VOLUME_TAG)) > 0
+    # the corner's triangles are left to M as free faces, said in the notes
+    assert len(solid.faces(CONTACT_TAG)) < len(mobile.faces(CONTACT_TAG))
+    assert np.sum(solid.facet_tags == FREE_TAG) > np.sum(mobile.facet_tags == FREE_TAG)
+    assert any("face no cartilage of F" in note for note in notes)
+
+
+def test_pairing_solids_refuses_faces_with_no_triangle_in_common():
+    """pair_solids keeps a contact triangle only when its partners form one of F's: none -> ValueError."""
+    import pytest
+
+    from geometries.fe_solids import extrude, pair_solids
+
+    plate = grid_plate(4.0, 4.0, 2)
+    n = len(plate.vertices_mm)
+    up = np.tile([0.0, 0.0, 1.0], (n, 1))
+    mobile = extrude("m", plate.vertices_mm + [0.0, 0.0, 2.0], plate.triangles[:, ::-1], -up, np.full(n, 1.0), 1)
+    fixed = extrude("f", plate.vertices_mm - [0.0, 0.0, 1.0], plate.triangles, up, np.full(n, 1.0), 1)
+    partner = np.full(len(mobile.points_mm), -1)
+    partner[n:] = n  # every point paired with one point of F: no triangle in common
+    with pytest.raises(ValueError, match="no contact triangle"):
+        pair_solids(mobile, fixed, partner)
+    partner[n:] = n + np.arange(n)
+    assert len(pair_solids(mobile, fixed, partner).faces(CONTACT_TAG)) == len(plate.triangles)

@@ -9,6 +9,8 @@ and the analysis kinds :data:`verification.analyses.ANALYSES`.
 Campaigns: ``edem-analytic`` (EDEM/DEM against closed forms), ``stability`` (stiff and extreme
 input, each ending in its declared outcome, no NaN anywhere), ``fe-analytic`` (the FE reference
 against Hertz line contact and confined compression on three meshes each, with observed orders),
+``fe-two-layers`` (the FE of two deformable layers against Hertz of two elastic cylinders and two
+confined layers in series, three meshes each, with observed orders),
 ``stance`` (EDEM vs DEM over the built-in stance scenes, the thesis's figures beside ours, DEM
 vs the FE slab at five instants), ``sensitivity`` (h_max x ligament modulus, 20 x 20 EDEM
 stances, the thesis's fig. 4.3.10), ``quick`` (a subset for CI), and EDEM/DEM against the FE
@@ -44,6 +46,7 @@ from verification.campaigns import (
     error_vs_runtime,
     fe_analytic,
     fe_convergence,
+    fe_two_layers,
     population,
     population_coupled,
     quick,
@@ -68,7 +71,7 @@ from verification.campaigns.stance import (
 )
 
 #: the registered campaign modules, in the order `edem verify --list` shows them
-CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, viscoelastic, fe_convergence,
+CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, fe_two_layers, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, viscoelastic, fe_convergence,
                     population, population_coupled, real_knee)
 #: campaigns on data the user gives (``edem verify NAME --data FOLDER``): name -> their module, whose
 #: ``data_files(data)`` refuses (InputError naming --data or the missing file) a folder without them and
