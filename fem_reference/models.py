@@ -287,15 +287,35 @@ def _measured_thickness(side: Any, bone: Any) -> Callable[[np.ndarray, np.ndarra
     ray cast the springs' triangles are measured by (:func:`edem.thickness.measure_layer`), and
     where no bone lies below, the value the side's unmeasured triangles carry."""
     from edem.thickness import measure_layer
+    from geometries.triangle_kernels import nearby_distance_mm
 
     unmeasured = side.thickness_mm[~side.measured]
     fallback = float(unmeasured.min()) if unmeasured.size else float(np.median(side.thickness_mm))
+    on_bone_mm = 1e-9 * float(np.ptp(bone.vertices_mm, axis=0).max())  # round-off of the coordinates
 
     def thickness_at(vertices_mm: np.ndarray, inward: np.ndarray) -> np.ndarray:
         depth, measured = measure_layer(vertices_mm, -inward, bone)
-        return np.where(measured, depth, fallback)
+        # a vertex on the layer's margin, where a tapered layer meets its bone, has no depth for
+        # the ray to find: its thickness is 0, not the fallback (measured_layer_solid ends the solid there)
+        on_bone = np.zeros(len(vertices_mm), bool)
+        on_bone[~measured] = nearby_distance_mm(vertices_mm[~measured], bone.vertices_mm, bone.triangles) <= on_bone_mm
+        return np.where(measured, depth, np.where(on_bone, 0.0, fallback))
 
     return thickness_at
+
+
+def column_directions(solid: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(unit directions (k, 3), their points (k,)) of the columns under the solid's contact face,
+    bone to contact face: the springs' rays through its points. A column of no height (a layer
+    tapered to zero on its bone, :func:`geometries.fe_solids.extrude`) takes the contact face's
+    vertex normal."""
+    points, triangles, top = contact_surface(solid)
+    column = solid.points_mm[top] - solid.points_mm[solid.bottom_vertex[top]]
+    length = np.linalg.norm(column, axis=1)
+    direction = fe_solids.vertex_normals(points, triangles)
+    tall = length > 0.0
+    direction[tall] = column[tall] / length[tall, None]
+    return direction, top
 
 
 def fixed_has_cartilage(scene: Any) -> bool:
@@ -352,9 +372,7 @@ class TwoLayerModel(FEModel):
 
         fixed = scene.cartilage.layers.fixed
         articular = scene.fixed if fixed.has_bone else offset_surface(scene.fixed, float(fixed.thickness_mm.max()))
-        top = np.unique(mobile.faces(fe_solids.CONTACT_TAG))
-        column = mobile.points_mm[top] - mobile.points_mm[mobile.bottom_vertex[top]]
-        direction = column / np.linalg.norm(column, axis=1)[:, None]
+        direction, top = column_directions(mobile)
         rotation, translation = f_pose.affine()
         hits = RayCaster(articular.vertices_mm, articular.triangles).cast(
             mobile.points_mm[top], direction, float(scene.cartilage.max_spring_length_mm), rotation=rotation, translation=translation)
