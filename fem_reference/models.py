@@ -318,6 +318,34 @@ def column_directions(solid: Any) -> tuple[np.ndarray, np.ndarray]:
     return direction, top
 
 
+def _facing_fixed(scene: Any, mobile: Any, f_pose: Placement) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Callable]:
+    """Where the columns of M's layer (``mobile``), carried on as the springs' rays, meet F's
+    articular surface at ``f_pose`` (F's scene surface with ``fixed_bone``; otherwise F's bone
+    offset by ``fixed_thickness_mm``), looking ``max_spring_length_mm`` both ways.
+
+    Returns M's contact-face points (k,), their unit column directions (k, 3), the points met
+    (k, 3; NaN where the ray misses), F's articular triangle met (k,; -1) and F's
+    ``thickness_at(vertices, inward) -> mm`` there (:func:`_measured_thickness` to F's bone at
+    ``f_pose``, or the uniform layer)."""
+    from geometries.cartilage_solids import offset_surface
+
+    fixed = scene.cartilage.layers.fixed
+    articular = scene.fixed if fixed.has_bone else offset_surface(scene.fixed, float(fixed.thickness_mm.max()))
+    direction, top = column_directions(mobile)
+    rotation, translation = f_pose.affine()
+    hits = RayCaster(articular.vertices_mm, articular.triangles).cast(
+        mobile.points_mm[top], direction, float(scene.cartilage.max_spring_length_mm), rotation=rotation, translation=translation)
+    ok = np.isfinite(hits.spring_length_mm)
+    points = np.full((len(top), 3), np.nan)
+    points[ok] = mobile.points_mm[top[ok]] + hits.spring_length_mm[ok, None] * direction[ok]
+    if fixed.has_bone:  # F's bone where F is at this time point
+        thickness_at = _measured_thickness(fixed, replace(fixed.bone, vertices_mm=f_pose.points(fixed.bone.vertices_mm)))
+    else:
+        def thickness_at(vertices_mm: np.ndarray, inward: np.ndarray) -> np.ndarray:
+            return np.full(len(vertices_mm), float(fixed.thickness_mm.max()))
+    return top, direction, points, np.where(ok, hits.triangle, -1), thickness_at
+
+
 def fixed_has_cartilage(scene: Any) -> bool:
     """Whether the scene gives F a cartilage layer of its own (``[geometry] fixed_bone`` or
     ``[cartilage] fixed_thickness_mm > 0``)."""
@@ -368,22 +396,11 @@ class TwoLayerModel(FEModel):
     def _paired(scene: Any, mobile: Any, f_pose: Placement, n_layers: int | None) -> Any:
         """M's layer and F's built on its contact face (F at ``f_pose``); the build's notes are
         issued as warnings (collected by :func:`_build_solid`)."""
-        from geometries.cartilage_solids import offset_surface, opposing_layer_solid
+        from geometries.cartilage_solids import opposing_layer_solid
 
-        fixed = scene.cartilage.layers.fixed
-        articular = scene.fixed if fixed.has_bone else offset_surface(scene.fixed, float(fixed.thickness_mm.max()))
-        direction, top = column_directions(mobile)
-        rotation, translation = f_pose.affine()
-        hits = RayCaster(articular.vertices_mm, articular.triangles).cast(
-            mobile.points_mm[top], direction, float(scene.cartilage.max_spring_length_mm), rotation=rotation, translation=translation)
+        top, _direction, points, _triangle, thickness_at = _facing_fixed(scene, mobile, f_pose)
         facing = np.full_like(mobile.points_mm, np.nan)
-        ok = np.isfinite(hits.spring_length_mm)
-        facing[top[ok]] = mobile.points_mm[top[ok]] + hits.spring_length_mm[ok, None] * direction[ok]
-        if fixed.has_bone:  # F's bone where F is at this time point
-            thickness_at = _measured_thickness(fixed, replace(fixed.bone, vertices_mm=f_pose.points(fixed.bone.vertices_mm)))
-        else:
-            def thickness_at(vertices_mm: np.ndarray, inward: np.ndarray) -> np.ndarray:
-                return np.full(len(vertices_mm), float(fixed.thickness_mm.max()))
+        facing[top] = points
 
         import warnings as python_warnings
 
@@ -410,5 +427,72 @@ class TwoLayerModel(FEModel):
         return thickness_mm + gap_mm
 
 
+class LumpedLayerModel(FEModel):
+    """Both layers summed into one on M's bone, against F's bone taken rigid: the FE of the lumped
+    layer (``[cartilage] thin_layer_stack = "lumped"``), the reference of the lumping error
+    (docs/method.md#two-layers-the-sandwich).
+
+    Each column of M's layer (as :class:`LayerModel` builds it) goes on from M's bone along its
+    direction for t_M + t_F, t_F F's layer along the same line: from where the column, carried on
+    as the springs' ray, meets F's articular surface on to F's bone (measured, or F's uniform
+    layer; where it meets no F, F's uniform layer, or nothing for a measured F, whose cartilage
+    ends at its margin). So the lumped layer's face stands t_F beyond M's articular surface, its
+    gap to F's bone along the column is the articular surfaces' gap (the springs' h_b - T), and it
+    touches F's bone where the two layers touch. One material (the scene's), bonded on M's bone
+    only, the other face free against F's bone."""
+
+    name = "lumped"
+    what = "both layers summed into one on M, F's bone rigid (the lumped layer's twin)"
+    needs_thickness = True
+    warm_start_scales_with_load = False
+
+    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
+        key = ("lumped", pose_key)
+        warnings: list[str] = []
+        if "mobile" not in cache:
+            cache["mobile"], cache["mobile_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers))
+            warnings += cache.pop("mobile_notes")
+        if cache.get("key") != key:
+            cache.update(key=key, solid=_build_solid("lumped layer", lambda: self._summed(scene, cache["mobile"], f_pose, mesh_size_mm, layers))[0])
+        fixed = scene.cartilage.layers.fixed
+        bone = fixed.bone if fixed.has_bone else scene.fixed  # without a bone mesh F's scene surface is its bone
+        bone_obstacle = RigidSurface(f_pose.points(bone.vertices_mm), bone.triangles, candidates=16)
+        pts, _, _ = contact_surface(cache["solid"])
+        gap, _ = bone_obstacle.gap_and_normal(pts)
+        overlap = float(-gap.min()) if len(gap) else 0.0
+        if overlap > 1e-9 * float(scene.cartilage.max_spring_length_mm):
+            warnings.append(f"the lumped layer overlaps F's bone by up to {overlap:.3g} mm ({int(np.sum(gap < 0))} contact-surface "
+                            "nodes): it starts pre-compressed")
+        return FEGeometry(cache["solid"], bone_obstacle, key, warnings)
+
+    @staticmethod
+    def _summed(scene: Any, mobile: Any, f_pose: Placement, mesh_size_mm: float, n_layers: int | None) -> Any:
+        """The columns of M's layer lengthened by F's thickness where they meet F (module docstring)."""
+        top, direction, points, triangle, thickness_at = _facing_fixed(scene, mobile, f_pose)
+        fixed = scene.cartilage.layers.fixed
+        t_fixed = np.full(len(top), 0.0 if fixed.has_bone else float(fixed.thickness_mm.max()))
+        hit = triangle >= 0
+        t_fixed[hit] = thickness_at(points[hit], direction[hit])  # on along the ray, through F's layer to its bone
+        points_mm, triangles, _ = contact_surface(mobile)  # (its points are ``top``, in that order)
+        bone = mobile.points_mm[mobile.bottom_vertex[top]]
+        total = np.linalg.norm(points_mm - bone, axis=1) + t_fixed
+        size = mesh_size_mm if mesh_size_mm is not None else fe_solids.mean_edge(points_mm, triangles)
+        return fe_solids.extrude("lumped-layer", bone, triangles, direction, total, fe_solids.layers_for(n_layers, float(total.max()), size))
+
+    def reach(self, scene, gap_mm, facing):
+        t = _largest_thickness_mm(scene) + float(scene.cartilage.layers.fixed.thickness_mm.max())
+        g0 = float(gap_mm[facing].min()) if facing.any() else 0.0
+        return facing & (gap_mm <= max(g0, 0.0) + 0.5 * t)
+
+    def sizing_surface(self, scene, caster, f_pose):
+        return scene.mobile.areas_mm2 > 0, _largest_thickness_mm(scene) + float(scene.cartilage.layers.fixed.thickness_mm.max())
+
+    def thickness_mm(self, scene, solid, used, points_mm):
+        return np.linalg.norm(points_mm - solid.points_mm[solid.bottom_vertex[used]], axis=1)
+
+    def spring_length_mm(self, thickness_mm, gap_mm):
+        return thickness_mm + gap_mm
+
+
 #: every FE model by name (``[fe] model``, ``edem fe --model``)
-FE_MODELS: dict[str, FEModel] = {m.name: m for m in (SlabModel(), LayerModel(), TwoLayerModel())}
+FE_MODELS: dict[str, FEModel] = {m.name: m for m in (SlabModel(), LayerModel(), TwoLayerModel(), LumpedLayerModel())}
