@@ -44,6 +44,9 @@ class FEGeometry:
     obstacle: RigidSurface
     key: tuple  # equal keys -> identical mesh and obstacle
     warnings: list[str]
+    #: (n, 3) per contact-face point (contact_surface's order) where its column crosses M's scene
+    #: surface (FEModel.mobile_points_mm; fem_reference.scene_run sets it)
+    mobile_points_mm: np.ndarray | None = None
 
 
 def contact_surface(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -96,6 +99,12 @@ class FEModel(ABC):
     def spring_length_mm(self, thickness_mm: np.ndarray, gap_mm: np.ndarray) -> np.ndarray:
         """(n,) the spring length a contact-surface point stands for."""
         ...
+
+    def mobile_points_mm(self, scene: Any, solid: Any, used: np.ndarray) -> np.ndarray:
+        """(n, 3) where each contact-surface point's column (``used``: solid indices) crosses M's
+        scene surface, the surface the springs live on: the comparisons measure the FE's area and
+        pressure there. By default the bottom of the column (M's surface is the bonded face)."""
+        return solid.points_mm[solid.bottom_vertex[used]]
 
 
 def _spring_lengths(scene: Any, caster: RayCaster, f_pose: Placement) -> np.ndarray:
@@ -242,11 +251,24 @@ class LayerModel(FEModel):
         # the column under each contact point (uniform: t; measured: the vertex's thickness)
         return np.linalg.norm(points_mm - solid.points_mm[solid.bottom_vertex[used]], axis=1)
 
+    def mobile_points_mm(self, scene, solid, used):
+        return _layer_mobile_points_mm(scene, solid, used)
+
     def sizing_surface(self, scene, caster, f_pose):
         return scene.mobile.areas_mm2 > 0, _largest_thickness_mm(scene)
 
     def spring_length_mm(self, thickness_mm, gap_mm):
         return thickness_mm + gap_mm
+
+
+def _layer_mobile_points_mm(scene: Any, solid: Any, used: np.ndarray) -> np.ndarray:
+    """M's scene surface under the contact face of M's layer: the contact face itself where M's
+    scene surface is its articular surface (a bone mesh under it: the layer stands below it),
+    else the bone the layer stands on (the bonded face)."""
+    layers = scene.cartilage.layers
+    if layers is not None and layers.mobile.has_bone:
+        return solid.points_mm[used]
+    return solid.points_mm[solid.bottom_vertex[used]]
 
 
 def _largest_thickness_mm(scene: Any) -> float:
@@ -423,6 +445,9 @@ class TwoLayerModel(FEModel):
         x, bottom, partner = solid.points_mm, solid.bottom_vertex, solid.partner[used]
         return np.linalg.norm(points_mm - x[bottom[used]], axis=1) + np.linalg.norm(x[partner] - x[bottom[partner]], axis=1)
 
+    def mobile_points_mm(self, scene, solid, used):
+        return _layer_mobile_points_mm(scene, solid, used)
+
     def spring_length_mm(self, thickness_mm, gap_mm):
         return thickness_mm + gap_mm
 
@@ -453,7 +478,8 @@ class LumpedLayerModel(FEModel):
             cache["mobile"], cache["mobile_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers))
             warnings += cache.pop("mobile_notes")
         if cache.get("key") != key:
-            cache.update(key=key, solid=_build_solid("lumped layer", lambda: self._summed(scene, cache["mobile"], f_pose, mesh_size_mm, layers))[0])
+            (solid, on_mobile), _ = _build_solid("lumped layer", lambda: self._summed(scene, cache["mobile"], f_pose, mesh_size_mm, layers))
+            cache.update(key=key, solid=solid, on_mobile=on_mobile)
         fixed = scene.cartilage.layers.fixed
         bone = fixed.bone if fixed.has_bone else scene.fixed  # without a bone mesh F's scene surface is its bone
         bone_obstacle = RigidSurface(f_pose.points(bone.vertices_mm), bone.triangles, candidates=16)
@@ -463,11 +489,14 @@ class LumpedLayerModel(FEModel):
         if overlap > 1e-9 * float(scene.cartilage.max_spring_length_mm):
             warnings.append(f"the lumped layer overlaps F's bone by up to {overlap:.3g} mm ({int(np.sum(gap < 0))} contact-surface "
                             "nodes): it starts pre-compressed")
-        return FEGeometry(cache["solid"], bone_obstacle, key, warnings)
+        return FEGeometry(cache["solid"], bone_obstacle, key, warnings, cache["on_mobile"])
 
     @staticmethod
-    def _summed(scene: Any, mobile: Any, f_pose: Placement, mesh_size_mm: float, n_layers: int | None) -> Any:
-        """The columns of M's layer lengthened by F's thickness where they meet F (module docstring)."""
+    def _summed(scene: Any, mobile: Any, f_pose: Placement, mesh_size_mm: float, n_layers: int | None) -> tuple[Any, np.ndarray]:
+        """The columns of M's layer lengthened by F's thickness where they meet F (the class
+        docstring), and per point of its contact face (contact_surface's order) where its column
+        crosses M's scene surface: t_M up from M's bone with a bone mesh (M's articular surface),
+        else the bone."""
         top, direction, points, triangle, thickness_at = _facing_fixed(scene, mobile, f_pose)
         fixed = scene.cartilage.layers.fixed
         t_fixed = np.full(len(top), 0.0 if fixed.has_bone else float(fixed.thickness_mm.max()))
@@ -477,7 +506,13 @@ class LumpedLayerModel(FEModel):
         bone = mobile.points_mm[mobile.bottom_vertex[top]]
         total = np.linalg.norm(points_mm - bone, axis=1) + t_fixed
         size = mesh_size_mm if mesh_size_mm is not None else fe_solids.mean_edge(points_mm, triangles)
-        return fe_solids.extrude("lumped-layer", bone, triangles, direction, total, fe_solids.layers_for(n_layers, float(total.max()), size))
+        solid = fe_solids.extrude("lumped-layer", bone, triangles, direction, total, fe_solids.layers_for(n_layers, float(total.max()), size))
+        from scipy.spatial import cKDTree
+
+        face, _, _ = contact_surface(solid)
+        _, column = cKDTree(bone + total[:, None] * direction).query(face)  # the same floats: each face point's column
+        on_mobile = points_mm if scene.cartilage.layers.mobile.has_bone else bone
+        return solid, on_mobile[column]
 
     def reach(self, scene, gap_mm, facing):
         t = _largest_thickness_mm(scene) + float(scene.cartilage.layers.fixed.thickness_mm.max())
