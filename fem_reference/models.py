@@ -455,7 +455,7 @@ class TwoLayerModel(FEModel):
 class LumpedLayerModel(FEModel):
     """Both layers summed into one on M's bone, against F's bone taken rigid: the FE of the lumped
     layer (``[cartilage] thin_layer_stack = "lumped"``), the reference of the lumping error
-    (docs/method.md#two-layers-the-sandwich).
+    (docs/method.md#two-deformable-layers).
 
     Each column of M's layer (as :class:`LayerModel` builds it) goes on from M's bone along its
     direction for t_M + t_F, t_F F's layer along the same line: from where the column, carried on
