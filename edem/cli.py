@@ -315,7 +315,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_run)
     p = sub.add_parser("fe", help="solve the FE reference (dolfinx) of a scene")
     p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
-    p.add_argument("--model", help="an FE model (fem_reference.models): slab (twin of the threshold law) or layer (of the gap laws); overrides [fe] model")
+    p.add_argument("--model", help="an FE model (fem_reference.models): slab (twin of the threshold law), layer (of the gap laws, F rigid), two-layer (both "
+                   "layers deformable) or lumped (both layers summed into one on M, F's bone rigid); overrides [fe] model")
     p.add_argument("--out", help="result directory (default results/<scene>-fe-<model>, plus -set-<hash> with --set)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing result directory (never another kind of directory)")
     p.add_argument("--mesh-size", type=float, metavar="MM", help="element size in mm; overrides [fe] mesh_size_mm")

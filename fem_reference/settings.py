@@ -119,18 +119,23 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
         raise InputError(f"{layers!r} is not a number of layers", file=file, key=layers_key,
                          expected="an integer >= 1")
     layered = scene.cartilage.layers
-    if layered is not None and fe_model.name not in ("layer", "two-layer"):
+    if layered is None and fe_model.name == "lumped":
+        raise InputError("the FE lumped model sums the two sides' layers: the scene has one combined thickness_mm",
+                         file=file, key="cartilage.thickness_mm",
+                         expected="per-side layers (cartilage.mobile_thickness_mm and fixed_thickness_mm, or bone meshes), or the layer model")
+    if layered is not None and fe_model.name not in ("layer", "two-layer", "lumped"):
         # (measured thickness, edem.thickness): the slab fills the gap, whatever the bone says
         raise InputError(f"the FE {fe_model.name} model does not take measured or per-side cartilage thickness",
                          file=file, key="geometry.mobile_bone, geometry.fixed_bone, geometry.cartilage, cartilage.mobile_thickness_mm, cartilage.fixed_thickness_mm",
-                         expected="the layer or two-layer model (--model layer / two-layer), or one combined thickness_mm (a built-in ankle without "
+                         expected="the layer, two-layer or lumped model (--model layer / two-layer / lumped), or one combined thickness_mm (a built-in ankle without "
                                   "its cartilage: geometry.cartilage = false, the thesis's geometry)")
     fixed_key = "geometry.fixed_bone" if layered is not None and layered.fixed.has_bone else "cartilage.fixed_thickness_mm"
     if fe_model.name == "layer" and fixed_has_cartilage(scene):
         # the layer model bonds M's cartilage to M and takes F rigid: a layer on F would be left out
         raise InputError("the FE layer model takes the fixed body rigid: it has no cartilage on it",
                          file=file, key=fixed_key,
-                         expected="the two-layer model (--model two-layer: both layers deformable), or fixed_thickness_mm = 0 and "
+                         expected="the two-layer model (--model two-layer: both layers deformable), the lumped model (--model lumped: "
+                                  "both layers summed into one on M, F's bone rigid), or fixed_thickness_mm = 0 and "
                                   "no fixed_bone (give F's articular surface as [geometry] fixed, e.g. its bone offset by its layer; "
                                   "the springs then model the same rigid F)")
     if fe_model.name == "two-layer" and not fixed_has_cartilage(scene):

@@ -38,6 +38,10 @@ _SMOOTHING_ROUNDS = 30
 #: 5-10 times taller than the facets' edges that tilts neighbouring columns into each other; a
 #: direction field smooth on the cartilage's own scale keeps every prism upright at every mesh level
 DIRECTION_SMOOTHING_MM = 1.0
+#: a vertex whose thickness is at most this fraction of the surface's extent lies on its bone (the
+#: round-off of the coordinates): the margin of a layer tapered to zero, where its column is one
+#: point (:func:`geometries.fe_solids.extrude`; docs/method.md#the-fe-layer-on-measured-thickness)
+ZERO_THICKNESS_FRACTION = 1e-9
 
 
 def offset_surface(surface: TriangleSurface, distance_mm: float, name: str = "") -> TriangleSurface:
@@ -153,12 +157,17 @@ def measured_layer_solid(
     dropped = 0
     worst_lean = 0.0
     keep = np.ones(len(tris), bool)
+    zero_mm = ZERO_THICKNESS_FRACTION * float(np.ptp(verts, axis=0).max())
     while True:
         verts, tris, tri_index = submesh(surface, keep)
         normals = smooth_directions(verts, tris)
         thickness = np.asarray(thickness_at(verts, -normals), float)
-        if not (np.isfinite(thickness).all() and (thickness > 0).all()):
-            raise ValueError("measured_layer_solid: a vertex has no positive finite thickness")
+        if not (np.isfinite(thickness).all() and (thickness >= 0).all()):
+            raise ValueError("measured_layer_solid: a vertex has no finite thickness >= 0")
+        # the margin where a tapered layer meets its bone: a column of no height (extrude collapses it to a point)
+        thickness[thickness <= zero_mm] = 0.0
+        if not thickness.any():
+            raise ValueError("measured_layer_solid: the layer has no thickness anywhere")
         n_layers = layers_for(layers_through_thickness, float(thickness.max()), size)
         thickness, normals, bad, touched = _smooth_inverted(verts, tris, normals, thickness, n_layers)
         if not bad.any():

@@ -76,8 +76,10 @@ class FESolid:
 
     ``facets`` are boundary triangles oriented with outward normals; ``facet_tags`` holds
     BONDED_TAG / CONTACT_TAG / FREE_TAG per facet; every tetrahedron has VOLUME_TAG.
-    ``bottom_vertex`` maps every point to the mobile-surface vertex it was extruded from and
-    ``layer`` to its layer (0 = bonded face, n = contact face).
+    ``bottom_vertex`` maps every point to the point at the bottom of its column (on the bonded
+    face; the layer-0 points come first, in the order of the surface's vertices, unless a column
+    of zero thickness is one point, :func:`extrude`) and ``layer`` to its layer (0 = bonded face,
+    n = contact face; a collapsed column's point is layer n and on both faces).
 
     Two layers in one solid (:func:`pair_solids`): ``cell_tags`` (VOLUME_TAG for M's,
     FIXED_VOLUME_TAG for F's tetrahedra), F's faces tagged FIXED_BONDED_TAG / FIXED_CONTACT_TAG,
@@ -91,7 +93,7 @@ class FESolid:
     facet_tags: np.ndarray  # (k,) int32
     name: str = ""
     layer: np.ndarray | None = None  # (n,) int
-    bottom_vertex: np.ndarray | None = None  # (n,) int, index into the submesh of M
+    bottom_vertex: np.ndarray | None = None  # (n,) int: the point at the bottom of its column
     cell_tags: np.ndarray | None = None  # (m,) int32; None: VOLUME_TAG everywhere
     partner: np.ndarray | None = None  # (n,) int: the paired point of the other contact face, or -1
 
@@ -263,17 +265,22 @@ def _vertex_values(vertices: np.ndarray, triangles: np.ndarray, values: np.ndarr
 def inverted_prisms(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray,
                      thickness: np.ndarray) -> np.ndarray:
     """(n_tri,) bool: the triangles whose one-layer prism along the vertex normals has a
-    tetrahedron of non-positive volume (the extrusion turns inside out there)."""
+    tetrahedron of non-positive volume (the extrusion turns inside out there). A column of zero
+    thickness is one point (:func:`extrude`): the tetrahedron through both its ends is not built,
+    so it is not checked."""
     nv = len(vertices)
     points = np.vstack([vertices, vertices + thickness[:, None] * normals])
     srt = np.sort(triangles, axis=1)
     a, b, c = srt[:, 0], srt[:, 1], srt[:, 2]
     ta, tb, tc = triangles[:, 0], triangles[:, 1], triangles[:, 2]
     even = ((ta == a) & (tb == b)) | ((tb == a) & (tc == b)) | ((tc == a) & (ta == b))
+    collapsed = np.asarray(thickness) == 0.0
     bad = np.zeros(len(triangles), dtype=bool)
-    for t in (np.column_stack([a, b, c, c + nv]), np.column_stack([a, b, c + nv, b + nv]), np.column_stack([a, b + nv, c + nv, a + nv])):
+    # each of the three tetrahedra holds both ends of one column: c's, b's, a's
+    for t, column in ((np.column_stack([a, b, c, c + nv]), c), (np.column_stack([a, b, c + nv, b + nv]), b),
+                      (np.column_stack([a, b + nv, c + nv, a + nv]), a)):
         t[~even] = t[~even][:, [1, 0, 2, 3]]
-        bad |= tet_volumes(points, t) <= 0
+        bad |= (tet_volumes(points, t) <= 0) & ~collapsed[column]
     return bad
 
 
@@ -401,10 +408,18 @@ def pair_solids(mobile: FESolid, fixed: FESolid, partner: np.ndarray, name: str 
 
 def extrude(name: str, bottom: np.ndarray, triangles: np.ndarray, normals: np.ndarray,
              thickness: np.ndarray, layers: int) -> FESolid:
-    """Prisms from ``bottom + k/layers * thickness * normal``, 3 tetrahedra each."""
+    """Prisms from ``bottom + k/layers * thickness * normal``, 3 tetrahedra each.
+
+    A vertex of thickness exactly 0 (a layer tapered to zero on its bone) has no column: its
+    copies are one point (the top one, on both the bonded and the contact face), and the
+    tetrahedra through two of them, which would be flat, are not built: a prism with such a
+    corner is a pyramid of two tetrahedra (three: one), so the solid follows the layer down to
+    nothing at its margin. ``bottom_vertex`` of the result is, per point, the point at the bottom
+    of its column (itself for a collapsed one)."""
     nv = len(bottom)
-    if np.any(~np.isfinite(thickness)) or np.any(thickness <= 0):
-        raise ValueError(f"{name}: non-positive or non-finite thickness at a vertex")
+    thickness = np.asarray(thickness, dtype=float)
+    if np.any(~np.isfinite(thickness)) or np.any(thickness < 0) or not np.any(thickness > 0):
+        raise ValueError(f"{name}: negative or non-finite thickness at a vertex, or none above zero")
     frac = np.arange(layers + 1) / layers
     pts = bottom[None, :, :] + frac[:, None, None] * (thickness[:, None] * normals)[None, :, :]
     pts = pts.reshape(-1, 3)
@@ -433,7 +448,22 @@ def extrude(name: str, bottom: np.ndarray, triangles: np.ndarray, normals: np.nd
             t[~even] = t[~even][:, [1, 0, 2, 3]]
             tets.append(t)
     tets = np.concatenate(tets)
-    # order tets prism by prism for locality
+    bottom_point = base.copy()  # the layer-0 copy of each point's column
+    collapsed = thickness == 0.0
+    both_faces = np.zeros(len(pts), bool)
+    if collapsed.any():
+        # every copy of a collapsed column is its top one; the flat tetrahedra through two go, and the
+        # unused copies with them (points renumbered)
+        merged = np.where(collapsed[base], layers * nv + base, np.arange(len(pts)))
+        tets = merged[tets]
+        s = np.sort(tets, axis=1)
+        tets = tets[np.all(s[:, 1:] != s[:, :-1], axis=1)]
+        used = np.unique(tets)
+        renumber = np.full(len(pts), -1, dtype=np.int64)
+        renumber[used] = np.arange(used.size)
+        pts, layer, tets = pts[used], layer[used], renumber[tets]
+        bottom_point = renumber[merged[base[used]]]
+        both_faces = collapsed[base[used]]
     vol = tet_volumes(pts, tets)
     if not np.all(vol > 0):
         bad = int(np.sum(vol <= 0))
@@ -441,15 +471,15 @@ def extrude(name: str, bottom: np.ndarray, triangles: np.ndarray, normals: np.nd
                          "for this thickness, or inconsistent orientation)")
 
     bnd = boundary_facets(tets)
-    lay = layer[bnd]
+    lay, ends = layer[bnd], both_faces[bnd]
     tags = np.full(len(bnd), FREE_TAG, dtype=np.int32)
-    tags[np.all(lay == 0, axis=1)] = BONDED_TAG
-    tags[np.all(lay == layers, axis=1)] = CONTACT_TAG
+    tags[np.all((lay == 0) | ends, axis=1)] = BONDED_TAG
+    tags[np.all((lay == layers) | ends, axis=1)] = CONTACT_TAG
     order = np.lexsort((np.arange(len(bnd)), tags))
     return FESolid(
         points_mm=pts, tets=np.ascontiguousarray(tets, dtype=np.int64),
         facets=np.ascontiguousarray(bnd[order], dtype=np.int64), facet_tags=tags[order],
-        name=name, layer=layer, bottom_vertex=base,
+        name=name, layer=layer, bottom_vertex=bottom_point,
     )
 
 

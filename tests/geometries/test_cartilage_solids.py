@@ -10,6 +10,7 @@ repaired (smoothed, said in the notes), not refused.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from geometries.cartilage_solids import measured_layer_solid, offset_surface
 from geometries.fe_solids import CONTACT_TAG, tet_volumes, vertex_normals
@@ -85,6 +86,41 @@ def test_a_thickness_spike_that_inverts_prisms_is_smoothed_not_refused():
     assert column[spike] < CAP_RADIUS_MM  # no longer through the centre of curvature
     far = np.linalg.norm(articular.vertices_mm[:, :2], axis=1) > 4.0  # beyond the smoothed rings: untouched
     np.testing.assert_allclose(column[far], 1.0, atol=1e-12)
+
+
+def test_a_layer_tapered_to_zero_on_its_bone_follows_the_taper_down_to_a_point():
+    # 1.3 mm in the middle, sin^2-tapered to 0 over 3 mm at the cap's square margin (as the built-in
+    # ankles' layers): the margin's columns have no height, so each is one point on both the bonded
+    # and the contact face; every column is exactly the thickness asked for (no smoothing), every
+    # tetrahedron has a positive volume
+    from geometries.fe_solids import BONDED_TAG, FREE_TAG
+
+    articular = cap()
+    half = 8.0
+
+    def thickness_at(vertices, inward):
+        inside = half - np.abs(vertices[:, :2]).max(axis=1)  # distance inside the margin (the square's)
+        return 1.3 * np.sin(0.5 * np.pi * np.clip(inside / 3.0, 0.0, 1.0)) ** 2
+
+    solid, notes = measured_layer_solid(articular, np.ones(articular.n_triangles, bool), thickness_at, None, 2)
+    assert notes == []
+    assert np.all(tet_volumes(solid.points_mm, solid.tets) > 0)
+    # the contact face is the articular surface but for the triangles with every corner on the margin
+    # (no cartilage at all: two at the grid's corners)
+    on_margin = np.isclose(np.abs(articular.vertices_mm[:, :2]).max(axis=1), half, atol=1e-12)
+    kept = ~on_margin[articular.triangles].all(axis=1)
+    assert len(solid.faces(CONTACT_TAG)) == int(kept.sum()) == articular.n_triangles - 2
+    top = np.unique(solid.faces(CONTACT_TAG))
+    np.testing.assert_allclose(np.sort(solid.points_mm[top], axis=0), np.sort(articular.vertices_mm[np.unique(articular.triangles[kept])], axis=0), atol=1e-12)
+    column = solid.points_mm[top] - solid.points_mm[solid.bottom_vertex[top]]
+    height = np.linalg.norm(column, axis=1)
+    margin = np.isclose(np.abs(solid.points_mm[top, :2]).max(axis=1), half, atol=1e-12)
+    assert margin.sum() == 4 * 12 - 2 and np.all(height[margin] == 0.0)
+    tall = ~margin
+    np.testing.assert_allclose(height[tall], thickness_at(solid.points_mm[top[tall]], -column[tall] / height[tall, None]), atol=1e-12)
+    # the margin's points are corners of the bonded face too, and no free face is left at the margin
+    assert set(top[margin]) <= set(np.unique(solid.faces(BONDED_TAG)))
+    assert not np.any(solid.facet_tags == FREE_TAG)
 
 
 def test_offset_surface_moves_every_vertex_by_the_distance_along_its_normal():

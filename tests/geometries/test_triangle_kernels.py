@@ -97,3 +97,21 @@ def test_closest_distance_is_the_minimum_over_every_vertex_and_triangle_both_way
         # the same kernel on the same pairs: equal up to the round-off of one pair's arithmetic
         assert closest_distance_mm(*case)[0] == pytest.approx(_brute_closest_distance_mm(*case), rel=1e-12)
     assert closest_distance_mm(*cases[0])[0] == pytest.approx(1.3, rel=1e-12)  # the sheet's lowest point over the box's top
+
+
+def test_nearby_distance_is_zero_on_the_surface_and_the_height_above_a_plane():
+    """Points on a triangulated plane (vertices, edge midpoints, inside triangles) are at 0 (round-off
+    of coordinates of order 10: 1e-12), points above it at their height (the triangle below them is
+    among the nearest centroids), as the closest-point kernel measures against every triangle."""
+    from geometries.triangle_kernels import nearby_distance_mm
+    from support import grid_plate
+
+    plate = grid_plate(10.0, 10.0, 10)
+    v, t = plate.vertices_mm, plate.triangles
+    rng = np.random.default_rng(7)
+    on = np.vstack([v, 0.5 * (v[t[:, 0]] + v[t[:, 1]]), v[t].mean(axis=1)])
+    np.testing.assert_allclose(nearby_distance_mm(on, v, t), 0.0, atol=1e-12)
+    above = np.column_stack([rng.uniform(-4.9, 4.9, (50, 2)), rng.uniform(0.1, 2.0, 50)])
+    np.testing.assert_allclose(nearby_distance_mm(above, v, t), above[:, 2], rtol=1e-12)
+    every = np.sqrt(closest_points_on_triangles(above[:, None, :], *(v[t][None, :, k] for k in range(3)))[0].min(axis=1))
+    np.testing.assert_allclose(nearby_distance_mm(above, v, t), every, rtol=1e-12)
