@@ -79,13 +79,14 @@ class OperatorPattern:
     added at the slots (no sparse product, no re-assembly). The band layout of the factorisation
     (an ordering and where each stored entry goes) depends on the pattern only, so it is found
     at the first factorisation and reused; so is the last band factor, in part
-    (``_banded_cholesky``).
+    (``_banded_cholesky``). A pattern that is not one cell set's H (a coarse space's, a stack
+    of terms', ``StackedPattern``) has no slots and may have no Q: it is factored the same way.
     """
 
     indices: np.ndarray
     indptr: np.ndarray
-    slots: np.ndarray  # (m, 9) int
-    q: sp.csr_matrix  # (m, v)
+    slots: np.ndarray = field(default_factory=lambda: np.zeros((0, 9), np.int64))  # (m, 9) int
+    q: sp.csr_matrix | None = None  # (m, v)
     #: the pattern of the whole surface (or of its coarse space): the cell set a run keeps at
     #: every time point (the gap laws' layer), where one symbolic analysis serves the whole run
     whole_surface: bool = False
@@ -102,9 +103,22 @@ class OperatorPattern:
     def sum_at_slots(self, per_pair: np.ndarray) -> np.ndarray:
         """Matrix data (nnz,) from values per triangle and corner pair (m, 9), or per triangle
         (m,) for the same value on its nine pairs, summed where they meet."""
+        if per_pair.ndim == 1:
+            return self.triangle_sums @ per_pair
         kept, slot = self.kept_pairs
-        weights = per_pair.ravel()[kept] if per_pair.ndim == 2 else per_pair[kept // 9]
-        return np.bincount(slot, weights=weights, minlength=self.indices.shape[0])
+        return np.bincount(slot, weights=per_pair.ravel()[kept], minlength=self.indices.shape[0])
+
+    @functools.cached_property
+    def triangle_sums(self) -> sp.csr_matrix:
+        """(nnz, m): the sum at each slot of the values of the triangles whose pairs sit there, a
+        sparse product in place of a gather and a bincount (the coupled matrix's data at each
+        factorisation; several times cheaper). Its rows list the pairs in their order in
+        ``kept_pairs`` and its entries are ones, so each sum is the bincount's to the bit."""
+        kept, slot = self.kept_pairs
+        indptr = np.zeros(self.indices.shape[0] + 1, np.int64)
+        np.cumsum(np.bincount(slot, minlength=self.indices.shape[0]), out=indptr[1:])
+        return sp.csr_matrix((np.ones(kept.shape[0]), (kept // 9)[np.argsort(slot, kind="stable")], indptr),
+                             shape=(self.indices.shape[0], self.slots.shape[0]))
 
     @functools.cached_property
     def kept_pairs(self) -> tuple[np.ndarray, np.ndarray]:
@@ -213,6 +227,65 @@ class OperatorPattern:
         if not np.shares_memory(trailing, band):  # LAPACK worked on a copy
             band[:, start:] = trailing
         return band
+
+
+@dataclass(frozen=True)
+class StackedPattern:
+    """The pattern of the stacked vertex matrix H + sigma Z diag(x) Z^T of terms of one sign
+    (a sandwich's Pade terms; ``edem.thin_layer.LayerCompliance``): H = diag(H_1, H_2, ...) and
+    Z (V, m) the terms' Z stacked, whose column j couples the fields of every term at spring j.
+
+    The matrix is symmetric and definite (positive for sigma = +1; for sigma = -1 as the
+    compliance is, docs/method.md), so it is factored as one term's is (``OperatorPattern``: the
+    banded Cholesky in reverse Cuthill-McKee order over the stacked fields, or CHOLMOD). Its
+    pattern holds every term's H (``block_slots``: where their entries go) and every pair (a, b)
+    of the entries of a row of Z^T (m, V), so Z diag(x) Z^T is one sparse product
+    (``coupling``: (nnz, m), spring j's pairs in its column).
+    """
+
+    pattern: OperatorPattern
+    block_slots: tuple[np.ndarray, ...]  # each term's stored entries' positions in the stacked data
+    pair_first: np.ndarray  # (pairs,) the entries of Z^T's data whose product each pair is, in slot order
+    pair_second: np.ndarray
+    pair_spring: np.ndarray  # (pairs,) its spring
+    pair_indptr: np.ndarray  # (nnz + 1,) the pairs of each slot
+
+    @staticmethod
+    def build(patterns: list[OperatorPattern], z_t: sp.csr_matrix) -> "StackedPattern":
+        """From the terms' patterns and Z^T (m, V) as the terms' Z^T side by side (CSR, laid out
+        as the layers' Z^T will be)."""
+        offsets = np.cumsum([0] + [p.n_vertices for p in patterns])
+        n = int(offsets[-1])
+        block_keys = [(np.repeat(np.arange(p.n_vertices), np.diff(p.indptr)) + o) * n + p.indices + o for p, o in zip(patterns, offsets)]
+        # every ordered pair of entries (first, second) of each row of Z^T
+        count = np.diff(z_t.indptr)
+        spring = np.repeat(np.arange(count.shape[0]), count * count)
+        k = np.arange(spring.shape[0]) - np.repeat(np.cumsum(count * count) - count * count, count * count)
+        first, second = z_t.indptr[spring] + k // count[spring], z_t.indptr[spring] + k % count[spring]
+        # canonical CSC: by column, then row
+        stored, slot = np.unique(np.concatenate(block_keys + [z_t.indices[second] * n + z_t.indices[first]]), return_inverse=True)
+        indptr = np.zeros(n + 1, np.int64)
+        np.cumsum(np.bincount(stored // n, minlength=n), out=indptr[1:])
+        ends = np.cumsum([keys.shape[0] for keys in block_keys])
+        pair_slot = slot[ends[-1]:]
+        order = np.argsort(pair_slot, kind="stable")
+        pair_indptr = np.zeros(stored.shape[0] + 1, np.int64)
+        np.cumsum(np.bincount(pair_slot, minlength=stored.shape[0]), out=pair_indptr[1:])
+        pattern = OperatorPattern(stored % n, indptr, whole_surface=all(p.whole_surface for p in patterns))
+        return StackedPattern(pattern, tuple(np.split(slot[: ends[-1]], ends[:-1])), first[order], second[order], spring[order], pair_indptr)
+
+    def blocks(self, h_data: list[np.ndarray]) -> np.ndarray:
+        """The stacked data (nnz,) of diag(H_1, H_2, ...) from each term's H data."""
+        out = np.zeros(self.pattern.indices.shape[0])
+        for slots, data in zip(self.block_slots, h_data):
+            out[slots] = data
+        return out
+
+    def coupling(self, z_t: sp.csr_matrix) -> sp.csr_matrix:
+        """(nnz, m): the stacked data of Z diag(x) Z^T is this times x (m,), for Z^T (m, V) laid
+        out as the one the pattern was built from."""
+        products = z_t.data[self.pair_first] * z_t.data[self.pair_second]
+        return sp.csr_matrix((products, self.pair_spring, self.pair_indptr), shape=(self.pair_indptr.shape[0] - 1, z_t.shape[0]))
 
 
 class SupernodalCholesky:

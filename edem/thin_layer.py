@@ -81,7 +81,7 @@ import scipy.sparse as sp
 from edem.coarse_space import COARSE_MIN_SPRINGS, CoarseSpace, coarse_transfer
 from edem.layer_symbols import LayerSymbol, pade_symbol
 from geometries.triangle_kernels import triangle_areas
-from edem.sparse_factors import LOW_RANK_MAX, LOW_RANK_MAX_INDEFINITE, LowRankUpdate, OperatorPattern, indefinite_solve
+from edem.sparse_factors import LOW_RANK_MAX, LOW_RANK_MAX_INDEFINITE, LowRankUpdate, OperatorPattern, StackedPattern, indefinite_solve
 
 
 # --------------------------------------------------------------------------- surface operators
@@ -395,7 +395,27 @@ class LayerCompliance:
     @property
     def low_rank_max(self) -> int:
         """Past this many changed weights a refactorisation is cheaper than the Woodbury correction."""
-        return LOW_RANK_MAX if len(self.terms) == 1 else LOW_RANK_MAX_INDEFINITE
+        return LOW_RANK_MAX if self.definite else LOW_RANK_MAX_INDEFINITE
+
+    @property
+    def definite(self) -> bool:
+        """Whether the stacked matrix sigma H + Z diag(x) Z^T is definite: its terms have one sign
+        (a Pade layer, a Pade sandwich), so it is sigma times an SPD matrix (``_factorise``)."""
+        return len({t.sigma for t in self.terms}) == 1
+
+    @functools.cached_property
+    def _stack(self) -> tuple[StackedPattern, np.ndarray, sp.csr_matrix]:
+        """A definite stack of terms: its pattern (kept in ``reuse`` over the layers built on the
+        same operator patterns: a run's time points on one cell set), the terms' H in its data
+        and the product giving Z diag(x) Z^T's (``StackedPattern``)."""
+        patterns = tuple(t.pattern for t in self.terms)
+        kept = None if self.reuse is None else self.reuse.get("stack")
+        if kept is None or len(kept[0]) != len(patterns) or not all(a is b for a, b in zip(kept[0], patterns)):
+            kept = (patterns, StackedPattern.build(list(patterns), self.z_t))
+            if self.reuse is not None:
+                self.reuse["stack"] = kept
+        stack = kept[1]
+        return stack, stack.blocks([t.h.data for t in self.terms]), stack.coupling(self.z_t)
 
     def factored_set(self) -> np.ndarray | None:
         """(m,) bool: the springs in contact (positive weight) in the kept factor, if it was
@@ -414,21 +434,26 @@ class LayerCompliance:
     def _factorise(self, spring_weight: np.ndarray):
         """Factor of sigma H + Z diag(spring_weight) Z^T: solve(rhs).
 
-        One term: sigma (H + sigma Z diag(x) Z^T), SPD (module docstring), by the pattern's
-        banded Cholesky. More (the two-pole's two, a sandwich's two or four): the block matrix is
-        symmetric, indefinite where its blocks' signs differ, factored by QDLDL's LDL^T, checked
-        (``indefinite_solve``). Its pattern follows the
-        contact set (the two terms' fields are coupled only through springs in contact), so the
-        ordering is found anew each time: one pattern holding every spring of the layer would keep
-        it, but on the gap law's 30k-spring layer (the whole surface) its fill made each
-        factorisation 2x slower (217 ms against 111 ms), and one growing with the springs in
+        Terms of one sign (a Pade layer, a Pade sandwich's two): sigma (H + sigma Z diag(x) Z^T),
+        SPD (module docstring), by the pattern's banded Cholesky or CHOLMOD (one term: its own
+        pattern; a stack: ``StackedPattern``, every term's fields on one pattern). Terms of both
+        signs (the two-pole's two, a two-pole sandwich's four): the block matrix is symmetric and
+        indefinite, factored by QDLDL's LDL^T, checked (``indefinite_solve``). Its pattern
+        follows the contact set (the terms' fields are coupled only through springs in contact),
+        so the ordering is found anew each time: one pattern holding every spring of the layer
+        would keep it, but on the gap law's 30k-spring layer (the whole surface) its fill made
+        each factorisation 2x slower (217 ms against 111 ms), and one growing with the springs in
         contact over a time point was found again at 56 of 76 factorisations (docs/method.md).
         """
+        sigma = self.terms[0].sigma
         if len(self.terms) == 1:
-            term = self.terms[0]
-            solve = term.pattern.factorise(term.coupled_data(spring_weight))
-            return solve if term.sigma > 0 else (lambda rhs: -solve(rhs))
-        return indefinite_solve((self._signed_block + self.z @ (self.z_t.multiply(spring_weight[:, None])).tocsc()).tocsc())
+            solve = self.terms[0].pattern.factorise(self.terms[0].coupled_data(spring_weight))
+        elif self.definite:
+            stack, blocks, coupling = self._stack
+            solve = stack.pattern.factorise(blocks + coupling @ (sigma * spring_weight))
+        else:
+            return indefinite_solve((self._signed_block + self.z @ (self.z_t.multiply(spring_weight[:, None])).tocsc()).tocsc())
+        return solve if sigma > 0 else (lambda rhs: -solve(rhs))
 
     def deflection(self, force_n: np.ndarray) -> np.ndarray:
         """Surface deflection w (m,) in mm under spring forces f (m,) in N."""
