@@ -230,7 +230,7 @@ def solve_thin_layer(
     free_directions = directions * free
     warm = None if initial_active is None else initial_active & touchable
     active = warm if warm is not None and np.any(warm) else touchable.copy()  # cold: every candidate, as DEM does
-    ligament_active = np.ones(ligament_rows.shape[0], bool)
+    ligament_active = ligament_law.offset_n > 0.0 if warm is not None else np.ones(ligament_rows.shape[0], bool)
     everything: np.ndarray | None = None
     seen: set[bytes] = set()
     force_scale = 1e-300
