@@ -109,16 +109,16 @@ class OperatorPattern:
         return np.bincount(slot, weights=per_pair.ravel()[kept], minlength=self.indices.shape[0])
 
     @functools.cached_property
-    def triangle_sums(self) -> sp.csr_matrix:
+    def triangle_sums(self) -> sp.csc_matrix:
         """(nnz, m): the sum at each slot of the values of the triangles whose pairs sit there, a
         sparse product in place of a gather and a bincount (the coupled matrix's data at each
-        factorisation; several times cheaper). Its rows list the pairs in their order in
-        ``kept_pairs`` and its entries are ones, so each sum is the bincount's to the bit."""
+        factorisation; several times cheaper). Column t holds triangle t's pairs in their order
+        in ``kept_pairs`` and its entries are ones, so each sum is the bincount's to the bit."""
         kept, slot = self.kept_pairs
-        indptr = np.zeros(self.indices.shape[0] + 1, np.int64)
-        np.cumsum(np.bincount(slot, minlength=self.indices.shape[0]), out=indptr[1:])
-        return sp.csr_matrix((np.ones(kept.shape[0]), (kept // 9)[np.argsort(slot, kind="stable")], indptr),
-                             shape=(self.indices.shape[0], self.slots.shape[0]))
+        m = self.slots.shape[0]
+        indptr = np.zeros(m + 1, np.int64)
+        np.cumsum(np.bincount(kept // 9, minlength=m), out=indptr[1:])
+        return sp.csc_matrix((np.ones(kept.shape[0]), slot, indptr), shape=(self.indices.shape[0], m))
 
     @functools.cached_property
     def kept_pairs(self) -> tuple[np.ndarray, np.ndarray]:
