@@ -417,15 +417,6 @@ class LayerCompliance:
         stack = kept[1]
         return stack, stack.blocks([t.h.data for t in self.terms]), stack.coupling(self.z_t)
 
-    def factored_set(self) -> np.ndarray | None:
-        """(m,) bool: the springs in contact (positive weight) in the kept factor, if it was
-        built on these operators; None otherwise. A first contact set for the active-set
-        iteration that needs no factorisation."""
-        base = None if self.reuse is None else self.reuse.get("base")
-        if base is None or not base.matches(self._operator_key(), self.local_mm_per_n.shape[0]):
-            return None
-        return base.weight > 0.0
-
     def _operator_key(self) -> tuple:
         """What the factored matrix depends on besides the spring weights: each term's sign, its
         pattern (by identity), H's data and the weights c_nl of Z."""

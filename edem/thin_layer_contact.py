@@ -404,6 +404,54 @@ def sandwich_thickness_mm(thickness_mm: np.ndarray, geometry, cartilage, domain:
     return np.stack([thickness_mm * share for share in shares])
 
 
+class ContactHistory:
+    """The forces and gaps of M's springs at the last two time points solved, whose extrapolation
+    is the next solve's first contact set.
+
+    Over a stance the contact grows, shrinks and moves by tens of springs a time point, and
+    starting from the last contact set the active set took two or three more iterations to reach
+    it (the first finding the springs that enter, the next the few that the entering ones lift
+    or press). Each spring's force and gap vary smoothly from one time point to the next, so
+    their linear extrapolation, f_k + (f_k - f_k-1) for a spring in contact at k and
+    y_k + (y_k - y_k-1) out of contact, predicts the next set: on the idealised ankle's stances
+    within 0-2 springs of the answer at most time points (docs/method.md). A spring that was not
+    a candidate at k - 1 keeps its state at k; one that was not a candidate at k starts in contact
+    where the surfaces overlap before the layer deflects (d0 >= 0: the threshold law's candidates,
+    whose window the contact fills; on the gap laws, new candidates lie at the window's far edge,
+    out of contact)."""
+
+    def __init__(self, n_springs: int) -> None:
+        self.force_n = np.zeros((2, n_springs))  # at k - 1, k
+        self.gap_mm = np.full((2, n_springs), np.nan)  # NaN: not a candidate then
+        self.in_contact = np.zeros(n_springs, bool)  # at k
+        self.recorded = 0
+
+    def record(self, candidate_index: np.ndarray, solution: ThinLayerSolution) -> None:
+        """The solution of a time point (candidates in ``candidate_index`` order, then ligaments)."""
+        n_c = candidate_index.shape[0]
+        self.force_n[0], self.gap_mm[0] = self.force_n[1], self.gap_mm[1]
+        self.force_n[1] = 0.0
+        self.gap_mm[1] = np.nan
+        self.in_contact[:] = False
+        active = solution.active[:n_c]
+        self.force_n[1, candidate_index] = np.where(active, solution.element_force_n[:n_c], 0.0)
+        self.gap_mm[1, candidate_index] = solution.gap_mm
+        self.in_contact[candidate_index] = active
+        self.recorded += 1
+
+    def first_set(self, springs: np.ndarray, overlap_mm: np.ndarray) -> np.ndarray | None:
+        """(n_d,) bool over the layer's springs ``springs`` (indices into M's), whose overlaps d0
+        (n_d,) mm are ``overlap_mm``; None before any record."""
+        if not self.recorded:
+            return None
+        force, gap, contact = self.force_n[:, springs], self.gap_mm[:, springs], self.in_contact[springs]
+        before = np.isfinite(gap[0]) if self.recorded > 1 else np.zeros(springs.shape[0], bool)
+        force_next = np.where(before, 2.0 * force[1] - force[0], force[1])
+        gap_next = np.where(before, 2.0 * gap[1] - gap[0], gap[1])
+        new = np.isnan(gap[1])  # not a candidate at k
+        return np.where(contact, force_next > 0.0, np.where(new, overlap_mm >= 0.0, gap_next < 0.0))
+
+
 @dataclass(frozen=True)
 class CoupledStep:
     """One time point of DEM/EDEM on the coupled layer: the layer, overlap and elements.
@@ -518,26 +566,18 @@ class CoupledStep:
         solution.deflection_mm, solution.gap_mm = solution.deflection_mm[c], solution.gap_mm[c]
         return solution
 
-    def solve(self, load, fixed_dofs, shear, length_scale_mm, released_before: np.ndarray | None = None) -> ThinLayerSolution:
+    def solve(self, load, fixed_dofs, shear, length_scale_mm, history: "ContactHistory | None" = None) -> ThinLayerSolution:
         """The coupled solve; forces, contact set, deflection and gap of the candidates (then ligaments).
 
-        ``released_before`` (n_springs,) bool over all of M's springs: the candidates out of
-        contact at the previous time point. The first iterate of the active set is every
-        candidate but those (new candidates start in contact, as in a cold start). Where the
-        layer's kept factor was built on the same operators (the gap laws' layer on the whole
-        surface, from one time point to the next), its contact set is the first iterate instead:
-        the first iteration then needs no factorisation, and new candidates that touch enter at
-        the second, as the programme's answer does not depend on the first iterate."""
-        initial = None if released_before is None else ~released_before[self.springs]
-        if self.column is None and initial is not None:
-            factored = self.layer.factored_set()
-            if factored is not None and np.any(factored & (self.overlap_mm > -np.inf)):
-                initial = factored
+        ``history``: the previous time points' solutions, whose extrapolation is the active set's
+        first iterate (``ContactHistory.first_set``); None: every candidate (a cold start, as
+        DEM's first time point). The programme's answer does not depend on the first iterate."""
         return self._to_candidates(
             solve_thin_layer(
                 self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
-                initial_active=initial, column=self.column, pushback_force_n=self.pushback_force_n,
+                initial_active=None if history is None else history.first_set(self.springs, self.overlap_mm), column=self.column,
+                pushback_force_n=self.pushback_force_n,
             )
         )
 
