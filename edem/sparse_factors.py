@@ -231,16 +231,17 @@ class OperatorPattern:
 
 @dataclass(frozen=True)
 class StackedPattern:
-    """The pattern of the stacked vertex matrix H + sigma Z diag(x) Z^T of terms of one sign
-    (a sandwich's Pade terms; ``edem.thin_layer.LayerCompliance``): H = diag(H_1, H_2, ...) and
+    """The pattern of the stacked vertex matrix sigma H + Z diag(x) Z^T of several terms
+    (``edem.thin_layer.LayerCompliance``): sigma H = diag(sigma_1 H_1, sigma_2 H_2, ...) and
     Z (V, m) the terms' Z stacked, whose column j couples the fields of every term at spring j.
 
-    The matrix is symmetric and definite (positive for sigma = +1; for sigma = -1 as the
-    compliance is, docs/method.md), so it is factored as one term's is (``OperatorPattern``: the
-    banded Cholesky in reverse Cuthill-McKee order over the stacked fields, or CHOLMOD). Its
-    pattern holds every term's H (``block_slots``: where their entries go) and every pair (a, b)
-    of the entries of a row of Z^T (m, V), so Z diag(x) Z^T is one sparse product
-    (``coupling``: (nnz, m), spring j's pairs in its column).
+    Its pattern holds every term's H (``block_slots``: where their entries go) and every pair
+    (a, b) of the entries of a row of Z^T (m, V), so Z diag(x) Z^T is one sparse product
+    (``coupling``: (nnz, m), spring j's pairs in its column), with no sparse assembly per
+    factorisation. Where the terms have one sign (a Pade sandwich) the matrix is sigma times an
+    SPD one (docs/method.md), factored as one term's is (``OperatorPattern``: the banded Cholesky
+    in reverse Cuthill-McKee order over the stacked fields, or CHOLMOD); where they have both (the
+    two-pole's), the LDL^T takes the pairs of the springs in contact only (``present``).
     """
 
     pattern: OperatorPattern
@@ -280,6 +281,29 @@ class StackedPattern:
         for slots, data in zip(self.block_slots, h_data):
             out[slots] = data
         return out
+
+    @functools.cached_property
+    def _entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(row, column (nnz,) of each stored entry, whether it is one of the terms' H's (nnz,) bool)."""
+        n = self.pattern.n_vertices
+        block = np.zeros(self.pattern.indices.shape[0], bool)
+        for slots in self.block_slots:
+            block[slots] = True
+        return self.pattern.indices, np.repeat(np.arange(n), np.diff(self.pattern.indptr)), block
+
+    def present(self, data: np.ndarray) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """The matrix with ``data`` (nnz,) without the pairs that no spring of nonzero weight holds
+        (zero off the terms' H: a fill-reducing ordering then sees only the springs in contact),
+        and its upper triangle, both (V, V) canonical CSC."""
+        row, column, block = self._entries
+        n = self.pattern.n_vertices
+        kept = block | (data != 0.0)
+        matrices = []
+        for keep in (kept, kept & (row <= column)):
+            indptr = np.zeros(n + 1, np.int64)
+            np.cumsum(np.bincount(column[keep], minlength=n), out=indptr[1:])
+            matrices.append(sp.csc_matrix((data[keep], row[keep], indptr), shape=(n, n)))
+        return matrices[0], matrices[1]
 
     def coupling(self, z_t: sp.csr_matrix) -> sp.csr_matrix:
         """(nnz, m): the stacked data of Z diag(x) Z^T is this times x (m,), for Z^T (m, V) laid
@@ -368,7 +392,8 @@ class LowRankUpdate:
     def matches(self, key: tuple, n_springs: int) -> bool:
         if self.weight.shape[0] != n_springs or len(key) != len(self.key):
             return False
-        return all(a[:2] == b[:2] and np.array_equal(a[2], b[2]) and np.array_equal(a[3], b[3]) for a, b in zip(key, self.key))
+        same = lambda x, y: x is y or np.array_equal(x, y)  # noqa: E731 (the layer kept over a run holds the same arrays)
+        return all(a[:2] == b[:2] and same(a[2], b[2]) and same(a[3], b[3]) for a, b in zip(key, self.key))
 
     def updated(self, z_t: sp.csr_matrix, changed: np.ndarray, delta: np.ndarray):
         """solve(rhs) with A(w) for the weights changed by ``delta`` (k,) on the springs ``changed``
@@ -401,8 +426,9 @@ def _dense_columns(z_t: sp.csr_matrix, rows: np.ndarray) -> np.ndarray:
     return out.T
 
 
-def indefinite_solve(matrix: sp.csc_matrix):
+def indefinite_solve(matrix: sp.csc_matrix, upper: sp.csc_matrix | None = None):
     """solve(rhs (v,) or (v, k)) with a symmetric indefinite matrix (v, v): QDLDL's LDL^T, checked.
+    ``upper``: its upper triangle (CSC), where the caller has it (QDLDL reads only that).
 
     QDLDL (approximate minimum degree, then an LDL^T with its pivots on the diagonal) factored
     and solved the two-pole's block matrices of the ankle stances in 0.55-0.77x SuperLU's time
@@ -418,7 +444,7 @@ def indefinite_solve(matrix: sp.csc_matrix):
 
     n = matrix.shape[0]
     try:
-        ldl = qdldl.Solver(matrix)
+        ldl = qdldl.Solver(matrix) if upper is None else qdldl.Solver(upper, upper=True)
     except RuntimeError:  # a zero pivot
         ldl = None
     norm = float(np.abs(matrix).sum(axis=1).max()) if n else 0.0  # ||A||_inf
@@ -437,8 +463,9 @@ def indefinite_solve(matrix: sp.csc_matrix):
             return superlu()(rhs)
         columns = rhs.reshape(n, -1)
         x = np.column_stack([ldl.solve(b) for b in columns.T])  # QDLDL solves one vector at a time
-        backward = np.abs(matrix @ x - columns).max(axis=0) / (norm * np.abs(x).max(axis=0) + np.abs(columns).max(axis=0))
-        if not np.all(backward <= n * np.finfo(float).eps):  # also NaN
+        # the normwise backward error, as a product (a zero column, x = 0, is exact: no 0 / 0)
+        residual = np.abs(matrix @ x - columns).max(axis=0)
+        if not np.all(residual <= n * np.finfo(float).eps * (norm * np.abs(x).max(axis=0) + np.abs(columns).max(axis=0))):  # also NaN
             return superlu()(rhs)
         return x.reshape(rhs.shape)
 

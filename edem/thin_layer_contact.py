@@ -63,7 +63,7 @@ import numpy as np
 
 from geometries.errors import SolverError
 from edem.laws import LinearElements
-from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, singular_stiffness_error, unrestrained_dofs
+from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, _regular_solve, singular_stiffness_error, unrestrained_dofs
 from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance
 from edem.viscoelastic import touch_motion
 
@@ -84,8 +84,8 @@ class ActiveSystem:
     active: np.ndarray  # (n_c,) bool
     force0_n: np.ndarray  # (n_I,)
     force_per_mm: np.ndarray  # (n_I, 6)
-    vertex0: np.ndarray  # (V,) the stacked vertex fields z at u = 0 (LayerCompliance)
-    vertex_per_mm: np.ndarray  # (V, 6)
+    nonlocal0_mm: np.ndarray  # (n_c,) the smoothing terms' deflection Z^T z at every spring at u = 0 (LayerCompliance)
+    nonlocal_per_mm: np.ndarray  # (n_c, 6)
     local_mm_per_n: np.ndarray  # (n_c,) the local compliance it was built with
     carried_force_n: np.ndarray | None = None  # (n_c,) c: f and z are then over the stored state (module docstring)
 
@@ -102,42 +102,40 @@ class ActiveSystem:
         lam = 1.0 / local[active]
         rhs = np.column_stack([overlap_mm[active], directions[active]])  # (n_I, 7)
         forces = lam[:, None] * rhs
-        vertex = np.zeros((layer.z_t.shape[1] if layer.coupled else 0, 7))
+        nonlocal_mm = np.zeros((active.shape[0], 7))  # Z^T z at every spring
         if layer.coupled:
             # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T.
             weight = np.zeros(active.shape[0])
             weight[active] = lam
             solve = layer.factorise_coupled(weight)
-            loads = np.zeros((active.shape[0], 7))
-            loads[active] = forces
             # A zero column (DEM: no overlap before the increment; a fixed DOF) needs no solves.
             nonzero = np.any(forces, axis=0)
-            if carried_force_n is not None:
-                loads[:, 0] -= np.where(active, 0.0, carried_force_n)  # -Z_N c_N joins the u-free column
-                nonzero[0] = np.any(loads[:, 0])
+            released = None if carried_force_n is None else np.where(active, 0.0, carried_force_n)
+            if released is not None:
+                nonzero[0] = nonzero[0] or np.any(released)
             nonzero = np.flatnonzero(nonzero)
             if nonzero.size:
-                vertex[:, nonzero] = solve(np.asarray(layer.z_t.T @ loads[:, nonzero]))
+                loads = np.zeros((active.shape[0], nonzero.size))
+                loads[active] = forces[:, nonzero]
+                if released is not None and nonzero[0] == 0:
+                    loads[:, 0] -= released  # -Z_N c_N joins the u-free column
                 # Every spring's row, then those in contact: cheaper than cutting Z^T's rows.
-                forces[:, nonzero] -= lam[:, None] * (layer.z_t @ vertex[:, nonzero])[active]
+                nonlocal_mm[:, nonzero] = layer.z_t @ solve(layer.z @ loads)
+                forces[:, nonzero] -= lam[:, None] * nonlocal_mm[active][:, nonzero]
         if carried_force_n is not None:
             forces[:, 0] += carried_force_n[active]
-        return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local, carried_force_n)
+        return ActiveSystem(active, forces[:, 0], forces[:, 1:], nonlocal_mm[:, 0], nonlocal_mm[:, 1:], local, carried_force_n)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
         return self.force0_n + self.force_per_mm @ u
 
-    def deflection(self, layer: LayerCompliance, u: np.ndarray) -> np.ndarray:
-        """w = C f at every candidate for the forces of this set under u (local part as built);
-        with carried forces c, w - C c (module docstring, "Carried forces")."""
-        f = np.zeros(self.active.shape[0])
-        f[self.active] = self.forces(u)
-        w = self.local_mm_per_n * f
+    def deflection(self, layer: LayerCompliance, u: np.ndarray, force_n: np.ndarray) -> np.ndarray:
+        """w = C f at every candidate for the forces f (n_c,) of this set under u (local part as
+        built); with carried forces c, w - C c (module docstring, "Carried forces")."""
+        w = self.local_mm_per_n * force_n
         if self.carried_force_n is not None:
             w = w - layer.local_mm_per_n * self.carried_force_n
-        if layer.coupled:
-            w = w + layer.z_t @ (self.vertex0 + self.vertex_per_mm @ u)
-        return w
+        return w + self.nonlocal0_mm + self.nonlocal_per_mm @ u
 
     def stiffness(self, directions: np.ndarray) -> np.ndarray:
         """Coupled contact stiffness D_I^T dF/du (6, 6), symmetrised against round-off."""
@@ -173,12 +171,6 @@ def _offset(layer: LayerCompliance, overlap_mm: np.ndarray, shift, local: np.nda
     if pushback_force_n is not None and local is not None:
         offset = offset - (local - layer.local_mm_per_n) * pushback_force_n
     return offset
-
-
-def _solve_free(k: np.ndarray, rhs: np.ndarray, free: np.ndarray) -> np.ndarray:
-    u = np.zeros(6)
-    u[free] = np.linalg.solve(k[np.ix_(free, free)], rhs[free])
-    return u
 
 
 def solve_thin_layer(
@@ -224,6 +216,7 @@ def solve_thin_layer(
         free[DOF_NAMES.index(name)] = False
     load = np.where(free, np.asarray(load, float), 0.0)
     to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)
+    free_block, dof_scale = np.ix_(free, free), 1.0 / to_newton[free]
     spring_scale = 1.0 / layer.local_mm_per_n  # N/mm: weighs the gap against the force in the NCP
     touchable = np.isfinite(overlap_mm)  # -inf: free layer with no opposing surface
     # A fixed DOF never moves, so its column of df/du is never used: zero rows skip its solves.
@@ -244,7 +237,10 @@ def solve_thin_layer(
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         stiffness = system.stiffness(directions) + k_other
         rhs = load - system.pushback(directions) - f_other
-        if unrestrained_dofs(stiffness, free, length_scale_mm):
+        u = np.zeros(6)
+        # The 6 x 6's Cholesky factor both solves and says whether a free DOF is unrestrained.
+        solved = _regular_solve(stiffness[free_block], dof_scale, rhs[free])
+        if solved is None and unrestrained_dofs(stiffness, free, length_scale_mm):
             if everything is None:
                 full = ActiveSystem.build(layer, free_directions, offset, touchable, local, pushback_force_n)
                 k_all, _ = _others(ligament_rows, ligament_law, np.ones_like(ligament_active), shear, touchable)
@@ -255,10 +251,12 @@ def solve_thin_layer(
             if not np.any(active) and not np.any(ligament_active):
                 raise SolverError("no equilibrium: no spring stays in compression under this load, so the load pulls the bodies apart")
             stiffness = stiffness + 1e-8 * everything  # a transiently small contact set
-        u = _solve_free(stiffness, rhs, free)
+        if solved is None:
+            solved = np.linalg.solve(stiffness[free_block], rhs[free])
+        u[free] = solved
         f = np.zeros(n_c)
         f[active] = system.forces(u)
-        w = system.deflection(layer, u) + shift
+        w = system.deflection(layer, u, f) + shift
         gap = w - overlap_mm - directions @ u
         tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
         new_active = np.where(active, f > 0.0, gap < 0.0)
@@ -398,10 +396,13 @@ def sandwich_thickness_mm(thickness_mm: np.ndarray, geometry, cartilage, domain:
         return thickness_mm
     total = geometry.thickness_mm[domain]
     mobile = layers.mobile.thickness_mm[domain]
-    shares = [share for share in (mobile / total, (total - mobile) / total) if np.any(share > 0.0)]
-    if len(shares) == 1:  # one side without cartilage: one layer, the lumped bed's to the bit
+    sides = [side for side in (mobile, total - mobile) if np.any(side > 0.0)]
+    if len(sides) == 1:  # one side without cartilage: one layer, the lumped bed's to the bit
         return thickness_mm
-    return np.stack([thickness_mm * share for share in shares])
+    # t_i (h / T): exactly t_M and t_F where h is T (the gap laws), so M's layer, bonded to the
+    # moving body, keeps its thickness's bits from one time point to the next (its terms are kept)
+    ratio = thickness_mm / total
+    return np.stack([side * ratio for side in sides])
 
 
 class ContactHistory:
@@ -482,8 +483,20 @@ class CoupledStep:
     ligament_rows: np.ndarray
     ligament_law: LinearElements
     column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None  # a nonlinear law's columns (solve_thin_layer)
-    shortest_smoothing_mm: float = np.inf  # sqrt(b) h of the symbol's shortest term at the candidates' median thickness
     pushback_force_n: np.ndarray | None = None  # (n_d,) a "carried" law's forces c, whose push-back C c adds to overlap_mm
+    layer_thickness_mm: np.ndarray | None = None  # (n_d,) or (L, n_d) each layer's local thickness (layer_compliance's)
+    shortest_screening: float | None = None  # b of the symbol's shortest term (None: no term)
+
+    @functools.cached_property
+    def shortest_smoothing_mm(self) -> float:
+        """sqrt(b) h of the symbol's shortest term at the candidates' median thickness of the
+        thinnest layer (a sandwich's terms are as short as their own layer is thin); inf: no term.
+        Formed only for the resolution warning."""
+        if self.shortest_screening is None:
+            return np.inf
+        layers = np.reshape(self.layer_thickness_mm, (-1, self.candidate.shape[0]))[:, self.candidate]
+        thinnest = min((float(np.median(h[h > 0.0])) for h in layers if np.any(h > 0.0)), default=np.inf)
+        return float(np.sqrt(self.shortest_screening) * thinnest)
 
     @staticmethod
     def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law,
@@ -539,11 +552,8 @@ class CoupledStep:
         if law.nonlinear:
             column = functools.partial(law.column_excess_mm, area_mm2=mesh.area_mm2[domain], confined_modulus_mpa=cartilage.confined_modulus_mpa,
                                        thickness_mm=thickness)
-        # at the thinnest layer's median (a sandwich's terms are as short as their own layer is thin)
-        thinnest = min((float(np.median(h[h > 0.0])) for h in np.reshape(stack, (-1, domain.size))[:, is_candidate] if np.any(h > 0.0)),
-                       default=np.inf)
-        shortest = float(np.sqrt(min(screenings)) * thinnest) if screenings else np.inf
-        return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law, column, shortest, pushback)
+        return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law, column, pushback, stack,
+                           min(screenings, default=None))
 
     def resolution_warning(self, mesh: SurfaceMesh) -> list[str]:
         """A warning when the symbol's shortest smoothing length is below the springs' size (the
