@@ -13,6 +13,7 @@ import hashlib
 import html
 import json
 import math
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -228,6 +229,11 @@ def _error_time_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], pa
     _save(plt, fig, spec["title"], path, axes)
 
 
+#: characters of a y-axis label on one line: longer labels wrap, so that they stay within the panel's
+#: height (about 36 characters of 10 pt text fit along a 3.6 in panel's axis)
+YLABEL_CHARS = 36
+
+
 def _finish_panel(ax: Any, logx: bool, logy: bool, xlabel: str, ylabel: str, legend: bool = False) -> None:
     """Scales, labels and grid of a panel; ``legend``: its own legend (where the panels' entries
     differ, e.g. a histogram's median), else the figure's one below the panels (:func:`_save`)."""
@@ -236,7 +242,8 @@ def _finish_panel(ax: Any, logx: bool, logy: bool, xlabel: str, ylabel: str, leg
     if logy:
         ax.set_yscale("log")
     ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
+    # "(a − b)" is one word to the wrapping: no line ends inside it
+    ax.set_ylabel(textwrap.fill(ylabel.replace("a − b", "a\u00a0−\u00a0b"), YLABEL_CHARS, break_on_hyphens=False))
     ax.grid(alpha=0.3, which="both")
     if legend:
         ax.legend(fontsize=8)
@@ -448,7 +455,7 @@ td.metrics { min-width: 24em; font-size: 0.95em; } td.links { font-size: 0.9em; 
 tr.flag td { background: #fff3e0; } .analysis-status { font-weight: bold; }
 .flagged { color: #c05600; font-weight: bold; } .fecoarse { color: #6a3d9a; font-weight: bold; } .why { font-size: 0.85em; color: #555; }
 #trust-summary { background: #f7f9fc; border: 1px solid #d8e0ea; padding: 0.2em 1em 0.8em; }
-#trust-summary li { margin: 0.3em 0; } figure.small-figure img { max-width: 620px; }
+#trust-summary li { margin: 0.3em 0; }
 table.legend { margin: 0.5em 0; }
 """
 
@@ -495,7 +502,7 @@ def _trust_html(result: dict[str, Any], figures: list[dict[str, Any]]) -> list[s
         parts.append("<ul>" + "".join(f"<li>{h(text)}</li>" for text in sentences) + "</ul>")
     wanted = result.get("values", {}).get("figures", [])
     for figure in sorted((f for f in figures if f.get("name") in wanted and f.get("file") and not f.get("error")), key=lambda f: wanted.index(f["name"])):
-        parts.append(f'<figure class="small-figure"><img src="{h(figure["file"])}" alt="{h(figure["title"])}"><figcaption>{h(figure["title"])}</figcaption></figure>')
+        parts.append(f'<figure><img src="{h(figure["file"])}" alt="{h(figure["title"])}"><figcaption>{h(figure["title"])}</figcaption></figure>')
     parts += _analysis_table(result)
     parts.append("</section>")
     return parts
