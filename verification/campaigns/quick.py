@@ -35,7 +35,7 @@ from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import BY_CONSTRUCTION, INVARIANT, MODEL_BAND_REL, Basis
 
 #: the ankle answer's Poisson's ratio: the built-in scenes' own. One value: the two-layer FE of one
-#: ankle and nu (three loads) costs 3.3 min of CPU time on the ideal ankle at P2 2.0 mm (measured
+#: ankle and nu (three loads) costs 218 s of CPU time on the ideal ankle at P2 2.0 mm (measured
 #: 2026-11-28), so a second nu would take the job past 10 minutes; ``ankles`` sweeps 0.3-0.49
 ANSWER_NUS = (0.42,)
 #: the ankle answer's FE: P2 at 2.0 mm, the coarsest level of the ``fe-convergence`` study (M's own
