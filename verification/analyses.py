@@ -439,7 +439,10 @@ def _signed(row: dict[str, Any], quantity: str) -> tuple[float | None, float | N
 
 
 def _pct(x: float | None) -> str:
-    return "–" if x is None or not math.isfinite(x) else f"{100.0 * x:+.0f} %"
+    """A signed relative difference in whole percent; one that rounds to nothing is "0 %" (not "-0 %")."""
+    if x is None or not math.isfinite(x):
+        return "–"
+    return "0 %" if round(100.0 * x) == 0 else f"{100.0 * x:+.0f} %"
 
 
 def _load_points(row: dict[str, Any]) -> list[dict[str, Any]]:
@@ -462,10 +465,10 @@ def _load_points(row: dict[str, Any]) -> list[dict[str, Any]]:
              "area": signed(e["contact_area_a_mm2"], e["contact_area_b_mm2"])} for e in per_time]
 
 
-def _values_text(points: list[dict[str, Any]], key: str, digits: int) -> str:
-    """"a1 / a2 / a3 against b1 / b2 / b3 (e1, e2, e3)" over the loads."""
-    return (" / ".join(_fmt(p[key][0], digits) for p in points) + " against " + " / ".join(_fmt(p[key][1], digits) for p in points)
-            + " (" + ", ".join(_pct(p[key][2]) for p in points) + ")")
+def _values_text(points: list[dict[str, Any]], key: str, digits: int, unit: str) -> str:
+    """"a1 / a2 / a3 unit against b1 / b2 / b3 unit (e1, e2, e3)" over the loads."""
+    return (" / ".join(_fmt(p[key][0], digits) for p in points) + f" {unit} against " + " / ".join(_fmt(p[key][1], digits) for p in points)
+            + f" {unit} (" + ", ".join(_pct(p[key][2]) for p in points) + ")")
 
 
 def _why_missed(row: dict[str, Any], metric: str, error: float | None, reference: dict[str, Any]) -> str:
@@ -515,8 +518,8 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     nu = base["params"].get("poissons_ratio")
     sentences = [
         f"The default bed, the {default_bed}, on the {first_ankle} standing on its cartilage (Poisson's ratio {_fmt(nu, 3)}, no ligaments) against the FE of "
-        f"both cartilage layers, at {loads} N: the talus moves {_values_text(points, 'disp', 3)} mm, the regularised peak pressure (the largest mean over "
-        f"1 mm²) is {_values_text(points, 'peak', 3)} MPa, the contact area {_values_text(points, 'area', 4)} mm²; verdict {base['status']} "
+        f"both cartilage layers, at {loads} N: the talus moves {_values_text(points, 'disp', 3, 'mm')}, the regularised peak pressure (the largest mean over "
+        f"1 mm²) is {_values_text(points, 'peak', 3, 'MPa')}, the contact area {_values_text(points, 'area', 4, 'mm²')}; verdict {base['status']} "
         f"(every judged metric at every load inside the declared ±{100 * band:.0f} % band)."
     ]
     missed, areas = [], []

@@ -53,6 +53,7 @@ def test_signed_errors_at_each_load_the_area_growth_and_the_goal(tmp_path):
     result = _analysis(rows)
     sentences = result["values"]["sentences"]
     assert sentences[0].startswith("The default bed, the coupled layer, on the ideal ankle") and "333 / 1000 / 2000 N" in sentences[0]
+    assert "the talus moves 0.19 / 0.42 / 0.6 mm against 0.2 / 0.4 / 0.6 mm (-5 %, +5 %, 0 %)" in sentences[0]  # signed; nothing is "-0 %"
     springs = next(s for s in sentences if s.startswith("Ideal ankle, independent springs"))
     assert "displacement -50 %, -50 %, -50 %" in springs  # signed, at each load, not |e|
     growth = next(s for s in sentences if s.startswith("The contact area grows"))
