@@ -19,7 +19,8 @@ def _row(tmp_path, name: str, disp: list[tuple[float, float]], peak: list[tuple[
     and contact area at each load, in its metrics.json's per-time comparison."""
     per_time = [{"load_n": f, "displacement_a_mm": [0.0, 0.0, d[0]], "displacement_b_mm": [0.0, 0.0, d[1]],
                  "regularised_peak_pressure_a_mpa": p[0], "regularised_peak_pressure_b_mpa": p[1],
-                 "contact_area_a_mm2": a[0], "contact_area_b_mm2": a[1], "pressure_l2_rel_error": 0.1}
+                 "contact_area_a_mm2": a[0], "contact_area_b_mm2": a[1], "pressure_l2_rel_error": 0.1,
+                 "displacement_rel_error": (d[0] - d[1]) / d[1]}  # along z only: the vector difference is the norms'
                 for f, d, p, a in zip(LOADS, disp, peak, area, strict=True)]
     (tmp_path / "cases" / name).mkdir(parents=True)
     (tmp_path / "cases" / name / "metrics.json").write_text(json.dumps({"comparison": {"per_time": per_time}}))
@@ -74,7 +75,7 @@ def test_goal_reached_when_every_card_metric_of_the_default_bed_is_within_it_at_
         "s": _row(tmp_path, "s", [(0.1, 0.2)] * 3, [(0.7, 1.0)] * 3, [(300.0, 300.0)] * 3),  # the springs miss it: not the default bed's goal
     }
     goal = next(s for s in _analysis(rows)["values"]["sentences"] if s.startswith("Goal"))
-    assert "reached on every ankle compared" in goal
+    assert "reached on every ankle compared" in goal and "own error is unknown (c: not yet in the mesh study" in goal  # no study: not a verdict
 
 
 def test_without_the_default_beds_comparison_the_answer_says_it_was_not_answered(tmp_path):
