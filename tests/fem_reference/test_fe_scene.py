@@ -379,6 +379,14 @@ def test_fe_refuses_per_side_layers_it_cannot_model_naming_the_key(capsys, model
     (["--set", 'fe.time_scheme="rk4"'], "fe.time_scheme"),
     (["--linear-solver", "cholesky"], "--linear-solver"),
     (["--set", 'fe.linear_solver="lu"'], "fe.linear_solver"),
+    (["--set", 'fe.material="poroelastic"'], "fe.material"),
+    (["--set", 'fe.material="biphasic"'], "biphasic"),  # no [biphasic] table
+    (["--set", 'fe.material="biphasic"', "--set", "biphasic.permeability_mm4_per_n_s=-1"], "biphasic.permeability_mm4_per_n_s"),
+    (["--set", 'fe.material="biphasic"', "--set", "biphasic.permeability_mm4_per_n_s=1e-3",
+      "--set", 'biphasic.counter_surface="sponge"'], "biphasic.counter_surface"),
+    (["--set", 'fe.material="biphasic"', "--set", "biphasic.permeability_mm4_per_n_s=1e-3", "--set", 'fe.element="P2"'], "fe.element"),
+    (["--set", 'fe.material="biphasic"', "--set", "biphasic.permeability_mm4_per_n_s=1e-3",
+      "--set", 'fe.time_scheme="trapezoidal"'], "fe.time_scheme"),
 ])
 def test_bad_fe_input_exits_2(capsys, args, key):
     """docs/result-format.md: bad FE settings exit 2 with a message naming the key; nothing is solved."""
