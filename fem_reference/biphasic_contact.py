@@ -71,6 +71,9 @@ DEFAULT_COUNTER_SURFACE = "impermeable"
 #: step's error is 2.1 % of the equilibrium displacement at beta 3, 0.99 % at 10, 0.76 % at 100 and
 #: 0.74 % at 1000, against 0.73 % with p = 0 imposed strongly (fem_reference.biphasic)
 DRAINAGE_BETA = 100.0
+#: BDF2's zero-stability bound on the ratio of consecutive steps (1 + sqrt 2): above it an
+#: indentation overshot its drained displacement by 8 % (step ratio 3.16; 0.23 % at 1.33)
+BDF2_MAX_STEP_RATIO = 1.0 + 2.0 ** 0.5
 #: solves of a step with the drainage set frozen, after Newton has cycled between drainage sets
 MAX_DRAINAGE_PASSES = 6
 
@@ -169,6 +172,7 @@ class BiphasicContactHistory:
         self.constants = {name: fem.Constant(msh, float(value)) for name, value in (
             ("flow_dt", 0.0), ("k", self.permeability_mm4_per_n_s), ("beta", DRAINAGE_BETA))}
         self.states: list[_State] = []
+        self.step_warnings: list[str] = []  # of the prepared step
         self._terms: _BulkTerms | None = None
         self.fluid_load_fraction: list[float] = []  # per solved time point
         self.drainage_passes: list[int] = []  # solves per time point (1 unless Newton cycled)
@@ -197,6 +201,11 @@ class BiphasicContactHistory:
         else:
             dt = 0.0
         flow_dt, weights = scheme_weights(self.scheme, dt, previous_dt)
+        self.step_warnings = []
+        if len(weights) == 2 and dt > BDF2_MAX_STEP_RATIO * previous_dt:
+            self.step_warnings.append(
+                f"the time step grows {dt / previous_dt:.3g} times (BDF2 is zero-stable below {BDF2_MAX_STEP_RATIO:.3f}): "
+                "the creep may overshoot (docs/method.md#biphasic-contact); grow the steps more slowly")
         self.constants["flow_dt"].value = flow_dt
         h = self.history_field.x.array
         h[:] = 0.0
@@ -217,13 +226,14 @@ class BiphasicContactHistory:
         from fem_reference.contact import solve_contact
 
         self.frozen_drainage = None
-        passes, warnings = 1, []
+        passes, warnings = 1, list(self.step_warnings)
         try:
             result = solve_contact(problem, comm, keep_fields=True, progress=progress)
         except FEConvergenceError:
             if self.counter_surface == "porous" or not self.states or self.constants["flow_dt"].value == 0.0:
                 raise  # the drainage set plays no part in this step
-            result, passes, warnings = self._solve_frozen(problem, comm, progress)
+            result, passes, frozen = self._solve_frozen(problem, comm, progress)
+            warnings += frozen
         finally:
             self.frozen_drainage = None
         result.warnings += warnings
