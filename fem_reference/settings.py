@@ -34,6 +34,9 @@ MATERIALS = {
                 "interstitial fluid, [biphasic]), Taylor-Hood",
 }
 
+#: the models whose one deformable layer can be biphasic (against a rigid F)
+BIPHASIC_MODELS = ("layer", "slab")
+
 
 @dataclass(frozen=True)
 class BiphasicSettings:
@@ -119,6 +122,9 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
         raise InputError(f"unknown FE material {material!r}", file=file, key="fe.material",
                          expected=" or ".join(f'"{m}" ({what})' for m, what in MATERIALS.items()))
     biphasic_table = biphasic_settings(scene) if material == "biphasic" else None
+    if biphasic_table is not None and fe_model.name not in BIPHASIC_MODELS:
+        raise InputError(f"the FE {fe_model.name} model has no biphasic layer (only the layer and slab models, one layer on M)", file=file, key="fe.material",
+                         expected=f'[fe] material = "elastic", or the {" or ".join(BIPHASIC_MODELS)} model with "biphasic"')
     if biphasic_table is not None:  # displacement and pore pressure: Taylor-Hood
         if el not in ("auto", "TH"):
             raise InputError(f"element {el} cannot carry the fluid pressure", file=file, key=el_key,

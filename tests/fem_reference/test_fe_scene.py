@@ -387,6 +387,7 @@ def test_fe_refuses_per_side_layers_it_cannot_model_naming_the_key(capsys, model
     (["--set", 'fe.material="biphasic"', "--set", "biphasic.permeability_mm4_per_n_s=1e-3", "--set", 'fe.element="P2"'], "fe.element"),
     (["--set", 'fe.material="biphasic"', "--set", "biphasic.permeability_mm4_per_n_s=1e-3",
       "--set", 'fe.time_scheme="trapezoidal"'], "fe.time_scheme"),
+    (["--set", 'fe.material="biphasic"', "--set", "biphasic.permeability_mm4_per_n_s=1e-3", "--model", "lumped"], "fe.material"),
 ])
 def test_bad_fe_input_exits_2(capsys, args, key):
     """docs/result-format.md: bad FE settings exit 2 with a message naming the key; nothing is solved."""
