@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from edem.laws import LAWS
-from fem_reference import biphasic
+from fem_reference.biphasic import TIME_SCHEMES as BIPHASIC_TIME_SCHEMES
 from fem_reference.biphasic_contact import COUNTER_SURFACES, DEFAULT_COUNTER_SURFACE
 from fem_reference.models import FE_MODELS, fixed_has_cartilage
 from fem_reference.problem import LINEAR_SOLVERS
@@ -189,9 +189,9 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     if scheme not in TIME_SCHEMES:
         raise InputError(f"unknown time scheme {scheme!r}", file=file, key=scheme_key,
                          expected=" or ".join(TIME_SCHEMES) + " (the viscoelastic FE's implicit scheme)")
-    if biphasic_table is not None and scheme not in biphasic.TIME_SCHEMES:
+    if biphasic_table is not None and scheme not in BIPHASIC_TIME_SCHEMES:
         raise InputError(f"the biphasic FE has no {scheme} scheme", file=file, key=scheme_key,
-                         expected=" or ".join(biphasic.TIME_SCHEMES) + " (the trapezoid leaves a step load's finest pressure "
+                         expected=" or ".join(BIPHASIC_TIME_SCHEMES) + " (the trapezoid leaves a step load's finest pressure "
                                   "modes undamped: docs/method.md#the-biphasic-anchor)")
     solver, solver_key = pick(linear_solver, "linear_solver")
     solver = "auto" if solver is None else solver
