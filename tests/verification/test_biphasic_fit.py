@@ -19,7 +19,8 @@ def test_the_time_points_grow_within_bdf2s_stability_bound():
 
 def test_the_fit_recovers_the_tau_of_a_kelvin_voigt_history():
     """Self-consistency: fitted to EDEM's own displacement history at tau = 50 s, the fit returns
-    50 s to 1e-4 (least_squares' xtol 1e-6 on log tau, measured 1e-7) and a zero residual."""
+    50 s to 1e-4 (least_squares' xtol 1e-6 on log tau; measured 8e-9) and a residual below 1e-6 of
+    the displacement (measured 3e-10 mm)."""
     times = np.asarray(TIMES_S)
     tau, rms = fit_tau(times, edem_displacement_mm(50.0))
     assert tau == pytest.approx(50.0, rel=1e-4)
