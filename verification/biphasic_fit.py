@@ -20,8 +20,8 @@ campaign's cylinder scene (``cylinder-layer``: R 20 mm, a bonded 2 mm layer, a r
 4. with ``--refine``, the FE again on a finer mesh and the largest difference between the two
    levels over time (the FE's own mesh error at the level used, at least that large).
 
-Result directories go under ``--out`` (``fe-mesh<size>``, ``edem-tau<tau>``); ``--reuse`` keeps
-FE directories already there (the FE dominates the cost: about 4-5 min at 2.0 mm; the fit 36
+Result directories go under ``--out`` (``fe-mesh<size>``, ``edem-<contact set>-tau<tau>``);
+``--reuse`` keeps FE directories already there (not checked against this script's inputs) (the FE dominates the cost: about 4-5 min at 2.0 mm; the fit 36
 EDEM runs in 25 s).
 """
 
@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 
 SCENE = "cylinder-layer"
-#: the drained matrix: the scene's Young's modulus, a cartilage-like drained Poisson's ratio (the
-#: matrix's measured 0.0-0.2; the campaign's 0.42 is a Kelvin-Voigt bed's, not a drained one)
+#: the drained matrix: the scene's Young's modulus, a cartilage-like drained Poisson's ratio
+#: (0-0.1, fem_reference.biphasic; the campaign's 0.42 is a Kelvin-Voigt bed's, not a drained one)
 POISSONS_RATIO = 0.1
 #: N: the drained equilibrium compresses the layer by 0.27 mm (14 %), as 333 N at nu 0.42 (13 %)
 LOAD_N = 200.0
@@ -162,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
                              "through the layer and subdivides M's triangles only below their mean edge, 0.97 mm here)")
     parser.add_argument("--contact-set", choices=tuple(CONTACT_SETS), default=CONTACT_SET,
                         help=f"the Kelvin-Voigt bed's contact set (default {CONTACT_SET}; frozen: the thesis's increment)")
-    parser.add_argument("--reuse", action="store_true", help="keep FE result directories already in --out")
+    parser.add_argument("--reuse", action="store_true", help="keep FE result directories already in --out (not checked against the inputs)")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
