@@ -21,8 +21,8 @@ campaign's cylinder scene (``cylinder-layer``: R 20 mm, a bonded 2 mm layer, a r
    levels over time (the FE's own mesh error at the level used, at least that large).
 
 Result directories go under ``--out`` (``fe-mesh<size>``, ``edem-<contact set>-tau<tau>``);
-``--reuse`` keeps FE directories already there (not checked against this script's inputs) (the FE dominates the cost: about 4-5 min at 2.0 mm; the fit 36
-EDEM runs in 25 s).
+``--reuse`` keeps FE directories already there, unchecked against this script's inputs. The FE
+dominates the cost: about 4-5 min at 2.0 mm; the fit is 36 EDEM runs in 25 s.
 """
 
 from __future__ import annotations
