@@ -323,7 +323,12 @@ def _solve(problem: FEContactProblem, comm: Any, progress: SolveProgress | None)
     w = ufl.TestFunction(s.V)
     E = s.rigid_modes()
 
-    if element == "TH":
+    bulk = None
+    if problem.bulk_form is not None:  # a time scheme's own bulk terms (FEContactProblem.bulk_form)
+        bulk = problem.bulk_form(s, uh, w)
+        u, v = bulk.displacement, bulk.test_displacement
+        sig_u, sig_v = bulk.stress_u, bulk.stress_v
+    elif element == "TH":
         u, p_ = ufl.split(uh)
         v, q = ufl.split(w)
         sig_u, sig_v = s.sigma(u, p_), s.sigma(v, q)
@@ -349,6 +354,8 @@ def _solve(problem: FEContactProblem, comm: Any, progress: SolveProgress | None)
     # along the body's outward normal n = -nu (against a deformable F: relative to F's displacement)
     un, vn = -ufl.dot(s.relative_displacement(u), nu), -ufl.dot(v, nu)
     pressure = ufl.max_value(0.0, gamma * (un - gap) - sn_u)
+    if bulk is not None:  # its terms may switch with the contact set (a biphasic face's drainage)
+        a_int = bulk.residual(pressure)
     F = (a_int - theta / gamma * sn_u * sn_v * s.ds_c - theta / gamma * pressure * sn_v * s.ds_c
          + pressure * vn * s.ds_c)
 
