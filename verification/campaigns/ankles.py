@@ -27,7 +27,9 @@ from typing import Any
 from verification.campaign_model import COUPLED_BED, THESIS_BED, Analysis, Campaign, Case
 from verification.fe_comparison import FE_COARSE, FE_TABLE_COLUMNS, banded, fe_comparison_case
 
-#: wall time with 2 jobs on 2 cores, nothing cached (measured 2026-11-28: docs/campaigns.md#ankles-the-cartilage-ankles-against-their-fe-twin)
+#: wall time with 2 jobs on 2 cores, nothing cached: an estimate, the whole campaign not yet run (2026-11-28: the two-layer
+#: FE runs at 2.0 mm took 245-1277 s each, the ideal ankle's at 1.0 mm 514 s:
+#: docs/campaigns.md#ankles-the-cartilage-ankles-against-their-fe-twin)
 EXPECTED_TIME_S = 7200.0
 
 #: the ankles: case-name prefix -> (scene, what)

@@ -27,7 +27,9 @@ from typing import Any
 from verification.campaign_model import Analysis, Campaign, Case, Figure
 from verification.fe_comparison import ERROR_PANELS, FE_TABLE_COLUMNS, banded, fe_comparison_case
 
-#: wall time with 2 jobs on 2 cores, nothing cached (measured 2026-11-28: docs/campaigns.md#two-layers-the-lumping-error-and-the-beds-against-the-two-layer-fe)
+#: wall time with 2 jobs on 2 cores, nothing cached: an estimate, the whole campaign not yet run (2026-11-28: its 48 cases at
+#: the goal's nu took 1806 s with one job at load 7-8 with the FE at 1.0 mm, not the 0.7 mm of :data:`FE_LEVEL`:
+#: docs/campaigns.md#two-layers-the-lumping-error-and-the-beds-against-the-two-layer-fe)
 EXPECTED_TIME_S = 3600.0
 
 SCENE = "cylinder-two-layers"
