@@ -1,4 +1,4 @@
-"""Kelvin-Voigt EDEM fitted to the biphasic FE's creep of the cylinder layer (docs/campaigns.md#biphasic-fit).
+"""Kelvin-Voigt EDEM fitted to the biphasic FE's creep of the cylinder layer (docs/campaigns.md#biphasic-fit-a-kelvin-voigt-bed-against-the-biphasic-layer-a-script).
 
 ``python -m verification.biphasic_fit [--out DIR] [--mesh-size MM] [--refine MM] [--reuse]``
 
