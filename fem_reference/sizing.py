@@ -85,6 +85,11 @@ def direct_fits(dofs: int, available_bytes: float | None = None) -> bool:
     return SAFETY * memory_bytes(dofs, "direct") <= available
 
 
+def iterative_is_default(dofs: int, element: str, available_bytes: float | None = None) -> bool:
+    """The ``auto`` choice of the inner linear solve: Krylov where the LU does not fit."""
+    return not direct_fits(dofs, available_bytes)
+
+
 def estimate(cells: int, vertices: int, element: str, available_bytes: float | None = None,
              linear_solver: str = "auto") -> FESize:
     """DOFs of the element on a tetrahedral mesh, the solver used and its peak memory.
