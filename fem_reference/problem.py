@@ -222,7 +222,8 @@ class Roller:
 
 @dataclass(frozen=True)
 class NitscheParameters:
-    """Chouly-Hild Nitsche contact: gamma = gamma0 * (lambda + 2 mu) / h.
+    """Chouly-Hild Nitsche contact: gamma = gamma0 * (lambda + 2 mu) / h, with 2 mu in place of
+    lambda + 2 mu for Taylor-Hood (whose stress's displacement part is 2 mu eps(u)).
 
     h = "height": the height of the cell over its contact facet, 3 * volume / facet area (what
     the discrete trace inequality needs; robust on anisotropic cells) or "diameter": the cell
