@@ -35,7 +35,7 @@ def use_iterative(s: ContactSetup) -> bool:
     from fem_reference.sizing import iterative_is_default
 
     choice = s.problem.solver.linear_solver
-    return choice == "iterative" or (choice == "auto" and iterative_is_default(s.n_global, s.element))
+    return choice == "iterative" or (choice == "auto" and iterative_is_default(s.n_global))
 
 
 #: Relative tolerance of an inner Krylov solve when the caller does not give one, on the
@@ -233,7 +233,10 @@ def krylov_fieldsplit(ksp: Any, s: ContactSetup) -> tuple[PMultigrid, list, list
     definite): approximated by -(1/mu + 1/lambda) M_p, the pressure mass matrix scaled like the
     inverse shear stiffness plus the compressible term (-M_p / lambda is A_pp itself;
     div A_uu^-1 div^T is spectrally M_p / mu on inf-sup stable elements), one Jacobi sweep on it.
-    Full factorisation (lower, Schur, upper).
+    Upper block-triangular factorisation: one u cycle per iteration (measured on the subject-like
+    ankle at 1.0 mm, nu 0.49, a random right-hand side to 1e-10: 50 iterations and 4.8 s of CPU,
+    against 48 and 7.8 s with the full factorisation's two; lower 54; three Chebyshev or
+    Richardson sweeps on M_p instead of one Jacobi: 48, no gain).
 
     Returns the multigrid of the u block, the PETSc objects the solve keeps (index sets, the
     pressure matrix) and the option keys set, for :meth:`InnerSolver.destroy`."""
@@ -256,7 +259,7 @@ def krylov_fieldsplit(ksp: Any, s: ContactSetup) -> tuple[PMultigrid, list, list
     pc.setType("fieldsplit")
     pc.setFieldSplitIS(("u", is_u), ("p", is_p))
     pc.setFieldSplitType(PETSc.PC.CompositeType.SCHUR)
-    pc.setFieldSplitSchurFactType(PETSc.PC.FieldSplitSchurFactType.FULL)
+    pc.setFieldSplitSchurFactType(PETSc.PC.FieldSplitSchurFactType.UPPER)
     pc.setFieldSplitSchurPreType(PETSc.PC.FieldSplitSchurPreType.USER, Mp)
     mg = PMultigrid(s, V0, u_map)
     # the u block's PC is "none" until the split has made its KSP (InnerSolver.set_operator then

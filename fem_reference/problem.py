@@ -247,13 +247,14 @@ class NitscheParameters:
 #: Inner linear solves of the bordered Newton (``SolverOptions.linear_solver``, ``[fe]
 #: linear_solver``, ``edem fe --linear-solver``); docs/method.md, section 6.
 LINEAR_SOLVERS = {
-    "auto": "direct while the LU's memory estimate (x2) fits the memory available "
-            "(fem_reference.sizing.direct_fits), iterative past that",
+    "auto": "iterative from 20,000 unknowns (fem_reference.sizing.ITERATIVE_FROM_DOFS) or where the "
+            "LU's memory estimate (x2) does not fit, direct below",
     "direct": "MUMPS LU of the Jacobian",
-    "iterative": "Krylov: P1/P2 GMRES (CG for Nitsche theta = 1) + GAMG with the rigid-body "
-                 "near-nullspace; Taylor-Hood GMRES + Schur-complement field split (GAMG with the "
-                 "near-nullspace on the displacement, a pressure mass matrix scaled by "
-                 "1/mu + 1/lambda on the pressure)",
+    "iterative": "Krylov to an Eisenstat-Walker forcing term: P2 GMRES (CG for Nitsche theta = 1) + "
+                 "P2 -> P1 p-multigrid (SOR, GAMG with the rigid-body near-nullspace on P1); P1 "
+                 "the same with GAMG alone; Taylor-Hood GMRES + Schur-complement field split (the "
+                 "p-multigrid on the displacement, the pressure mass matrix scaled by 1/mu + "
+                 "1/lambda on the pressure)",
 }
 
 
