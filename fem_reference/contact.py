@@ -519,6 +519,7 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
         newton_iterations=iters, converged_reason=reason_name, started=t_start, warnings=warnings,
         fields=fields, linear_solver="iterative" if system.inner.iterative else "direct",
         krylov_iterations=int(system.inner.iterations), rotation_axes=s.rot.copy(),
+        krylov_iterations_per_step=list(system.krylov_per_step) if system.inner.iterative else [],
         bone_rotation_rad=s.rot.T @ delta[s.kt:], contact_moment_nmm=contact_moment,
         moment_residual_nmm=moment_residual)
     _destroy(snes, Jshell, X, Fv, system)

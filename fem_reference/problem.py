@@ -469,6 +469,7 @@ class FEContactResult:
     warnings: list[str] = field(default_factory=list)
     linear_solver: str = "direct"  # the inner solve used: "direct" or "iterative" (LINEAR_SOLVERS)
     krylov_iterations: int = 0  # iterative path: inner Krylov iterations summed over all solves
+    krylov_iterations_per_step: list[int] = field(default_factory=list)  # iterative path: per Newton step
     # free rotations (empty without them): small rotation vector of the bone about G, the moment
     # of the contact force about G and |P_rot (M_c - moment)|
     rotation_axes: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
