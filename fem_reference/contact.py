@@ -45,7 +45,7 @@ from .progress import SolveProgress
 #: 1e-12) 8 Newton steps and 82 Krylov iterations; with these XX.
 ETA_MAX = 1e-2
 ETA_SETTLING = 1e-3
-ETA_FINISH = 1e-7
+ETA_FINISH = 1e-5
 
 class _BorderedSystem:
     """Residual, Jacobian (shell) and exact block preconditioner of the bordered Newton system."""
@@ -74,7 +74,11 @@ class _BorderedSystem:
         self.K = [np.zeros(self.no) for _ in range(self.k)]
         self.G = [np.zeros(self.no) for _ in range(self.k)]
         self.Xs = [np.zeros(self.no) for _ in range(self.k)]
-        self.X_vecs = [self.A.createVecRight() for _ in range(self.k)]  # A^-1 L_j, the next solve's start
+        # Y_j = A^-1 L_j (the next step's start), L_j, their residual norms and Ef_j (_jacobian)
+        self.X_vecs = [self.A.createVecRight() for _ in range(self.k)]
+        self.L_vecs = [self.A.createVecRight() for _ in range(self.k)]
+        self.Y_residual = np.zeros(self.k)
+        self.Ef = [np.zeros(self.no) for _ in range(self.k)]
         self.H = np.zeros((self.k, self.k))
         self.S = np.eye(self.k)
         self.S_ref: np.ndarray | None = None
@@ -180,20 +184,31 @@ class _BorderedSystem:
         self.krylov_per_step.append(0)
         for j in range(self.k):
             # X_j = A^-1 K_j = Ef_j + A^-1 L_j with Ef_j the rigid mode zero on the bonded rows and
-            # L_j = K_j - A Ef_j: the elastic force of moving the bonded face alone (K_j holds the
+            # L_j = K_j - A Ef_j the elastic force of moving the bonded face alone (K_j holds the
             # contact stiffness, whose scale the error of an inexact solve would take)
-            Ef = self.Eo[j].copy()
-            Ef[self.s.cons_owned] = 0.0
-            self._load(Ef)
+            self.Ef[j] = self.Eo[j].copy()
+            self.Ef[j][self.s.cons_owned] = 0.0
+            self._load(self.Ef[j])
             self.A.mult(self.wu, self.zu)
-            self._load(self.K[j] - self.zu.getArray(readonly=True))
-            # exact (LU), or to the forcing term from the last step's
-            self.krylov_per_step[-1] += self.inner.solve(self.wu, self.X_vecs[j], rtol=self.eta, guess=True)
-            self.Xs[j] = Ef + self.X_vecs[j].getArray(readonly=True)
+            with self.L_vecs[j] as arr:
+                arr[:] = self.K[j] - self.zu.getArray(readonly=True)
+            self._solve_Y(j, self.eta)
+        self._schur(initial=True)
+        J.assemble()
+
+    def _solve_Y(self, j: int, rtol: float) -> None:
+        """Y_j = A^-1 L_j, exact (LU) or to ``rtol`` from the last one (the last Newton step's);
+        X_j = Ef_j + Y_j and the residual norm |L_j - A Y_j| that the step's accuracy needs."""
+        self.krylov_per_step[-1] += self.inner.solve(self.L_vecs[j], self.X_vecs[j], rtol=rtol, guess=True)
+        self.Y_residual[j] = self.inner.ksp.getResidualNorm() if self.inner.iterative else 0.0
+        self.Xs[j] = self.Ef[j] + self.X_vecs[j].getArray(readonly=True)
+
+    def _schur(self, initial: bool) -> None:
+        """S = H - G^T X, the tangent contact stiffness of the free rigid motions. It is singular
+        when an iterate has lost contact: then the last regular one (counted once per step,
+        ``initial``)."""
         S = self.H - np.array([[self.dot(self.G[j], self.Xs[m_]) for m_ in range(self.k)]
                                for j in range(self.k)])
-        # The Schur complement is the tangent contact stiffness of the free translations; it is
-        # singular when an iterate has lost contact. Fall back on the last regular one.
         sv = np.linalg.svd(S, compute_uv=False)
         if self.S_ref is None:
             if sv.min() <= 1e-12 * max(sv.max(), 1e-300):
@@ -205,12 +220,11 @@ class _BorderedSystem:
             self.S_ref = S.copy()
         ref = np.linalg.svd(self.S_ref, compute_uv=False).max()
         if sv.min() <= 1e-8 * ref:
-            self.singular_steps += 1
+            self.singular_steps += int(initial)
             S = self.S_ref.copy()
         else:
             self.S_ref = S.copy()
         self.S = S
-        J.assemble()
 
     def mult(self, mat: Any, x: Any, y: Any) -> None:
         xu, xd = self.split(x)
@@ -259,7 +273,21 @@ class _BorderedSystem:
 
     def apply(self, pc: Any, x: Any, y: Any) -> None:
         xu, xd = self.split(x)
-        yu, dd = self.eliminate(self.solve_A(xu, self.eta), xd)
+        z0 = self.solve_A(xu, self.eta)
+        yu, dd = self.eliminate(z0, xd)
+        # The step's residual in the u rows is r(z0) - sum_j dd_j r(Y_j): the Y_j were solved to the
+        # forcing term of |L_j|, which can be far larger than |F| / |dd_j|. Solve them further
+        # until that part is within half the forcing term of |F| (the LU's are exact).
+        allowed = 0.5 * self.eta * x.norm()
+        for _ in range(3):
+            excess = np.abs(dd) * self.Y_residual
+            if excess.sum() <= allowed:
+                break
+            for j in np.flatnonzero(excess > allowed / self.k):
+                target = 0.5 * allowed / (self.k * abs(dd[j]))
+                self._solve_Y(j, max(target / max(self.L_vecs[j].norm(), 1e-300), 1e-14))
+            self._schur(initial=False)
+            yu, dd = self.eliminate(z0, xd)
         alpha = self.step_limit(dd)
         if alpha < 1.0:
             yu, dd = alpha * yu, alpha * dd
@@ -292,7 +320,7 @@ class _BorderedSystem:
         self.inner.destroy()
         self.A.destroy()
         self.A_bulk.destroy()
-        for vec in (self.wu, self.zu, *self.X_vecs):
+        for vec in (self.wu, self.zu, *self.X_vecs, *self.L_vecs):
             vec.destroy()
 
 
@@ -463,8 +491,9 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
         warnings.append(f"{system.singular_steps} Newton iterate(s) lost contact; the last "
                         "regular contact stiffness was used for those steps")
 
-    # ---- post-processing ----
-    contact_force = np.array([s.scalar(fem.form(-pressure * nu[i] * s.ds_c)) for i in range(3)])
+    # ---- post-processing (three compiled forms: force and moment, nodal loads and area, mass) ----
+    resultant = _resultant(s, pressure, nu)
+    contact_force = resultant[:3]
     force_residual, _ = s.force_split(contact_force)
     if force_residual > opt.force_balance_rtol * load_norm:
         _destroy(snes, Jshell, X, Fv, system)
@@ -476,9 +505,7 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     contact_moment = np.zeros(3)
     moment_residual = 0.0
     if len(s.rot):
-        arm = ufl.SpatialCoordinate(s.mesh) - fem.Constant(s.mesh, s.ref_point)
-        mom = ufl.cross(arm, -pressure * nu)
-        contact_moment = np.array([s.scalar(fem.form(mom[i] * s.ds_c)) for i in range(3)])
+        contact_moment = resultant[3:]
         moment_residual = float(np.linalg.norm(s.rot @ (contact_moment - s.moment)))
         x = s.mesh.geometry.x
         size = max(s.comm.allreduce(float(x[:, i].max()) if len(x) else -np.inf, op=MPI.MAX)
@@ -493,9 +520,9 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
                 f"rotations", reason="MOMENT_BALANCE", residual_norm=last, iterations=iters)
 
     pdofs, _, Q = s.contact_points(1)
-    phi = ufl.TestFunction(Q)
-    mass = s.vector_owned(fem.form(phi * s.ds_c))
-    load_vec = s.vector_owned(fem.form(pressure * phi * s.ds_c))
+    mass = s.vector_owned(fem.form(ufl.TestFunction(Q) * s.ds_c))
+    loads = _NodalLoads(s, pressure)
+    load_vec = loads.assemble(0.0)[:, 0]
     nq = Q.dofmap.index_map.size_local
     own = np.sort(pdofs[pdofs < nq])
     pnod = np.where(mass[own] > 0, load_vec[own] / np.where(mass[own] > 0, mass[own], 1.0), 0.0)
@@ -503,9 +530,9 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     p_all = s.gather(pnod)
     x_all = s.gather(coords)
     peak = float(p_all.max()) if len(p_all) else 0.0
-    ptol = fem.Constant(s.mesh, 1e-8 * max(peak, 1e-300))
-    area = s.scalar(fem.form(ufl.conditional(ufl.gt(pressure, ptol), 1.0, 0.0) * s.ds_c))
-    total_p = s.scalar(fem.form(pressure * s.ds_c))
+    # the P1 hat functions sum to 1: the sums of the nodal integrals are the integrals
+    area = s.comm.allreduce(float(loads.assemble(1e-8 * max(peak, 1e-300))[:nq, 1].sum()), op=MPI.SUM)
+    total_p = s.comm.allreduce(float(load_vec[:nq].sum()), op=MPI.SUM)
     mean_p = total_p / area if area > 0 else 0.0
     fields = None
     if keep_fields:
@@ -526,20 +553,54 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     return result
 
 
+def _resultant(s: ContactSetup, pressure: Any, nu: Any) -> np.ndarray:
+    """(6,) the force the body exerts on the obstacle (N) and its moment about G (N mm), integrated
+    over the contact facets in one assembly: a vector form on the piecewise constant (6,) space,
+    whose DOFs' sums are the integrals."""
+    fem, ufl, MPI = s.m["fem"], s.m["ufl"], s.m["MPI"]
+    W = fem.functionspace(s.mesh, ("DG", 0, (6,)))
+    traction = -pressure * nu
+    arm = ufl.SpatialCoordinate(s.mesh) - fem.Constant(s.mesh, s.ref_point)
+    moment = ufl.cross(arm, traction)
+    both = ufl.as_vector([traction[i] for i in range(3)] + [moment[i] for i in range(3)])
+    vec = s.vector_owned(fem.form(ufl.inner(both, ufl.TestFunction(W)) * s.ds_c))
+    return s.comm.allreduce(vec.reshape(-1, 6).sum(axis=0), op=MPI.SUM)
+
+
+class _NodalLoads:
+    """The contact pressure's nodal integrals on the P1 nodes of the contact surface and the
+    indicator of where it exceeds a threshold, one compiled form for both: column 0 integral of
+    p phi_i, column 1 integral of [p > threshold] phi_i (the contact nodes of the progress lines,
+    threshold 0; the contact area, threshold 1e-8 of the peak)."""
+
+    def __init__(self, s: ContactSetup, pressure: Any) -> None:
+        fem, ufl = s.m["fem"], s.m["ufl"]
+        self.s = s
+        self.threshold = fem.Constant(s.mesh, 0.0)
+        Q2 = fem.functionspace(s.mesh, ("Lagrange", 1, (2,)))
+        both = ufl.as_vector([pressure, ufl.conditional(ufl.gt(pressure, self.threshold), 1.0, 0.0)])
+        self.form = fem.form(ufl.inner(both, ufl.TestFunction(Q2)) * s.ds_c)
+
+    def assemble(self, threshold: float) -> np.ndarray:
+        """(owned P1 nodes, 2): the two integrals per node (see the class)."""
+        self.threshold.value = threshold
+        return self.s.vector_owned(self.form).reshape(-1, 2)
+
+
 def _monitor_progress(snes: Any, system: _BorderedSystem, s: ContactSetup, pressure: Any, progress: SolveProgress) -> None:
     """Newton and (iterative path) Krylov monitors writing ``progress`` lines (rank 0).
 
     The contact nodes are the P1 nodes of the contact surface whose lumped pressure is positive
     at the iterate; counting them is one facet assembly per Newton iteration, on every rank."""
-    fem, ufl, MPI = s.m["fem"], s.m["ufl"], s.m["MPI"]
+    MPI = s.m["MPI"]
     pdofs, _, Q = s.contact_points(1)
     owned = np.sort(pdofs[pdofs < Q.dofmap.index_map.size_local])
-    touching = fem.form(ufl.conditional(ufl.gt(pressure, 0.0), 1.0, 0.0) * ufl.TestFunction(Q) * s.ds_c)
+    loads = _NodalLoads(s, pressure)
     previous: list[np.ndarray] = []
 
     def newton(snes_: Any, it: int, fnorm: float) -> None:
         system.set_state(snes_.getSolution())  # the iterate (set_state only copies it into the fields)
-        active = s.vector_owned(touching)[owned] > 0.0
+        active = loads.assemble(0.0)[owned, 1] > 0.0
         entered = left = 0
         if previous:
             entered = int(np.count_nonzero(active & ~previous[0]))

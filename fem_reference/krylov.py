@@ -115,7 +115,14 @@ def set_inner_options(ksp: Any, options: dict[str, str]) -> list[str]:
 
 
 def _gmres(options: dict[str, str]) -> dict[str, str]:
+    """Right-preconditioned GMRES: its residual norm is the unpreconditioned one the tolerances
+    and the Newton step's accuracy (:meth:`fem_reference.contact._BorderedSystem.apply`) are on."""
     return {"ksp_type": "gmres", "ksp_gmres_restart": str(GMRES_RESTART), "ksp_pc_side": "right", **options}
+
+
+def _cg(options: dict[str, str]) -> dict[str, str]:
+    """CG (the symmetric Nitsche variant) on the unpreconditioned residual norm, as GMRES."""
+    return {"ksp_type": "cg", "ksp_norm_type": "unpreconditioned", **options}
 
 
 def krylov_amg(ksp: Any, A: Any, s: ContactSetup) -> list[str]:
@@ -126,10 +133,7 @@ def krylov_amg(ksp: Any, A: Any, s: ContactSetup) -> list[str]:
     A.setNearNullSpace(near_nullspace(s, s.V.tabulate_dof_coordinates()[:nodes], vec))
     vec.destroy()
     options = {"pc_type": "gamg", "pc_gamg_reuse_interpolation": "true", **GAMG_OPTIONS}
-    if s.problem.nitsche.theta == 1.0:
-        options.update(ksp_type="cg")
-    else:
-        options = _gmres(options)
+    options = _cg(options) if s.problem.nitsche.theta == 1.0 else _gmres(options)
     return set_inner_options(ksp, options)
 
 
@@ -221,7 +225,7 @@ def krylov_pmg(ksp: Any, s: ContactSetup) -> tuple[PMultigrid, list[str]]:
     :meth:`InnerSolver.set_operator`) and the option keys set."""
     mg = PMultigrid(s, s.V, None)
     options = dict(PMG_OPTIONS)
-    options = {**options, "ksp_type": "cg"} if s.problem.nitsche.theta == 1.0 else _gmres(options)
+    options = _cg(options) if s.problem.nitsche.theta == 1.0 else _gmres(options)
     return mg, set_inner_options(ksp, options)
 
 
