@@ -28,6 +28,8 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/bench_edem.py
+	$(PY) benchmarks/bench_whole_run.py
+	$(PY) benchmarks/bench_fine_mesh.py
 	$(PY) benchmarks/bench_raycast.py
 	$(PY) benchmarks/bench_thin_layer.py
 	$(PY) benchmarks/bench_factorisations.py

@@ -3,7 +3,7 @@
 The smoothing length sqrt(b) h of the Pade term is about 2.5 mm on a 2 mm layer while springs
 are 0.3-1 mm apart, so the vertex operators resolve far more than the smoothed field needs. With
 a resolution r > 0 each term is solved on a Galerkin P1 subspace about sqrt(b) h / r across
-(``edem.thin_layer``, "Coarse smoothing space"). This script prints
+(``edem.coarse_space``). This script prints
 
 1. the bonded cylinder layer (the thin-layer campaign's base point: 2 mm, 333 N, nu 0.42 and
    0.49, DEM, Pade) at the scene's springs and at a finer spring mesh: displacement, regularised
@@ -30,6 +30,7 @@ from dataclasses import replace  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from edem.beds import CoupledThinLayer, IndependentSprings, on_bed  # noqa: E402
 from edem.pressure_metrics import regularised_peak_pressure_mpa  # noqa: E402
 from edem.raycast import RayCaster  # noqa: E402
 from edem.scene import load_scene  # noqa: E402
@@ -66,7 +67,7 @@ def cylinder_layer(nu: float, resolutions: list[float], spring_mesh_mm: float | 
     points, triangles = scene.mobile.vertices_mm, scene.mobile.triangles[scene.spring_triangle]
     rows = {}
     for resolution in [0.0, *resolutions]:
-        varied = replace(scene, cartilage=replace(scene.cartilage, thin_layer_smoothing_resolution=resolution))
+        varied = replace(scene, cartilage=on_bed(scene.cartilage, CoupledThinLayer.coupling, thin_layer_smoothing_resolution=resolution))
         _share()
         started = time.perf_counter()
         step = run(varied, "dem").steps[-1]
@@ -88,10 +89,10 @@ def stance(size_mm: float, law: str, steps: int, rounds: int, resolutions: list[
     base = stance_like_scene(size_mm, steps)
     caster = RayCaster(base.fixed.vertices_mm, base.fixed.triangles)
     cartilage = replace(base.cartilage, poissons_ratio=0.45, law=law, thickness_mm=2.0 if law != "threshold" else None)
-    models = {"springs": replace(base, cartilage=replace(cartilage, coupling="none"))}
+    models = {"springs": replace(base, cartilage=on_bed(cartilage, IndependentSprings.coupling))}
     for resolution in [0.0, *resolutions]:
         name = "fine" if resolution == 0.0 else f"resolution {resolution:g}"
-        models[name] = replace(base, cartilage=replace(cartilage, coupling="thin-layer", thin_layer_smoothing_resolution=resolution))
+        models[name] = replace(base, cartilage=on_bed(cartilage, CoupledThinLayer.coupling, thin_layer_smoothing_resolution=resolution))
     times: dict[str, list[float]] = {name: [] for name in models}
     last, shares = {}, {}
     run(models["springs"], "edem", caster=caster)  # warm-up: imports, first Embree traversal

@@ -22,8 +22,9 @@ from edem.solver import run
 from geometries.builders import build_geometry
 
 
-def stance_like_scene(mesh_size_mm: float, n_steps: int) -> Scene:
-    geometry = build_geometry("ideal_ankle", {"mesh_size_mm": mesh_size_mm})
+def stance_like_scene(mesh_size_mm: float, n_steps: int, **cartilage) -> Scene:
+    """The idealised ankle's stance; ``cartilage``: Scene.from_arrays's cartilage keys beyond E and nu."""
+    geometry = build_geometry("ideal_ankle", {"mesh_size_mm": mesh_size_mm, "cartilage": False})  # the thesis's cylinder under a plane
     t = np.linspace(0.0, 0.64, n_steps)
     s = t / t[-1]
     force = np.column_stack([60.0 * s, -40.0 * np.sin(np.pi * s), 50.0 + 4140.0 * s])
@@ -31,7 +32,7 @@ def stance_like_scene(mesh_size_mm: float, n_steps: int) -> Scene:
         geometry.mobile.vertices_mm, geometry.mobile.triangles, geometry.fixed.vertices_mm, geometry.fixed.triangles, force,
         youngs_modulus_mpa=10.35, poissons_ratio=0.42, time_s=t, load_frame="fixed", fixed_dofs=("tx", "rx", "ry", "rz"),
         kinematics=JointKinematics(geometry.ankle_axis_point_mm, geometry.ankle_axis_direction, np.radians(16.31) * s),
-        name=f"stance-like-{geometry.mobile.n_triangles}", description="benchmark",
+        name=f"stance-like-{geometry.mobile.n_triangles}", description="benchmark", **cartilage,
     )
 
 

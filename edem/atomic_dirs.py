@@ -47,6 +47,8 @@ _HOST = hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
 #: Bytes the temporary sibling's name adds to the result's name (".", ".tmp-", host, pid, 16 hex).
 _SIBLING_EXTRA = 48
 _CHUNK = 1 << 20
+#: threads hashing and flushing a result's files (the waits overlap; the hashing releases the GIL)
+_SYNC_THREADS = 16
 
 
 def _safe_name(text: str) -> str:
@@ -169,11 +171,16 @@ def write_manifest(root: str | Path, run_id: str | None = None, *, durable: bool
 
     ``durable``: every file and directory is fsynced on the way, so a sealed directory is on disk.
     """
+    from concurrent.futures import ThreadPoolExecutor
+
     root = Path(root)
-    files = {}
-    for rel in _listed_files(root):
-        path = root / rel
-        files[rel] = {"bytes": path.stat().st_size, "sha256": _sha256(path, sync=durable)}
+    listed = _listed_files(root)
+    # fsyncs issued together: the file system commits them in a few journal transactions, where
+    # one after the other each waited for its own (the 140 files of a 65-point run, 2026-11-28:
+    # 0.63-0.68 s -> 0.03-0.07 s)
+    with ThreadPoolExecutor(max_workers=_SYNC_THREADS) as pool:
+        digests = list(pool.map(lambda rel: _sha256(root / rel, sync=durable), listed))
+    files = {rel: {"bytes": (root / rel).stat().st_size, "sha256": digest} for rel, digest in zip(listed, digests)}
     manifest = {"format": MANIFEST_FORMAT, "run_id": run_id or uuid.uuid4().hex, "files": files}
     tmp = root / (MANIFEST_NAME + ".tmp")
     with open(tmp, "w", encoding="utf-8") as f:

@@ -16,15 +16,9 @@ from geometries.extras import MissingExtra, extra_of
 RESULTS_ROOT = Path("results")
 
 
-def _bed_text(cartilage) -> str:
-    """The bed a run used, for its one-line report: "independent springs" or "coupled thin layer (pade)"."""
-    from edem.beds import bed_class
-
-    text = bed_class(cartilage.coupling).description
-    return text if cartilage.coupling == "none" else f"{text} ({cartilage.thin_layer_symbol})"
-
-
 def _run(args: argparse.Namespace) -> int:
+    from edem.beds import bed_text
+    from edem.pressure_metrics import check_quadrature_size
     from edem.resultdir import provenance
     from edem.results import write_results
     from edem.scene import load_scene, parse_override
@@ -35,6 +29,9 @@ def _run(args: argparse.Namespace) -> int:
     for warning in scene.warnings:  # said before the solve, so a refused run keeps them
         print(f"edem run: warning: {warning}", file=sys.stderr)
     method = args.method or scene.method
+    # the regularised peak of the pressure maps is computed after the solve: refuse a mesh it
+    # cannot hold now, not after the solve
+    check_quadrature_size(scene.mobile.vertices_mm, scene.mobile.triangles, file=scene.mobile.source or scene.source, key="geometry.mobile")
     out = _out_dir(args, scene.name, method, overrides=overrides)
     record = provenance(args.scene, overrides, method=method)
     n = len(scene.load.time_s)
@@ -50,7 +47,7 @@ def _run(args: argparse.Namespace) -> int:
     last = result.steps[-1]
     print("\n".join(result.preflight.lines()))
     print(
-        f"{scene.name}: {method.upper()}, {len(result.steps)} time point(s), {result.n_springs} springs, {_bed_text(scene.cartilage)}, "
+        f"{scene.name}: {method.upper()}, {len(result.steps)} time point(s), {result.n_springs} springs, {bed_text(scene.cartilage)}, "
         f"{result.wall_time_s:.3f} s\n"
         f"  peak pressure {max(s.peak_pressure_mpa for s in result.steps):.4g} MPa, "
         f"max contact area {max(s.contact_area_mm2 for s in result.steps):.4g} mm^2, "
@@ -318,13 +315,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_run)
     p = sub.add_parser("fe", help="solve the FE reference (dolfinx) of a scene")
     p.add_argument("scene", help="a scene TOML file or the name of a built-in scene (edem scenes)")
-    p.add_argument("--model", help="an FE model (fem_reference.models): slab (twin of the threshold law) or layer (of the gap laws); overrides [fe] model")
+    p.add_argument("--model", help="an FE model (fem_reference.models): slab (twin of the threshold law), layer (of the gap laws, F rigid), two-layer (both "
+                   "layers deformable) or lumped (both layers summed into one on M, F's bone rigid); overrides [fe] model")
     p.add_argument("--out", help="result directory (default results/<scene>-fe-<model>, plus -set-<hash> with --set)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing result directory (never another kind of directory)")
     p.add_argument("--mesh-size", type=float, metavar="MM", help="element size in mm; overrides [fe] mesh_size_mm")
     p.add_argument("--degree", type=int, choices=(1, 2), help="element degree (2: P2, or Taylor-Hood at nu >= 0.49); overrides [fe] degree")
     p.add_argument("--linear-solver", metavar="NAME",
-                   help="inner linear solve: auto (MUMPS LU while it fits in memory, Krylov past that), direct or iterative "
+                   help="inner linear solve: auto (Krylov from 20,000 unknowns or where the LU does not fit in memory, MUMPS LU below), direct or iterative "
                         "(docs/method.md, section 6); overrides [fe] linear_solver")
     p.add_argument("--steps", metavar="LIST", help="time points to solve, e.g. 0,5-9,10:65:8 (default: all)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,

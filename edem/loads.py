@@ -157,6 +157,17 @@ class _DataFile:
                              "finite numbers")
         return sign * values
 
+    def check_converted(self, values: np.ndarray, specs: list[str], key: str, conversion: str, expected: str) -> None:
+        """InputError naming the column and line of the first value of ``values`` (one column per
+        spec of :meth:`column`) that ``conversion`` made infinite: finite numbers in the file can
+        overflow once multiplied (N m -> N mm, m -> mm, a scale)."""
+        bad = np.argwhere(~np.isfinite(values))
+        if bad.size:
+            row, col = (int(i) for i in bad[0])
+            name = specs[col].removeprefix("-")
+            raise self.error(key, f"{float(self.values[row, self.columns.index(name)])!r} in column '{name}' at line "
+                                  f"{self.line_numbers[row]} is not finite after {conversion}", expected)
+
     def check_time(self, time_s: np.ndarray, key: str) -> None:
         if time_s.size == 0:
             raise self.error(self.key, "no data rows", "at least one row after the header")
@@ -293,6 +304,7 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
     every longer step into equal ones, the load interpolated linearly; the kinematics follow).
     """
     tab = SceneTable(table, scene_file, "load", LOAD_KEYS)
+    scale = tab.number("force_scale", 1.0)
     if tab.has("file") and tab.has("force_n"):
         raise tab.error("file", "both 'file' and 'force_n' are given", "exactly one of 'force_n' or 'file'")
     if tab.has("file"):
@@ -300,17 +312,16 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
             if tab.has(key):
                 raise tab.error(key, f"'{key}' cannot be combined with 'file'",
                                 "column names in time_column / moment_columns instead")
-        time_s, force_n, moment_nmm, point_mm, file_frame = _load_from_file(tab)
+        time_s, force_n, moment_nmm, point_mm, file_frame = _load_from_file(tab, scale)
     elif tab.has("force_n"):
         for key in _FILE_ONLY_LOAD_KEYS:
             if tab.has(key):
                 raise tab.error(key, f"'{key}' only applies with 'file'", "no column keys for inline loads")
-        time_s, force_n, moment_nmm = _load_inline(tab)
+        time_s, force_n, moment_nmm = _load_inline(tab, scale)
         point_mm, file_frame = None, None
     else:
         raise tab.error("force_n", "no load given", "'force_n' (static or with 'time_s') or 'file'")
 
-    force_n = force_n * tab.number("force_scale", 1.0)
     if tab.has("time_range_s"):
         t0, t1 = tab.numbers("time_range_s", 2, "[t0, t1] in s with t0 <= t1")
         if t0 > t1:
@@ -325,8 +336,10 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
     if tab.has("max_step_s"):
         given_time_s = time_s
         time_s = _split_steps(tab, time_s)
-        force_n, moment_nmm = _interpolate(given_time_s, force_n, time_s), _interpolate(given_time_s, moment_nmm, time_s)
-        point_mm = None if point_mm is None else _interpolate(given_time_s, point_mm, time_s)
+        with np.errstate(over="ignore", invalid="ignore"):
+            force_n, moment_nmm = _interpolate(given_time_s, force_n, time_s), _interpolate(given_time_s, moment_nmm, time_s)
+            point_mm = None if point_mm is None else _interpolate(given_time_s, point_mm, time_s)
+        _check_interpolated(tab, given_time_s, time_s, force_n, moment_nmm, point_mm)
     in_ground = file_frame == "ground"
     file_frame = "global" if in_ground else file_frame
     frame = tab.string("frame", file_frame or "global")
@@ -338,10 +351,7 @@ def load_series_from_table(table: dict[str, Any], scene_file: Path) -> LoadSerie
     if tab.has("axes"):
         rotation = _axes(tab)
         force_n, moment_nmm = force_n @ rotation.T, moment_nmm @ rotation.T
-        point_mm = None if point_mm is None else point_mm @ rotation.T
-    if not np.all(np.isfinite(force_n)):  # finite values times force_scale can overflow
-        raise tab.error("force_scale", f"the scaled force overflows (largest |force| before scaling "
-                        f"{np.abs(force_n / tab.number('force_scale', 1.0)).max():.3g} N)", "a scale that keeps the force finite")
+        point_mm = None if point_mm is None else point_mm @ rotation.T  # (a signed permutation: no sum can overflow)
     return LoadSeries(time_s, force_n, moment_nmm, frame, point_mm, in_ground, given_time_s)
 
 
@@ -365,6 +375,18 @@ def _split_steps(tab: SceneTable, time_s: np.ndarray) -> np.ndarray:
     return np.append(np.repeat(time_s[:-1], n) + fractions * np.repeat(np.diff(time_s), n), time_s[-1])
 
 
+def _check_interpolated(tab: SceneTable, given_time_s: np.ndarray, time_s: np.ndarray, *series: np.ndarray | None) -> None:
+    """InputError naming the step whose interpolation overflowed: between two finite values of
+    opposite sign near the largest float, their difference is not finite."""
+    for values in series:
+        if values is not None and not np.all(np.isfinite(values)):
+            t = time_s[np.flatnonzero(~np.all(np.isfinite(values), axis=1))[0]]
+            k = min(int(np.searchsorted(given_time_s, t)), len(given_time_s) - 1)
+            raise tab.error("max_step_s", f"the load interpolated between t = {given_time_s[k - 1]:g} s and t = {given_time_s[k]:g} s "
+                                          "is not finite (the values there differ by more than the largest float)",
+                            "load values that differ by a finite amount from one time point to the next, or no max_step_s")
+
+
 def _interpolate(time_s: np.ndarray, values: np.ndarray, new_time_s: np.ndarray) -> np.ndarray:
     """(n, 3) values linearly interpolated column by column onto new_time_s."""
     return np.column_stack([np.interp(new_time_s, time_s, values[:, j]) for j in range(values.shape[1])])
@@ -380,11 +402,11 @@ def _axes(tab: SceneTable) -> np.ndarray:
                         "y anterior, z up) or three signed file axes per scene axis, e.g. [\"z\", \"x\", \"y\"]") from None
 
 
-def _load_inline(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _load_inline(tab: SceneTable, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if not tab.has("time_s"):
         force = tab.triple("force_n", "3 finite numbers [fx, fy, fz] (for a series, also give time_s)")
         moment = tab.triple("moment_nmm", "3 finite numbers [mx, my, mz]") if tab.has("moment_nmm") else np.zeros(3)
-        return np.zeros(1), force[None, :], moment[None, :]
+        return np.zeros(1), _scaled_inline(tab, force[None, :], scale), moment[None, :]
     time_s = tab.numbers("time_s", what="a non-empty list of finite times in s")
     back = np.flatnonzero(np.diff(time_s) <= 0.0)
     if back.size:
@@ -394,12 +416,26 @@ def _load_inline(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n = time_s.size
     force = tab.triples("force_n", n)
     moment = tab.triples("moment_nmm", n) if tab.has("moment_nmm") else np.zeros((n, 3))
-    return time_s, force, moment
+    return time_s, _scaled_inline(tab, force, scale), moment
 
 
-def _load_from_file(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, str | None]:
-    """time, force, moment (file axes), the point the moment is about (mm) or None, and the frame
-    the columns are expressed in ("global", "fixed") when the file says (JointReaction) or None."""
+def _scaled_inline(tab: SceneTable, force: np.ndarray, scale: float) -> np.ndarray:
+    """force_n times force_scale; InputError naming the first force that overflows."""
+    with np.errstate(over="ignore"):
+        scaled = force * scale
+    bad = np.argwhere(~np.isfinite(scaled))
+    if bad.size:
+        row, col = (int(i) for i in bad[0])
+        where = f"force_n[{row}][{col}]" if tab.has("time_s") else f"force_n[{col}]"
+        raise tab.error("force_scale", f"{where} = {force[row, col]!r} N times force_scale = {scale:g} is not finite",
+                        "a force_scale that keeps every force finite")
+    return scaled
+
+
+def _load_from_file(tab: SceneTable, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, str | None]:
+    """time, force (times ``scale``), moment (N mm; file axes), the point the moment is about (mm)
+    or None, and the frame the columns are expressed in ("global", "fixed") when the file says
+    (JointReaction) or None. Each conversion that overflows is named by file, column and line."""
     path = tab.path("file", "a .csv, .sto or .mot file")
     data = _read_data_file(path, tab.key("file"))
     opensim = path.suffix.lower() in _OPENSIM_SUFFIXES
@@ -432,7 +468,9 @@ def _load_from_file(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray
         force_key = tab.key("file")
         force_names = list(_CSV_DEFAULT_FORCE)
         moment_names = list(_CSV_DEFAULT_MOMENT)
-    force = np.column_stack([data.column(name, force_key) for name in force_names])
+    with np.errstate(over="ignore"):  # (an overflow is refused just below, naming its line)
+        force = np.column_stack([data.column(name, force_key) for name in force_names]) * scale
+    data.check_converted(force, force_names, tab.key("force_scale"), f"force_scale = {scale:g}", "a force_scale that keeps every force finite")
 
     if tab.has("moment_columns"):
         moment_key = tab.key("moment_columns")
@@ -448,14 +486,20 @@ def _load_from_file(tab: SceneTable) -> tuple[np.ndarray, np.ndarray, np.ndarray
     unit = tab.string("moment_unit", "nm" if opensim else "nmm")
     if unit not in ("nm", "nmm"):
         raise tab.error("moment_unit", f"got {unit!r}", "'nm' (N·m) or 'nmm' (N·mm)")
-    if unit == "nm":
-        moment = moment * NM_TO_NMM
+    if unit == "nm" and moment_names is not None:
+        with np.errstate(over="ignore"):
+            moment = moment * NM_TO_NMM
+        data.check_converted(moment, moment_names, moment_key, "N m -> N mm (x 1000)",
+                             f"moments in N m within +-{np.finfo(float).max / NM_TO_NMM:.3g} (finite in N mm)")
     if reaction is None:
         return time_s, force, moment, None, None
     sign, point_names, frame = reaction
     point = None
     if point_names is not None:
-        point = np.column_stack([data.column(name, tab.key("file")) for name in point_names]) * 1000.0  # m -> mm
+        with np.errstate(over="ignore"):
+            point = np.column_stack([data.column(name, tab.key("file")) for name in point_names]) * 1000.0  # m -> mm
+        data.check_converted(point, point_names, tab.key("file"), "m -> mm (x 1000)",
+                             f"joint-centre positions in m within +-{np.finfo(float).max / 1000.0:.3g}")
     return time_s, sign * force, sign * moment, point, frame
 
 

@@ -29,7 +29,7 @@ from scipy.linalg.lapack import dpotrf, dpotrs
 
 from geometries.errors import SolverError
 from edem.laws import ElementLaw, LinearElements
-from edem.rowwise import rows_times
+from geometries.rowwise import rows_times
 from geometries.triangle_kernels import cross_rows
 
 DOF_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
@@ -294,7 +294,7 @@ def solve_unilateral(
     # The iteration runs on the free DOFs only (u is zero on the fixed ones): the rows g_j
     # restricted to them, stored as p <= 6 contiguous columns (p, m), so every product over the
     # elements is p / 6 of the full one and runs along contiguous columns. The products are
-    # einsums, not BLAS calls, which OpenBLAS would spread over threads (see edem.rowwise).
+    # einsums, not BLAS calls, which OpenBLAS would spread over threads (see geometries.rowwise).
     cols = np.ascontiguousarray(directions[:, dofs].T)
     load_f = load[dofs]
 

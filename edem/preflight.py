@@ -24,7 +24,7 @@ import numpy as np
 
 from geometries.errors import SolverError
 from edem.mechanics import DOF_NAMES, balanceable, generalised_directions, unrestrained_dofs
-from edem.rowwise import add_rows, row_dot
+from geometries.rowwise import add_rows, row_dot
 from edem.springs import Placement, SpringGeometry, ligament_elements, spring_geometry
 from geometries.surface import TriangleSurface
 from geometries.triangle_kernels import closest_distance_mm
@@ -169,7 +169,7 @@ def _median_edge_mm(vertices_mm: np.ndarray, triangles: np.ndarray) -> float:
     """Median length (mm) of the edges of ``triangles`` (k, 3), each triangle's three counted.
 
     Corner by corner, as rows of points: a norm over a last axis of 3 runs several times slower
-    (:mod:`edem.rowwise`); the squares sum in the same order, so the lengths are the same numbers.
+    (:mod:`geometries.rowwise`); the squares sum in the same order, so the lengths are the same numbers.
     """
     corners = [np.take(vertices_mm, triangles[:, j], axis=0) for j in range(3)]
     edges = [corners[j] - corners[j - 1] for j in range(3)]

@@ -16,14 +16,28 @@ columns' area ratio, on the points of M under them; a discrete run's spring pres
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
+
+from geometries.errors import InputError
+from geometries.triangle_kernels import triangle_areas
 
 #: area (mm^2) of the disc the regularised peak averages the pressure over
 PEAK_DISC_AREA_MM2 = 1.0
 #: quadrature points per disc radius along a triangle edge: the disc's area is then integrated to
 #: a few per cent (~60 points per disc), far below the 10 % bands the metric is judged against
 _POINTS_PER_RADIUS = 3.0
+#: quadrature points the disc averaging of one surface may hold (measured 113-121 bytes each on
+#: coarse meshes, ~260 a triangle on fine ones with their centres: 2.4 GB); a mesh that needs
+#: more is refused before its run (check_quadrature_size)
+MAX_QUADRATURE_POINTS = 20_000_000
+#: (centre, quadrature point) pairs evaluated at once: ~60 bytes each while a chunk is formed
+_CHUNK_PAIRS = 2_000_000
+#: the first chunk's pairs (each next one twice as many)
+_FIRST_CHUNK_PAIRS = 50_000
+#: pairs kept between the pressure fields of one surface (12 bytes each): a run's rows
+_CACHE_PAIRS = 16_000_000
 #: what summary.json says of its regularised_peak_pressure_mpa
 REGULARISED_PEAK_DEFINITION = (
     f"the largest mean of the pressure (force per area of M) over a disc of {PEAK_DISC_AREA_MM2:g} mm^2 of the surface, "
@@ -47,8 +61,324 @@ def _subdivided(points_mm: np.ndarray, triangles: np.ndarray, n: int) -> tuple[n
     corners = points_mm[triangles]  # (m, 3, 3)
     positions = np.einsum("qk,mkx->mqx", weights, corners)
     a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1) / (n * n)
+    area = triangle_areas(a, b, c) / (n * n)
     return positions, weights, np.repeat(area[:, None], len(uv), axis=1)
+
+
+class DiscMeans:
+    """The disc averaging of one surface: what depends on the mesh only (the quadrature, its
+    search tree, the bounding cells), built once and applied to any number of pressure fields on
+    it, as a run's time points (:class:`RegularisedPeaks`).
+
+    The mean over the disc of a centre is a sum over the quadrature points within the radius of
+    it, always in the same order (the points' own), so it is the same number whichever other
+    centres are evaluated with it, in whichever chunk. That makes two savings exact:
+
+    * the rows of the averaging (one per centre: the quadrature points in its disc and their
+      areas) computed for one pressure field are kept (up to ``cache_pairs`` pairs) and reused
+      by the next: over a run a time point is one sparse product for the centres seen before;
+    * a centre whose disc cannot beat the best mean found so far is never evaluated: a disc's
+      mean is at most the largest pressure in the disc, and that is at most the largest value of
+      the triangles with quadrature points in the 27 cubic cells (side >= the radius) around the
+      centre's. The rest are evaluated in chunks (at most ``chunk_pairs`` pairs each) from the
+      largest bound down, until the next bound is below the best.
+
+    Memory is then linear in the quadrature (the mesh), plus one chunk and the kept rows,
+    whatever the size of the contact.
+
+    Parameters
+    ----------
+    points_mm : (n, 3) float
+        Surface points, mm.
+    triangles : (m, 3) int
+        Triangles.
+    at_points : bool
+        Whether the pressure fields are nodal (linear on each triangle) or one value per triangle.
+    disc_area_mm2 : float
+        Area of the disc (radius sqrt(area / pi) in 3D: a ball cut by the surface, a disc where
+        the surface is flat over the radius).
+    only_for : (n,) or (m,) float, optional
+        One pressure field this is built for: only its loaded centres are candidates and only the
+        triangles within reach of them carry quadrature points (what one evaluation needs). None:
+        every centre and triangle, for any field on the surface.
+    chunk_pairs, cache_pairs : int
+        The most (centre, quadrature point) pairs evaluated at once, and kept between fields.
+    """
+
+    def __init__(self, points_mm: np.ndarray, triangles: np.ndarray, *, at_points: bool, disc_area_mm2: float = PEAK_DISC_AREA_MM2,
+                 only_for: np.ndarray | None = None, chunk_pairs: int = _CHUNK_PAIRS, cache_pairs: int = _CACHE_PAIRS) -> None:
+        points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
+        tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+        self.at_points, self.radius_mm = at_points, math.sqrt(disc_area_mm2 / math.pi)
+        self.chunk_pairs, self.cache_pairs = max(int(chunk_pairs), 1), int(cache_pairs)
+        self._triangles, self._n_points = tris, len(points)
+        edge, centroids = _longest_edges(points, tris)
+        # centre indices: the centroid of triangle t is centre t, point v is centre m + v
+        if only_for is None:
+            self._centres = None  # all of them
+            self._centre_mm = np.concatenate([centroids, points])
+            quadrature_on = np.arange(len(tris))
+        else:
+            self._centres = self.loaded_centres(only_for)
+            self._centre_mm = self._positions(self._centres, centroids, points)
+            # only triangles that reach within a radius of a centre can meet a disc (zero pressure counts)
+            reach = np.full(len(tris), np.inf)
+            if len(self._centres):
+                reach = _kdtree(self._centre_mm).query(centroids, distance_upper_bound=self.radius_mm + float(edge.max()))[0]
+            quadrature_on = np.flatnonzero(reach <= self.radius_mm + edge)
+        # each triangle split into n^2 sub-triangles, n by its longest edge; the quadrature points
+        # grouped by n, each group's triangles in their order: the order every sum runs in
+        subdivisions = _subdivisions(edge[quadrature_on], self.radius_mm)
+        needed = int((subdivisions**2).sum())
+        if needed > MAX_QUADRATURE_POINTS:
+            raise InputError(f"the regularised peak of this surface needs {needed:,} quadrature points, more than the "
+                             f"{MAX_QUADRATURE_POINTS:,} it holds in memory", expected=_QUADRATURE_EXPECTED)
+        self._groups, positions, areas = [], [], []
+        for n in np.flatnonzero(np.bincount(subdivisions)):
+            group = quadrature_on[subdivisions == n]
+            q_pos, weights, q_area = _subdivided(points, tris[group], int(n))
+            self._groups.append((group, weights))
+            positions.append(q_pos.reshape(-1, 3))
+            areas.append(q_area.ravel())
+        self._q_mm = np.concatenate(positions) if positions else np.zeros((0, 3))
+        self._q_area = np.concatenate(areas) if areas else np.zeros(0)
+        self._q_tree = self._cells = None
+        self._blocks: list[tuple[Any, np.ndarray]] = []  # kept rows: (CSR of areas, disc area per row)
+        self._block_row = np.full(len(self._centre_mm), -1, dtype=np.int64)  # candidate centre -> its kept row
+        self._kept_pairs = 0
+        #: discs evaluated so far, over every field given (what the bounds and the kept rows saved)
+        self.rows_evaluated = 0
+
+    @staticmethod
+    def _positions(centres: np.ndarray, centroids: np.ndarray, points: np.ndarray) -> np.ndarray:
+        m = len(centroids)
+        return np.concatenate([centroids[centres[centres < m]], points[centres[centres >= m] - m]])
+
+    @property
+    def n_quadrature_points(self) -> int:
+        return len(self._q_area)
+
+    def loaded_centres(self, pressure_mpa: np.ndarray) -> np.ndarray:
+        """Centre indices (k,), ascending: the centroids, then the points, of the triangles that
+        carry pressure (the candidate centres of the definition)."""
+        p = np.asarray(pressure_mpa, dtype=np.float64).ravel()
+        expected = self._n_points if self.at_points else len(self._triangles)
+        if p.shape != (expected,):
+            raise ValueError(f"{len(p)} pressure values for a surface of {expected} {'points' if self.at_points else 'triangles'}")
+        loaded = (p[self._triangles].max(axis=1, initial=-np.inf) if self.at_points else p) > 0.0
+        corner = np.zeros(self._n_points, dtype=bool)
+        corner[self._triangles[loaded]] = True
+        return np.concatenate([np.flatnonzero(loaded), len(self._triangles) + np.flatnonzero(corner)])
+
+    def _candidates(self, centres: np.ndarray) -> np.ndarray:
+        """Positions of centre indices among the candidates (ValueError for one that is not)."""
+        if self._centres is None:
+            return centres
+        where = np.minimum(np.searchsorted(self._centres, centres), max(len(self._centres) - 1, 0))
+        if len(centres) and (not len(self._centres) or np.any(self._centres[where] != centres)):
+            raise ValueError("a pressure field loads centres this averaging was not built for (only_for)")
+        return where
+
+    def _values(self, pressure_mpa: np.ndarray) -> np.ndarray:
+        """The pressure at every quadrature point (n_q,), MPa."""
+        p = np.asarray(pressure_mpa, dtype=np.float64).ravel()
+        if not self._groups:
+            return np.zeros(0)
+        return np.concatenate([(np.einsum("qk,mk->mq", weights, p[self._triangles[group]]) if self.at_points
+                                else np.repeat(p[group][:, None], weights.shape[0], axis=1)).ravel() for group, weights in self._groups])
+
+    def _rows(self, candidates: np.ndarray) -> tuple[Any, np.ndarray]:
+        """The averaging rows of candidate centres: a CSR matrix (k, n_q) of the areas of the
+        quadrature points in each disc (columns ascending), and the disc areas (k,)."""
+        from scipy.sparse import csr_matrix
+
+        if self._q_tree is None:
+            self._q_tree = _kdtree(self._q_mm)
+        n_q = len(self._q_area)
+        pairs = _kdtree(self._centre_mm[candidates]).sparse_distance_matrix(self._q_tree, self.radius_mm, output_type="ndarray")
+        # the (row, column) pairs in order as one sorted key: several times cheaper than an argsort
+        key = np.sort(pairs["i"] * n_q + pairs["j"])
+        del pairs
+        row = key // n_q
+        columns = (key - row * n_q).astype(np.int32 if n_q < 2**31 else np.int64)
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=len(candidates)))]).astype(columns.dtype)
+        del key, row
+        rows = csr_matrix((self._q_area[columns], columns, indptr), shape=(len(candidates), n_q))
+        # (a product, not a reduction: the sum runs along each row in order, as the mean's does)
+        return rows, rows @ np.ones(n_q)
+
+    @staticmethod
+    def _means(rows: Any, area: np.ndarray, values: np.ndarray) -> np.ndarray:
+        return np.divide(rows @ values, area, out=np.zeros(len(area)), where=area > 0)
+
+    def _keep(self, candidates: np.ndarray, rows: Any, area: np.ndarray) -> None:
+        if self._kept_pairs + rows.nnz > self.cache_pairs:
+            return
+        self._block_row[candidates] = sum(len(a) for _, a in self._blocks) + np.arange(len(candidates))
+        self._blocks.append((rows, area))
+        self._kept_pairs += rows.nnz
+
+    def _cell_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The bounding cells (mesh only): cubes of side >= the radius, so that a disc lies within
+        the 27 cells around its centre's. Returns the triangles with quadrature points in each
+        cell, cell by cell, and where each cell's start; the 27 neighbours of each cell (27,
+        n_cells; n_cells for none); every candidate's cell; and how many quadrature points the 27
+        cells around each cell hold (an upper bound on the pairs of a disc centred there)."""
+        if self._cells is None:
+            everything = np.concatenate([self._q_mm, self._centre_mm])
+            origin = everything.min(axis=0)
+            side = max(self.radius_mm, float(np.ptp(everything, axis=0).max()) / 2**20)  # <= 2^20 cells a side: the keys fit int64
+            index = np.floor((everything - origin) / side).astype(np.int64) + 1  # (an empty layer of cells on every side)
+            del everything
+            dims = index.max(axis=0) + 2
+            keys = np.ravel_multi_index(index.T, dims)
+            del index
+            cells = _sorted_unique(keys)
+            cell_of = np.searchsorted(cells, keys)
+            del keys
+            n_q, n_cells = len(self._q_area), len(cells)
+            q_cell, centre_cell = cell_of[:n_q], cell_of[n_q:]
+            shifts = np.array([[i, j, k] for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)]) @ np.array([dims[1] * dims[2], dims[2], 1])
+            around = cells[None, :] + shifts[:, None]  # (27, n_cells): the maxima over the 27 run along rows
+            neighbour = np.searchsorted(cells, around)
+            found = cells[np.minimum(neighbour, n_cells - 1)] == around
+            neighbour = np.where(found, neighbour, n_cells).astype(np.int32 if n_cells < 2**31 else np.int64)
+            count = np.append(np.bincount(q_cell, minlength=n_cells), 0)
+            # a triangle's quadrature points are the cells' only values, and none exceeds the
+            # triangle's largest value: the bound needs each (cell, triangle) pair once
+            q_triangle = np.concatenate([np.repeat(group, weights.shape[0]) for group, weights in self._groups]) if self._groups else np.zeros(0, np.int64)
+            pair = _sorted_unique(q_cell * len(self._triangles) + q_triangle)
+            pair_cell = pair // len(self._triangles)
+            self._cells = (pair - pair_cell * len(self._triangles), np.searchsorted(pair_cell, np.arange(n_cells)), neighbour, centre_cell,
+                           count[neighbour].sum(axis=0))
+        return self._cells
+
+    def _bounds(self, pressure_mpa: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+        """An upper bound (k,) of each candidate's disc mean: the largest value of the triangles
+        with quadrature points in its 27 cells."""
+        pair_triangle, starts, neighbour, centre_cell, _ = self._cell_tables()
+        p = np.asarray(pressure_mpa, dtype=np.float64).ravel()
+        triangle_largest = p[self._triangles].max(axis=1) if self.at_points else p
+        largest = np.full(len(starts) + 1, -np.inf)
+        occupied = np.flatnonzero(np.diff(np.append(starts, len(pair_triangle))) > 0)
+        if occupied.size:
+            largest[occupied] = np.maximum.reduceat(triangle_largest[pair_triangle], starts[occupied])
+        return largest[neighbour].max(axis=0)[centre_cell[candidates]]  # (27 x cells: fewer than the candidates of a fine mesh)
+
+    def _chunks(self, candidates: np.ndarray) -> list[tuple[int, int]]:
+        """Consecutive slices of ``candidates`` of at most ``chunk_pairs`` pairs each (counted by
+        the quadrature points in the cells around each; at least one centre a slice), the first
+        ones smaller: the bounds usually end the search within a few hundred discs."""
+        _, _, _, centre_cell, around = self._cell_tables()
+        reach = np.cumsum(around[centre_cell[candidates]])
+        slices, start, budget = [], 0, min(_FIRST_CHUNK_PAIRS, self.chunk_pairs)
+        while start < len(candidates):
+            before = reach[start - 1] if start else 0
+            stop = max(start + 1, int(np.searchsorted(reach, before + budget, side="right")))
+            slices.append((start, stop))
+            start, budget = stop, min(2 * budget, self.chunk_pairs)
+        return slices
+
+    def means(self, pressure_mpa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every loaded centre's disc mean: centre indices (k,) (:meth:`loaded_centres`) and
+        means (k,), MPa (zero pressure outside the contact counts; off the surface's edge
+        nothing does)."""
+        centres = self.loaded_centres(pressure_mpa)
+        candidates = self._candidates(centres)
+        values = self._values(pressure_mpa)
+        out = np.zeros(len(centres))
+        for start, stop in self._chunks(candidates) if len(centres) else []:
+            rows, area = self._rows(candidates[start:stop])
+            out[start:stop] = self._means(rows, area, values)
+            self.rows_evaluated += stop - start
+        return centres, out
+
+    def centres_mm(self, centres: np.ndarray) -> np.ndarray:
+        """Positions (k, 3) of centre indices, mm."""
+        return self._centre_mm[self._candidates(centres)]
+
+    def peak(self, pressure_mpa: np.ndarray) -> float:
+        """The largest of :meth:`means` (0 with no pressure), MPa: the same number, from only the
+        discs the bounds cannot rule out, and the rows kept from the fields before."""
+        candidates = self._candidates(self.loaded_centres(pressure_mpa))
+        if not candidates.size:
+            return 0.0
+        values = self._values(pressure_mpa)
+        best = 0.0
+        kept = self._block_row[candidates]
+        if (kept >= 0).any():
+            means = np.concatenate([self._means(rows, area, values) for rows, area in self._blocks])
+            best = max(best, float(means[kept[kept >= 0]].max()))
+            candidates = candidates[kept < 0]
+        if not candidates.size:
+            return best
+        # A computed mean exceeds its bound by rounding only, at most (pairs) x eps x the largest
+        # |value|: 1e-6 of that value is far above it for any disc of fewer than 1e9 points.
+        margin = 1e-6 * float(np.abs(values).max(initial=0.0))
+        bound = self._bounds(pressure_mpa, candidates)
+        possible = bound + margin >= best
+        candidates, bound = candidates[possible], bound[possible]
+        order = np.argsort(-bound, kind="stable")
+        candidates, bound = candidates[order], bound[order]
+        for start, stop in self._chunks(candidates):
+            if bound[start] + margin < best:
+                break
+            chunk = candidates[start:stop]
+            rows, area = self._rows(chunk)
+            best = max(best, float(self._means(rows, area, values).max()))
+            self.rows_evaluated += stop - start
+            self._keep(chunk, rows, area)
+        return best
+
+
+_QUADRATURE_EXPECTED = ("a surface of fewer or shorter triangles: each is split into n^2 sub-triangles, n its longest edge over "
+                        "a third of the disc radius (0.19 mm), so long thin ones need many; remesh them")
+
+
+def _longest_edges(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The longest edge (m,) and the centroid (m, 3) of each triangle, mm."""
+    a, b, c = points[triangles[:, 0]], points[triangles[:, 1]], points[triangles[:, 2]]
+    return np.sqrt(np.maximum(np.maximum(_squared(b - a), _squared(c - b)), _squared(a - c))), (a + b + c) / 3.0
+
+
+def _subdivisions(edge_mm: np.ndarray, radius_mm: float) -> np.ndarray:
+    """n of each triangle's n^2 sub-triangles: its longest edge over a third of the radius."""
+    return np.maximum(1, np.ceil(edge_mm * _POINTS_PER_RADIUS / radius_mm)).astype(np.int64)
+
+
+def quadrature_size(points_mm: np.ndarray, triangles: np.ndarray, disc_area_mm2: float = PEAK_DISC_AREA_MM2) -> int:
+    """The quadrature points the disc averaging of a whole surface holds (:class:`DiscMeans`)."""
+    points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
+    edge, _ = _longest_edges(points, np.asarray(triangles, dtype=np.int64).reshape(-1, 3))
+    return int((_subdivisions(edge, math.sqrt(disc_area_mm2 / math.pi)) ** 2).sum())
+
+
+def check_quadrature_size(points_mm: np.ndarray, triangles: np.ndarray, *, file: str | None, key: str) -> None:
+    """InputError (before a run) when the regularised peak of its maps on this surface would need
+    more than :data:`MAX_QUADRATURE_POINTS` quadrature points."""
+    n = quadrature_size(points_mm, triangles)
+    if n > MAX_QUADRATURE_POINTS:
+        raise InputError(f"the regularised peak pressure of its results (docs/method.md#7-comparison-metrics) needs {n:,} quadrature "
+                         f"points on this mesh of {len(triangles):,} triangles, more than the {MAX_QUADRATURE_POINTS:,} it holds in memory",
+                         file=file, key=key, expected=_QUADRATURE_EXPECTED)
+
+
+def _squared(v: np.ndarray) -> np.ndarray:
+    """|v|^2 of rows (k, 3), summed in the order np.linalg.norm sums them."""
+    return v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2]
+
+
+def _sorted_unique(values: np.ndarray) -> np.ndarray:
+    """np.unique of integers by a sort (several times faster than its hashing for millions of
+    distinct values)."""
+    ordered = np.sort(values)
+    return ordered[np.concatenate([[True], ordered[1:] != ordered[:-1]])] if len(ordered) else ordered
+
+
+def _kdtree(points: np.ndarray):
+    from scipy.spatial import cKDTree
+
+    return cKDTree(points, balanced_tree=False)  # (half the build time of a median split; the same pairs)
 
 
 def disc_mean_pressure_mpa(points_mm: np.ndarray, triangles: np.ndarray, pressure_mpa: np.ndarray, *, at_points: bool,
@@ -77,45 +407,62 @@ def disc_mean_pressure_mpa(points_mm: np.ndarray, triangles: np.ndarray, pressur
         The area-weighted mean pressure over the part of the surface within the disc of each
         centre (zero pressure outside the contact counts; off the surface's edge nothing does).
     """
-    points = np.asarray(points_mm, dtype=np.float64)
-    tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    p = np.asarray(pressure_mpa, dtype=np.float64)
-    radius = math.sqrt(disc_area_mm2 / math.pi)
-    corners = points[tris]
-    edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
-    loaded = (p[tris].max(axis=1) if at_points else p) > 0.0
-    if not loaded.any():
-        return np.zeros((0, 3)), np.zeros(0)
-    centroids = corners.mean(axis=1)
-    centres = np.concatenate([centroids[loaded], points[np.unique(tris[loaded])]])
-    from scipy.sparse import coo_matrix
-    from scipy.spatial import cKDTree
-
-    # only triangles that reach within a radius of a centre can meet a disc (zero pressure counts)
-    reach = cKDTree(centres).query(centroids, distance_upper_bound=radius + float(edge.max()))[0]
-    near = np.flatnonzero(reach <= radius + edge)
-    # each triangle split into n^2 sub-triangles, n by its longest edge (grouped by n)
-    subdivisions = np.maximum(1, np.ceil(edge[near] * _POINTS_PER_RADIUS / radius)).astype(np.int64)
-    q_pos, q_val, q_area = [], [], []
-    for n in np.unique(subdivisions):
-        group = near[subdivisions == n]
-        positions, weights, area = _subdivided(points, tris[group], int(n))
-        q_pos.append(positions.reshape(-1, 3))
-        q_area.append(area.ravel())
-        q_val.append((np.einsum("qk,mk->mq", weights, p[tris[group]]) if at_points else np.repeat(p[group][:, None], weights.shape[0], axis=1)).ravel())
-    q_pos, q_val, q_area = np.concatenate(q_pos), np.concatenate(q_val), np.concatenate(q_area)
-    pairs = cKDTree(centres).sparse_distance_matrix(cKDTree(q_pos), radius, output_type="coo_matrix")
-    inside = coo_matrix((np.ones_like(pairs.data), (pairs.row, pairs.col)), shape=pairs.shape).tocsr()
-    total = inside @ q_area
-    mean = np.divide(inside @ (q_area * q_val), total, out=np.zeros(len(centres)), where=total > 0)
-    return centres, mean
+    discs = DiscMeans(points_mm, triangles, at_points=at_points, disc_area_mm2=disc_area_mm2, only_for=pressure_mpa)
+    centres, mean = discs.means(pressure_mpa)
+    return discs.centres_mm(centres), mean
 
 
 def regularised_peak_pressure_mpa(points_mm: np.ndarray, triangles: np.ndarray, pressure_mpa: np.ndarray, *, at_points: bool,
                                   disc_area_mm2: float = PEAK_DISC_AREA_MM2) -> float:
-    """The regularised peak: the largest :func:`disc_mean_pressure_mpa` (0 with no pressure), MPa."""
-    _centres, mean = disc_mean_pressure_mpa(points_mm, triangles, pressure_mpa, at_points=at_points, disc_area_mm2=disc_area_mm2)
-    return float(mean.max(initial=0.0))
+    """The regularised peak: the largest :func:`disc_mean_pressure_mpa` (0 with no pressure), MPa
+    (by :meth:`DiscMeans.peak`, in memory linear in the mesh)."""
+    return DiscMeans(points_mm, triangles, at_points=at_points, disc_area_mm2=disc_area_mm2, only_for=pressure_mpa).peak(pressure_mpa)
+
+
+class RegularisedPeaks:
+    """The regularised peaks of a run's pressure maps, one call per map: the disc averaging
+    (:class:`DiscMeans`) is built once for the surface the maps share, and again only when a map
+    stands on another surface.
+
+    A discrete run's maps are M at each time point's pose, an FE run's the same contact face at
+    every time point: the same triangles, points that differ by a rigid motion at most, which
+    changes no distance, so no disc. ``single=True``: one map only (no averaging is shared: it
+    is built for that map's contact only)."""
+
+    def __init__(self, *, single: bool = False) -> None:
+        self._single = single
+        self._surface: tuple[np.ndarray, np.ndarray, bool] | None = None
+        self._discs: DiscMeans | None = None
+
+    def __call__(self, surface) -> float:
+        """:func:`surface_regularised_peak_mpa` of a pressure map (an edem.resultdir.SurfaceFrame), MPa."""
+        points, triangles, pressure, at_points = pressure_field_on_mobile(surface)
+        if self._single:
+            return regularised_peak_pressure_mpa(points, triangles, pressure, at_points=at_points)
+        if self._discs is None or not self._same_surface(points, triangles, at_points):
+            self._discs = DiscMeans(points, triangles, at_points=at_points)
+            self._surface = (np.asarray(points, dtype=np.float64), triangles, at_points)
+        return self._discs.peak(pressure)
+
+    def _same_surface(self, points: np.ndarray, triangles: np.ndarray, at_points: bool) -> bool:
+        known_points, known_triangles, known_at_points = self._surface
+        if at_points != known_at_points or not (triangles is known_triangles or np.array_equal(triangles, known_triangles)):
+            return False
+        return _rigidly_moved(known_points, np.asarray(points, dtype=np.float64))
+
+
+def _rigidly_moved(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether the points b are the points a moved rigidly (an orthogonal map and a translation,
+    found by orthogonal Procrustes), to 1e-9 of their extent: far below any disc's resolution,
+    far above the rounding of placing a mesh at a pose."""
+    if a.shape != b.shape:
+        return False
+    if a is b or np.array_equal(a, b):
+        return True
+    a0, b0 = a - a.mean(axis=0), b - b.mean(axis=0)
+    u, _, vt = np.linalg.svd(a0.T @ b0)
+    size = max(float(np.ptp(a, axis=0).max(initial=0.0)), 1e-300)
+    return float(np.abs(a0 @ (u @ vt) - b0).max(initial=0.0)) <= 1e-9 * size
 
 
 def pressure_field_on_mobile(surface) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:

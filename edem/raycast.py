@@ -51,7 +51,7 @@ from typing import Literal
 
 import numpy as np
 
-from edem.rowwise import add_rows, min_rows, row_dot, rows_times
+from geometries.rowwise import add_rows, min_rows, row_dot, rows_times
 from geometries.triangle_kernels import cross_rows
 
 Backend = Literal["embree", "numpy"]

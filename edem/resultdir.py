@@ -78,7 +78,7 @@ import math
 import numbers
 import subprocess
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -87,8 +87,9 @@ from typing import Any, Protocol
 import numpy as np
 
 from edem.atomic_dirs import ResultWriteError, atomic_result_dir, verify_manifest
-from edem.pressure_metrics import REGULARISED_PEAK_DEFINITION, has_pressure, surface_regularised_peak_mpa
+from edem.pressure_metrics import REGULARISED_PEAK_DEFINITION, RegularisedPeaks, has_pressure
 from geometries.errors import InputError, SolverError
+from geometries.triangle_kernels import triangle_areas
 
 SUMMARY_FILE = "summary.json"
 TIMESERIES_FILE = "timeseries.csv"
@@ -137,8 +138,7 @@ class SurfaceFrame:
 
     @property
     def areas_mm2(self) -> np.ndarray:
-        a, b, c = (self.points_mm[self.triangles[:, i]] for i in range(3))
-        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        return triangle_areas(*(self.points_mm[self.triangles[:, i]] for i in range(3)))
 
 
 @dataclass(frozen=True)
@@ -206,10 +206,6 @@ def write_result_dir(
         summary = {**summary, **provenance.summary_keys}
     if not frames:
         summary = {**summary, MAPS_KEY: 0}
-    elif REGULARISED_PEAK_KEY not in summary:
-        peaks = [surface_regularised_peak_mpa(f.surface) for f in frames if has_pressure(f.surface)]
-        if peaks:
-            summary = {**summary, REGULARISED_PEAK_KEY: max(peaks), REGULARISED_PEAK_DEFINITION_KEY: REGULARISED_PEAK_DEFINITION}
     check_finite_summary(summary, out / SUMMARY_FILE)
     columns = list(TIMESERIES_COLUMNS)
     if timeseries:
@@ -225,6 +221,13 @@ def write_result_dir(
                 raise SolverError(f"{out / TIMESERIES_FILE}: time point {row['step']}, column '{column}' is not finite ({value})")
         lines.append([_csv_number(row[c]) for c in columns])
     with atomic_result_dir(out, overwrite=overwrite, durable=durable) as tmp:
+        # the regularised peak of each map as it is written (one map in memory at a time), the
+        # disc averaging built once for the surface the maps share
+        measure = RegularisedPeaks(single=len(frames) == 1) if frames and REGULARISED_PEAK_KEY not in summary else None
+        peaks = _write_series(tmp, "pressure", frames, COLLECTION_FILE, measure)
+        if peaks:
+            summary = {**summary, REGULARISED_PEAK_KEY: max(peaks), REGULARISED_PEAK_DEFINITION_KEY: REGULARISED_PEAK_DEFINITION}
+            check_finite_summary(summary, out / SUMMARY_FILE)
         (tmp / SUMMARY_FILE).write_text(json.dumps(dict(summary), indent=2) + "\n", encoding="utf-8")
         if provenance is not None:
             (tmp / SCENE_FILE).write_text(provenance.scene_toml, encoding="utf-8")
@@ -232,7 +235,6 @@ def write_result_dir(
             writer = csv.writer(f)
             writer.writerow(columns)
             writer.writerows(lines)
-        _write_series(tmp, "pressure", frames, COLLECTION_FILE)
         if fixed is not None:
             write_surface_frame(tmp / FIXED_FILE, fixed.points_mm, fixed.triangles, fixed.point_data, fixed.cell_data)
         if fixed_frames:
@@ -257,11 +259,12 @@ class RunOutput(Protocol):
         """timeseries.csv, one row per time point: :func:`timeseries_row`'s columns, then extra ones."""
         ...
 
-    def frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
-        """The pressure maps of the time points at ``positions`` in the run (default: all)."""
+    def frames(self, positions: Sequence[int] | None = None) -> Sequence[Frame]:
+        """The pressure maps of the time points at ``positions`` in the run (default: all); the
+        writer reads each once, in order (a sequence may make each map when it is read)."""
         ...
 
-    def fixed_frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
+    def fixed_frames(self, positions: Sequence[int] | None = None) -> Sequence[Frame]:
         """The fixed body placed at those time points (fixed.pvd; empty: not written)."""
         ...
 
@@ -332,14 +335,24 @@ def _write_run(run: RunOutput, out_dir: str | Path, frame_steps: Sequence[int] |
                             opensim_sto=run.opensim_sto and not time_series_only, overwrite=overwrite, provenance=provenance, durable=durable)
 
 
-def _write_series(out: Path, prefix: str, frames: Sequence[Frame], collection: str) -> None:
-    """<prefix>_NNNN.vtp per frame and the ParaView collection listing them."""
-    entries = []
+def _write_series(out: Path, prefix: str, frames: Iterable[Frame], collection: str,
+                  measure: Callable[[SurfaceFrame], float] | None = None) -> list[float]:
+    """<prefix>_NNNN.vtp per frame and the ParaView collection listing them; ``measure`` of each
+    frame's surface that has a pressure (:func:`edem.pressure_metrics.has_pressure`)."""
+    from geometries.mesh_files.vtk_family import vtp_polys
+
+    entries, measured = [], []
+    triangles, polys = None, None  # the frames' mesh, encoded once (it is the same at every time point)
     for frame in frames:
         name = f"{prefix}_{frame.step:04d}.vtp"
-        write_surface_frame(out / name, frame.surface.points_mm, frame.surface.triangles, frame.surface.point_data, frame.surface.cell_data)
+        if triangles is None or not (frame.surface.triangles is triangles or np.array_equal(frame.surface.triangles, triangles)):
+            triangles, polys = frame.surface.triangles, vtp_polys(frame.surface.triangles)
+        write_surface_frame(out / name, frame.surface.points_mm, triangles, frame.surface.point_data, frame.surface.cell_data, polys=polys)
         entries.append((float(frame.time_s), name))
+        if measure is not None and has_pressure(frame.surface):
+            measured.append(measure(frame.surface))
     write_pvd(out / collection, entries)
+    return measured
 
 
 def write_sto(path: str | Path, columns: Sequence[str], rows: Sequence[Sequence[float]], *, name: str = "edem") -> Path:
@@ -419,11 +432,14 @@ def write_surface_frame(
     triangles: np.ndarray,
     point_data: dict[str, np.ndarray] | None = None,
     cell_data: dict[str, np.ndarray] | None = None,
+    *,
+    polys: str | None = None,
 ) -> Path:
-    """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only)."""
+    """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only);
+    ``polys``: the triangles already encoded (:func:`geometries.mesh_files.vtk_family.vtp_polys`)."""
     from geometries.mesh_files import write_vtp
 
-    write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data)
+    write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data, polys=polys)
     return Path(path)
 
 

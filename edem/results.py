@@ -5,7 +5,7 @@ the format and its one writer, :func:`edem.resultdir.write_run`)."""
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -16,6 +16,7 @@ from edem.loads import JointKinematics
 from edem.opensim_model import BodyPoses
 from edem.resultdir import TIMESERIES_COLUMNS, Frame, Provenance, SurfaceFrame, timeseries_row, write_pvd, write_run
 from edem.scene import Scene
+from edem.beds import bed_summary
 from edem.preflight import Preflight
 from edem.springs import Placement
 from edem.thickness import thickness_summary
@@ -80,10 +81,11 @@ class RunResult:
     scene: Scene
     method: str
     steps: list[StepResult]
-    wall_time_s: float
+    wall_time_s: float  # the solve of the time points (their geometry, solves and results)
     warnings: list[str]
     seconds: dict[str, float]  # wall time of the geometry stage (ray casting) and of the solves
     preflight: Preflight | None = None  # what the springs saw before the first solve (edem.preflight)
+    setup_time_s: float = 0.0  # before the first time point: the ray caster, the bed, the pre-flight, lazy imports
 
     @property
     def n_springs(self) -> int:
@@ -99,6 +101,7 @@ class RunResult:
             "steps": len(steps),
             "n_springs": self.n_springs,
             "wall_time_s": self.wall_time_s,
+            "setup_time_s": self.setup_time_s,
             "peak_pressure_mpa": max(s.peak_pressure_mpa for s in steps),
             "max_contact_area_mm2": max(s.contact_area_mm2 for s in steps),
             "final_displacement_mm": [float(x) for x in last.displacement_mm],
@@ -107,13 +110,19 @@ class RunResult:
             "max_moment_residual_nmm": max(s.moment_residual_nmm for s in steps),
             "law": self.scene.cartilage.law,
             # the bed (the built-in scenes' defaults differ: the standing and toe-off ones couple, the stances do not)
-            "coupling": self.scene.cartilage.coupling,
-            "thin_layer_symbol": self.scene.cartilage.thin_layer_symbol if self.scene.cartilage.coupling != "none" else None,
-            "thin_layer_smoothing_resolution": self.scene.cartilage.thin_layer_smoothing_resolution if self.scene.cartilage.coupling != "none" else None,
+            **bed_summary(self.scene.cartilage),
             "warnings": list(self.scene.warnings) + list(self.warnings),
             **thickness_summary(self.scene.cartilage.layers),  # measured thickness only
+            **self._viscoelastic_summary(),
             **({} if self.preflight is None else {"preflight": self.preflight.as_dict()}),
         }
+
+    def _viscoelastic_summary(self) -> dict[str, Any]:
+        """The Kelvin-Voigt springs of a viscoelastic EDEM run (docs/method.md#4-viscoelastic-edem-thesis-chapter-6); none otherwise."""
+        viscous = self.scene.viscoelastic
+        if viscous is None or self.method != "edem":
+            return {}
+        return {"relaxation_time_s": viscous.relaxation_time_s, "contact_set": viscous.contact_set, "integrator": viscous.integrator}
 
     def timeseries_rows(self) -> list[dict[str, float]]:
         """One timeseries.csv row per time point of the run: the common columns, then the joint's
@@ -140,38 +149,57 @@ class RunResult:
             rows.append(row)
         return rows
 
-    def frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
-        """The pressure maps of the steps at ``positions`` in ``steps`` (default: all): the mobile
-        surface at the step's pose with cell data pressure_mpa, spring_length_mm (0 where the ray
-        found nothing: see ray_hit), in_contact and ray_hit (0/1), and with measured thickness
-        thickness_mm (M's layer). Degenerate triangles carry no spring: 0 everywhere."""
+    def frames(self, positions: Sequence[int] | None = None) -> Sequence[Frame]:
+        """The pressure maps of the steps at ``positions`` in ``steps`` (default: all), each made
+        when it is read (a writer holds one at a time): the mobile surface at the step's pose with
+        cell data pressure_mpa, spring_length_mm (0 where the ray found nothing: see ray_hit),
+        in_contact and ray_hit (0/1), and with measured thickness thickness_mm (M's layer).
+        Degenerate triangles carry no spring: 0 everywhere."""
+        return _Frames(self._frame, self.steps if positions is None else [self.steps[k] for k in positions])
+
+    def _frame(self, s: StepResult) -> Frame:
         scene = self.scene
         spring_triangle = scene.spring_triangle
         n_tri = scene.mobile.triangles.shape[0]
-        frames = []
-        for s in self.steps if positions is None else [self.steps[k] for k in positions]:
-            pressure = np.zeros(n_tri)
-            pressure[spring_triangle] = s.pressure_mpa
-            hit = np.isfinite(s.spring_length_mm)
-            length = np.zeros(n_tri)
-            length[spring_triangle] = np.where(hit, s.spring_length_mm, 0.0)
-            ray_hit = np.zeros(n_tri, np.int8)
-            ray_hit[spring_triangle] = hit
-            contact = np.zeros(n_tri, np.int8)
-            contact[spring_triangle] = s.in_contact
-            points = s.mobile_placement.points(scene.mobile.vertices_mm)
-            cells = {"pressure_mpa": pressure, "spring_length_mm": length, "in_contact": contact, "ray_hit": ray_hit}
-            if scene.cartilage.layers is not None:  # measured thickness: M's own layer per triangle
-                cells["thickness_mm"] = np.zeros(n_tri)
-                cells["thickness_mm"][spring_triangle] = scene.cartilage.layers.mobile.thickness_mm
-            frames.append(Frame(s.step, s.time_s, SurfaceFrame(points, scene.mobile.triangles, {}, cells)))
-        return frames
+        pressure = np.zeros(n_tri)
+        pressure[spring_triangle] = s.pressure_mpa
+        hit = np.isfinite(s.spring_length_mm)
+        length = np.zeros(n_tri)
+        length[spring_triangle] = np.where(hit, s.spring_length_mm, 0.0)
+        ray_hit = np.zeros(n_tri, np.int8)
+        ray_hit[spring_triangle] = hit
+        contact = np.zeros(n_tri, np.int8)
+        contact[spring_triangle] = s.in_contact
+        points = s.mobile_placement.points(scene.mobile.vertices_mm)
+        cells = {"pressure_mpa": pressure, "spring_length_mm": length, "in_contact": contact, "ray_hit": ray_hit}
+        if scene.cartilage.layers is not None:  # measured thickness: M's own layer per triangle
+            cells["thickness_mm"] = np.zeros(n_tri)
+            cells["thickness_mm"][spring_triangle] = scene.cartilage.layers.mobile.thickness_mm
+        return Frame(s.step, s.time_s, SurfaceFrame(points, scene.mobile.triangles, {}, cells))
 
-    def fixed_frames(self, positions: Sequence[int] | None = None) -> list[Frame]:
-        """The fixed body placed where each step's kinematics put it (scene axes, mm)."""
+    def fixed_frames(self, positions: Sequence[int] | None = None) -> Sequence[Frame]:
+        """The fixed body placed where each step's kinematics put it (scene axes, mm), made when read."""
+        return _Frames(self._fixed_frame, self.steps if positions is None else [self.steps[k] for k in positions])
+
+    def _fixed_frame(self, s: StepResult) -> Frame:
         fixed = self.scene.fixed
-        return [Frame(s.step, s.time_s, SurfaceFrame(s.fixed_placement.points(fixed.vertices_mm), fixed.triangles, {}, self.scene.fixed_cell_data()))
-                for s in (self.steps if positions is None else [self.steps[k] for k in positions])]
+        return Frame(s.step, s.time_s, SurfaceFrame(s.fixed_placement.points(fixed.vertices_mm), fixed.triangles, {}, self.scene.fixed_cell_data()))
+
+
+class _Frames(Sequence[Frame]):
+    """Frames made one at a time when read: a run of many time points on a fine mesh holds one
+    map in memory, not all of them."""
+
+    def __init__(self, make: Callable[[StepResult], Frame], steps: Sequence[StepResult]) -> None:
+        self._make, self._steps = make, steps
+
+    def __len__(self) -> int:
+        return len(self._steps)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self._make(s) for s in self._steps[index]]
+        return self._make(self._steps[index])
 
 
 def write_results(run: RunResult, out_dir: str | Path, *, frame_steps: list[int] | None = None, note: str | None = None,

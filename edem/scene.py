@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from edem.beds import BEDS, IndependentSprings
+from edem.beds import DEFAULT_COUPLING, bed_keys, read_bed
 from geometries.errors import InputError
 from edem.joint_reaction import transfer_moment
 from edem.laws import LAWS
@@ -26,7 +26,7 @@ from edem.mechanics import DOF_NAMES, rotation_matrix
 from edem.opensim_model import BodyPoses
 from edem.plausibility import scene_warnings
 from edem.springs import Cartilage, Ligament, Placement
-from edem.thin_layer import LAYER_SYMBOLS
+from edem.viscoelastic import CONTACT_SETS, DEFAULT_CONTACT_SET, integrator_problem
 from edem.thickness import CARTILAGE_KEYS, GEOMETRY_KEYS, array_layers, scene_layers, uses_layers
 from edem.tables import SceneTable, not_utf8
 from geometries.builders import build_geometry
@@ -44,17 +44,14 @@ SECTIONS = {
         "max_spring_length_mm",
         "thickness_mm",
         "shear_modulus_mpa",
-        "coupling",
-        "thin_layer_symbol",
-        "thin_layer_smoothing_resolution",
         *CARTILAGE_KEYS,  # measured thickness (edem.thickness)
-    },
+    },  # and the beds' keys (edem.beds.bed_keys: coupling and each bed's own)
     "load": None,  # checked by edem.loads
     "kinematics": None,  # checked by edem.loads
     "constraints": {"fixed_dofs"},
     "ligaments": {"name", "mobile_point_mm", "fixed_point_mm", "youngs_modulus_mpa", "area_mm2", "rest_length_mm"},
-    "viscoelastic": {"relaxation_time_s", "integrator", "allow_unstable"},
-    "solver": {"method"},
+    "viscoelastic": {"relaxation_time_s", "contact_set", "integrator", "allow_unstable"},
+    "solver": {"method", "allow_bone_overlap"},
     "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness", "time_scheme"},
     "opensim": None,  # checked by edem.opensim_model
 }
@@ -63,11 +60,27 @@ FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm", "spring_
 
 @dataclass(frozen=True)
 class Viscoelastic:
-    """Kelvin-Voigt springs, damping = tau * stiffness (docs/method.md#4-viscoelastic-edem-thesis-chapter-6, eq. 6.13)."""
+    """Kelvin-Voigt springs, damping = tau * stiffness (docs/method.md#4-viscoelastic-edem-thesis-chapter-6, eq. 6.13).
+
+    ``contact_set``: how a time point decides the contact (:data:`edem.viscoelastic.CONTACT_SETS`:
+    "creeping", each spring's creeping compression, or "frozen", the thesis's increment);
+    ``integrator``: one of that contact set's (None: its default, "bdf2" or "exact"). InputError
+    naming the key for an integrator of the other set.
+    """
 
     relaxation_time_s: float
-    integrator: str = "exact"  # exact | rk2
+    integrator: str | None = None  # creeping: bdf2 | backward-euler; frozen: exact | rk2
     allow_unstable: bool = False  # run RK2 beyond dt > 2 tau (with a warning) instead of refusing
+    contact_set: str = DEFAULT_CONTACT_SET
+
+    def __post_init__(self) -> None:
+        if self.contact_set not in CONTACT_SETS:
+            raise InputError(f"unknown contact set {self.contact_set!r}", key="viscoelastic.contact_set", expected=" or ".join(CONTACT_SETS))
+        if self.integrator is None:
+            object.__setattr__(self, "integrator", CONTACT_SETS[self.contact_set].integrators[0])
+        problem = integrator_problem(self.contact_set, self.integrator)
+        if problem:
+            raise InputError(problem, key="viscoelastic.integrator", expected=" or ".join(CONTACT_SETS[self.contact_set].integrators))
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -93,6 +106,9 @@ class Scene:
     viscoelastic: Viscoelastic | None = None
     method: str = "edem"
     fe: dict | None = None
+    # [solver] allow_bone_overlap: a result whose springs are compressed past their layer (the bones
+    # through each other) is kept with a warning instead of refused (stability studies)
+    allow_bone_overlap: bool = False
     warnings: tuple[str, ...] = ()
 
     # The springs' arrays are formed once per scene (a run reads them, and every RunResult's
@@ -172,15 +188,14 @@ class Scene:
         max_spring_length_mm: float | None = None,
         thickness_mm: float | None = None,
         shear_modulus_mpa: float = 0.0,
-        coupling: str = IndependentSprings.coupling,
-        thin_layer_symbol: str | None = None,
-        thin_layer_smoothing_resolution: float | None = None,
+        coupling: str = DEFAULT_COUPLING,
         fixed_dofs: tuple[str, ...] = (),
         reference_point_mm: np.ndarray | None = None,
         kinematics: JointKinematics | None = None,
         ligaments: tuple[Ligament, ...] = (),
         viscoelastic: Viscoelastic | None = None,
         method: str = "edem",
+        allow_bone_overlap: bool = False,
         name: str = "scene",
         description: str = "",
         mobile_bone: tuple[np.ndarray, np.ndarray] | None = None,
@@ -188,6 +203,7 @@ class Scene:
         mobile_thickness_mm: float | None = None,
         fixed_thickness_mm: float | None = None,
         spring_spacing_mm: float | None = None,
+        **bed_settings: Any,
     ) -> Scene:
         """A scene from meshes and loads already in memory (no TOML file, no mesh cleaning).
 
@@ -218,23 +234,16 @@ class Scene:
         shear_modulus_mpa : float
             Shear spring modulus (0: frictionless).
         coupling : str
-            The bed, a key of :data:`edem.beds.BEDS` (as ``[cartilage] coupling``): ``"none"``,
-            independent springs, or ``"thin-layer"``, the coupled thin layer.
-        thin_layer_symbol : str, optional
-            With ``coupling="thin-layer"``, the layer's symbol, a name of
-            :data:`edem.thin_layer.LAYER_SYMBOLS` (``"pade"``, the default, or ``"two-pole"``).
-        thin_layer_smoothing_resolution : float, optional
-            With ``coupling="thin-layer"``, cells of the coarse smoothing space per smoothing
-            length (as ``[cartilage] thin_layer_smoothing_resolution``); default 0, the springs'
-            own mesh (docs/method.md, "Coarse smoothing space").
+            The bed, a key of :data:`edem.beds.BEDS` (as ``[cartilage] coupling``); default
+            :data:`edem.beds.DEFAULT_COUPLING`, the independent springs.
         fixed_dofs : tuple of str
             Fixed DOFs of M among tx, ty, tz, rx, ry, rz.
         reference_point_mm : (3,) float, optional
             G, the point M's rotations and moments refer to; default the area-weighted centroid
             of M's triangles.
-        kinematics, ligaments, viscoelastic, method, name, description
+        kinematics, ligaments, viscoelastic, method, allow_bone_overlap, name, description
             As the scene file's ``[kinematics]``, ``[[ligaments]]``, ``[viscoelastic]``,
-            ``[solver] method`` and ``[scene]``.
+            ``[solver] method`` and ``allow_bone_overlap`` and ``[scene]``.
         mobile_bone, fixed_bone : (vertices (m, 3) mm, triangles (k, 3) int), optional
             Subchondral bone under M's / F's surface: that side's cartilage thickness is measured
             (docs/method.md#measured-cartilage-thickness); with either, or a per-side thickness,
@@ -245,6 +254,11 @@ class Scene:
         spring_spacing_mm : float, optional
             Resample M so that no spring triangle has an edge longer than this (mm), as
             ``[geometry] spring_spacing_mm``; default: one spring per given triangle.
+        **bed_settings
+            The bed's own keys, as ``[cartilage]``'s (:attr:`edem.beds.Bed.Keys`); e.g. for the
+            coupled layer ``thin_layer_symbol`` (a name of :data:`edem.layer_symbols.LAYER_SYMBOLS`,
+            default ``"pade"``) and ``thin_layer_smoothing_resolution`` (cells of the coarse
+            smoothing space per smoothing length; default 0, the springs' own mesh). None: not given.
 
         Returns
         -------
@@ -277,8 +291,7 @@ class Scene:
             mobile = subdivide_to_spacing(mobile, float(spring_spacing_mm), key="spring_spacing_mm")
         given = {
             "youngs_modulus_mpa": youngs_modulus_mpa, "poissons_ratio": poissons_ratio, "law": law, "max_spring_length_mm": max_spring_length_mm,
-            "thickness_mm": thickness_mm, "shear_modulus_mpa": shear_modulus_mpa, "coupling": coupling, "thin_layer_symbol": thin_layer_symbol,
-            "thin_layer_smoothing_resolution": thin_layer_smoothing_resolution,
+            "thickness_mm": thickness_mm, "shear_modulus_mpa": shear_modulus_mpa, "coupling": coupling, **bed_settings,
         }
         # numpy scalars as the plain numbers a TOML table holds; None: not given
         bones, uniform = {"mobile": mobile_bone, "fixed": fixed_bone}, {"mobile": mobile_thickness_mm, "fixed": fixed_thickness_mm}
@@ -315,6 +328,7 @@ class Scene:
             ligaments=tuple(ligaments),
             viscoelastic=viscoelastic,
             method=method,
+            allow_bone_overlap=bool(allow_bone_overlap),
             warnings=tuple(notes),
         )
 
@@ -326,7 +340,8 @@ def cartilage_from_table(table: dict[str, Any], file: str | Path, section: str =
     Parameters
     ----------
     table : dict
-        The keys of ``SECTIONS["cartilage"]`` (README.md#scene-files) to TOML values.
+        The keys of ``SECTIONS["cartilage"]`` and of the beds (:func:`edem.beds.bed_keys`;
+        README.md#scene-files) to TOML values.
     file : str or Path
         The scene file (or ``"<arrays>"``), named in the errors.
     section : str
@@ -346,12 +361,13 @@ def cartilage_from_table(table: dict[str, Any], file: str | Path, section: str =
     InputError
         Naming the file, the key and what was expected.
     """
-    cart = SceneTable(table, file, section, SECTIONS["cartilage"])
+    cart = SceneTable(table, file, section, (*SECTIONS["cartilage"], *bed_keys()))
     law = cart.string("law", "threshold", tuple(LAWS))
     spring_law = LAWS[law]
     thickness = cart.optional_number("thickness_mm", positive=True, what="the undeformed cartilage thickness in mm (> 0)")
     if layered and thickness is not None:
-        raise cart.error("thickness_mm", "per-side layers replace thickness_mm", "no thickness_mm with a bone mesh or a per-side thickness")
+        raise cart.error("thickness_mm", "per-side layers replace thickness_mm",
+                         "no thickness_mm with a bone mesh, a per-side thickness or a built-in ankle's cartilage (geometry.cartilage = false: the thesis's geometry without it)")
     if spring_law.needs_thickness and thickness is None and not layered:
         raise cart.error("thickness_mm", f"the '{law}' law needs the undeformed thickness", "a thickness in mm > 0")
     # Beyond a kilometre the ray window is no longer a length on a joint (and its float32 reach overflows).
@@ -364,12 +380,10 @@ def cartilage_from_table(table: dict[str, Any], file: str | Path, section: str =
             f"the ray window h_max = {window:g} mm is shorter than the thickness {thickness:g} mm",
             f"h_max >= thickness_mm for the {law} law (springs beyond h_max are not seen)",
         )
-    coupling = cart.string("coupling", IndependentSprings.coupling, tuple(BEDS))
+    bed, own_keys = read_bed(cart)
     cartilage = Cartilage(
-        coupling=coupling,
-        thin_layer_symbol=cart.string("thin_layer_symbol", "pade", tuple(LAYER_SYMBOLS)),
-        thin_layer_smoothing_resolution=cart.number("thin_layer_smoothing_resolution", 0.0, nonnegative=True,
-                                                    what="cells of the coarse smoothing space per smoothing length (>= 0; 0: the springs' own mesh)"),
+        coupling=bed.coupling,
+        bed_keys=own_keys,
         youngs_modulus_mpa=cart.number("youngs_modulus_mpa", positive=True, what="Young's modulus in MPa (> 0)"),
         poissons_ratio=cart.number("poissons_ratio", low=-1.0, high=0.5, what="Poisson's ratio in (-1, 0.5)"),
         law=law,
@@ -377,7 +391,7 @@ def cartilage_from_table(table: dict[str, Any], file: str | Path, section: str =
         thickness_mm=thickness,
         shear_modulus_mpa=cart.number("shear_modulus_mpa", 0.0, nonnegative=True, what="a shear modulus in MPa (>= 0)"),
     )
-    BEDS[coupling].check(cartilage, cart)
+    bed.check(cartilage, cart)
     return cartilage
 
 
@@ -498,9 +512,9 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         from edem.opensim_model import model_geometry
 
         mobile, fixed, reference_point, kinematics, load = model_geometry(data, path, cartilage, load, notes)
-        attachments, geo_description = {}, ""
+        attachments, geo_description, built_bones = {}, "", None
     else:
-        mobile, fixed, reference_point, attachments, geo_description = _load_geometry(data["geometry"], path, cartilage, notes)
+        mobile, fixed, reference_point, attachments, geo_description, built_bones = _load_geometry(data["geometry"], path, cartilage, notes)
         kinematics = None
         if "kinematics" in data:
             kinematics = angle_series_from_table(data["kinematics"], path, load.time_s, load.given_time_s)
@@ -518,7 +532,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
             file=mobile.source or file, key="geometry.mobile" if mobile.source else "geometry",
             expected="a surface mesh whose triangles have distinct corners",
         )
-    layers = scene_layers(data, path, mobile, fixed, np.flatnonzero(mobile.areas_mm2 > 0.0), cartilage.max_spring_length_mm, notes)
+    layers = scene_layers(data, path, mobile, fixed, np.flatnonzero(mobile.areas_mm2 > 0.0), cartilage.max_spring_length_mm, notes, built_bones)
     if layers is not None:
         cartilage = replace(cartilage, layers=layers)
 
@@ -532,14 +546,22 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
     viscoelastic = None
     if "viscoelastic" in data:
         ve = SceneTable(data["viscoelastic"], file, "viscoelastic", SECTIONS["viscoelastic"])
+        contact_set = ve.string("contact_set", DEFAULT_CONTACT_SET, tuple(CONTACT_SETS))
+        integrators = CONTACT_SETS[contact_set].integrators
+        integrator = ve.string("integrator", integrators[0], tuple(i for each in CONTACT_SETS.values() for i in each.integrators))
+        problem = integrator_problem(contact_set, integrator)
+        if problem:
+            raise ve.error("integrator", problem, " or ".join(integrators) + f' with contact_set = "{contact_set}"')
         viscoelastic = Viscoelastic(
             relaxation_time_s=ve.number("relaxation_time_s", positive=True, what="the relaxation time tau in s (> 0)"),
-            integrator=ve.string("integrator", "exact", ("exact", "rk2")),
+            integrator=integrator,
             allow_unstable=ve.boolean("allow_unstable", False),
+            contact_set=contact_set,
         )
 
     solver = SceneTable(data.get("solver", {}), file, "solver", SECTIONS["solver"])
     method = solver.string("method", "edem", ("edem", "dem"))
+    allow_bone_overlap = solver.boolean("allow_bone_overlap", False)
     fe = data.get("fe")
     if fe is not None:
         SceneTable(fe, file, "fe", SECTIONS["fe"])
@@ -559,6 +581,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         viscoelastic=viscoelastic,
         method=method,
         fe=fe,
+        allow_bone_overlap=allow_bone_overlap,
         warnings=tuple(notes),
     )
 
@@ -600,9 +623,11 @@ def _ligament(entry: dict[str, Any], index: int, file: str, attachments: dict[st
 
 
 def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warnings_out: list[str]):
-    """Mobile and fixed surfaces from a built-in generator or mesh files, oriented and checked."""
+    """Mobile and fixed surfaces from a built-in generator or mesh files, oriented and checked,
+    with the bones a built-in ankle builds under its cartilage (by side; None without them)."""
     file = str(path)
     reference_point = None
+    built_bones = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if "builtin" in table:
@@ -617,6 +642,8 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
             reference_point = built.reference_point_mm
             attachments = {lig.name: (lig.mobile_point_mm, lig.fixed_point_mm) for lig in built.ligaments}
             description = built.description
+            if built.mobile_bone is not None:
+                built_bones = {"mobile": built.mobile_bone, "fixed": built.fixed_bone}
         else:
             from geometries.repair import prepare_pair
 
@@ -637,4 +664,4 @@ def _load_geometry(table: dict[str, Any], path: Path, cartilage: Cartilage, warn
         # Area-weighted centroid of the articular surface (docs/method.md#1-two-rigid-bones-and-a-bed-of-springs default for G).
         areas = mobile.areas_mm2
         reference_point = (mobile.centroids_mm * areas[:, None]).sum(axis=0) / areas.sum()
-    return mobile, fixed, np.asarray(reference_point, float), attachments, description
+    return mobile, fixed, np.asarray(reference_point, float), attachments, description, built_bones

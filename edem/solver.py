@@ -17,24 +17,33 @@ from edem.plausibility import emit, merge_repeated
 from edem.preflight import patch_resolution_warning, preflight
 from edem.raycast import RayCaster
 from edem.results import RunResult, StepResult
-from edem.rowwise import add_rows, row_dot
+from geometries.rowwise import add_rows, row_dot
 from edem.scene import Scene
 from edem.springs import Cartilage, Placement, SpringGeometry, contact_law, ligament_elements, ligament_table, shear_terms, spring_geometry
-from edem.viscoelastic import check_rk2_stability, integrator_weights
+from edem.viscoelastic import viscoelastic_stepping
 
 
 #: the discrete methods: DEM (static, from M's initial pose at every time point) and EDEM (docs/method.md#2-edem-the-time-dependent-incremental-method)
 METHODS = ("edem", "dem")
 
 
+#: a gap-law spring overlapping by less than this share of its thickness touches rather than
+#: starts compressed: its preload, p = 0.01 E' (0.26 MPa on the ankles' cartilage), is well below
+#: the pressures a load makes. The built-in ankles' articular surfaces, placed touching at the
+#: neutral pose, overlap by up to 0.02 mm (0.7 % of T) at the stance's first ankle angle, -3 deg:
+#: the subject-like trochlea is wider anteriorly, so the mortise tightens as the tibia turns
+TOUCHING_OVERLAP = 1e-2
+
+
 def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> list[str]:
-    """Say so when a gap-law bed starts compressed (t larger than the gap h): it pushes the
-    bodies apart before any load, so the first time point's result includes that preload."""
+    """Say so when a gap-law bed starts compressed (t larger than the gap h, beyond
+    :data:`TOUCHING_OVERLAP`): it pushes the bodies apart before any load, so the first time
+    point's result includes that preload."""
     t = geometry.candidate_thickness_mm(cartilage)  # (measured thickness: one per candidate)
     if t is None or not cartilage.spring_law.needs_thickness:
         return []
     h = geometry.candidate_length_mm
-    compressed = h < t * (1.0 - 1e-9)
+    compressed = h < t * (1.0 - TOUCHING_OVERLAP)
     if not np.any(compressed):
         return []
     thickness = f"thickness t = {float(t):g} mm" if np.ndim(t) == 0 else "local total thickness t_M + t_F"
@@ -48,6 +57,40 @@ def precompression_warning(geometry: SpringGeometry, cartilage: Cartilage) -> li
 def compression_ratio(geometry: SpringGeometry, cartilage: Cartilage, approach_mm: np.ndarray) -> np.ndarray:
     """Compression over undeformed length of the candidate springs after an approach (strain)."""
     return cartilage.spring_law.strain(geometry.candidate_length_mm, approach_mm, geometry.candidate_thickness_mm(cartilage))
+
+
+def _index_runs(indices: list[int]) -> str:
+    """'1-20, 22, 24-47': consecutive time point indices as runs."""
+    runs: list[list[int]] = []
+    for k in indices:
+        if runs and k == runs[-1][1] + 1:
+            runs[-1][1] = k
+        else:
+            runs.append([k, k])
+    return ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in runs)
+
+
+def bone_overlap_message(overlaps: list[tuple[int, float, int, float]], n_times: int, method: str) -> str:
+    """Why a result whose springs are compressed past their length is refused: the time points
+    (index runs and times), the springs and their share of those in contact, the worst time point
+    (``overlaps``: (k, t, springs, share) per time point), and what to do."""
+    k, t, count, share = (list(x) for x in zip(*overlaps))
+    worst = max(overlaps, key=lambda item: item[3])
+
+    def span(values: list, fmt: str) -> str:
+        low, high = min(values), max(values)
+        return format(low, fmt) if low == high else f"{format(low, fmt)}-{format(high, fmt)}"
+
+    return (
+        f"springs are compressed past their length (strain >= 100 %: the bone-to-bone length is below 0, the bones pass "
+        f"through each other) at {len(k)} of {n_times} time points (k = {_index_runs(k)}; t = {span(t, 'g')} s): "
+        f"{span(count, 'd')} springs, {span([100 * x for x in share], '.3g')} % of those in contact (worst: k = {worst[0]}, "
+        f"t = {worst[1]:g} s, {worst[2]} springs, {100 * worst[3]:.3g} %). The spring bed cannot represent that contact: "
+        "give the bodies their cartilage (bone meshes under articular surfaces, or a thickness that matches the gap), "
+        "a load in the joint's range"
+        + (", or more time points ([load] max_step_s)" if method == "edem" else "")
+        + "; [solver] allow_bone_overlap = true keeps such a result (stability studies)"
+    )
 
 
 def constrained_moment_warning(loads: np.ndarray, fixed_dofs: tuple[str, ...]) -> list[str]:
@@ -101,11 +144,12 @@ def run(
     load = scene.load
     loads = scene.applied_loads()
     warnings: list[str] = constrained_moment_warning(loads, scene.fixed_dofs)
-    viscous = scene.viscoelastic if method == "edem" else None
+    # the Kelvin-Voigt springs' time steps (edem.viscoelastic: the contact set frozen as in the thesis, or creeping)
+    viscous = viscoelastic_stepping(scene, loads) if method == "edem" and scene.viscoelastic is not None else None
     if scene.viscoelastic is not None and viscous is None:
         warnings.append("[viscoelastic] is ignored by DEM, a static method: use --method edem")
-    if viscous is not None and viscous.integrator == "rk2":
-        warnings += check_rk2_stability(load.time_s, viscous.relaxation_time_s, viscous.allow_unstable, scene.source)
+    if viscous is not None:
+        warnings += viscous.warnings
     # Committed (elastic) spring forces, the EDEM push-back, one row per axis (3, n): gathers and
     # scatters of the candidates' columns run along contiguous rows (several times cheaper than
     # over (n, 3) rows).
@@ -114,15 +158,22 @@ def run(
     bed = scene_bed(scene, caster)
     steps: list[StepResult] = []
     unbalanced: list[tuple[int, float]] = []  # DEM time points whose re-measured springs miss the load
+    overlaps: list[tuple[int, float, int, float]] = []  # time points whose springs pass their length: (k, t, springs, share in contact)
     free = np.array([d not in scene.fixed_dofs for d in DOF_NAMES])
     ligaments = ligament_table(scene.ligaments)
     reference_rows = generalised_directions(spring_centroid, spring_normal, g0)
     rays = caster.prepare(spring_centroid, spring_normal)  # checked once, cast at every time point
     # M's springs at its initial pose at time point 0: the first step's geometry, which the
     # pre-flight also checks when the load starts at time point 0 (measured once for both).
+    clock = time.perf_counter()
     first_geometry = spring_geometry(spring_centroid, spring_normal, spring_area, pose, caster, scene.fixed_placement(0), cartilage, rays)
+    first_geometry_s = time.perf_counter() - clock  # the first step's, counted in the solve
     report = preflight(scene, loads, scene.fixed_placement, caster, rays, first_geometry)
-    seconds = {"geometry": 0.0, "solve": 0.0}
+    # Set-up (the caster's scene, the bed, the pre-flight, lazy imports: paid once per run, most
+    # of it once per process) is timed apart from the solve of the time points.
+    solve_started = time.perf_counter()
+    setup_s = solve_started - started - first_geometry_s
+    seconds = {"geometry": first_geometry_s, "solve": 0.0}
     for k, t in enumerate(load.time_s):
         clock = time.perf_counter()
         if method == "dem":
@@ -162,7 +213,11 @@ def run(
         law = stack_elements(contact_law(geometry, cartilage, stored_normal), lig_law)
         contact_step = ContactStep(geometry, directions, law, stored_normal, lig_rows, lig_law, shear, scene.fixed_dofs, length_scale)
         try:
-            solution = bed.solve(contact_step, loads[k])
+            if viscous is None:
+                solution = bed.solve(contact_step, loads[k])
+            else:
+                contact_step = viscous.prepare(k, contact_step)
+                solution = viscous.solve(bed, contact_step, loads[k])
         except SolverError as exc:
             cause = (
                 f" (no spring is a candidate here: no part of the fixed body lies within h_max = "
@@ -178,17 +233,17 @@ def run(
             warnings += bed.first_step_warnings(contact_step, solution)
         overstrained = int((solution.active[:n_c] & (compression_ratio(geometry, cartilage, directions[:n_c] @ solution.displacement) >= 1.0)).sum())
         if overstrained:
-            warnings.append(
-                f"time point {k} (t = {t:g} s): {overstrained} springs compressed past their length "
-                "(strain >= 100 %): the spring bed is outside its range" + (", use more time points ([load] max_step_s)" if method == "edem" else "")
-            )
+            in_contact_now = max(int(solution.active[:n_c].sum()), 1)
+            overlaps.append((k, float(t), overstrained, overstrained / in_contact_now))
+            if scene.allow_bone_overlap:
+                warnings.append(
+                    f"time point {k} (t = {t:g} s): {overstrained} springs compressed past their length "
+                    "(strain >= 100 %): the spring bed is outside its range" + (", use more time points ([load] max_step_s)" if method == "edem" else "")
+                )
         if viscous is None:
             u, elastic_force = solution.displacement, total_force
         else:
-            dt = float(t - load.time_s[k - 1]) if k else 0.0
-            previous = loads[k - 1] if k else np.zeros(6)
-            weights = integrator_weights(dt, viscous.relaxation_time_s, viscous.integrator)
-            u, elastic_force = bed.viscoelastic_increment(contact_step, solution, previous, loads[k], weights)
+            u, elastic_force = viscous.increment(bed, contact_step, solution, k, loads)
             if not np.all(np.isfinite(u)):
                 raise SolverError(f"time point {k} (t = {t:g} s): the viscoelastic integration diverged (non-finite displacement)")
         # Overflowed numbers pass every comparison below (NaN > limit is False): refuse them here.
@@ -200,8 +255,8 @@ def run(
                 "check the load's units and scale and the cartilage modulus"
             )
         contact = directions[:n_c].T @ total_force[:n_c]
-        if shear is not None:
-            contact = contact + shear.generalised_force(solution.displacement, solution.active[:n_c])
+        if shear is not None:  # (the step's: a creeping step's shear springs carry their dashpots' share too)
+            contact = contact + contact_step.shear.generalised_force(solution.displacement, solution.active[:n_c])
         spring_force = total_force[:n_c]
         # sum f (R X + b) / sum f = R (sum f X / sum f) + b: the candidates' centroids are only
         # placed at the pose if check_increment needs them.
@@ -219,6 +274,10 @@ def run(
         stored = np.zeros((3, n_springs))
         for axis in range(3):  # one contiguous scatter per axis: twice as fast as one 2-D scatter
             stored[axis, cand_idx] = committed[axis]
+        in_contact = np.zeros(n_springs, bool)
+        in_contact[cand_idx] = solution.active[:n_c]
+        if viscous is not None:
+            stored = viscous.commit(stored, in_contact)
         pose = Placement(rotation_matrix(u[3:]) @ pose.rotation, pose.translation_mm + u[:3], g0)
         remeasured = None
         if method == "dem":
@@ -233,8 +292,6 @@ def run(
         viscous_pressure = np.zeros(n_springs)
         if viscous is not None:
             viscous_pressure[cand_idx] = (total_force[:n_c] - elastic_force[:n_c]) / area_c
-        in_contact = np.zeros(n_springs, bool)
-        in_contact[cand_idx] = solution.active[:n_c]
         seconds["solve"] += time.perf_counter() - clock
         steps.append(
             StepResult(
@@ -263,11 +320,14 @@ def run(
         )
         if progress is not None:
             progress(k)
+    if overlaps and not scene.allow_bone_overlap:
+        raise SolverError(bone_overlap_message(overlaps, len(load.time_s), method))
     if unbalanced:
         worst = max(unbalanced, key=lambda item: item[1])
         warnings.append(remeasured_warning(len(unbalanced), worst[0], worst[1]))
     warnings += patch_resolution_warning(steps)
-    return RunResult(scene, method, steps, time.perf_counter() - started, merge_repeated(warnings), seconds, report)
+    return RunResult(scene, method, steps, time.perf_counter() - solve_started + first_geometry_s, merge_repeated(warnings), seconds, report,
+                     setup_time_s=setup_s)
 
 
 def solve(scene: Scene, method: str | None = None, *, progress: Callable[[int], None] | None = None) -> RunResult:
@@ -296,8 +356,10 @@ def solve(scene: Scene, method: str | None = None, *, progress: Callable[[int], 
     InputError
         An unknown method.
     SolverError
-        A time point without equilibrium (the message names it and says why), or a scene the
-        pre-flight refuses (springs out of reach, a load the constraints carry entirely).
+        A time point without equilibrium (the message names it and says why), a scene the
+        pre-flight refuses (springs out of reach, a load the constraints carry entirely), or a
+        result whose springs are compressed past their length, the bones through each other
+        (the time points and shares named; ``scene.allow_bone_overlap`` keeps it, warned).
 
     Warns
     -----

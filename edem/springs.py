@@ -10,14 +10,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from edem.laws import LAWS, ContactLaw, ElementLaw, LinearElements
+from edem.layer_symbols import LAYER_SYMBOLS, LayerSymbol
 from edem.mechanics import ShearTerms, confined_modulus_mpa, generalised_directions
 from edem.raycast import RayCaster, Rays
-from edem.rowwise import add_rows, rows_times
+from geometries.rowwise import add_rows, rows_times
 
 if TYPE_CHECKING:
     from edem.thickness import Layers
@@ -62,12 +63,12 @@ class Cartilage:
     max_spring_length_mm: float = 3.5  # h_max: candidates (threshold) and ray window (all laws)
     thickness_mm: float | None = None  # undeformed combined thickness t (gap laws)
     shear_modulus_mpa: float = 0.0
-    coupling: str = "none"  # none (independent springs) | thin-layer (edem.thin_layer)
-    thin_layer_symbol: str = "pade"  # under the coupling, a name of edem.thin_layer.LAYER_SYMBOLS
-    # under the coupling: cells of the coarse smoothing space per smoothing length (0: the springs' own vertices; edem.thin_layer)
-    thin_layer_smoothing_resolution: float = 0.0
     # measured thickness (edem.thickness): each side's layer; None: thickness_mm is the combined one
     layers: Layers | None = field(default=None, compare=False, repr=False)
+    # the bed, a key of edem.beds.BEDS ([cartilage] coupling), and the values of its own keys (its
+    # edem.beds.Bed.Keys), both read by edem.beds.read_bed
+    coupling: str = field(kw_only=True)
+    bed_keys: Any = field(kw_only=True)
 
     @property
     def confined_modulus_mpa(self) -> float:
@@ -77,6 +78,12 @@ class Cartilage:
     def spring_law(self) -> ContactLaw:
         """The contact law object named by ``law`` (:data:`edem.laws.LAWS`)."""
         return LAWS[self.law]
+
+    @cached_property
+    def layer_symbol(self) -> LayerSymbol:
+        """The coupled layer's symbol: its key ``thin_layer_symbol`` at this Poisson's ratio
+        (:data:`edem.layer_symbols.LAYER_SYMBOLS`), formed once per cartilage."""
+        return LAYER_SYMBOLS[self.bed_keys.thin_layer_symbol](self.poissons_ratio)
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,8 @@ surface under each body's articular surface, as OpenSim JAM's contact meshes car
 
 Each side has a cartilage layer between its bone and its articular surface:
 
-* with a bone mesh (``[geometry] mobile_bone`` / ``fixed_bone``) the side's scene surface is its
+* with a bone mesh (``[geometry] mobile_bone`` / ``fixed_bone``, or the bones a built-in ankle
+  builds under its cartilage, ``[geometry] cartilage = true``) the side's scene surface is its
   articular surface, and the layer's thickness is measured per triangle: from the triangle's
   centroid along minus its normal (into the body) to the bone, by the same Embree ray cast as the
   springs (:class:`edem.raycast.RayCaster`), up to :data:`BONE_SEARCH_MM`. Where that ray finds no
@@ -145,10 +146,18 @@ def side_layer(
     return SideLayer(np.where(measured, thickness, fallback), measured, area_mm2, True, bone)
 
 
+def builtin_bones(geometry: dict[str, Any]) -> bool:
+    """Whether a scene's ``[geometry]`` asks a built-in builder for bones under its cartilage
+    (:func:`geometries.builders.builds_bones`: the ankles with ``cartilage = true``, their default)."""
+    from geometries.builders import builds_bones
+
+    return isinstance(geometry, dict) and isinstance(geometry.get("builtin"), str) and builds_bones(geometry["builtin"], geometry)
+
+
 def uses_layers(data: dict[str, Any]) -> bool:
-    """Whether a parsed scene asks for per-side layers (a bone mesh or a per-side thickness)."""
+    """Whether a parsed scene asks for per-side layers (a bone mesh, a built-in ankle's bones or a per-side thickness)."""
     geometry, cartilage = data.get("geometry", {}), data.get("cartilage", {})
-    return (isinstance(geometry, dict) and any(k in geometry for k in GEOMETRY_KEYS)) or (
+    return (isinstance(geometry, dict) and any(k in geometry for k in GEOMETRY_KEYS)) or builtin_bones(geometry) or (
         isinstance(cartilage, dict) and any(k in cartilage for k in CARTILAGE_KEYS)
     )
 
@@ -186,15 +195,17 @@ def build_layers(
 
 def scene_layers(
     data: dict[str, Any], path: Path, mobile: TriangleSurface, fixed: TriangleSurface, spring_triangle: np.ndarray,
-    window_mm: float, notes: list[str],
+    window_mm: float, notes: list[str], built_bones: dict[str, TriangleSurface | None] | None = None,
 ) -> Layers | None:
     """The layers a parsed scene file asks for (README.md#scene-files), or None.
 
     Reads ``[geometry] mobile_bone, fixed_bone`` (mesh files beside the scene, in the scene's
-    ``units``, placed as ``mobile``/``fixed``) and ``[cartilage] mobile_thickness_mm,
-    fixed_thickness_mm``. InputError naming the file and key for a combination that cannot be
-    read (``thickness_mm`` beside them, a bone with a built-in geometry or an OpenSim model, a ray
-    window that cannot see the articular surfaces meet).
+    ``units``, placed as ``mobile``/``fixed``), or takes ``built_bones`` by side (the bones a
+    built-in ankle built under its cartilage), and ``[cartilage] mobile_thickness_mm,
+    fixed_thickness_mm``. Either bone is oriented and measured alike. InputError naming the
+    file and key for a combination that cannot be read (``thickness_mm`` beside them, a bone
+    file with a built-in geometry or an OpenSim model, a ray window that cannot see the
+    articular surfaces meet).
     """
     if not uses_layers(data):
         return None
@@ -204,14 +215,16 @@ def scene_layers(
     geometry, cartilage = data["geometry"], data["cartilage"]
     if "thickness_mm" in cartilage:
         raise InputError(
-            "thickness_mm (one combined thickness) cannot be combined with per-side layers",
+            "thickness_mm (one combined thickness) cannot be combined with per-side layers"
+            + (" (the built-in ankle's cartilage, geometry.cartilage = true)" if built_bones else ""),
             file=file, key="cartilage.thickness_mm",
-            expected="mobile_thickness_mm and fixed_thickness_mm (or a bone mesh per side) without thickness_mm",
+            expected="mobile_thickness_mm and fixed_thickness_mm (or a bone mesh per side) without thickness_mm"
+            + ("; or geometry.cartilage = false for the thesis's geometry without cartilage" if built_bones else ""),
         )
     if ("builtin" in geometry or "opensim" in data) and any(k in geometry for k in GEOMETRY_KEYS):
         raise InputError(
             "bone meshes go with mesh files only", file=file, key=f"geometry.{next(k for k in GEOMETRY_KEYS if k in geometry)}",
-            expected="[geometry] mobile and fixed mesh files beside mobile_bone / fixed_bone",
+            expected="[geometry] mobile and fixed mesh files beside mobile_bone / fixed_bone (a built-in ankle builds its own bones: geometry.cartilage = true)",
         )
     table = SceneTable(cartilage, file, "cartilage", None)
     uniform = {side: table.optional_number(f"{side}_thickness_mm", nonnegative=True, high=BONE_SEARCH_MM,
@@ -221,13 +234,16 @@ def scene_layers(
     units = geometry.get("units", "mm")
     for side, articular in zip(SIDES, (mobile, fixed)):
         key = f"geometry.{side}_bone"
-        if f"{side}_bone" not in geometry:
-            bones[side] = None
-            continue
-        from geometries.repair import prepare_surface
+        if built_bones is not None:
+            bone = built_bones[side]
+        elif f"{side}_bone" in geometry:
+            from geometries.repair import prepare_surface
 
-        name = SceneTable(geometry, file, "geometry", None).string(f"{side}_bone")
-        bones[side] = orient_bone(prepare_surface(path.parent / name, units=units, key=key, name=f"{side}_bone", refuse_units=True), articular, key)
+            name = SceneTable(geometry, file, "geometry", None).string(f"{side}_bone")
+            bone = prepare_surface(path.parent / name, units=units, key=key, name=f"{side}_bone", refuse_units=True)
+        else:
+            bone = None
+        bones[side] = None if bone is None else orient_bone(bone, articular, key)
     try:
         layers = build_layers(mobile, fixed, spring_triangle, bones, uniform, notes)
     except InputError as exc:

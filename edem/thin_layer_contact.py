@@ -64,7 +64,8 @@ import numpy as np
 from geometries.errors import SolverError
 from edem.laws import LinearElements
 from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, singular_stiffness_error, unrestrained_dofs
-from edem.thin_layer import LAYER_SYMBOLS, LayerCompliance, SurfaceMesh, layer_compliance
+from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance
+from edem.viscoelastic import touch_motion
 
 
 @dataclass
@@ -384,6 +385,25 @@ def coupled_domain(mesh: SurfaceMesh, candidates: np.ndarray, band_mm: float) ->
     return np.arange(n) if 2 * np.count_nonzero(band) >= n else np.flatnonzero(band)
 
 
+def sandwich_thickness_mm(thickness_mm: np.ndarray, geometry, cartilage, domain: np.ndarray) -> np.ndarray:
+    """The layer's local thickness (n_d,) mm over the springs ``domain`` as ``layer_compliance``
+    takes it: split into M's and F's layers (2, n_d) where the scene gives both sides a layer and
+    the bed's ``thin_layer_stack`` is "sandwich" (each layer bonded to its bone, frictionless
+    between them: docs/method.md); else as it is (one layer: the lumped pair, or a side without
+    cartilage). The split is M's share t_M / T of the springs' total thickness T = t_M + t_F
+    (``edem.thickness``: t_F at F's triangle each ray meets), which is the law's thickness t_M,
+    t_F for the gap laws and the bone-to-bone length's shares for the threshold law."""
+    layers = cartilage.layers
+    if layers is None or geometry.thickness_mm is None or cartilage.bed_keys.thin_layer_stack != "sandwich":
+        return thickness_mm
+    total = geometry.thickness_mm[domain]
+    mobile = layers.mobile.thickness_mm[domain]
+    shares = [share for share in (mobile / total, (total - mobile) / total) if np.any(share > 0.0)]
+    if len(shares) == 1:  # one side without cartilage: one layer, the lumped bed's to the bit
+        return thickness_mm
+    return np.stack([thickness_mm * share for share in shares])
+
+
 @dataclass(frozen=True)
 class CoupledStep:
     """One time point of DEM/EDEM on the coupled layer: the layer, overlap and elements.
@@ -398,7 +418,8 @@ class CoupledStep:
     the slab), the layer is the candidates, and it ends at their boundary with a free lateral
     face (the smoothed field vanishes there, as at the surface's free edge). Local
     thickness: the length the law's shear springs use (t for the gap law, the current spring
-    length for the threshold law; on the band t or the candidates' median). The overlap d0 is t - h for an
+    length for the threshold law; on the band t or the candidates' median), split into the two
+    layers of a sandwich where both sides have one (``sandwich_thickness_mm``). The overlap d0 is t - h for an
     "overlap" law (gap) or C f_carried for a "carried" law (threshold: the EDEM push-back of the
     forces committed at the previous step, zero in DEM); -inf on the band. The push-back is kept
     as its forces (``pushback_force_n``, with ``overlap_mm`` 0) and solved for by the contact
@@ -417,12 +438,18 @@ class CoupledStep:
     pushback_force_n: np.ndarray | None = None  # (n_d,) a "carried" law's forces c, whose push-back C c adds to overlap_mm
 
     @staticmethod
-    def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law) -> "CoupledStep":
-        """``directions`` (n_c, 6) and ``carried_force_n`` (n_c,) are those of the candidates."""
+    def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law,
+              history_force_n: np.ndarray | None = None, gap_mm: np.ndarray | None = None) -> "CoupledStep":
+        """``directions`` (n_c, 6) and ``carried_force_n`` (n_c,) are those of the candidates.
+
+        A creeping Kelvin-Voigt step (:class:`edem.viscoelastic.Creep`; ``cartilage`` then c0 times
+        stiffer): ``history_force_n`` (n_springs,), forces over all of M's springs whose push-back
+        joins the carried forces' (-S_n), and ``gap_mm`` (n_springs,), a carried law's gaps at the
+        step's start (its overlap is then -gap instead of 0)."""
         cand = np.flatnonzero(geometry.candidate)
         law = cartilage.spring_law
         candidate_thickness = law.shear_length_mm(geometry.spring_length_mm[cand], geometry.candidate_thickness_mm(cartilage))  # the h of k_s = G / h
-        screenings = LAYER_SYMBOLS[cartilage.thin_layer_symbol](cartilage.poissons_ratio).screenings
+        screenings = cartilage.layer_symbol.screenings
         b = max(screenings, default=0.0)
         ends = law.thin_layer_extent == "candidates"
         if ends or b == 0.0:  # the layer is the candidates
@@ -443,25 +470,31 @@ class CoupledStep:
         # stance, 29k springs: 14.5x the springs against 6.3x fine, benchmarks/bench_coarse_smoothing.py),
         # so such a layer stays on the springs' vertices.
         whole = domain.shape[0] == mesh.triangles.shape[0]
-        resolution = cartilage.thin_layer_smoothing_resolution if whole else 0.0
-        layer = layer_compliance(mesh, domain, thickness, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends, cartilage.thin_layer_symbol,
+        resolution = cartilage.bed_keys.thin_layer_smoothing_resolution if whole else 0.0
+        stack = sandwich_thickness_mm(thickness, geometry, cartilage, domain)
+        layer = layer_compliance(mesh, domain, stack, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, ends, cartilage.layer_symbol,
                                  resolution)
         overlap = np.full(domain.shape, -np.inf)
         pushback = None
         if law.thin_layer == "carried":
-            overlap[is_candidate] = 0.0
+            overlap[is_candidate] = 0.0 if gap_mm is None else -gap_mm[domain[is_candidate]]
             if np.any(carried_force_n):
                 pushback = np.zeros(domain.shape)
                 pushback[is_candidate] = carried_force_n
         else:
             overlap[is_candidate] = (thickness - length)[is_candidate]
+        if history_force_n is not None:
+            pushback = history_force_n[domain] if pushback is None else pushback + history_force_n[domain]
         rows = np.zeros((domain.shape[0], 6))
         rows[is_candidate] = directions  # domain is sorted, so candidates keep their order
         column = None
         if law.nonlinear:
             column = functools.partial(law.column_excess_mm, area_mm2=mesh.area_mm2[domain], confined_modulus_mpa=cartilage.confined_modulus_mpa,
                                        thickness_mm=thickness)
-        shortest = float(np.sqrt(min(screenings)) * np.median(candidate_thickness)) if screenings and cand.size else np.inf
+        # at the thinnest layer's median (a sandwich's terms are as short as their own layer is thin)
+        thinnest = min((float(np.median(h[h > 0.0])) for h in np.reshape(stack, (-1, domain.size))[:, is_candidate] if np.any(h > 0.0)),
+                       default=np.inf)
+        shortest = float(np.sqrt(min(screenings)) * thinnest) if screenings else np.inf
         return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law, column, shortest, pushback)
 
     def resolution_warning(self, mesh: SurfaceMesh) -> list[str]:
@@ -506,6 +539,27 @@ class CoupledStep:
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
                 initial_active=initial, column=self.column, pushback_force_n=self.pushback_force_n,
             )
+        )
+
+    def force_free(self, direction: np.ndarray | None) -> ThinLayerSolution | None:
+        """The unloaded time point of a creeping step (``edem.beds.Bed.force_free``): with no force
+        anywhere the layer keeps the deflection of its carried forces, so a candidate's gap at u is
+        -d0 - g . u with d0 = o + C c (module docstring, "Carried forces")."""
+        carried = np.zeros(int(self.candidate.sum()))  # C c at the candidates
+        if self.pushback_force_n is not None:
+            carried = self.layer.deflection(self.pushback_force_n)[self.candidate]
+        overlap = self.overlap_mm[self.candidate] + carried
+        rows = self.directions[self.candidate]
+        u = touch_motion(-overlap, rows, self.ligament_rows, self.ligament_law, direction)
+        if u is None:
+            return None
+        gap = -overlap - rows @ u
+        tension = self.ligament_law.offset_n + self.ligament_law.stiffness_n_per_mm * (self.ligament_rows @ u)
+        n_c = rows.shape[0]
+        return ThinLayerSolution(
+            displacement=u, element_force_n=np.concatenate([np.zeros(n_c), tension]), active=np.zeros(n_c + tension.shape[0], bool),
+            iterations=0, force_residual_n=0.0, moment_residual_nmm=0.0, deflection_mm=-carried,  # w - C c with f = 0
+            gap_mm=gap, max_penetration_mm=0.0,
         )
 
     def _shear(self, shear: ShearTerms | None) -> ShearTerms | None:

@@ -5,7 +5,9 @@
   E* = E / (1 - nu^2) (rigid indenter), half-width a = sqrt(4 P' R / (pi E*)),
   peak pressure p0 = 2 P' / (pi a), p(x) = p0 sqrt(1 - x^2 / a^2).
   A thick elastic block bonded to a rigid base approaches it when its thickness and width are
-  large compared with a.
+  large compared with a. Two elastic cylinders (the second: R2, E2, nu2): the same with
+  1 / E* = (1 - nu^2) / E + (1 - nu2^2) / E2 and 1 / R* = 1 / R + 1 / R2 in place of E* and R
+  (two equal cylinders: E* = E / (2 (1 - nu^2)), R* = R / 2).
 * Confined compression of a thin flat slab of thickness h, lateral faces on rollers, pressed by
   d: uniform pressure p = E' d / h with the confined (oedometric) modulus
   E' = E (1 - nu) / ((1 + nu) (1 - 2 nu)).
@@ -37,20 +39,33 @@ def plane_strain_modulus(youngs_modulus_mpa: float, poissons_ratio: float) -> fl
 
 @dataclass(frozen=True)
 class HertzLine:
-    """Hertz line contact of a rigid cylinder on an elastic half-space (plane strain)."""
+    """Hertz line contact of a rigid cylinder on an elastic half-space (plane strain); with a
+    second body's ``other_*`` (default: rigid, flat), of two elastic cylinders."""
 
     load_per_length_n_per_mm: float
     radius_mm: float
     youngs_modulus_mpa: float
     poissons_ratio: float
+    other_radius_mm: float = math.inf
+    other_youngs_modulus_mpa: float = math.inf
+    other_poissons_ratio: float = 0.0
 
     @property
     def contact_modulus_mpa(self) -> float:
-        return plane_strain_modulus(self.youngs_modulus_mpa, self.poissons_ratio)
+        """E* = 1 / ((1 - nu^2) / E + (1 - nu2^2) / E2)."""
+        compliance = 1.0 / plane_strain_modulus(self.youngs_modulus_mpa, self.poissons_ratio)
+        if math.isfinite(self.other_youngs_modulus_mpa):
+            compliance += 1.0 / plane_strain_modulus(self.other_youngs_modulus_mpa, self.other_poissons_ratio)
+        return 1.0 / compliance
+
+    @property
+    def effective_radius_mm(self) -> float:
+        """R* = 1 / (1 / R + 1 / R2)."""
+        return 1.0 / (1.0 / self.radius_mm + 1.0 / self.other_radius_mm)
 
     @property
     def half_width_mm(self) -> float:
-        return math.sqrt(4.0 * self.load_per_length_n_per_mm * self.radius_mm
+        return math.sqrt(4.0 * self.load_per_length_n_per_mm * self.effective_radius_mm
                          / (math.pi * self.contact_modulus_mpa))
 
     @property
@@ -64,11 +79,13 @@ class HertzLine:
 
     @classmethod
     def for_half_width(cls, half_width_mm: float, radius_mm: float, youngs_modulus_mpa: float,
-                       poissons_ratio: float) -> "HertzLine":
-        """The load per length that gives half-width ``half_width_mm``: P' = pi a^2 E* / (4 R)."""
-        es = plane_strain_modulus(youngs_modulus_mpa, poissons_ratio)
-        p = math.pi * half_width_mm**2 * es / (4.0 * radius_mm)
-        return cls(p, radius_mm, youngs_modulus_mpa, poissons_ratio)
+                       poissons_ratio: float, **other: float) -> "HertzLine":
+        """The load per length that gives half-width ``half_width_mm``: P' = pi a^2 E* / (4 R*)
+        (``other``: the second cylinder's ``other_radius_mm``, ``other_youngs_modulus_mpa``,
+        ``other_poissons_ratio``)."""
+        unit = cls(1.0, radius_mm, youngs_modulus_mpa, poissons_ratio, **other)
+        p = math.pi * half_width_mm**2 * unit.contact_modulus_mpa / (4.0 * unit.effective_radius_mm)
+        return cls(p, radius_mm, youngs_modulus_mpa, poissons_ratio, **other)
 
 
 def hertz_line_contact(load_per_length_n_per_mm: float, radius_mm: float, youngs_modulus_mpa: float,

@@ -29,6 +29,7 @@ is :class:`fem_reference.contact_setup.ContactSetup`; the inner linear solve
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -39,7 +40,7 @@ from .krylov import InnerSolver
 from .problem import AREA_DEFINITION_NITSCHE, FEContactProblem, FEContactResult, FEConvergenceError
 from .progress import SolveProgress
 
-#: The inner solves' forcing term on the iterative path (:meth:`_BorderedSystem._forcing`): its
+#: The inner solves' forcing term on the iterative path (:meth:`BorderedSystem._forcing`): its
 #: range while the contact set settles, and the tightest solve tried to finish Newton in one step.
 #: Measured on the subject-like ankle at 1.0 mm (P2): plain Eisenstat-Walker (forcing down to
 #: 1e-12) 8 Newton steps and 82 Krylov iterations; with these XX.
@@ -47,7 +48,7 @@ ETA_MAX = 1e-2
 ETA_SETTLING = 1e-3
 ETA_FINISH = 1e-5
 
-class _BorderedSystem:
+class BorderedSystem:
     """Residual, Jacobian (shell) and exact block preconditioner of the bordered Newton system."""
 
     def __init__(self, s: ContactSetup, uh: Any, ut: Any, E: list, forms: dict, prefix: str) -> None:
@@ -61,16 +62,14 @@ class _BorderedSystem:
         self.Ea = [e.x.array.copy() for e in E]
         self.load_free = s.gen_load
         self.delta = np.zeros(self.k)
-        # the bulk (linear) part of the Jacobian, assembled once; A: the Jacobian, same sparsity
-        self.A_bulk = s.m["fem_petsc"].assemble_matrix(forms["bulk"])
-        self.A_bulk.assemble()
-        self.A = self.A_bulk.duplicate(copy=False)
-        self.A.setOptionsPrefix(f"{prefix}A_")
-        self.inner = InnerSolver(s, self.A, prefix)
-        self.wu, self.zu = self.A.createVecs()
         offset = s.V.dofmap.index_map.local_range[0] * s.V.dofmap.index_map_bs
         self.cons_global = (offset + s.cons_owned).astype(s.m["PETSc"].IntType)
         self.E_vecs = [e.x.petsc_vec for e in E]
+        self.A_bulk: Any = None
+        self.A = self._create_matrix()
+        self.A.setOptionsPrefix(f"{prefix}A_")
+        self.inner = InnerSolver(s, self.A, prefix)
+        self.wu, self.zu = self.A.createVecs()
         self.K = [np.zeros(self.no) for _ in range(self.k)]
         self.G = [np.zeros(self.no) for _ in range(self.k)]
         self.Xs = [np.zeros(self.no) for _ in range(self.k)]
@@ -92,6 +91,25 @@ class _BorderedSystem:
         self.fnorm = self.fnorm_previous = self.fnorm_first = float("nan")
         self.eta = ETA_MAX  # this Newton step's
         self.krylov_per_step: list[int] = []  # Krylov iterations of each Newton step (iterative path)
+
+    @staticmethod
+    def forms(s: ContactSetup, bulk: Any, contact: Any, uh: Any, E: list, pressure: Any, nu: Any) -> dict:
+        """The compiled forms this system assembles from the residual R = ``bulk`` + ``contact``
+        (test function and trial direction of ``uh``'s space): the bulk part is linear in u, so
+        its matrix is assembled once (``bulk``: its Jacobian) and each Newton step assembles the
+        contact facets alone (``F``, ``J``). The borders K, G, H are products of the Jacobian
+        with the rigid modes (:meth:`_assemble_jacobian`)."""
+        fem, ufl = s.m["fem"], s.m["ufl"]
+        du = ufl.TrialFunction(s.V)
+        return {"bulk": fem.form(ufl.derivative(bulk, uh, du)), "F": fem.form(contact),
+                "J": fem.form(ufl.derivative(contact, uh, du))}
+
+    def _create_matrix(self) -> Any:
+        """The PETSc matrix A the Jacobian is assembled into: the bulk's sparsity (the contact
+        facets' couplings are within their cells). Assembles the bulk matrix ``A_bulk``."""
+        self.A_bulk = self.s.m["fem_petsc"].assemble_matrix(self.f["bulk"])
+        self.A_bulk.assemble()
+        return self.A_bulk.duplicate(copy=False)
 
     # ---- helpers ----
     def dot(self, a: np.ndarray, b: np.ndarray) -> float:
@@ -145,10 +163,15 @@ class _BorderedSystem:
             self.error = exc
             raise
 
+    def _residual_vector(self) -> np.ndarray:
+        """The owned residual R(u) at the current state (before the bonded rows are set): the
+        contact facets' part assembled, the bulk part A_bulk u."""
+        self.A_bulk.mult(self.uh.x.petsc_vec, self.zu)
+        return self.s.vector_owned(self.f["F"]) + self.zu.getArray(readonly=True)
+
     def _residual(self, X: Any, F: Any) -> None:
         self.set_state(X)
-        self.A_bulk.mult(self.uh.x.petsc_vec, self.zu)  # the bulk part, linear in u
-        b = self.s.vector_owned(self.f["F"]) + self.zu.getArray(readonly=True)
+        b = self._residual_vector()
         r = np.array([self.dot(self.Eo[j], b) for j in range(self.k)]) - self.load_free
         b[self.s.cons_owned] = self.ut.x.array[self.s.cons_owned]
         self.join(F, b, r)
@@ -319,17 +342,30 @@ class _BorderedSystem:
         Python preconditioner context's ``destroy(pc)`` when the PC goes.)"""
         self.inner.destroy()
         self.A.destroy()
-        self.A_bulk.destroy()
+        if self.A_bulk is not None:
+            self.A_bulk.destroy()
         for vec in (self.wu, self.zu, *self.X_vecs, *self.L_vecs):
             vec.destroy()
 
 
+#: The set-up and bordered system of an obstacle that is not rigid, by its type (the rigid ones
+#: use :class:`ContactSetup` and :class:`BorderedSystem`); registered by the module that solves it:
+#: :class:`fem_reference.problem.DeformableCounterpart` by :mod:`fem_reference.two_body`.
+OBSTACLE_SOLVERS: dict[type, tuple[type, type]] = {}
+
+
 class _ShellContext:
-    def __init__(self, system: _BorderedSystem) -> None:
+    def __init__(self, system: BorderedSystem) -> None:
         self.system = system
 
     def mult(self, mat: Any, x: Any, y: Any) -> None:
         self.system.mult(mat, x, y)
+
+
+#: Solves of a problem whose pairing follows the slip (a deformable F,
+#: :meth:`fem_reference.two_body.TwoBodySetup.moved_pairing`) before the pairing is left as it is
+#: (with a warning); 2-3 were needed on the verification cases.
+MAX_PAIRING_PASSES = 10
 
 
 def solve_contact(problem: FEContactProblem, comm: Any = None, *,
@@ -337,17 +373,45 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     """Solve ``problem`` by Nitsche contact with force control (bordered semi-smooth Newton).
 
     ``progress``: progress lines from inside the solve (:mod:`fem_reference.progress`); in
-    parallel give one on every rank (rank 0 writes).
+    parallel give one on every rank (rank 0 writes). Against a deformable F whose pairing
+    follows the slip, the problem is solved again from the last solution with the pairing of the
+    deformed configuration until it stops moving (the result's Newton iterations and wall time
+    are those of all passes).
 
     Raises :class:`FEConvergenceError` when SNES does not converge or the converged solution
     does not balance the load to ``problem.solver.force_balance_rtol``.
     """
+    started = time.perf_counter()
+    result = _solve(problem, comm, progress)
+    newton, passes = result.newton_iterations, 0
+    while (moved := result.fields["setup"].moved_pairing(result.fields["solution"])) is not None:
+        if passes == MAX_PAIRING_PASSES:
+            result.warnings.append(f"the pairing of the two layers still moved after {passes} passes: it is left where "
+                                   "the last one put it")
+            break
+        warm = replace(problem, obstacle=moved, initial_field=result.fields["ut_owned"],
+                       initial_translation_mm=result.bone_displacement_mm, initial_rotation_rad=result.bone_rotation_rad)
+        try:
+            result = _solve(warm, comm, progress)
+        except FEConvergenceError:  # the last pass's solution was a bad start: start afresh
+            result = _solve(replace(problem, obstacle=moved), comm, progress)
+        newton, passes = newton + result.newton_iterations, passes + 1
+    result.newton_iterations = newton
+    result.wall_time_s = time.perf_counter() - started
+    if not keep_fields:
+        result.fields = None
+    return result
+
+
+def _solve(problem: FEContactProblem, comm: Any, progress: SolveProgress | None) -> FEContactResult:
+    """One solve of :func:`solve_contact` (its fields kept)."""
     t_start = time.perf_counter()
     m = fe_modules()
     fem, ufl, PETSc, MPI = m["fem"], m["ufl"], m["PETSc"], m["MPI"]
     comm = MPI.COMM_WORLD if comm is None else comm
     element = problem.resolved_element()
-    s = ContactSetup(problem, comm, element)
+    setup, system_class = OBSTACLE_SOLVERS.get(type(problem.obstacle), (ContactSetup, BorderedSystem))
+    s = setup(problem, comm, element)
     warnings: list[str] = []
     if element == "P1" and problem.poissons_ratio >= 0.49:
         warnings.append(f"P1 elements lock at nu = {problem.poissons_ratio}: displacements are "
@@ -356,7 +420,6 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     uh = fem.Function(s.V, name="displacement")
     ut = fem.Function(s.V)
     w = ufl.TestFunction(s.V)
-    dw = ufl.TrialFunction(s.V)
     E = s.rigid_modes()
 
     if element == "TH":
@@ -390,17 +453,13 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     theta = fem.Constant(s.mesh, float(problem.nitsche.theta))
     sn_u = ufl.dot(ufl.dot(sig_u, nu), nu)
     sn_v = ufl.dot(ufl.dot(sig_v, nu), nu)
-    un, vn = -ufl.dot(u, nu), -ufl.dot(v, nu)  # along the body's outward normal n = -nu
+    # along the body's outward normal n = -nu (against a deformable F: relative to F's displacement)
+    un, vn = -ufl.dot(s.relative_displacement(u), nu), -ufl.dot(v, nu)
     pressure = ufl.max_value(0.0, gamma * (un - gap) - sn_u)
     contact = (-theta / gamma * sn_u * sn_v - theta / gamma * pressure * sn_v + pressure * vn) * s.ds_c
-    # the residual F = a_int + contact and its Jacobian: the bulk part a_int is linear, so its matrix
-    # is assembled once and each Newton step assembles the contact facets alone; the borders K, G, H
-    # are products of the Jacobian with the rigid modes (_BorderedSystem._assemble_jacobian)
-    forms = {"bulk": fem.form(ufl.derivative(a_int, uh, dw)), "F": fem.form(contact),
-             "J": fem.form(ufl.derivative(contact, uh, dw))}
-
+    forms = system_class.forms(s, a_int, contact, uh, E, pressure, nu)
     prefix = options_prefix("fecontact")
-    system = _BorderedSystem(s, uh, ut, E, forms, prefix)
+    system = system_class(s, uh, ut, E, forms, prefix)
     load_norm = float(np.linalg.norm(s.load))
     k = s.k
     nloc = s.n_owned + (k if s.comm.rank == 0 else 0)
@@ -534,11 +593,8 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     area = s.comm.allreduce(float(loads.assemble(1e-8 * max(peak, 1e-300))[:nq, 1].sum()), op=MPI.SUM)
     total_p = s.comm.allreduce(float(load_vec[:nq].sum()), op=MPI.SUM)
     mean_p = total_p / area if area > 0 else 0.0
-    fields = None
-    if keep_fields:
-        fields = {"mesh": s.mesh, "facet_tags": s.facet_tags, "solution": uh, "pressure": pressure,
-                  "displacement": u, "space": s.V, "setup": s,
-                  "ut_owned": system.ut.x.array[: s.n_owned].copy()}
+    fields = {"mesh": s.mesh, "facet_tags": s.facet_tags, "solution": uh, "pressure": pressure,
+              "displacement": u, "space": s.V, "setup": s, "ut_owned": system.ut.x.array[: s.n_owned].copy()}
     result = s.result(
         method="nitsche", area_definition=AREA_DEFINITION_NITSCHE, translation_mm=s.dirs.T @ delta[:s.kt],
         points_mm=x_all, pressure_mpa=p_all, peak_pressure_mpa=peak, mean_pressure_mpa=mean_p,
@@ -587,7 +643,7 @@ class _NodalLoads:
         return self.s.vector_owned(self.form).reshape(-1, 2)
 
 
-def _monitor_progress(snes: Any, system: _BorderedSystem, s: ContactSetup, pressure: Any, progress: SolveProgress) -> None:
+def _monitor_progress(snes: Any, system: BorderedSystem, s: ContactSetup, pressure: Any, progress: SolveProgress) -> None:
     """Newton and (iterative path) Krylov monitors writing ``progress`` lines (rank 0).
 
     The contact nodes are the P1 nodes of the contact surface whose lumped pressure is positive
@@ -619,7 +675,7 @@ def _monitor_progress(snes: Any, system: _BorderedSystem, s: ContactSetup, press
 
 def _destroy(*objs: Any) -> None:
     for o in objs:
-        if isinstance(o, _BorderedSystem):
+        if isinstance(o, BorderedSystem):
             o.release()
         elif o is not None:
             o.destroy()

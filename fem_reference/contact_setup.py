@@ -63,6 +63,7 @@ class ContactSetup:
         self.mesh = mesh = data.mesh
         self.comm = mesh.comm
         self.facet_tags = data.facet_tags
+        self.cell_tags = data.cell_tags
         if self.facet_tags is None:
             raise ValueError("the FE mesh needs facet tags (bonded and contact faces)")
         self.tdim = mesh.topology.dim
@@ -72,7 +73,7 @@ class ContactSetup:
         mesh.topology.create_connectivity(self.fdim, self.tdim)
         self.element = element
         self.degree = 1 if element == "P1" else 2
-        self.bonded_facets = self._facets(problem.bonded_tag, "bonded")
+        self.bonded_facets = self._bonded_facets()
         self.contact_facets = self._facets(problem.contact_tag, "contact")
 
         if element == "TH":
@@ -89,9 +90,7 @@ class ContactSetup:
         self.n_owned = im.size_local * self.V.dofmap.index_map_bs
         self.n_global = im.size_global * self.V.dofmap.index_map_bs
 
-        lam, mu = problem.lame()
-        self.lam = fem.Constant(mesh, float(lam))
-        self.mu = fem.Constant(mesh, float(mu))
+        self.lam, self.mu = self._material()
         self.dirs = problem.free_directions()  # (k_t, 3)
         self.rot = problem.free_rotation_axes()  # (k_r, 3), about the reference point G
         self.kt = len(self.dirs)
@@ -132,6 +131,16 @@ class ContactSetup:
         self.cons_owned = np.unique(np.concatenate(owned)).astype(np.int64)
         self.cons_all = np.unique(np.concatenate(allc)).astype(np.int64)
 
+    def _bonded_facets(self) -> np.ndarray:
+        """The facets held by the bone (u~ = 0 there)."""
+        return self._facets(self.problem.bonded_tag, "bonded")
+
+    def _material(self) -> tuple[Any, Any]:
+        """Lame's (lambda, mu) in MPa as UFL coefficients."""
+        fem = self.m["fem"]
+        lam, mu = self.problem.lame()
+        return fem.Constant(self.mesh, float(lam)), fem.Constant(self.mesh, float(mu))
+
     def _facets(self, tag: int, what: str) -> np.ndarray:
         facets = self.facet_tags.find(tag)
         n = self.comm.allreduce(int(np.sum(facets < self.mesh.topology.index_map(self.fdim)
@@ -170,6 +179,15 @@ class ContactSetup:
         (f.sub(0) if self.element == "TH" else f).interpolate(values)
         f.x.scatter_forward()
         return f
+
+    def relative_displacement(self, u: Any) -> Any:
+        """The displacement the contact condition measures: ``u`` against a rigid obstacle (a
+        deformable one subtracts its own, :class:`fem_reference.two_body.TwoBodySetup`)."""
+        return u
+
+    def moved_pairing(self, uh: Any) -> Any:
+        """A rigid obstacle's pairing never moves: None (see :meth:`fem_reference.two_body.TwoBodySetup.moved_pairing`)."""
+        return None
 
     def rigid_modes(self) -> list:
         """The fields of the rigid unknowns: free translations, then free rotations."""
@@ -247,7 +265,7 @@ class ContactSetup:
         half that of a Winkler bed (springs E' / L per unit area, L = extent of the body along
         the load) carrying the load (:meth:`_winkler_penetration`). Newton steps are damped so
         that the penetration changes by at most a factor 4 per step
-        (:meth:`fem_reference.contact._BorderedSystem.step_limit`).
+        (:meth:`fem_reference.contact.BorderedSystem.step_limit`).
         """
         fem, ufl, MPI = self.m["fem"], self.m["ufl"], self.m["MPI"]
         obs = self.problem.obstacle

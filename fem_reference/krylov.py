@@ -116,7 +116,7 @@ def set_inner_options(ksp: Any, options: dict[str, str]) -> list[str]:
 
 def _gmres(options: dict[str, str]) -> dict[str, str]:
     """Right-preconditioned GMRES: its residual norm is the unpreconditioned one the tolerances
-    and the Newton step's accuracy (:meth:`fem_reference.contact._BorderedSystem.apply`) are on."""
+    and the Newton step's accuracy (:meth:`fem_reference.contact.BorderedSystem.apply`) are on."""
     return {"ksp_type": "gmres", "ksp_gmres_restart": str(GMRES_RESTART), "ksp_pc_side": "right", **options}
 
 
@@ -256,7 +256,7 @@ def krylov_fieldsplit(ksp: Any, s: ContactSetup) -> tuple[PMultigrid, list, list
     is_u.setBlockSize(3)
     is_p = PETSc.IS().createGeneral((offset + p_map[:np_owned]).astype(PETSc.IntType), comm=s.comm)
     p, q = ufl.TrialFunction(Q), ufl.TestFunction(Q)
-    scale = fem.Constant(s.mesh, -(1.0 / float(s.mu.value) + 1.0 / float(s.lam.value)))
+    scale = -(1.0 / s.mu + 1.0 / s.lam)  # UFL: constants, or per-cell values (two layers)
     Mp = s.m["fem_petsc"].assemble_matrix(fem.form(scale * p * q * s.dx))
     Mp.assemble()
     pc = ksp.getPC()

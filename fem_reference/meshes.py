@@ -247,3 +247,186 @@ def cylinder_layer_quarter(comm: Any, *, bone_radius: float = 20.0, thickness: f
         g.model.mesh.generate(3)
 
     return _gmsh_to_dolfinx(comm, gmsh, build)
+
+
+# --------------------------------------------------------------------------------------------
+# two deformable layers (docs/method.md#two-deformable-layers): paired solids, numpy arrays
+# (geometries.fe_solids.FESolid; to_dolfinx() makes the mesh, DeformableCounterpart.from_solid
+# the pairing)
+# --------------------------------------------------------------------------------------------
+
+
+def _retag_planes(solid: Any, planes: list[tuple[int, int, float]]) -> Any:
+    """``solid`` with its free faces lying in a plane x_axis = value retagged (tag, axis, value)."""
+    from dataclasses import replace
+
+    tags = solid.facet_tags.copy()
+    x = solid.points_mm[solid.facets]
+    scale = float(np.ptp(solid.points_mm, axis=0).max())
+    for tag, axis, value in planes:
+        on = np.all(np.abs(x[:, :, axis] - value) <= 1e-9 * scale, axis=1)
+        tags[on & (tags == FREE_TAG)] = tag
+    return replace(solid, facet_tags=tags)
+
+
+def two_layer_stack(lx: float, ly: float, mobile_thickness: float, fixed_thickness: float,
+                    divisions: tuple[int, int], layers: tuple[int, int], gap: float = 0.0) -> Any:
+    """Two flat layers, M's on top of F's, their contact faces paired node to node.
+
+    F: [0, lx] x [0, ly] x [-fixed_thickness, 0], bonded at the bottom, contact face z = 0. M:
+    z in [gap, gap + mobile_thickness], bonded at the top, contact face z = gap. Both from one
+    triangulated rectangle of ``divisions`` squares (two triangles each) extruded in ``layers``
+    (M's, F's) element layers; lateral faces on rollers (tag 4 on x = 0, lx, tag 5 on y = 0, ly):
+    each layer is laterally confined, p h / E' each."""
+    from geometries.fe_solids import extrude, pair_solids
+
+    nx, ny = divisions
+    gx, gy = np.meshgrid(np.linspace(0.0, lx, nx + 1), np.linspace(0.0, ly, ny + 1), indexing="ij")
+    idx = np.arange((nx + 1) * (ny + 1)).reshape(nx + 1, ny + 1)
+    a, b, c, d = (q.ravel() for q in (idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]))
+    up = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])  # normals +z
+    flat = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+    ez = np.tile([0.0, 0.0, 1.0], (len(flat), 1))
+    top = gap + mobile_thickness
+    mobile = extrude("mobile-layer", flat + [0.0, 0.0, top], up[:, ::-1], -ez, np.full(len(flat), mobile_thickness), layers[0])
+    fixed = extrude("fixed-layer", flat - [0.0, 0.0, fixed_thickness], up, ez, np.full(len(flat), fixed_thickness), layers[1])
+    planes = [(TAG_ROLLER_X, 0, 0.0), (TAG_ROLLER_X, 0, lx), (TAG_ROLLER_Y, 1, 0.0), (TAG_ROLLER_Y, 1, ly)]
+    mobile, fixed = _retag_planes(mobile, planes), _retag_planes(fixed, planes)
+    n = len(flat)
+    partner = np.full(len(mobile.points_mm), -1, dtype=np.int64)
+    partner[layers[0] * n:] = layers[1] * n + np.arange(n)  # the contact faces: the last layer of each
+    return pair_solids(mobile, fixed, partner, name="two-layer-stack")
+
+
+def _quarter_disk(gmsh: Any, radius: float, slice_thickness: float, size_contact: float, size_far: float,
+                  fine_radius: float, coarse_radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points and tetrahedra (gmsh, this rank) of the quarter disk x >= 0 of a cylinder of
+    ``radius`` whose axis runs along y through (0, ., radius): the arc from the bottom (0, 0, 0)
+    up to (R, 0, R), the diameter z = R; one element thick in y; element size ``size_contact``
+    within ``fine_radius`` of the bottom line, growing to ``size_far`` at ``coarse_radius``."""
+    geo = gmsh.model.geo
+    r = radius
+    centre, bottom, side = geo.addPoint(0, 0, r), geo.addPoint(0, 0, 0), geo.addPoint(r, 0, r)
+    arc = geo.addCircleArc(bottom, centre, side)
+    surf = geo.addPlaneSurface([geo.addCurveLoop([arc, geo.addLine(side, centre), geo.addLine(centre, bottom)])])
+    geo.extrude([(2, surf)], 0, slice_thickness, 0, numElements=[1], recombine=False)
+    geo.synchronize()
+    field = gmsh.model.mesh.field
+    dist = field.add("Distance")
+    field.setNumbers(dist, "PointsList", [bottom])
+    thr = field.add("Threshold")
+    for key, value in (("InField", dist), ("SizeMin", size_contact), ("SizeMax", size_far),
+                       ("DistMin", fine_radius), ("DistMax", coarse_radius)):
+        field.setNumber(thr, key, value)
+    field.setAsBackgroundMesh(thr)
+    gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+    gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+    gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+    gmsh.model.mesh.generate(3)
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
+    index[tags.astype(np.int64)] = np.arange(len(tags))
+    _, nodes = gmsh.model.mesh.getElementsByType(4)
+    tets = index[nodes.astype(np.int64).reshape(-1, 4)]
+    used = np.unique(tets)
+    remap = np.full(len(tags), -1, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    return coords.reshape(-1, 3)[used], remap[tets]
+
+
+def hertz_cylinder(comm: Any, *, radius: float, slice_thickness: float, size_contact: float, size_far: float,
+                   fine_radius: float, coarse_radius: float, contact_extent: float) -> Any:
+    """One elastic cylinder for Hertz line contact, plane strain (a one-element slice), as an
+    :class:`~geometries.fe_solids.FESolid` on every rank (built on rank 0).
+
+    The quarter disk x >= 0 of a cylinder of ``radius`` (axis along y at z = radius), touching
+    z = 0 at the origin: bonded on its diameter z = radius (tag 1), contact face the arc up to
+    x = ``contact_extent`` (tag 2), symmetry plane x = 0 (tag 4), plane-strain faces y = 0 and
+    y = ``slice_thickness`` (tag 5), the rest of the arc free (tag 3)."""
+    from geometries.fe_solids import FESolid, boundary_facets, tet_volumes
+
+    gmsh = _gmsh_start()
+    pts = tets = None
+    if comm.rank == 0:
+        saved = {k: gmsh.option.getNumber(k) for k in _GMSH_OPTIONS}
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add(f"fem_reference_{np.random.randint(1 << 30)}")
+        try:
+            pts, tets = _quarter_disk(gmsh, radius, slice_thickness, size_contact, size_far, fine_radius, coarse_radius)
+        finally:
+            gmsh.model.remove()
+            for k, v in saved.items():
+                gmsh.option.setNumber(k, v)
+    pts, tets = comm.bcast((pts, tets), root=0)
+    negative = tet_volumes(pts, tets) < 0
+    tets[negative] = tets[negative][:, [1, 0, 2, 3]]
+    facets = boundary_facets(tets)
+    x = pts[facets]
+    tol = 1e-9 * radius
+    tags = np.full(len(facets), FREE_TAG, dtype=np.int32)
+    on_arc = np.all(np.abs(np.hypot(x[:, :, 0], x[:, :, 2] - radius) - radius) <= 1e-6 * radius, axis=1)
+    slice_face = np.all(np.abs(x[:, :, 1]) <= tol, axis=1) | np.all(np.abs(x[:, :, 1] - slice_thickness) <= tol, axis=1)
+    tags[on_arc & ~slice_face & np.all(x[:, :, 0] <= contact_extent + tol, axis=1)] = CONTACT_TAG
+    tags[np.all(np.abs(x[:, :, 2] - radius) <= tol, axis=1)] = BONDED_TAG
+    tags[np.all(np.abs(x[:, :, 0]) <= tol, axis=1)] = TAG_ROLLER_X
+    tags[slice_face] = TAG_ROLLER_Y
+    return FESolid(pts, tets, facets, tags, name="hertz-cylinder")
+
+
+def mirror_solid(solid: Any, axis: int = 2) -> Any:
+    """``solid``'s mirror image through the plane x_axis = 0 (same tags, points in the same order)."""
+    from geometries.fe_solids import FESolid
+
+    points = solid.points_mm.copy()
+    points[:, axis] *= -1.0
+    # a reflection turns every tetrahedron and facet inside out: two vertices swapped right them
+    return FESolid(points, solid.tets[:, [1, 0, 2, 3]], solid.facets[:, [1, 0, 2]], solid.facet_tags.copy(),
+                   name=f"{solid.name}-mirror")
+
+
+def mirrored_pair(solid: Any, axis: int = 2) -> Any:
+    """``solid`` (M) and its mirror image through the plane x_axis = 0 (F), each contact-face
+    point paired with its mirror image (:func:`geometries.fe_solids.pair_solids`)."""
+    from geometries.fe_solids import pair_solids
+
+    partner = np.full(len(solid.points_mm), -1, dtype=np.int64)
+    contact = np.unique(solid.faces(CONTACT_TAG))
+    partner[contact] = contact
+    return pair_solids(solid, mirror_solid(solid, axis), partner, name=f"{solid.name}-pair")
+
+
+def cylinder_on_flat_layers(*, bone_radius: float, mobile_thickness: float, fixed_thickness: float,
+                            half_angle_deg: float, n_arc: int, arc_progression: float, slice_thickness: float,
+                            layers: tuple[int, int]) -> tuple[Any, Any]:
+    """A cylindrical layer on a flat one, plane strain (a one-element slice), as paired solids.
+
+    M: the layer of ``mobile_thickness`` on a bone cylinder of ``bone_radius`` (axis along y at
+    z = bone_radius + mobile_thickness), touching z = 0 at x = 0, its arc from the bottom up to
+    ``half_angle_deg`` in ``n_arc`` elements growing by ``arc_progression``. F: the flat layer
+    z in [-fixed_thickness, 0] under M's contact face, built by carrying M's contact
+    triangulation along M's normals (the springs' rays) onto z = 0. Tags: bonded 1 / 11,
+    contact 2 / 12, symmetry x = 0 tag 4, plane-strain faces tag 5, the ends free.
+    Returns (the paired solid, M's layer alone with the same tags)."""
+    from geometries.fe_solids import extrude, pair_solids
+
+    steps = arc_progression ** np.arange(n_arc)
+    angle = np.concatenate([[0.0], np.cumsum(steps) / steps.sum() * np.radians(half_angle_deg)])
+    na = len(angle)
+    centre = bone_radius + mobile_thickness
+    ring = np.column_stack([np.sin(angle), np.zeros(na), -np.cos(angle)])  # outward normals
+    bone = np.vstack([centre * np.array([0.0, 0.0, 1.0]) + bone_radius * ring,
+                      centre * np.array([0.0, 0.0, 1.0]) + bone_radius * ring + [0.0, slice_thickness, 0.0]])
+    normals = np.vstack([ring, ring])
+    i = np.arange(na - 1)
+    tris = np.concatenate([np.column_stack([i, i + na, i + 1]), np.column_stack([i + 1, i + na, i + 1 + na])])
+    mobile = extrude("cylinder-layer", bone, tris, normals, np.full(len(bone), mobile_thickness), layers[0])
+    nv = len(bone)
+    top = mobile.points_mm[layers[0] * nv:]
+    facing = top - (top[:, 2] / normals[:, 2])[:, None] * normals  # along M's normals onto z = 0
+    ez = np.tile([0.0, 0.0, 1.0], (nv, 1))
+    fixed = extrude("flat-layer", facing - fixed_thickness * ez, tris[:, ::-1], ez, np.full(nv, fixed_thickness), layers[1])
+    planes = [(TAG_ROLLER_X, 0, 0.0), (TAG_ROLLER_Y, 1, 0.0), (TAG_ROLLER_Y, 1, slice_thickness)]
+    mobile, fixed = _retag_planes(mobile, planes), _retag_planes(fixed, planes)
+    partner = np.full(len(mobile.points_mm), -1, dtype=np.int64)
+    partner[layers[0] * nv:] = layers[1] * nv + np.arange(nv)
+    return pair_solids(mobile, fixed, partner, name="cylinder-on-flat"), mobile

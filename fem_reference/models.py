@@ -12,6 +12,9 @@ A model builds, for one time point, the solid bonded to the mobile body M (a
 * ``layer`` (:class:`LayerModel`, twin of the ``gap`` laws): a uniform layer of
   ``cartilage.thickness_mm`` bonded to M; the initial gap to F comes from the geometry. One
   mesh for every pose.
+* ``two-layer`` (:class:`TwoLayerModel`, twin of the ``gap`` laws with cartilage on both bones):
+  M's layer as ``layer`` builds it and F's own, both elastic, in frictionless contact
+  (docs/method.md#two-deformable-layers); F's layer is built on M's contact face at F's pose.
 
 To add a model: one subclass of :class:`FEModel` here, added to :data:`FE_MODELS`; a contact law
 names it as its ``fe_twin``.
@@ -20,6 +23,7 @@ names it as its ``fe_twin``.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
@@ -27,7 +31,7 @@ import numpy as np
 
 from edem.raycast import RayCaster
 from edem.springs import Placement, spring_geometry
-from fem_reference.problem import RigidSurface
+from fem_reference.problem import DeformableCounterpart, RigidSurface
 from geometries import fe_solids
 from geometries.errors import SolverError
 
@@ -40,6 +44,9 @@ class FEGeometry:
     obstacle: RigidSurface
     key: tuple  # equal keys -> identical mesh and obstacle
     warnings: list[str]
+    #: (n, 3) per contact-face point (contact_surface's order) where its column crosses M's scene
+    #: surface (FEModel.mobile_points_mm; fem_reference.scene_run sets it)
+    mobile_points_mm: np.ndarray | None = None
 
 
 def contact_surface(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -63,6 +70,8 @@ class FEModel(ABC):
     mesh_follows_pose: ClassVar[bool] = True
     #: whether the previous time point's bone translation, scaled with the load, is a good start
     warm_start_scales_with_load: ClassVar[bool] = True
+    #: elastic solids in the mesh, each about the size of the one on M (for the size estimate)
+    bodies: ClassVar[int] = 1
 
     @abstractmethod
     def build(self, scene: Any, mesh_size_mm: float, layers: int | None, caster: RayCaster, f_pose: Placement,
@@ -90,6 +99,12 @@ class FEModel(ABC):
     def spring_length_mm(self, thickness_mm: np.ndarray, gap_mm: np.ndarray) -> np.ndarray:
         """(n,) the spring length a contact-surface point stands for."""
         ...
+
+    def mobile_points_mm(self, scene: Any, solid: Any, used: np.ndarray) -> np.ndarray:
+        """(n, 3) where each contact-surface point's column (``used``: solid indices) crosses M's
+        scene surface, the surface the springs live on: the comparisons measure the FE's area and
+        pressure there. By default the bottom of the column (M's surface is the bonded face)."""
+        return solid.points_mm[solid.bottom_vertex[used]]
 
 
 def _spring_lengths(scene: Any, caster: RayCaster, f_pose: Placement) -> np.ndarray:
@@ -236,11 +251,24 @@ class LayerModel(FEModel):
         # the column under each contact point (uniform: t; measured: the vertex's thickness)
         return np.linalg.norm(points_mm - solid.points_mm[solid.bottom_vertex[used]], axis=1)
 
+    def mobile_points_mm(self, scene, solid, used):
+        return _layer_mobile_points_mm(scene, solid, used)
+
     def sizing_surface(self, scene, caster, f_pose):
         return scene.mobile.areas_mm2 > 0, _largest_thickness_mm(scene)
 
     def spring_length_mm(self, thickness_mm, gap_mm):
         return thickness_mm + gap_mm
+
+
+def _layer_mobile_points_mm(scene: Any, solid: Any, used: np.ndarray) -> np.ndarray:
+    """M's scene surface under the contact face of M's layer: the contact face itself where M's
+    scene surface is its articular surface (a bone mesh under it: the layer stands below it),
+    else the bone the layer stands on (the bonded face)."""
+    layers = scene.cartilage.layers
+    if layers is not None and layers.mobile.has_bone:
+        return solid.points_mm[used]
+    return solid.points_mm[solid.bottom_vertex[used]]
 
 
 def _largest_thickness_mm(scene: Any) -> float:
@@ -255,31 +283,251 @@ def scene_layer_solid(scene: Any, mesh_size_mm: float, n_layers: int | None) -> 
     and its bone (:func:`geometries.cartilage_solids.measured_layer_solid`), each vertex measured
     by the ray cast the springs' triangles are measured by (:func:`edem.thickness.measure_layer`,
     up to :data:`edem.thickness.BONE_SEARCH_MM`; where no bone lies below, the value M's unmeasured
-    springs carry), or M's uniform layer. F is rigid (:func:`fem_reference.settings.resolve_settings`
-    refuses a layer on it). The construction's repairs are issued as warnings (the run's notes)."""
+    springs carry), or M's uniform layer. The layer model takes F rigid (:func:`fem_reference.settings.resolve_settings`
+    refuses a layer on it); the two-layer model builds F's on this one's contact face. The
+    construction's repairs are issued as warnings (the run's notes)."""
     layers = scene.cartilage.layers
     if layers is None:
         return fe_solids.layer_solid(scene.mobile, float(scene.cartilage.thickness_mm), mesh_size_mm, n_layers)
     mobile = layers.mobile
     if not mobile.has_bone:
         return fe_solids.layer_solid(scene.mobile, float(mobile.thickness_mm.max()), mesh_size_mm, n_layers)
-    from edem.thickness import measure_layer
-    from geometries.cartilage_solids import measured_layer_solid
-
-    unmeasured = mobile.thickness_mm[~mobile.measured]
-    fallback = float(unmeasured.min()) if unmeasured.size else float(np.median(mobile.thickness_mm))
-
-    def thickness_at(vertices_mm: np.ndarray, inward: np.ndarray) -> np.ndarray:
-        depth, measured = measure_layer(vertices_mm, -inward, mobile.bone)
-        return np.where(measured, depth, fallback)
-
     import warnings as python_warnings
 
-    solid, notes = measured_layer_solid(scene.mobile, scene.mobile.areas_mm2 > 0, thickness_at, mesh_size_mm, n_layers)
+    from geometries.cartilage_solids import measured_layer_solid
+
+    solid, notes = measured_layer_solid(scene.mobile, scene.mobile.areas_mm2 > 0, _measured_thickness(mobile, mobile.bone),
+                                        mesh_size_mm, n_layers)
     for note in notes:  # collected by _build_solid as the construction's notes
         python_warnings.warn(note, stacklevel=2)
     return solid
 
 
+def _measured_thickness(side: Any, bone: Any) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """``thickness_at(vertices (k, 3) mm, inward directions (k, 3)) -> (k,) mm`` of a side's layer
+    (:class:`edem.thickness.SideLayer`): measured to ``bone`` (placed as the vertices are) by the
+    ray cast the springs' triangles are measured by (:func:`edem.thickness.measure_layer`), and
+    where no bone lies below, the value the side's unmeasured triangles carry."""
+    from edem.thickness import measure_layer
+    from geometries.triangle_kernels import nearby_distance_mm
+
+    unmeasured = side.thickness_mm[~side.measured]
+    fallback = float(unmeasured.min()) if unmeasured.size else float(np.median(side.thickness_mm))
+    on_bone_mm = 1e-9 * float(np.ptp(bone.vertices_mm, axis=0).max())  # round-off of the coordinates
+
+    def thickness_at(vertices_mm: np.ndarray, inward: np.ndarray) -> np.ndarray:
+        depth, measured = measure_layer(vertices_mm, -inward, bone)
+        # a vertex on the layer's margin, where a tapered layer meets its bone, has no depth for
+        # the ray to find: its thickness is 0, not the fallback (measured_layer_solid ends the solid there)
+        on_bone = np.zeros(len(vertices_mm), bool)
+        on_bone[~measured] = nearby_distance_mm(vertices_mm[~measured], bone.vertices_mm, bone.triangles) <= on_bone_mm
+        return np.where(measured, depth, np.where(on_bone, 0.0, fallback))
+
+    return thickness_at
+
+
+def column_directions(solid: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(unit directions (k, 3), their points (k,)) of the columns under the solid's contact face,
+    bone to contact face: the springs' rays through its points. A column of no height (a layer
+    tapered to zero on its bone, :func:`geometries.fe_solids.extrude`) takes the contact face's
+    vertex normal."""
+    points, triangles, top = contact_surface(solid)
+    column = solid.points_mm[top] - solid.points_mm[solid.bottom_vertex[top]]
+    length = np.linalg.norm(column, axis=1)
+    direction = fe_solids.vertex_normals(points, triangles)
+    tall = length > 0.0
+    direction[tall] = column[tall] / length[tall, None]
+    return direction, top
+
+
+def _facing_fixed(scene: Any, mobile: Any, f_pose: Placement) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Callable]:
+    """Where the columns of M's layer (``mobile``), carried on as the springs' rays, meet F's
+    articular surface at ``f_pose`` (F's scene surface with ``fixed_bone``; otherwise F's bone
+    offset by ``fixed_thickness_mm``), looking ``max_spring_length_mm`` both ways.
+
+    Returns M's contact-face points (k,), their unit column directions (k, 3), the points met
+    (k, 3; NaN where the ray misses), F's articular triangle met (k,; -1) and F's
+    ``thickness_at(vertices, inward) -> mm`` there (:func:`_measured_thickness` to F's bone at
+    ``f_pose``, or the uniform layer)."""
+    from geometries.cartilage_solids import offset_surface
+
+    fixed = scene.cartilage.layers.fixed
+    articular = scene.fixed if fixed.has_bone else offset_surface(scene.fixed, float(fixed.thickness_mm.max()))
+    direction, top = column_directions(mobile)
+    rotation, translation = f_pose.affine()
+    hits = RayCaster(articular.vertices_mm, articular.triangles).cast(
+        mobile.points_mm[top], direction, float(scene.cartilage.max_spring_length_mm), rotation=rotation, translation=translation)
+    ok = np.isfinite(hits.spring_length_mm)
+    points = np.full((len(top), 3), np.nan)
+    points[ok] = mobile.points_mm[top[ok]] + hits.spring_length_mm[ok, None] * direction[ok]
+    if fixed.has_bone:  # F's bone where F is at this time point
+        thickness_at = _measured_thickness(fixed, replace(fixed.bone, vertices_mm=f_pose.points(fixed.bone.vertices_mm)))
+    else:
+        def thickness_at(vertices_mm: np.ndarray, inward: np.ndarray) -> np.ndarray:
+            return np.full(len(vertices_mm), float(fixed.thickness_mm.max()))
+    return top, direction, points, np.where(ok, hits.triangle, -1), thickness_at
+
+
+def fixed_has_cartilage(scene: Any) -> bool:
+    """Whether the scene gives F a cartilage layer of its own (``[geometry] fixed_bone`` or
+    ``[cartilage] fixed_thickness_mm > 0``)."""
+    layers = scene.cartilage.layers
+    return layers is not None and (layers.fixed.has_bone or float(layers.fixed.thickness_mm.max()) > 0.0)
+
+
+class TwoLayerModel(FEModel):
+    """M's layer (as :class:`LayerModel` builds it) and F's, both elastic, each bonded to its bone,
+    in frictionless contact (docs/method.md#two-deformable-layers).
+
+    F's layer is built on M's contact face: each of its points is carried along its column (M's
+    smoothed normal, the springs' ray) onto F's articular surface at the time point's pose (F's
+    scene surface with ``fixed_bone``; otherwise F's bone offset by ``fixed_thickness_mm``), and F's
+    columns go from there down F's smoothed normals to its bone (measured, or the uniform
+    thickness) (:func:`geometries.cartilage_solids.opposing_layer_solid`). The rays look as far as
+    the springs' (``max_spring_length_mm``, both ways); M's contact triangles whose rays miss F
+    become free faces. Both layers have the scene's cartilage."""
+
+    name = "two-layer"
+    what = "twin of the gap laws with cartilage on both bones"
+    needs_thickness = True
+    warm_start_scales_with_load = False
+    bodies = 2
+
+    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
+        key = ("two-layer", pose_key)
+        warnings: list[str] = []
+        if "mobile" not in cache:
+            cache["mobile"], cache["mobile_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers))
+            warnings += cache.pop("mobile_notes")
+        if cache.get("key") != key:
+            solid, notes = _build_solid("two-layer solid", lambda: self._paired(scene, cache["mobile"], f_pose, layers))
+            cache.update(key=key, solid=solid)
+            warnings += notes
+        solid = cache["solid"]
+        counterpart = DeformableCounterpart.from_solid(solid, float(scene.cartilage.youngs_modulus_mpa),
+                                                       float(scene.cartilage.poissons_ratio))
+        pts, _, _ = contact_surface(solid)
+        gap, _ = counterpart.gap_and_normal(pts)
+        overlap = float(-gap.min()) if len(gap) else 0.0
+        if overlap > 1e-9 * float(scene.cartilage.max_spring_length_mm):
+            warnings.append(f"the two layers overlap by up to {overlap:.3g} mm ({int(np.sum(gap < 0))} contact-surface "
+                            "nodes): they start pre-compressed")
+        return FEGeometry(solid, counterpart, key, warnings)
+
+    @staticmethod
+    def _paired(scene: Any, mobile: Any, f_pose: Placement, n_layers: int | None) -> Any:
+        """M's layer and F's built on its contact face (F at ``f_pose``); the build's notes are
+        issued as warnings (collected by :func:`_build_solid`)."""
+        from geometries.cartilage_solids import opposing_layer_solid
+
+        top, _direction, points, _triangle, thickness_at = _facing_fixed(scene, mobile, f_pose)
+        facing = np.full_like(mobile.points_mm, np.nan)
+        facing[top] = points
+
+        import warnings as python_warnings
+
+        solid, notes = opposing_layer_solid(mobile, facing, thickness_at, n_layers)
+        for note in notes:  # collected by _build_solid as the construction's notes
+            python_warnings.warn(note, stacklevel=2)
+        return solid
+
+    def reach(self, scene, gap_mm, facing):
+        t = _largest_thickness_mm(scene) + float(scene.cartilage.layers.fixed.thickness_mm.max())
+        g0 = float(gap_mm[facing].min()) if facing.any() else 0.0
+        return facing & (gap_mm <= max(g0, 0.0) + 0.5 * t)
+
+    def sizing_surface(self, scene, caster, f_pose):
+        # F's layer stands on M's contact face: as many columns as M's (bodies = 2), the thicker layer's
+        return scene.mobile.areas_mm2 > 0, max(_largest_thickness_mm(scene), float(scene.cartilage.layers.fixed.thickness_mm.max()))
+
+    def thickness_mm(self, scene, solid, used, points_mm):
+        # both columns: M's under the contact point and F's under its partner
+        x, bottom, partner = solid.points_mm, solid.bottom_vertex, solid.partner[used]
+        return np.linalg.norm(points_mm - x[bottom[used]], axis=1) + np.linalg.norm(x[partner] - x[bottom[partner]], axis=1)
+
+    def mobile_points_mm(self, scene, solid, used):
+        return _layer_mobile_points_mm(scene, solid, used)
+
+    def spring_length_mm(self, thickness_mm, gap_mm):
+        return thickness_mm + gap_mm
+
+
+class LumpedLayerModel(FEModel):
+    """Both layers summed into one on M's bone, against F's bone taken rigid: the FE of the lumped
+    layer (``[cartilage] thin_layer_stack = "lumped"``), the reference of the lumping error
+    (docs/method.md#two-deformable-layers).
+
+    Each column of M's layer (as :class:`LayerModel` builds it) goes on from M's bone along its
+    direction for t_M + t_F, t_F F's layer along the same line: from where the column, carried on
+    as the springs' ray, meets F's articular surface on to F's bone (measured, or F's uniform
+    layer; where it meets no F, F's uniform layer, or nothing for a measured F, whose cartilage
+    ends at its margin). So the lumped layer's face stands t_F beyond M's articular surface, its
+    gap to F's bone along the column is the articular surfaces' gap (the springs' h_b - T), and it
+    touches F's bone where the two layers touch. One material (the scene's), bonded on M's bone
+    only, the other face free against F's bone."""
+
+    name = "lumped"
+    what = "both layers summed into one on M, F's bone rigid (the lumped layer's twin)"
+    needs_thickness = True
+    warm_start_scales_with_load = False
+
+    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
+        key = ("lumped", pose_key)
+        warnings: list[str] = []
+        if "mobile" not in cache:
+            cache["mobile"], cache["mobile_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers))
+            warnings += cache.pop("mobile_notes")
+        if cache.get("key") != key:
+            (solid, on_mobile), _ = _build_solid("lumped layer", lambda: self._summed(scene, cache["mobile"], f_pose, mesh_size_mm, layers))
+            cache.update(key=key, solid=solid, on_mobile=on_mobile)
+        fixed = scene.cartilage.layers.fixed
+        bone = fixed.bone if fixed.has_bone else scene.fixed  # without a bone mesh F's scene surface is its bone
+        bone_obstacle = RigidSurface(f_pose.points(bone.vertices_mm), bone.triangles, candidates=16)
+        pts, _, _ = contact_surface(cache["solid"])
+        gap, _ = bone_obstacle.gap_and_normal(pts)
+        overlap = float(-gap.min()) if len(gap) else 0.0
+        if overlap > 1e-9 * float(scene.cartilage.max_spring_length_mm):
+            warnings.append(f"the lumped layer overlaps F's bone by up to {overlap:.3g} mm ({int(np.sum(gap < 0))} contact-surface "
+                            "nodes): it starts pre-compressed")
+        return FEGeometry(cache["solid"], bone_obstacle, key, warnings, cache["on_mobile"])
+
+    @staticmethod
+    def _summed(scene: Any, mobile: Any, f_pose: Placement, mesh_size_mm: float, n_layers: int | None) -> tuple[Any, np.ndarray]:
+        """The columns of M's layer lengthened by F's thickness where they meet F (the class
+        docstring), and per point of its contact face (contact_surface's order) where its column
+        crosses M's scene surface: t_M up from M's bone with a bone mesh (M's articular surface),
+        else the bone."""
+        top, direction, points, triangle, thickness_at = _facing_fixed(scene, mobile, f_pose)
+        fixed = scene.cartilage.layers.fixed
+        t_fixed = np.full(len(top), 0.0 if fixed.has_bone else float(fixed.thickness_mm.max()))
+        hit = triangle >= 0
+        t_fixed[hit] = thickness_at(points[hit], direction[hit])  # on along the ray, through F's layer to its bone
+        points_mm, triangles, _ = contact_surface(mobile)  # (its points are ``top``, in that order)
+        bone = mobile.points_mm[mobile.bottom_vertex[top]]
+        total = np.linalg.norm(points_mm - bone, axis=1) + t_fixed
+        size = mesh_size_mm if mesh_size_mm is not None else fe_solids.mean_edge(points_mm, triangles)
+        solid = fe_solids.extrude("lumped-layer", bone, triangles, direction, total, fe_solids.layers_for(n_layers, float(total.max()), size))
+        from scipy.spatial import cKDTree
+
+        face, _, _ = contact_surface(solid)
+        _, column = cKDTree(bone + total[:, None] * direction).query(face)  # the same floats: each face point's column
+        on_mobile = points_mm if scene.cartilage.layers.mobile.has_bone else bone
+        return solid, on_mobile[column]
+
+    def reach(self, scene, gap_mm, facing):
+        t = _largest_thickness_mm(scene) + float(scene.cartilage.layers.fixed.thickness_mm.max())
+        g0 = float(gap_mm[facing].min()) if facing.any() else 0.0
+        return facing & (gap_mm <= max(g0, 0.0) + 0.5 * t)
+
+    def sizing_surface(self, scene, caster, f_pose):
+        return scene.mobile.areas_mm2 > 0, _largest_thickness_mm(scene) + float(scene.cartilage.layers.fixed.thickness_mm.max())
+
+    def thickness_mm(self, scene, solid, used, points_mm):
+        return np.linalg.norm(points_mm - solid.points_mm[solid.bottom_vertex[used]], axis=1)
+
+    def spring_length_mm(self, thickness_mm, gap_mm):
+        return thickness_mm + gap_mm
+
+
 #: every FE model by name (``[fe] model``, ``edem fe --model``)
-FE_MODELS: dict[str, FEModel] = {m.name: m for m in (SlabModel(), LayerModel())}
+FE_MODELS: dict[str, FEModel] = {m.name: m for m in (SlabModel(), LayerModel(), TwoLayerModel(), LumpedLayerModel())}

@@ -18,13 +18,15 @@ Conventions
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal, Sequence
 
 import numpy as np
 
 from geometries.errors import SolverError
-from geometries.fe_solids import BONDED_TAG, CONTACT_TAG
+from geometries.fe_solids import (
+    BONDED_TAG, CONTACT_TAG, FIXED_BONDED_TAG, FIXED_CONTACT_TAG, FIXED_VOLUME_TAG, vertex_normals,
+)
 from geometries.triangle_kernels import closest_points_on_triangles
 
 
@@ -187,7 +189,194 @@ class RigidSurface:
         return gap, n
 
 
-Obstacle = RigidPlane | RigidCylinder | RigidSurface
+def _plane_strain_compliance(youngs_modulus_mpa: float, poissons_ratio: float) -> float:
+    """(1 - nu^2) / E (1/MPa): a body's share of the contact compliance (Hertz's 1 / E*)."""
+    return (1.0 - float(poissons_ratio) ** 2) / float(youngs_modulus_mpa)
+
+
+@dataclass(frozen=True, eq=False)
+class DeformableCounterpart:
+    """F as a second elastic layer in the same mesh, in frictionless contact with M's
+    (docs/method.md#two-deformable-layers; solved by :mod:`fem_reference.two_body`).
+
+    Its contact face (``contact_tag``) is M's (the problem's ``contact_tag``) carried onto F: the
+    same triangles, and the pairing is point to point and fixed in the reference configuration
+    (small sliding): each node Y of M's contact face (vertex, and for P2 edge midpoint) faces the
+    node Z of F's with the same place in the shared triangulation. The gap and the contact normal
+    are measured along the normal of the interface the two faces close onto: the unit vector
+    along w n_F - (1 - w) n_M (n_F, n_M the faces' outward normals at Z and Y; w = c_M / (c_M + c_F),
+    c = (1 - nu^2) / E each body's contact compliance), i.e. F's normal when F is rigid, M's when M
+    is, their mean for equal materials; it points out of F, towards M (the rigid obstacles'
+    convention), gap = (Y - Z) . nu. F is bonded to its rigid bone on ``bonded_tag`` (held
+    fixed); its tetrahedra are tagged ``cell_tag`` (every other cell is M's).
+
+    ``mobile_points_mm`` (n, 3) M's contact-face vertices and ``mobile_normals`` (n, 3) its outward
+    normals there, ``fixed_points_mm`` (n, 3) the vertices of F they face and ``fixed_normals``
+    (n, 3) F's outward normals, ``triangles`` (m, 3) the shared connectivity (indices into the n
+    points); F's material, and M's (``mobile_*``, None: F's; :class:`FEContactProblem` sets it to its
+    own). :meth:`from_solid` reads the geometry from a paired :class:`geometries.fe_solids.FESolid`.
+    ``follow_slip``: :func:`fem_reference.contact.solve_contact` re-pairs each node of M with the
+    point of F its relative tangential displacement carried it to (:meth:`slid`) and solves again,
+    until the pairing stops moving (the deformed configuration's pairing, to first order).
+    """
+
+    mobile_points_mm: np.ndarray
+    mobile_normals: np.ndarray
+    fixed_points_mm: np.ndarray
+    fixed_normals: np.ndarray
+    triangles: np.ndarray
+    youngs_modulus_mpa: float
+    poissons_ratio: float
+    mobile_youngs_modulus_mpa: float | None = None
+    mobile_poissons_ratio: float | None = None
+    bonded_tag: int = FIXED_BONDED_TAG
+    contact_tag: int = FIXED_CONTACT_TAG
+    cell_tag: int = FIXED_VOLUME_TAG
+    follow_slip: bool = False
+    #: per node of M's contact face (vertices, then edge midpoints): the triangle of F's face it
+    #: faces after sliding and the barycentric weights there (-1: its own partner node); :meth:`slid`
+    slide_triangle: np.ndarray | None = field(default=None, repr=False)
+    slide_weights: np.ndarray | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        y, z = (np.asarray(a, dtype=float).reshape(-1, 3) for a in (self.mobile_points_mm, self.fixed_points_mm))
+        n_m, n_f = (np.asarray(a, dtype=float).reshape(-1, 3) for a in (self.mobile_normals, self.fixed_normals))
+        t = np.asarray(self.triangles, dtype=np.int64).reshape(-1, 3)
+        if not (len(y) == len(z) == len(n_m) == len(n_f)) or not len(t) or t.min() < 0 or t.max() >= len(y):
+            raise ValueError("DeformableCounterpart: the points and normals need one row per point and triangles "
+                             "indices into them")
+        for e, nu, who in ((self.youngs_modulus_mpa, self.poissons_ratio, "F"),
+                           (self.mobile_youngs_modulus_mpa, self.mobile_poissons_ratio, "M")):
+            if (e is None) != (nu is None) or (e is not None and not (float(e) > 0.0 and np.isfinite(e) and -1.0 < float(nu) < 0.5)):
+                raise ValueError(f"DeformableCounterpart: {who}'s E = {e!r} MPa, nu = {nu!r} (need E > 0, -1 < nu < 0.5)")
+        unit_m = n_m / np.linalg.norm(n_m, axis=1)[:, None]
+        unit_f = n_f / np.linalg.norm(n_f, axis=1)[:, None]
+        c_f = _plane_strain_compliance(self.youngs_modulus_mpa, self.poissons_ratio)
+        c_m = c_f if self.mobile_youngs_modulus_mpa is None else _plane_strain_compliance(
+            self.mobile_youngs_modulus_mpa, self.mobile_poissons_ratio)
+        weight = c_m / (c_m + c_f)
+        nu_v = weight * unit_f - (1.0 - weight) * unit_m
+        length = np.linalg.norm(nu_v, axis=1)
+        if not (np.all(np.isfinite(y)) and np.all(np.isfinite(z)) and np.all(length > 1e-6)):
+            raise ValueError("DeformableCounterpart: non-finite points, or faces whose normals do not face each other")
+        nu_v /= length[:, None]
+        # the P1 and P2 nodes of the shared triangulation: vertices, then edge midpoints
+        edges = np.unique(np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1), axis=0)
+        mid_n = nu_v[edges[:, 0]] + nu_v[edges[:, 1]]
+        partner = np.vstack([z, 0.5 * (z[edges[:, 0]] + z[edges[:, 1]])])
+        facing = partner.copy()
+        if self.slide_triangle is not None:
+            moved = np.asarray(self.slide_triangle) >= 0
+            corners = z[t[np.asarray(self.slide_triangle)[moved]]]  # (k, 3 corners, 3)
+            facing[moved] = np.einsum("kc,kcx->kx", np.asarray(self.slide_weights)[moved], corners)
+        object.__setattr__(self, "_edges", edges)
+        object.__setattr__(self, "_nodes_mobile", np.vstack([y, 0.5 * (y[edges[:, 0]] + y[edges[:, 1]])]))
+        object.__setattr__(self, "_nodes_partner", partner)
+        object.__setattr__(self, "_nodes_fixed", facing)
+        object.__setattr__(self, "_nodes_normal", np.vstack([nu_v, mid_n / np.linalg.norm(mid_n, axis=1)[:, None]]))
+        object.__setattr__(self, "_tree", None)
+
+    @classmethod
+    def from_solid(cls, solid: Any, youngs_modulus_mpa: float, poissons_ratio: float, **mobile: float) -> "DeformableCounterpart":
+        """The counterpart of a paired solid (:func:`geometries.fe_solids.pair_solids`): M's
+        contact face, the partners of its points, both faces' area-weighted vertex normals.
+        ``mobile``: M's ``mobile_youngs_modulus_mpa`` and ``mobile_poissons_ratio``."""
+        tris = solid.faces(CONTACT_TAG)
+        used = np.unique(tris)
+        remap = np.full(len(solid.points_mm), -1, dtype=np.int64)
+        remap[used] = np.arange(used.size)
+        partner = solid.partner[used]
+        on_face = np.full(len(solid.points_mm), -1, dtype=np.int64)
+        on_face[partner] = np.arange(used.size)
+        mobile_normals = vertex_normals(solid.points_mm[used], remap[tris])
+        fixed_normals = vertex_normals(solid.points_mm[partner], on_face[solid.faces(FIXED_CONTACT_TAG)])
+        return cls(solid.points_mm[used], mobile_normals, solid.points_mm[partner], fixed_normals, remap[tris],
+                   youngs_modulus_mpa, poissons_ratio, **mobile)
+
+    def with_mobile_material(self, youngs_modulus_mpa: float, poissons_ratio: float) -> "DeformableCounterpart":
+        """This counterpart facing M of the given material (ValueError if it was built for another)."""
+        if self.mobile_youngs_modulus_mpa is not None and not np.allclose(
+                [self.mobile_youngs_modulus_mpa, self.mobile_poissons_ratio], [youngs_modulus_mpa, poissons_ratio], rtol=1e-12, atol=0.0):
+            raise ValueError(f"the DeformableCounterpart was built for M of E = {self.mobile_youngs_modulus_mpa} MPa, "
+                             f"nu = {self.mobile_poissons_ratio}, the problem's M has E = {youngs_modulus_mpa}, nu = {poissons_ratio}")
+        return replace(self, mobile_youngs_modulus_mpa=float(youngs_modulus_mpa), mobile_poissons_ratio=float(poissons_ratio))
+
+    def _nodes(self, points: np.ndarray) -> np.ndarray:
+        from scipy.spatial import cKDTree
+
+        if self._tree is None:  # type: ignore[attr-defined]
+            object.__setattr__(self, "_tree", cKDTree(self._nodes_mobile))  # type: ignore[attr-defined]
+        x = np.asarray(points, dtype=float).reshape(-1, 3)
+        dist, idx = self._tree.query(x)  # type: ignore[attr-defined]
+        size = float(np.ptp(self._nodes_mobile, axis=0).max()) or 1.0  # type: ignore[attr-defined]
+        if len(x) and float(dist.max()) > 1e-8 * size:
+            raise ValueError(f"DeformableCounterpart: {int(np.sum(dist > 1e-8 * size))} points are not nodes of M's "
+                             f"paired contact face (farthest {float(dist.max()):.3g} mm): the mesh does not match the pairing")
+        return idx
+
+    def gap_and_normal(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Initial gap (n,) and contact normal (n, 3), out of F, at nodes of M's contact face (n, 3)."""
+        i = self._nodes(points)
+        y, z, nu = self._nodes_mobile[i], self._nodes_fixed[i], self._nodes_normal[i]  # type: ignore[attr-defined]
+        return np.einsum("ij,ij->i", y - z, nu), nu
+
+    def facing_points(self, points: np.ndarray) -> np.ndarray:
+        """The point of F's contact face (n, 3) paired with each node of M's (n, 3)."""
+        return self._nodes_fixed[self._nodes(points)]  # type: ignore[attr-defined]
+
+    def stencil(self, points: np.ndarray, degree: int) -> tuple[np.ndarray, np.ndarray]:
+        """F's displacement at the points paired with nodes of M's face (n, 3), as weights on F's
+        nodes of a Lagrange field of ``degree`` (1 or 2): the nodes' coordinates (n, k, 3) and the
+        weights (n, k), k = 3 or 6 (zero weights pad a node paired with a node)."""
+        i = self._nodes(points)
+        z = np.asarray(self.fixed_points_mm, dtype=float)
+        k = 3 if degree == 1 else 6
+        coords = np.repeat(self._nodes_partner[i][:, None, :], k, axis=1)  # type: ignore[attr-defined]
+        weights = np.zeros((len(i), k))
+        weights[:, 0] = 1.0
+        tri = np.full(len(i), -1) if self.slide_triangle is None else np.asarray(self.slide_triangle)[i]
+        moved = tri >= 0
+        if moved.any():
+            corners = z[np.asarray(self.triangles)[tri[moved]]]
+            lam = np.asarray(self.slide_weights)[i[moved]]
+            if degree == 1:
+                coords[moved], weights[moved] = corners, lam
+            else:  # P2 on the triangle: corners lam (2 lam - 1), edge midpoints 4 lam_a lam_b
+                pairs = ((0, 1), (1, 2), (2, 0))
+                mids = np.stack([0.5 * (corners[:, a] + corners[:, b]) for a, b in pairs], axis=1)
+                coords[moved] = np.concatenate([corners, mids], axis=1)
+                weights[moved] = np.column_stack([lam * (2.0 * lam - 1.0)] + [4.0 * lam[:, a] * lam[:, b] for a, b in pairs])
+        return coords, weights
+
+    def slid(self, points: np.ndarray, slip_mm: np.ndarray) -> "DeformableCounterpart":
+        """This counterpart with the nodes of M's face at ``points`` (n, 3) paired instead with the
+        point of F's face their slip (n, 3) carries their partner node to (the closest point of F's
+        face to partner + slip): the pairing of the deformed configuration, to first order."""
+        from scipy.spatial import cKDTree
+
+        i = self._nodes(points)
+        z = np.asarray(self.fixed_points_mm, dtype=float)
+        tris = np.asarray(self.triangles)
+        target = self._nodes_partner[i] + np.asarray(slip_mm, dtype=float).reshape(-1, 3)  # type: ignore[attr-defined]
+        candidates = min(12, len(tris))
+        _, near = cKDTree(z[tris].mean(axis=1)).query(target, k=candidates)
+        near = np.asarray(near).reshape(len(target), candidates)
+        d2, lam = closest_points_on_triangles(target[:, None, :], z[tris[near, 0]], z[tris[near, 1]], z[tris[near, 2]])
+        best = np.argmin(d2, axis=1)
+        n_nodes = len(self._nodes_mobile)  # type: ignore[attr-defined]
+        triangle = np.full(n_nodes, -1) if self.slide_triangle is None else np.asarray(self.slide_triangle).copy()
+        weights = np.zeros((n_nodes, 3)) if self.slide_weights is None else np.asarray(self.slide_weights, dtype=float).copy()
+        triangle[i] = near[np.arange(len(i)), best]
+        weights[i] = lam[np.arange(len(i)), best]
+        return replace(self, slide_triangle=triangle, slide_weights=weights)
+
+    def lame(self) -> tuple[float, float]:
+        """F's (lambda, mu) in MPa."""
+        e, nu = float(self.youngs_modulus_mpa), float(self.poissons_ratio)
+        return e * nu / ((1 + nu) * (1 - 2 * nu)), e / (2 * (1 + nu))
+
+
+Obstacle = RigidPlane | RigidCylinder | RigidSurface | DeformableCounterpart
 
 
 # --------------------------------------------------------------------------------------------
@@ -341,8 +530,10 @@ class FEContactProblem:
         self.force_n = f
         if self.element not in ("auto", "P1", "P2", "TH"):
             raise ValueError(f"element must be auto, P1, P2 or TH; got {self.element!r}")
-        if not isinstance(self.obstacle, (RigidPlane, RigidCylinder, RigidSurface)):
-            raise TypeError("obstacle must be a RigidPlane, RigidCylinder or RigidSurface")
+        if not isinstance(self.obstacle, (RigidPlane, RigidCylinder, RigidSurface, DeformableCounterpart)):
+            raise TypeError("obstacle must be a RigidPlane, RigidCylinder, RigidSurface or DeformableCounterpart")
+        if isinstance(self.obstacle, DeformableCounterpart):
+            self.obstacle = self.obstacle.with_mobile_material(e, nu)
         self.rollers = tuple(r if isinstance(r, Roller) else Roller(*r) for r in self.rollers)
         self.moment_nmm = _point(self.moment_nmm, "moment_nmm")
         self.reference_point_mm = _point(self.reference_point_mm, "reference_point_mm")
@@ -357,7 +548,8 @@ class FEContactProblem:
     def resolved_element(self) -> str:
         if self.element != "auto":
             return self.element
-        return "TH" if self.poissons_ratio >= 0.49 else "P2"
+        nu = max(self.poissons_ratio, getattr(self.obstacle, "poissons_ratio", self.poissons_ratio))
+        return "TH" if nu >= 0.49 else "P2"
 
     def lame(self) -> tuple[float, float]:
         """(lambda, mu) in MPa."""

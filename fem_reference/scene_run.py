@@ -78,6 +78,7 @@ from fem_reference.progress import SolveProgress
 from fem_reference.settings import FESettings, resolve_settings
 from fem_reference.time_stepping import TimePoint, time_stepping
 from geometries.errors import InputError, SolverError
+from geometries.triangle_kernels import triangle_areas
 
 #: Free rigid motions whose contact stiffness is below this fraction of the largest are fixed.
 WEAK_MODE_RATIO = 1e-8
@@ -85,9 +86,10 @@ WEAK_MODE_RATIO = 1e-8
 STRAIN_WARNING = 0.10
 AREA_ON_MOBILE_DEFINITION = (
     "the contact indicator of contact_area_definition weighted, facet by facet, by the area of "
-    "the bonded (mobile-surface) triangle the facet's column was extruded from over the facet's "
-    "own area: the contact area measured on M, as the springs measure it (the slab's columns "
-    "fan out along M's normals, so its contact face is larger than the candidate surface)")
+    "the triangle where the facet's columns cross M's scene surface (the bonded face, or with a "
+    "bone mesh under M its articular surface) over the facet's own area: the contact area "
+    "measured on M, as the springs measure it (the slab's columns fan out along M's normals, so "
+    "its contact face is larger than the candidate surface)")
 NOMINAL_STRAIN_DEFINITION = (
     "max over the contact-surface nodes in contact of the compression over the undeformed "
     "thickness: (approach of the rigid bone motion along the obstacle normal - initial gap) / "
@@ -256,11 +258,13 @@ def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: S
 
     if not selected:
         return None
-    mask, thickness = FE_MODELS[settings.model].sizing_surface(scene, caster, scene.fixed_placement(selected[0]))
+    fe_model = FE_MODELS[settings.model]
+    mask, thickness = fe_model.sizing_surface(scene, caster, scene.fixed_placement(selected[0]))
     if not mask.any():
         return None  # the model refuses this with its own message
     edge = mean_edge(scene.mobile.vertices_mm, scene.mobile.triangles[mask])
     cells, vertices = solid_size(int(mask.sum()), edge, thickness, settings.mesh_size_mm, settings.layers_through_thickness)
+    cells, vertices = fe_model.bodies * cells, fe_model.bodies * vertices
     size = estimate(cells, vertices, settings.element, linear_solver=settings.linear_solver)
     check_fits(size, settings.mesh_size_mm, file=scene.source, key="mesh_size_mm (--mesh-size, or [fe] in the scene)")
     return size
@@ -272,8 +276,11 @@ def _build_geometry(scene: Any, settings: FESettings, k: int, caster: RayCaster,
     rotation, translation = f_pose.affine()
     obstacle = RigidSurface(f_pose.points(scene.fixed.vertices_mm), scene.fixed.triangles, candidates=16)
     pose_key = (np.round(rotation, 14).tobytes(), np.round(translation, 12).tobytes())
-    return FE_MODELS[settings.model].build(scene, settings.mesh_size_mm, settings.layers_through_thickness,
-                                           caster, f_pose, obstacle, pose_key, solid_cache)
+    fe_model = FE_MODELS[settings.model]
+    geom = fe_model.build(scene, settings.mesh_size_mm, settings.layers_through_thickness, caster, f_pose, obstacle, pose_key, solid_cache)
+    if geom.mobile_points_mm is None:
+        geom.mobile_points_mm = fe_model.mobile_points_mm(scene, geom.solid, contact_surface(geom.solid)[2])
+    return geom
 
 
 def mean_edge(points: np.ndarray, tris: np.ndarray) -> float:
@@ -582,26 +589,23 @@ def _surface_data(geom: FEGeometry, settings: FESettings, scene: Any,
     return pts, tris, length, gap, nu, thickness
 
 
-def _mobile_mapping(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where the contact surface stands on M: per contact-surface point the point of M its column
-    was extruded from, per point and per facet the area ratio (contact face / M) of the columns
-    (lumped at the points): a pressure times this ratio is the force per area of M, as the
-    springs carry it."""
-    pts, tris, used = contact_surface(solid)
-    x = solid.points_mm
-    top = used[tris]
-    bottom = solid.bottom_vertex[top]
+def _mobile_mapping(geom: FEGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the contact surface stands on M: per contact-surface point the point of M's scene
+    surface its column crosses (the model's :meth:`~fem_reference.models.FEModel.mobile_points_mm`),
+    per point and per facet the area ratio (contact face / M) of the columns (lumped at the
+    points): a pressure times this ratio is the force per area of M, as the springs carry it."""
+    pts, tris, _ = contact_surface(geom.solid)
+    on_mobile = geom.mobile_points_mm
 
-    def areas(ix: np.ndarray) -> np.ndarray:
-        a, b, c = x[ix[:, 0]], x[ix[:, 1]], x[ix[:, 2]]
-        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    def areas(x: np.ndarray) -> np.ndarray:
+        return triangle_areas(x[tris[:, 0]], x[tris[:, 1]], x[tris[:, 2]])
 
-    a_top, a_bottom = areas(top), areas(bottom)
-    lumped_top, lumped_bottom = np.zeros(len(pts)), np.zeros(len(pts))
+    a_top, a_mobile = areas(pts), areas(on_mobile)
+    lumped_top, lumped_mobile = np.zeros(len(pts)), np.zeros(len(pts))
     for j in range(3):
         np.add.at(lumped_top, tris[:, j], a_top / 3.0)
-        np.add.at(lumped_bottom, tris[:, j], a_bottom / 3.0)
-    return x[solid.bottom_vertex[used]], lumped_top / lumped_bottom, a_top / a_bottom
+        np.add.at(lumped_mobile, tris[:, j], a_mobile / 3.0)
+    return on_mobile, lumped_top / lumped_mobile, a_top / a_mobile
 
 
 def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FEGeometry,
@@ -624,29 +628,24 @@ def _zero_step(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FE
         point_data={"pressure_mpa": z, "spring_length_mm": z.copy(),
                     "in_contact": z.astype(np.int8), "gap_mm": gap,
                     "pressure_on_mobile_mpa": z.copy(),
-                    "mobile_point_mm": _mobile_mapping(geom.solid)[0]},
+                    "mobile_point_mm": geom.mobile_points_mm},
         cell_data={"pressure_mpa": zc, "spring_length_mm": zc.copy(),
                    "in_contact": zc.astype(np.int8), "pressure_on_mobile_mpa": zc.copy()},
         mean_edge_mm=mean_edge(pts, tris), layers=int(geom.solid.layer.max()))
 
 
-def _area_on_mobile(res: Any, solid: Any) -> float:
-    """The Nitsche contact-area integral with each contact facet weighted by (area of the
-    bonded triangle below it) / (its own area): the contact area measured on M."""
+def _area_on_mobile(res: Any, geom: FEGeometry) -> float:
+    """The Nitsche contact-area integral with each contact facet weighted by (area of M's
+    triangle under it, :func:`_mobile_mapping`) / (its own area): the contact area measured on M."""
     m = fe_modules()
     fem, ufl, dmesh = m["fem"], m["ufl"], m["dolfinx"].mesh
     s, pressure = res.fields["setup"], res.fields["pressure"]
     mesh = s.mesh
-    pts, tris, used = contact_surface(solid)
+    solid = geom.solid
+    _, tris, used = contact_surface(solid)
     top = used[tris]  # solid point indices of the contact triangles
-    bottom = solid.bottom_vertex[top]  # layer-0 points are the first ones: same indices
     x = solid.points_mm
-
-    def areas(ix: np.ndarray) -> np.ndarray:
-        a, b, c = x[ix[:, 0]], x[ix[:, 1]], x[ix[:, 2]]
-        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-
-    ratio_of = areas(bottom) / areas(top)
+    ratio_of = 1.0 / _mobile_mapping(geom)[2]
     V0 = fem.functionspace(mesh, ("DG", 0))
     w = fem.Function(V0)
     facets = s.contact_facets
@@ -671,8 +670,8 @@ def _area_on_mobile(res: Any, solid: Any) -> float:
 def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: FEGeometry,
                  settings: FESettings, res: Any, clock: float, scene: Any) -> FEStepResult:
     pts, tris, length, gap, nu, thickness = _surface_data(geom, settings, scene)
-    area_on_mobile = _area_on_mobile(res, geom.solid)
-    on_mobile, ratio_point, ratio_cell = _mobile_mapping(geom.solid)
+    area_on_mobile = _area_on_mobile(res, geom)
+    on_mobile, ratio_point, ratio_cell = _mobile_mapping(geom)
     xs = np.asarray(res.contact_points_mm).reshape(-1, 3)
     dist, idx = cKDTree(xs).query(pts)
     size = float(np.ptp(pts, axis=0).max()) or 1.0

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from edem.laws import LAWS
-from fem_reference.models import FE_MODELS
+from fem_reference.models import FE_MODELS, fixed_has_cartilage
 from fem_reference.problem import LINEAR_SOLVERS
 from fem_reference.viscoelastic import DEFAULT_TIME_SCHEME, TIME_SCHEMES
 from geometries.errors import InputError
@@ -55,14 +55,14 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     """Arguments first, then the scene's ``[fe]`` table, then the defaults.
 
     model: default the FE twin of the scene's contact law (:mod:`edem.laws`: threshold -> slab,
-    gap laws -> layer).
+    gap laws -> layer, or two-layer when F has cartilage of its own).
     element: "auto" (default) is P1 for degree 1 and P2 for degree 2, and Taylor-Hood (P2-P1 u-p,
     degree 2) when nu >= 0.49 unless the degree is given as 1 (P1 then locks: the core warns).
     mesh_size_mm: default :data:`DEFAULT_MESH_SIZE_MM` of the degree.
     time_scheme: the implicit scheme of a viscoelastic scene (:mod:`fem_reference.viscoelastic`),
     default BDF2.
     linear_solver: the inner linear solve (:data:`fem_reference.problem.LINEAR_SOLVERS`), default
-    "auto" (direct while the LU fits in memory, Krylov past that).
+    "auto" (Krylov from 20,000 unknowns or where the LU does not fit in memory, direct below).
     argument_keys: how errors name an argument given here (default: its parameter name).
     """
     fe = dict(scene.fe or {})
@@ -77,6 +77,8 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     value, key = pick(model, "model")
     if value is None:
         value = LAWS[scene.cartilage.law].fe_twin
+        if value == "layer" and fixed_has_cartilage(scene):
+            value = "two-layer"  # cartilage on both bones: both layers deformable
     if value not in FE_MODELS:
         raise InputError(f"unknown FE model {value!r}", file=file, key=key,
                          expected=" or ".join(f"{m.name} ({m.what})" for m in FE_MODELS.values()))
@@ -117,17 +119,31 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
         raise InputError(f"{layers!r} is not a number of layers", file=file, key=layers_key,
                          expected="an integer >= 1")
     layered = scene.cartilage.layers
-    if layered is not None and fe_model.name != "layer":
+    if layered is None and fe_model.name == "lumped":
+        raise InputError("the FE lumped model sums the two sides' layers: the scene has one combined thickness_mm",
+                         file=file, key="cartilage.thickness_mm",
+                         expected="per-side layers (cartilage.mobile_thickness_mm and fixed_thickness_mm, or bone meshes), or the layer model")
+    if layered is not None and fe_model.name not in ("layer", "two-layer", "lumped"):
         # (measured thickness, edem.thickness): the slab fills the gap, whatever the bone says
         raise InputError(f"the FE {fe_model.name} model does not take measured or per-side cartilage thickness",
-                         file=file, key="geometry.mobile_bone, geometry.fixed_bone, cartilage.mobile_thickness_mm, cartilage.fixed_thickness_mm",
-                         expected="the layer model (--model layer), or one combined thickness_mm")
-    if layered is not None and (layered.fixed.has_bone or float(layered.fixed.thickness_mm.max()) > 0.0):
-        # the FE bonds M's cartilage to M and takes F rigid: a layer on F would be left out
+                         file=file, key="geometry.mobile_bone, geometry.fixed_bone, geometry.cartilage, cartilage.mobile_thickness_mm, cartilage.fixed_thickness_mm",
+                         expected="the layer, two-layer or lumped model (--model layer / two-layer / lumped), or one combined thickness_mm (a built-in ankle without "
+                                  "its cartilage: geometry.cartilage = false, the thesis's geometry)")
+    fixed_key = "geometry.fixed_bone" if layered is not None and layered.fixed.has_bone else "cartilage.fixed_thickness_mm"
+    if fe_model.name == "layer" and fixed_has_cartilage(scene):
+        # the layer model bonds M's cartilage to M and takes F rigid: a layer on F would be left out
         raise InputError("the FE layer model takes the fixed body rigid: it has no cartilage on it",
-                         file=file, key="geometry.fixed_bone" if layered.fixed.has_bone else "cartilage.fixed_thickness_mm",
-                         expected="fixed_thickness_mm = 0 and no fixed_bone (give F's articular surface as [geometry] fixed, "
-                                  "e.g. its bone offset by its layer; the springs then model the same rigid F)")
+                         file=file, key=fixed_key,
+                         expected="the two-layer model (--model two-layer: both layers deformable), the lumped model (--model lumped: "
+                                  "both layers summed into one on M, F's bone rigid), or fixed_thickness_mm = 0 and "
+                                  "no fixed_bone (give F's articular surface as [geometry] fixed, e.g. its bone offset by its layer; "
+                                  "the springs then model the same rigid F)")
+    if fe_model.name == "two-layer" and not fixed_has_cartilage(scene):
+        raise InputError("the FE two-layer model needs cartilage on the fixed body", file=file, key=fixed_key,
+                         expected="cartilage.fixed_thickness_mm > 0 or a [geometry] fixed_bone (or the layer model, --model layer)")
+    if fe_model.name == "two-layer" and scene.viscoelastic is not None:
+        raise InputError("the FE two-layer model is elastic only (no Kelvin-Voigt twin of two layers yet)", file=file,
+                         key="viscoelastic", expected="no [viscoelastic] table, or the layer model (--model layer)")
     if fe_model.needs_thickness and scene.cartilage.thickness_mm is None and layered is None:
         raise InputError(f"the FE {fe_model.name} model needs the undeformed cartilage thickness",
                          file=file, key="cartilage.thickness_mm",

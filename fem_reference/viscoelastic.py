@@ -47,33 +47,8 @@ from typing import Any
 
 import numpy as np
 
+from edem.viscoelastic import DEFAULT_TIME_SCHEME, TIME_SCHEMES, scheme_weights  # noqa: F401 (the FE's schemes: shared with EDEM)
 from fem_reference.problem import FEContactProblem, FEContactResult
-
-#: time schemes of the Kelvin-Voigt FE (module docstring); the default is second order
-TIME_SCHEMES = ("trapezoidal", "bdf2", "backward-euler")
-DEFAULT_TIME_SCHEME = "bdf2"
-
-
-def scheme_weights(scheme: str, dt_s: float, previous_dt_s: float | None, relaxation_time_s: float,
-                   ) -> tuple[float, tuple[float, ...], float]:
-    """(c0, (c_1, c_2, ...), e) of v_n = c0 u_n - sum_j c_j u_{n-j} - e r_{n-1} (module docstring).
-
-    ``previous_dt_s`` is None at the first step (BDF2 then takes a trapezoidal step). The weights
-    are consistent (c0 - sum c_j = 1 and the rate enters only through r: a body at rest stays at
-    rest).
-    """
-    if scheme not in TIME_SCHEMES:
-        raise ValueError(f"unknown time scheme {scheme!r} (expected {' or '.join(TIME_SCHEMES)})")
-    if not (dt_s > 0.0):
-        raise ValueError(f"the time step must be > 0, got {dt_s!r} s")
-    a = relaxation_time_s / dt_s
-    if scheme == "backward-euler":
-        return 1.0 + a, (a,), 0.0
-    if scheme == "trapezoidal" or previous_dt_s is None:
-        return 1.0 + 2.0 * a, (2.0 * a,), 1.0
-    w = dt_s / previous_dt_s
-    return 1.0 + a * (1.0 + 2.0 * w) / (1.0 + w), (a * (1.0 + w), -a * w * w / (1.0 + w)), 0.0
-
 
 def first_load_warning(force_n: np.ndarray) -> list[str]:
     """The FE and EDEM start differently under a load at the first time point (module docstring)."""

@@ -28,7 +28,7 @@ from geometries.fe_solids import (
 )
 from geometries.surface import TriangleSurface
 
-__all__ = ["measured_layer_solid", "offset_surface", "smooth_directions"]
+__all__ = ["measured_layer_solid", "offset_surface", "opposing_layer_solid", "smooth_directions"]
 
 #: smoothing passes before a rim triangle is dropped: each pass averages the thickness of an
 #: inverting prism's corners with their neighbours (one ring further per pass)
@@ -38,6 +38,10 @@ _SMOOTHING_ROUNDS = 30
 #: 5-10 times taller than the facets' edges that tilts neighbouring columns into each other; a
 #: direction field smooth on the cartilage's own scale keeps every prism upright at every mesh level
 DIRECTION_SMOOTHING_MM = 1.0
+#: a vertex whose thickness is at most this fraction of the surface's extent lies on its bone (the
+#: round-off of the coordinates): the margin of a layer tapered to zero, where its column is one
+#: point (:func:`geometries.fe_solids.extrude`; docs/method.md#the-fe-layer-on-measured-thickness)
+ZERO_THICKNESS_FRACTION = 1e-9
 
 
 def offset_surface(surface: TriangleSurface, distance_mm: float, name: str = "") -> TriangleSurface:
@@ -153,12 +157,17 @@ def measured_layer_solid(
     dropped = 0
     worst_lean = 0.0
     keep = np.ones(len(tris), bool)
+    zero_mm = ZERO_THICKNESS_FRACTION * float(np.ptp(verts, axis=0).max())
     while True:
         verts, tris, tri_index = submesh(surface, keep)
         normals = smooth_directions(verts, tris)
         thickness = np.asarray(thickness_at(verts, -normals), float)
-        if not (np.isfinite(thickness).all() and (thickness > 0).all()):
-            raise ValueError("measured_layer_solid: a vertex has no positive finite thickness")
+        if not (np.isfinite(thickness).all() and (thickness >= 0).all()):
+            raise ValueError("measured_layer_solid: a vertex has no finite thickness >= 0")
+        # the margin where a tapered layer meets its bone: a column of no height (extrude collapses it to a point)
+        thickness[thickness <= zero_mm] = 0.0
+        if not thickness.any():
+            raise ValueError("measured_layer_solid: the layer has no thickness anywhere")
         n_layers = layers_for(layers_through_thickness, float(thickness.max()), size)
         thickness, normals, bad, touched = _smooth_inverted(verts, tris, normals, thickness, n_layers)
         if not bad.any():
@@ -185,4 +194,66 @@ def measured_layer_solid(
         notes.append(f"cartilage solid: {dropped} rim triangles dropped (vertex normals leaning up to {worst_lean:.0f} deg "
                      "from their own: their prisms turn inside out)")
     solid = extrude("measured-layer", verts - thickness[:, None] * normals, tris, normals, thickness, n_layers)
+    return solid, notes
+
+
+def opposing_layer_solid(
+    mobile: FESolid,
+    facing_points_mm: np.ndarray,
+    thickness_at: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    layers_through_thickness: int | None = None,
+) -> tuple[FESolid, list[str]]:
+    """F's cartilage built on M's contact face, paired with it point to point, in one solid with
+    M's (docs/method.md#two-deformable-layers).
+
+    Parameters
+    ----------
+    mobile : FESolid
+        M's layer (its contact face, CONTACT_TAG, faces F).
+    facing_points_mm : (n_points, 3) float
+        Per point of ``mobile``: where the ray from its contact-face point along its column meets
+        F's articular surface (NaN where it does not, and off the contact face).
+    thickness_at : callable
+        ``thickness_at(vertices (k, 3) mm, inward unit directions (k, 3)) -> (k,) mm``: F's
+        cartilage thickness below its articular surface (as :func:`measured_layer_solid`).
+    layers_through_thickness : int, optional
+        F's element layers (default: its largest thickness over the mean edge).
+
+    Returns
+    -------
+    solid : FESolid
+        :func:`geometries.fe_solids.pair_solids` of M's layer and F's: F's articular face is M's
+        contact triangulation (every triangle whose three rays meet F) carried onto F, so both
+        contact faces have the same connectivity; F's columns go down its smoothed normals to its
+        bone (:func:`measured_layer_solid`, whose repairs may drop a few rim triangles).
+    notes : list of str
+        The construction's notes (M's contact triangles left without a partner, F's repairs).
+    """
+    from scipy.spatial import cKDTree
+
+    from geometries.fe_solids import CONTACT_TAG, pair_solids
+
+    contact = mobile.faces(CONTACT_TAG)
+    facing = np.asarray(facing_points_mm, float)
+    hit = np.all(np.isfinite(facing[contact]), axis=(1, 2))
+    notes: list[str] = []
+    if not hit.any():
+        raise ValueError("opposing_layer_solid: no ray from M's contact face meets F's articular surface")
+    used = np.unique(contact[hit])
+    remap = np.full(len(mobile.points_mm), -1, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    # M's contact triangles are oriented out of M, towards F: reversed, they face out of F
+    articular = TriangleSurface(facing[used], remap[contact[hit]][:, ::-1].copy(), name="fixed-articular")
+    fixed, fixed_notes = measured_layer_solid(articular, np.ones(int(hit.sum()), bool), thickness_at, None, layers_through_thickness)
+    notes += [note.replace("cartilage solid", "fixed cartilage solid") for note in fixed_notes]
+    top = np.flatnonzero(fixed.layer == fixed.layer.max())
+    dist, nearest = cKDTree(fixed.points_mm[top]).query(facing[used])
+    found = dist <= 1e-9 * max(float(np.ptp(fixed.points_mm, axis=0).max()), 1.0)
+    partner = np.full(len(mobile.points_mm), -1, dtype=np.int64)
+    partner[used[found]] = top[nearest[found]]
+    solid = pair_solids(mobile, fixed, partner, name="two-layer")
+    unpaired = len(contact) - int(np.sum(solid.facet_tags == CONTACT_TAG))
+    if unpaired:
+        notes.append(f"two-layer solid: {unpaired} of M's {len(contact)} contact triangles face no cartilage of F "
+                     "(their rays miss F's articular surface, or F's rim was trimmed): free faces")
     return solid, notes

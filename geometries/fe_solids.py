@@ -31,6 +31,7 @@ import numpy as np
 
 from geometries.builders.gmsh_session import gmsh_model
 from geometries.surface import TriangleSurface, midpoint_subdivision
+from geometries.triangle_kernels import triangle_areas
 
 
 __all__ = [
@@ -39,6 +40,10 @@ __all__ = [
     "CONTACT_TAG",
     "FREE_TAG",
     "VOLUME_TAG",
+    "FIXED_BONDED_TAG",
+    "FIXED_CONTACT_TAG",
+    "FIXED_VOLUME_TAG",
+    "pair_solids",
     "slab_solid",
     "layer_solid",
     "vertex_normals",
@@ -49,8 +54,14 @@ BONDED_TAG = 1
 CONTACT_TAG = 2
 FREE_TAG = 3
 VOLUME_TAG = 10
+#: Two deformable layers in one mesh (:func:`pair_solids`): F's bonded and contact faces and cells
+#: (M's keep the tags above)
+FIXED_BONDED_TAG = 11
+FIXED_CONTACT_TAG = 12
+FIXED_VOLUME_TAG = 20
 _GROUP_NAMES = {BONDED_TAG: "bonded", CONTACT_TAG: "contact", FREE_TAG: "free",
-                VOLUME_TAG: "cartilage"}
+                VOLUME_TAG: "cartilage", FIXED_BONDED_TAG: "fixed_bonded",
+                FIXED_CONTACT_TAG: "fixed_contact", FIXED_VOLUME_TAG: "fixed_cartilage"}
 
 
 def tet_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
@@ -65,8 +76,15 @@ class FESolid:
 
     ``facets`` are boundary triangles oriented with outward normals; ``facet_tags`` holds
     BONDED_TAG / CONTACT_TAG / FREE_TAG per facet; every tetrahedron has VOLUME_TAG.
-    ``bottom_vertex`` maps every point to the mobile-surface vertex it was extruded from and
-    ``layer`` to its layer (0 = bonded face, n = contact face).
+    ``bottom_vertex`` maps every point to the point at the bottom of its column (on the bonded
+    face; the layer-0 points come first, in the order of the surface's vertices, unless a column
+    of zero thickness is one point, :func:`extrude`) and ``layer`` to its layer (0 = bonded face,
+    n = contact face; a collapsed column's point is layer n and on both faces).
+
+    Two layers in one solid (:func:`pair_solids`): ``cell_tags`` (VOLUME_TAG for M's,
+    FIXED_VOLUME_TAG for F's tetrahedra), F's faces tagged FIXED_BONDED_TAG / FIXED_CONTACT_TAG,
+    and ``partner``: per point, the point of the other contact face it is paired with (-1 off
+    the paired contact faces).
     """
 
     points_mm: np.ndarray  # (n, 3)
@@ -75,7 +93,9 @@ class FESolid:
     facet_tags: np.ndarray  # (k,) int32
     name: str = ""
     layer: np.ndarray | None = None  # (n,) int
-    bottom_vertex: np.ndarray | None = None  # (n,) int, index into the submesh of M
+    bottom_vertex: np.ndarray | None = None  # (n,) int: the point at the bottom of its column
+    cell_tags: np.ndarray | None = None  # (m,) int32; None: VOLUME_TAG everywhere
+    partner: np.ndarray | None = None  # (n,) int: the paired point of the other contact face, or -1
 
     @property
     def volumes_mm3(self) -> np.ndarray:
@@ -84,26 +104,33 @@ class FESolid:
     def faces(self, tag: int) -> np.ndarray:
         return self.facets[self.facet_tags == tag]
 
+    def volume_tags(self) -> np.ndarray:
+        """(m,) int32 tag per tetrahedron: ``cell_tags``, or VOLUME_TAG for a one-body solid."""
+        if self.cell_tags is None:
+            return np.full(len(self.tets), VOLUME_TAG, dtype=np.int32)
+        return np.asarray(self.cell_tags, dtype=np.int32)
+
     def write_msh(self, path: str | Path) -> Path:
         """Write a gmsh MSH 4.1 file (via the gmsh API, discrete entities) with physical groups
         1 bonded, 2 contact, 3 free (surfaces) and 10 volume, named bonded/contact/free/
-        cartilage."""
+        cartilage (a paired solid adds F's 11, 12 and 20)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         with gmsh_model("fe_solid") as gmsh:
             gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
             gmsh.option.setNumber("Mesh.Binary", 0)
             gmsh.option.setNumber("Mesh.SaveAll", 0)
-            vol = gmsh.model.addDiscreteEntity(3)
+            cell_tags = self.volume_tags()
+            vols = {tag: gmsh.model.addDiscreteEntity(3) for tag in np.unique(cell_tags)}
             node_tags = np.arange(1, len(self.points_mm) + 1, dtype=np.int64)
-            gmsh.model.mesh.addNodes(3, vol, node_tags, self.points_mm.ravel())
+            gmsh.model.mesh.addNodes(3, next(iter(vols.values())), node_tags, self.points_mm.ravel())
             etag = 1
-            tets = self.tets + 1
-            gmsh.model.mesh.addElementsByType(vol, 4, np.arange(etag, etag + len(tets)),
-                                              tets.ravel())
-            etag += len(tets)
+            for tag, vol in vols.items():
+                tets = self.tets[cell_tags == tag] + 1
+                gmsh.model.mesh.addElementsByType(vol, 4, np.arange(etag, etag + len(tets)), tets.ravel())
+                etag += len(tets)
             surf_of_tag = {}
-            for tag in (BONDED_TAG, CONTACT_TAG, FREE_TAG):
+            for tag in sorted({BONDED_TAG, CONTACT_TAG, FREE_TAG} | set(np.unique(self.facet_tags).tolist())):
                 tris = self.faces(tag) + 1
                 s = gmsh.model.addDiscreteEntity(2)
                 surf_of_tag[tag] = s
@@ -112,8 +139,9 @@ class FESolid:
                                                       tris.ravel())
                     etag += len(tris)
             for tag, s in surf_of_tag.items():
-                gmsh.model.addPhysicalGroup(2, [s], tag, name=_GROUP_NAMES[tag])
-            gmsh.model.addPhysicalGroup(3, [vol], VOLUME_TAG, name=_GROUP_NAMES[VOLUME_TAG])
+                gmsh.model.addPhysicalGroup(2, [s], tag, name=_GROUP_NAMES.get(tag, ""))
+            for tag, vol in vols.items():
+                gmsh.model.addPhysicalGroup(3, [vol], int(tag), name=_GROUP_NAMES.get(int(tag), ""))
             gmsh.write(str(path))
         return path
 
@@ -121,7 +149,7 @@ class FESolid:
         """(mesh, cell_tags, facet_tags) as dolfinx objects, built from the arrays.
 
         The arrays are handed over from rank 0 of ``comm`` (default COMM_WORLD) and distributed
-        by dolfinx; cell tags carry VOLUME_TAG, facet tags BONDED/CONTACT/FREE_TAG.
+        by dolfinx; cell tags carry :meth:`volume_tags`, facet tags ``facet_tags``.
         """
         import dolfinx_solver  # noqa: F401  (orders MPI ahead of the dolfinx bindings)
 
@@ -140,7 +168,7 @@ class FESolid:
             x = np.ascontiguousarray(self.points_mm, dtype=np.float64)
             facets = np.ascontiguousarray(self.facets, dtype=np.int64)
             fvals = np.asarray(self.facet_tags, dtype=np.int32)
-            cvals = np.full(len(cells), VOLUME_TAG, dtype=np.int32)
+            cvals = self.volume_tags()
         else:
             cells = np.empty((0, 4), dtype=np.int64)
             x = np.empty((0, 3), dtype=np.float64)
@@ -198,9 +226,7 @@ def _vertex_values(vertices: np.ndarray, triangles: np.ndarray, values: np.ndarr
     """
     nv = len(vertices)
     cent = vertices[triangles].mean(axis=1)
-    v0 = vertices[triangles[:, 0]]
-    area = 0.5 * np.linalg.norm(np.cross(vertices[triangles[:, 1]] - v0,
-                                         vertices[triangles[:, 2]] - v0), axis=1)
+    area = triangle_areas(*(vertices[triangles[:, k]] for k in range(3)))
     # vertex -> triangles (CSR)
     vt = np.repeat(np.arange(len(triangles)), 3)
     vv = triangles.ravel()
@@ -239,17 +265,22 @@ def _vertex_values(vertices: np.ndarray, triangles: np.ndarray, values: np.ndarr
 def inverted_prisms(vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray,
                      thickness: np.ndarray) -> np.ndarray:
     """(n_tri,) bool: the triangles whose one-layer prism along the vertex normals has a
-    tetrahedron of non-positive volume (the extrusion turns inside out there)."""
+    tetrahedron of non-positive volume (the extrusion turns inside out there). A column of zero
+    thickness is one point (:func:`extrude`): the tetrahedron through both its ends is not built,
+    so it is not checked."""
     nv = len(vertices)
     points = np.vstack([vertices, vertices + thickness[:, None] * normals])
     srt = np.sort(triangles, axis=1)
     a, b, c = srt[:, 0], srt[:, 1], srt[:, 2]
     ta, tb, tc = triangles[:, 0], triangles[:, 1], triangles[:, 2]
     even = ((ta == a) & (tb == b)) | ((tb == a) & (tc == b)) | ((tc == a) & (ta == b))
+    collapsed = np.asarray(thickness) == 0.0
     bad = np.zeros(len(triangles), dtype=bool)
-    for t in (np.column_stack([a, b, c, c + nv]), np.column_stack([a, b, c + nv, b + nv]), np.column_stack([a, b + nv, c + nv, a + nv])):
+    # each of the three tetrahedra holds both ends of one column: c's, b's, a's
+    for t, column in ((np.column_stack([a, b, c, c + nv]), c), (np.column_stack([a, b, c + nv, b + nv]), b),
+                      (np.column_stack([a, b + nv, c + nv, a + nv]), a)):
         t[~even] = t[~even][:, [1, 0, 2, 3]]
-        bad |= tet_volumes(points, t) <= 0
+        bad |= (tet_volumes(points, t) <= 0) & ~collapsed[column]
     return bad
 
 
@@ -318,12 +349,77 @@ def _trim_inverting_rim(name: str, surface: TriangleSurface, mask: np.ndarray, t
     return verts, tris, tri_index, normals, thickness
 
 
+def boundary_facets(tets: np.ndarray) -> np.ndarray:
+    """(k, 3) the faces used by exactly one tetrahedron, oriented outward (the tetrahedra
+    right-handed: positive volume)."""
+    faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]])
+    _, inv, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
+    return faces[counts[inv.ravel()] == 1]
+
+
+def pair_solids(mobile: FESolid, fixed: FESolid, partner: np.ndarray, name: str = "") -> FESolid:
+    """M's and F's layers in one solid (two disconnected regions), their contact faces paired
+    point to point (docs/method.md#two-deformable-layers).
+
+    ``partner`` (n_mobile_points,): per point of ``mobile``, the point of ``fixed`` it faces
+    (-1: none). A contact triangle of M stays a contact face (CONTACT_TAG) when its three
+    partners are a contact triangle of F (the same connectivity: the pairing is DOF to DOF); the
+    other contact triangles of either body become free faces. F's faces are retagged
+    FIXED_BONDED_TAG / FIXED_CONTACT_TAG, its tetrahedra FIXED_VOLUME_TAG; other tags (rollers)
+    are kept. ValueError when no contact triangle is paired.
+    """
+    n_m = len(mobile.points_mm)
+    partner = np.asarray(partner, dtype=np.int64).reshape(-1)
+    if partner.shape != (n_m,):
+        raise ValueError(f"pair_solids: partner has {partner.size} entries for {n_m} points")
+    m_tags = np.asarray(mobile.facet_tags).copy()
+    f_tags = np.asarray(fixed.facet_tags).copy()
+    m_contact = np.flatnonzero(m_tags == CONTACT_TAG)
+    f_contact = np.flatnonzero(f_tags == CONTACT_TAG)
+    images = partner[mobile.facets[m_contact]]
+    f_keys = {tuple(k): i for i, k in zip(f_contact, np.sort(fixed.facets[f_contact], axis=1).tolist())}
+    matched = np.array([np.all(img >= 0) and tuple(sorted(img.tolist())) in f_keys for img in images], dtype=bool)
+    if not matched.any():
+        raise ValueError("pair_solids: no contact triangle of the mobile layer faces one of the fixed layer")
+    kept_f = np.array([f_keys[tuple(sorted(img.tolist()))] for img in images[matched]], dtype=np.int64)
+    m_tags[m_contact[~matched]] = FREE_TAG
+    f_new = np.where(f_tags == BONDED_TAG, FIXED_BONDED_TAG, np.where(f_tags == CONTACT_TAG, FREE_TAG, f_tags))
+    f_new[kept_f] = FIXED_CONTACT_TAG
+    paired = np.unique(mobile.facets[m_contact[matched]])
+    both = np.full(n_m + len(fixed.points_mm), -1, dtype=np.int64)
+    both[paired] = n_m + partner[paired]
+    both[n_m + partner[paired]] = paired
+
+    def joined(a: np.ndarray | None, b: np.ndarray | None, offset: int = 0) -> np.ndarray | None:
+        return None if a is None or b is None else np.concatenate([a, np.asarray(b) + offset])
+
+    return FESolid(
+        points_mm=np.vstack([mobile.points_mm, fixed.points_mm]),
+        tets=np.vstack([mobile.tets, fixed.tets + n_m]),
+        facets=np.vstack([mobile.facets, fixed.facets + n_m]),
+        facet_tags=np.concatenate([m_tags, f_new]).astype(np.int32),
+        name=name or f"{mobile.name}+{fixed.name}",
+        layer=joined(mobile.layer, fixed.layer),
+        bottom_vertex=joined(mobile.bottom_vertex, fixed.bottom_vertex, n_m),
+        cell_tags=np.concatenate([mobile.volume_tags(), np.full(len(fixed.tets), FIXED_VOLUME_TAG, dtype=np.int32)]),
+        partner=both,
+    )
+
+
 def extrude(name: str, bottom: np.ndarray, triangles: np.ndarray, normals: np.ndarray,
              thickness: np.ndarray, layers: int) -> FESolid:
-    """Prisms from ``bottom + k/layers * thickness * normal``, 3 tetrahedra each."""
+    """Prisms from ``bottom + k/layers * thickness * normal``, 3 tetrahedra each.
+
+    A vertex of thickness exactly 0 (a layer tapered to zero on its bone) has no column: its
+    copies are one point (the top one, on both the bonded and the contact face), and the
+    tetrahedra through two of them, which would be flat, are not built: a prism with such a
+    corner is a pyramid of two tetrahedra (three: one), so the solid follows the layer down to
+    nothing at its margin. ``bottom_vertex`` of the result is, per point, the point at the bottom
+    of its column (itself for a collapsed one)."""
     nv = len(bottom)
-    if np.any(~np.isfinite(thickness)) or np.any(thickness <= 0):
-        raise ValueError(f"{name}: non-positive or non-finite thickness at a vertex")
+    thickness = np.asarray(thickness, dtype=float)
+    if np.any(~np.isfinite(thickness)) or np.any(thickness < 0) or not np.any(thickness > 0):
+        raise ValueError(f"{name}: negative or non-finite thickness at a vertex, or none above zero")
     frac = np.arange(layers + 1) / layers
     pts = bottom[None, :, :] + frac[:, None, None] * (thickness[:, None] * normals)[None, :, :]
     pts = pts.reshape(-1, 3)
@@ -352,29 +448,38 @@ def extrude(name: str, bottom: np.ndarray, triangles: np.ndarray, normals: np.nd
             t[~even] = t[~even][:, [1, 0, 2, 3]]
             tets.append(t)
     tets = np.concatenate(tets)
-    # order tets prism by prism for locality
+    bottom_point = base.copy()  # the layer-0 copy of each point's column
+    collapsed = thickness == 0.0
+    both_faces = np.zeros(len(pts), bool)
+    if collapsed.any():
+        # every copy of a collapsed column is its top one; the flat tetrahedra through two go, and the
+        # unused copies with them (points renumbered)
+        merged = np.where(collapsed[base], layers * nv + base, np.arange(len(pts)))
+        tets = merged[tets]
+        s = np.sort(tets, axis=1)
+        tets = tets[np.all(s[:, 1:] != s[:, :-1], axis=1)]
+        used = np.unique(tets)
+        renumber = np.full(len(pts), -1, dtype=np.int64)
+        renumber[used] = np.arange(used.size)
+        pts, layer, tets = pts[used], layer[used], renumber[tets]
+        bottom_point = renumber[merged[base[used]]]
+        both_faces = collapsed[base[used]]
     vol = tet_volumes(pts, tets)
     if not np.all(vol > 0):
         bad = int(np.sum(vol <= 0))
         raise ValueError(f"{name}: {bad} tetrahedra with non-positive volume (surface too curved "
                          "for this thickness, or inconsistent orientation)")
 
-    # boundary facets: faces used by exactly one tet, oriented outward
-    faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]],
-                            tets[:, [0, 2, 1]]])
-    key = np.sort(faces, axis=1)
-    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    bnd = faces[counts[inv.ravel()] == 1]
-    # faces above are outward for positive tets (opposite vertex on the negative side)
-    lay = layer[bnd]
+    bnd = boundary_facets(tets)
+    lay, ends = layer[bnd], both_faces[bnd]
     tags = np.full(len(bnd), FREE_TAG, dtype=np.int32)
-    tags[np.all(lay == 0, axis=1)] = BONDED_TAG
-    tags[np.all(lay == layers, axis=1)] = CONTACT_TAG
+    tags[np.all((lay == 0) | ends, axis=1)] = BONDED_TAG
+    tags[np.all((lay == layers) | ends, axis=1)] = CONTACT_TAG
     order = np.lexsort((np.arange(len(bnd)), tags))
     return FESolid(
         points_mm=pts, tets=np.ascontiguousarray(tets, dtype=np.int64),
         facets=np.ascontiguousarray(bnd[order], dtype=np.int64), facet_tags=tags[order],
-        name=name, layer=layer, bottom_vertex=base,
+        name=name, layer=layer, bottom_vertex=bottom_point,
     )
 
 

@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from geometries.triangle_kernels import triangle_area_vectors
+
 
 @dataclass(frozen=True)
 class TriangleSurface:
@@ -44,7 +46,7 @@ class TriangleSurface:
         """Half the cross product of two edges: area times unit normal, per triangle."""
         if "area_vectors" not in self._cache:
             a, b, c = self._corners()
-            self._cache["area_vectors"] = 0.5 * np.cross(b - a, c - a)
+            self._cache["area_vectors"] = triangle_area_vectors(a, b, c)
         return self._cache["area_vectors"]
 
     @property

@@ -1,5 +1,5 @@
 """Array kernels on triangles and 3-vectors, one of each for the whole project: row-wise cross
-products and closest points on triangles.
+products, triangle areas (and area vectors) and closest points on triangles.
 
 Both are vectorised numpy over rows (points, springs, triangles); the DEM solver (``edem``), the
 FE reference's rigid obstacles and the verification's surface projections use these, never a
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["closest_points_on_triangles", "cross_rows"]
+__all__ = ["closest_points_on_triangles", "cross_rows", "nearby_distance_mm", "triangle_area_vectors", "triangle_areas"]
 
 
 def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -25,6 +25,18 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
     out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
     return out
+
+
+def triangle_area_vectors(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(n, 3) half the cross product of two edges of the triangles with corners ``a``, ``b``, ``c``
+    (each (n, 3), mm): area (mm^2) times the unit normal of the right-hand rule."""
+    return 0.5 * cross_rows(b - a, c - a)
+
+
+def triangle_areas(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(n,) areas (mm^2) of the triangles with corners ``a``, ``b``, ``c`` (each (n, 3), mm); 0 for
+    a degenerate one."""
+    return np.linalg.norm(triangle_area_vectors(a, b, c), axis=1)
 
 
 def _dot(u: list[np.ndarray], v: list[np.ndarray]) -> np.ndarray:
@@ -85,6 +97,24 @@ def closest_points_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: 
     )
     weights = np.stack([np.where(inside, w_in, w_edge) for w_in, w_edge in zip((1.0 - s - t, s, t), on_edge)], axis=-1)
     return np.where(inside, d2_inside, best_d2), weights
+
+
+def nearby_distance_mm(points_mm: np.ndarray, vertices_mm: np.ndarray, triangles: np.ndarray, candidates: int = 12) -> np.ndarray:
+    """(n,) distance (mm) from each point (n, 3) to the nearest of the ``candidates`` triangles
+    whose centroids lie nearest it: the distance to the surface for a point on or near it (the
+    triangle it lies on is among them on any mesh without slivers far longer than their
+    neighbours), an upper bound of it otherwise."""
+    from scipy.spatial import cKDTree
+
+    points_mm = np.asarray(points_mm, float).reshape(-1, 3)
+    if not len(points_mm):
+        return np.zeros(0)
+    corners = np.asarray(vertices_mm, float)[np.asarray(triangles, np.int64)]
+    k = min(int(candidates), len(corners))
+    _, near = cKDTree(corners.mean(axis=1)).query(points_mm, k=k)
+    near = near.reshape(len(points_mm), k)
+    squared, _ = closest_points_on_triangles(points_mm[:, None, :], *(corners[near, i] for i in range(3)))
+    return np.sqrt(squared.min(axis=1))
 
 
 # Point-triangle pairs measured first, those with the smallest lower bound: the best of them

@@ -1,10 +1,12 @@
-"""Small exact geometries and scene builders shared by the tests (numpy only)."""
+"""Small exact geometries and scene builders shared by the tests (numpy, and scipy for a Delaunay disk)."""
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import Delaunay
 
 from edem.scene import Scene
+from edem.thin_layer import SurfaceMesh
 from geometries.surface import TriangleSurface
 
 
@@ -74,3 +76,36 @@ def make_scene(
         youngs_modulus_mpa=youngs_modulus_mpa, poissons_ratio=poissons_ratio, max_spring_length_mm=max_spring_length_mm,
         name="test", **options,
     )
+
+
+def periodic_grid(n: int, spacing_mm: float, n_y: int | None = None) -> tuple[SurfaceMesh, np.ndarray]:
+    """Flat n x n (or n x n_y) square grid, two right triangles per square, periodic both ways (a
+    flat torus; n_y = 3 squares across is a plane-strain strip for loads uniform along y).
+
+    Returns the mesh and the triangle centroids (unwrapped, mm). Square (i, j): L = (v00, v10, v11),
+    U = (v00, v11, v01); L triangles come first.
+    """
+    n_y = n if n_y is None else n_y
+    i, j = np.meshgrid(np.arange(n), np.arange(n_y), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    vid = lambda a, b: (a % n) * n_y + (b % n_y)  # noqa: E731
+    xy = lambda a, b: np.column_stack([a * spacing_mm, b * spacing_mm, np.zeros(a.shape)])  # noqa: E731
+    lower = (np.column_stack([vid(i, j), vid(i + 1, j), vid(i + 1, j + 1)]), np.stack([xy(i, j), xy(i + 1, j), xy(i + 1, j + 1)], axis=1))
+    upper = (np.column_stack([vid(i, j), vid(i + 1, j + 1), vid(i, j + 1)]), np.stack([xy(i, j), xy(i + 1, j + 1), xy(i, j + 1)], axis=1))
+    tri = np.vstack([lower[0], upper[0]])
+    corners = np.concatenate([lower[1], upper[1]])
+    return SurfaceMesh.from_corners(tri, corners), corners.mean(axis=1)
+
+
+def disk_plate(radius_mm: float, n_rings: int) -> TriangleSurface:
+    """A flat disk facing up (+z), Delaunay-triangulated rings of 6k points (k = 0 .. n_rings)."""
+    points = [np.zeros((1, 2))]
+    for k in range(1, n_rings + 1):
+        angle = np.linspace(0.0, 2 * np.pi, 6 * k, endpoint=False)
+        points.append(radius_mm * k / n_rings * np.column_stack([np.cos(angle), np.sin(angle)]))
+    xy = np.vstack(points)
+    tri = Delaunay(xy).simplices
+    u, v = xy[tri[:, 1]] - xy[tri[:, 0]], xy[tri[:, 2]] - xy[tri[:, 0]]
+    cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    tri = np.where((cross > 0)[:, None], tri, tri[:, ::-1])
+    return TriangleSurface(np.column_stack([xy, np.zeros(len(xy))]), tri)

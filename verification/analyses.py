@@ -27,6 +27,11 @@ its declared band (the thesis's figures) and "unavailable" when their cases coul
 * ``fe-band``: a discrete model against the FE on a base mesh and its refinements: the FE's mesh
   error beside the difference, judged against a goal only where the FE's error is below it
   (:func:`fe_band_analysis`).
+* ``per-load``: a discrete model against the FE at each load of one run (its time points): both
+  sides' contact areas, the signed errors, the FE's own error and a verdict against a goal where
+  that error is below it; optionally the areas' growth from the smallest to the largest load
+  (:func:`per_load_analysis`).
+* ``pairs``: one value of two cases against each other, signed (:func:`pairs_analysis`).
 * ``fe-convergence``: per FE point, each compared quantity on three meshes: values, observed
   order, Richardson extrapolation and each mesh's estimated error, with the meshes' DOFs, wall
   time and peak memory (:mod:`verification.fe_convergence`); its ``values["entries"]`` are what
@@ -622,29 +627,173 @@ def fe_band_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any
     }
 
 
+def _per_time(row: dict[str, Any]) -> list[dict[str, Any]] | None:
+    """The comparison of each time point of a case (verification.metrics.compare_result_dirs
+    ``per_time``), read from its metrics.json; None when the case has none."""
+    import json
+
+    if not row.get("out_dir") or not row.get("case_dir"):
+        return None
+    try:
+        record = json.loads((Path(row["out_dir"]) / row["case_dir"] / "metrics.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return ((record.get("comparison") or {}).get("per_time")) or None
+
+
+def per_load_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """A discrete model against the FE at each load of one run (its time points), judged against
+    a goal where the FE's own error is below it.
+
+    ``settings``: ``quantities`` ((name, comparison metric), ...) judged against ``goal`` (relative;
+    None: reported only) where the FE reference's estimated error of that metric
+    (:func:`verification.fe_convergence.fe_relative_error`) is below the goal ("not judged" where
+    it is not, "FE error unknown" without one); ``reported`` ((name, metric), ...) shown beside
+    them; ``area_growth``: the contact area at the largest load must be at least this many times
+    the area at the smallest, for each side (None: not checked). Rows: one per case and load with
+    both sides' contact areas, the signed errors, the FE's own errors and the verdict; rows
+    outside the goal or short of the growth are flagged (reported, never failed)."""
+    from verification.fe_convergence import fe_relative_error, load_reference
+
+    settings = analysis.settings
+    goal = settings.get("goal")
+    growth = settings.get("area_growth")
+    quantities = [tuple(q) for q in settings["quantities"]]
+    reported = [tuple(q) for q in settings.get("reported", ())]
+    reference = load_reference()
+    out_rows, values, notes = [], [], []
+    flagged = available = False
+    for name in analysis.cases:
+        row = rows.get(name)
+        per_time = None if row is None else _per_time(row)
+        if per_time is None:
+            why = "case not run" if row is None else _unavailable_message(row)
+            out_rows.append({"cells": [name, "–", "–", "–"] + ["–"] * (len(quantities) + len(reported)) + ["–", f"unavailable: {why}"]})
+            values.append({"case": name, "verdict": UNAVAILABLE})
+            continue
+        available = True
+        fe_errors = fe_relative_error(row, reference)
+        fe_text = " / ".join("unknown" if fe_errors is None or m not in fe_errors else _size_pct(fe_errors[m]) for _, m in quantities)
+        for entry in per_time:
+            errors = {metric: entry.get(metric) for _, metric in quantities + reported}
+            verdict = "reported"
+            if goal is not None:
+                outside = [q for q, m in quantities if errors[m] is not None and abs(errors[m]) > goal]
+                unjudged = [q for q, m in quantities if fe_errors is None or m not in fe_errors or not fe_errors[m] < goal]
+                judged_out = [q for q in outside if q not in unjudged]
+                if judged_out:
+                    verdict = "outside: " + ", ".join(judged_out)
+                elif unjudged:
+                    verdict = ("not judged (FE error unknown or >= goal): " + ", ".join(unjudged)
+                               + (f"; outside: {', '.join(outside)}" if outside else ""))
+                else:
+                    verdict = "within"
+            flag = verdict.startswith("outside")
+            flagged |= flag
+            values.append({"case": name, "load_n": entry["load_n"], "area_a_mm2": entry["contact_area_a_mm2"], "area_b_mm2": entry["contact_area_b_mm2"],
+                           "errors": errors, "fe_error": fe_errors, "verdict": verdict})
+            out_rows.append({"cells": [name, _fmt(entry["load_n"]), _fmt(entry["contact_area_a_mm2"]), _fmt(entry["contact_area_b_mm2"])]
+                             + [_percent(errors[m]) for _, m in quantities + reported] + [fe_text, verdict], "flag": flag})
+        if growth is not None and len(per_time) > 1:
+            first, last = min(per_time, key=lambda e: e["load_n"]), max(per_time, key=lambda e: e["load_n"])
+            ratios = [last[f"contact_area_{side}_mm2"] / first[f"contact_area_{side}_mm2"] if first[f"contact_area_{side}_mm2"] > 0 else math.inf
+                      for side in "ab"]
+            short = [side for side, r in zip(("DEM", "FE"), ratios) if not r >= growth]
+            flagged |= bool(short)
+            notes.append(f"{name}: contact area at {_fmt(last['load_n'])} N / at {_fmt(first['load_n'])} N = {ratios[0]:.2f} (a), {ratios[1]:.2f} (b, the FE): "
+                         + (f"short of {growth:g}x for " + " and ".join(short) if short else f"at least {growth:g}x for both"))
+    if goal is not None:
+        notes.append(f"goal: {', '.join(q for q, _ in quantities)} within {100 * goal:.0f} % of the FE at every load, judged where the FE's own estimated error "
+                     "(fe-convergence, the worst over its time points) is below the goal")
+    return {
+        "columns": ["case", "load (N)", "area a (mm^2)", "area b, FE (mm^2)"] + [f"{q} err" for q, _ in quantities + reported]
+        + [f"FE's own err ({' / '.join(q for q, _ in quantities)})", "verdict"],
+        "rows": out_rows,
+        "status": (FLAGGED if flagged else REPORTED) if available else UNAVAILABLE,
+        "notes": notes,
+        "values": {"rows": values},
+    }
+
+
+def pairs_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """One value of two cases against each other: ``settings["pairs"]`` ((label, case a, case b),
+    ...) and ``quantities`` ((name, metric of a, metric of b), ...); per pair and quantity both
+    values and the signed relative difference (a - b) / |b|. Reported."""
+    out_rows, values = [], []
+    available = False
+    for label, name_a, name_b in analysis.settings["pairs"]:
+        row_a, row_b = rows.get(name_a), rows.get(name_b)
+        for quantity, metric_a, metric_b in analysis.settings["quantities"]:
+            a = None if row_a is None else _metric(row_a, metric_a)
+            b = None if row_b is None else _metric(row_b, metric_b)
+            if a is None or b is None:
+                missing, row = (name_a, row_a) if a is None else (name_b, row_b)
+                why = "case not run" if row is None else _unavailable_message(row)
+                out_rows.append({"cells": [label, quantity, _fmt(a), _fmt(b), "–", f"unavailable ({missing}): {why}"]})
+                values.append({"pair": label, "quantity": quantity, "verdict": UNAVAILABLE})
+                continue
+            available = True
+            difference = (a - b) / abs(b) if b else math.inf
+            values.append({"pair": label, "quantity": quantity, "a": a, "b": b, "difference": difference})
+            out_rows.append({"cells": [label, quantity, _fmt(a), _fmt(b), _percent(difference), ""]})
+    return {
+        "columns": ["pair", "quantity", "a", "b", "(a - b) / b", "note"],
+        "rows": out_rows,
+        "status": REPORTED if available else UNAVAILABLE,
+        "notes": [],
+        "values": {"rows": values},
+    }
+
+
 def _size_pct(x: float | None) -> str:
     """An unsigned error size (an FE error estimate has no sign), in %."""
     return "–" if x is None or not math.isfinite(x) else f"{100.0 * x:.2f} %"
 
 
-def _field_estimate(level_rows: list[dict[str, Any]], sizes: list[float], extra: dict[str, Any] | None):
+def _field_estimate(level_rows: list[dict[str, Any]], sizes: list[float], extra: dict[str, Any] | None, k: int = -1):
     """The pressure field's estimated L2 error on each mesh (verification.fe_convergence.field_errors)
-    and that of the extra (P1) run (its difference from the finest plus the finest's error), read
-    from the result directories; None when a row does not say where they are."""
+    and that of the extra (P1) run (its difference from the finest plus the finest's error), at
+    time point ``k``, read from the result directories; None when a row does not say where they are."""
     from verification.fe_convergence import field_difference, field_errors
 
-    rows = level_rows + ([extra] if extra is not None else [])
+    dirs = _result_dirs(level_rows + ([extra] if extra is not None else []))
+    if dirs is None:
+        return None
+    est = field_errors(sizes, (field_difference(dirs[0], dirs[2], k), field_difference(dirs[1], dirs[2], k)), field_difference(dirs[0], dirs[1], k))
+    extra_error = None if extra is None else field_difference(dirs[3], dirs[2], k) + est.errors[-1]
+    return est, extra_error
+
+
+def _result_dirs(rows: list[dict[str, Any]]) -> list[Path] | None:
+    """Each row's first result directory; None when a row does not say where it is."""
     if any(not r.get("out_dir") or not r.get("result_dirs") for r in rows):
         return None
-    dirs = [Path(r["out_dir"]) / r["result_dirs"][0] for r in rows]
-    est = field_errors(sizes, (field_difference(dirs[0], dirs[2]), field_difference(dirs[1], dirs[2])), field_difference(dirs[0], dirs[1]))
-    extra_error = None if extra is None else field_difference(dirs[3], dirs[2]) + est.errors[-1]
-    return est, extra_error
+    return [Path(r["out_dir"]) / r["result_dirs"][0] for r in rows]
+
+
+def _values_by_time(rows: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
+    """Per time point, each row's study values (verification.fe_convergence.fe_values): the rows'
+    metrics when they hold one time point (or do not say where their results are), else each
+    time point measured from the result directories. The load of each time point is "load_n"."""
+    from verification.fe_convergence import fe_values, time_point_count
+
+    dirs = _result_dirs(rows)
+    n = 1 if dirs is None else time_point_count(dirs[0])
+    if n == 1:
+        return [[dict(r["metrics"]) for r in rows]]
+    from edem.resultdir import read_result_dir
+
+    series = read_result_dir(dirs[-1]).timeseries
+    loads = np.linalg.norm(np.column_stack([series[f"force_{x}_n"] for x in "xyz"]), axis=1)
+    return [[{**fe_values(d, k), "load_n": float(loads[k])} for d in dirs] for k in range(n)]
 
 
 def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Per point and quantity: the three meshes' values, order, extrapolation and errors; the
-    errors keyed for :func:`verification.fe_convergence.fe_relative_error` in ``values["entries"]``."""
+    errors keyed for :func:`verification.fe_convergence.fe_relative_error` in ``values["entries"]``.
+    A point whose FE run has several time points (loads) is estimated at each, one row per
+    quantity and load, and each mesh's error is the largest over them (as a comparison's error
+    is its largest over the time points)."""
     from verification.fe_convergence import QUANTITIES, fe_key, richardson
 
     out_rows, entries, points, notes = [], {}, [], []
@@ -667,49 +816,57 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
         sizes = [n ** (-1.0 / 3.0) for n in dofs]  # representative size h ~ N^(-1/3)
         extra = rows.get(point["extra"]) if point.get("extra") else None
         extra_ok = extra is not None and all(s.get("status") == OK for s in extra.get("sides", []))
+        by_time = _values_by_time(level_rows + ([extra] if extra_ok else []))
+        several = len(by_time) > 1
         level_errors: list[dict[str, float]] = [{} for _ in level_rows]
         extra_errors: dict[str, float] = {}
         record = {"point": point["point"], "mesh_sizes_mm": [r["options"]["mesh_size_mm"] for r in level_rows], "dofs": dofs,
                   "wall_time_s": [float(m["fe_wall_time_s"]) for m in metrics], "peak_memory_mb": [m.get("fe_peak_memory_mb") for m in metrics], "quantities": {}}
-        for quantity, (value_metric, error_metric) in QUANTITIES.items():
-            values = [float(m[value_metric]) for m in metrics]
-            est = richardson(sizes, values)
-            record["quantities"][quantity] = est.to_dict()
-            for k, e in enumerate(est.errors):
-                level_errors[k][error_metric] = e
-            cells = [point["point"], quantity, ", ".join(_fmt(v, 4) for v in values), _fmt(est.order, 3),
-                     _fmt(est.extrapolated, 4) if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in est.errors)]
-            if extra_ok:
-                v = float(extra["metrics"][value_metric])
-                ref = est.extrapolated if est.asymptotic else values[-1]
-                spread = 0.0 if est.asymptotic else est.errors[-1]
-                extra_errors[error_metric] = abs(v - ref) / abs(ref) + spread
-                record["quantities"][quantity]["p1_value"] = v
-                record["quantities"][quantity]["p1_error"] = extra_errors[error_metric]
-                cells.append(f"{_fmt(v, 4)} ({_size_pct(extra_errors[error_metric])})")
-            else:
-                cells.append("–")
-            cells += [", ".join(f"{d / 1e3:.0f}k" for d in dofs),
-                      ", ".join(f"{t:.0f} s / {_fmt(None if mem is None or not math.isfinite(float(mem)) else float(mem) / 1e3, 2)} GB" for t, mem in zip(record["wall_time_s"], record["peak_memory_mb"]))]
-            out_rows.append({"cells": cells, "flag": not est.asymptotic})
-        fields = _field_estimate(level_rows, sizes, extra if extra_ok else None)
-        if fields is not None:
-            est, extra_error = fields
-            record["quantities"]["pressure field (L2)"] = est.to_dict()
-            for k, e in enumerate(est.errors):
-                level_errors[k]["pressure_l2_rel_error"] = e
-            cells = [point["point"], "pressure field (L2)", "differences from the finest: " + ", ".join(_size_pct(v) for v in est.values[:2]), _fmt(est.order, 3),
-                     "on a line" if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in est.errors)]
+        cost = [", ".join(f"{d / 1e3:.0f}k" for d in dofs),
+                ", ".join(f"{t:.0f} s / {_fmt(None if mem is None or not math.isfinite(float(mem)) else float(mem) / 1e3, 2)} GB" for t, mem in zip(record["wall_time_s"], record["peak_memory_mb"]))]
+
+        def keep(error_metric: str, errors, extra_error: float | None) -> None:  # the largest over the time points
+            for j, e in enumerate(errors):
+                level_errors[j][error_metric] = max(e, level_errors[j].get(error_metric, 0.0))
             if extra_error is not None:
-                extra_errors["pressure_l2_rel_error"] = extra_error
-                record["quantities"]["pressure field (L2)"]["p1_error"] = extra_error
-            cells.append("–" if extra_error is None else f"({_size_pct(extra_error)})")
-            cells += out_rows[-1]["cells"][-2:]
-            out_rows.append({"cells": cells, "flag": not est.asymptotic})
-        ratios = [float(m["fe_peak_pressure_mpa"]) / float(m["fe_p98_pressure_mpa"]) if float(m["fe_p98_pressure_mpa"]) > 0 else math.nan for m in metrics]
+                extra_errors[error_metric] = max(extra_error, extra_errors.get(error_metric, 0.0))
+
+        for k, at in enumerate(by_time):
+            label = f" at {_fmt(at[0]['load_n'])} N" if several else ""
+            for quantity, (value_metric, error_metric) in QUANTITIES.items():
+                values = [float(m[value_metric]) for m in at[:len(level_rows)]]
+                est = richardson(sizes, values)
+                record["quantities"][quantity + label] = est.to_dict()
+                cells = [point["point"], quantity + label, ", ".join(_fmt(v, 4) for v in values), _fmt(est.order, 3),
+                         _fmt(est.extrapolated, 4) if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in est.errors)]
+                extra_error = None
+                if extra_ok:
+                    v = float(at[-1][value_metric])
+                    ref = est.extrapolated if est.asymptotic else values[-1]
+                    spread = 0.0 if est.asymptotic else est.errors[-1]
+                    extra_error = abs(v - ref) / abs(ref) + spread
+                    record["quantities"][quantity + label].update(p1_value=v, p1_error=extra_error)
+                    cells.append(f"{_fmt(v, 4)} ({_size_pct(extra_error)})")
+                else:
+                    cells.append("–")
+                keep(error_metric, est.errors, extra_error)
+                out_rows.append({"cells": cells + cost, "flag": not est.asymptotic})
+            fields = _field_estimate(level_rows, sizes, extra if extra_ok else None, k if several else -1)
+            if fields is not None:
+                est, extra_error = fields
+                record["quantities"]["pressure field (L2)" + label] = est.to_dict()
+                keep("pressure_l2_rel_error", est.errors, extra_error)
+                if extra_error is not None:
+                    record["quantities"]["pressure field (L2)" + label]["p1_error"] = extra_error
+                cells = [point["point"], "pressure field (L2)" + label, "differences from the finest: " + ", ".join(_size_pct(v) for v in est.values[:2]),
+                         _fmt(est.order, 3), "on a line" if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in est.errors),
+                         "–" if extra_error is None else f"({_size_pct(extra_error)})"]
+                out_rows.append({"cells": cells + cost, "flag": not est.asymptotic})
+        last = by_time[-1][:len(level_rows)]
+        ratios = [float(m["fe_peak_pressure_mpa"]) / float(m["fe_p98_pressure_mpa"]) if float(m["fe_p98_pressure_mpa"]) > 0 else math.nan for m in last]
         record["peak_over_p98"] = ratios
         notes.append(f"{point['point']}: raw peak / 98th percentile by area = {', '.join(_fmt(r, 3) for r in ratios)} on the three meshes "
-                     + ("(a few nodes set the raw peak)" if max(ratios) > 1.2 else "(a smooth maximum)"))
+                     + (f"at {_fmt(by_time[-1][0]['load_n'])} N " if several else "") + ("(a few nodes set the raw peak)" if max(ratios) > 1.2 else "(a smooth maximum)"))
         for name, row, errors in zip(point["levels"], level_rows, level_errors):
             entries[fe_key(point["scene"], point["side"], point["overrides"], row["options"])] = {"case": name, "errors": errors}
         if extra_ok:
@@ -718,7 +875,8 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
     notes.extend(analysis.settings.get("findings", []))
     notes.append("Values coarsest mesh first; h ~ N_dofs^(-1/3) represents each mesh (the mesher halves M's triangles and sets ceil(t / size) layers, so the "
                  "refinement ratios differ); order from f(h) = f0 + C h^p through the three values; error of each mesh |f_i - f0| / |f0|. Not asymptotic (flagged): "
-                 "the differences change sign or the order is outside 0.5-4; each mesh's error is then the largest difference to the other meshes.")
+                 "the differences change sign or the order is outside 0.5-4; each mesh's error is then the largest difference to the other meshes. A point "
+                 "solved at several loads (its time points) is estimated at each; its stored error is the largest over them.")
     notes.append("P1 column: quick's P1 reference at 1.0 mm and its error against the extrapolation (against the finest mesh plus that mesh's error when not asymptotic).")
     return {
         "columns": ["point", "quantity", "values (3 meshes)", "order", "extrapolated", "error of each mesh", "P1 1.0 mm (error)", "DOFs", "time / peak memory"],
@@ -738,6 +896,8 @@ ANALYSES: dict[str, Callable[[Any, dict[str, dict[str, Any]]], dict[str, Any]]] 
     "goal": goal_analysis,
     "trust": trust_analysis,
     "fe-band": fe_band_analysis,
+    "per-load": per_load_analysis,
+    "pairs": pairs_analysis,
     "fe-convergence": fe_convergence_analysis,
 }
 

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from edem.beds import CoupledThinLayer, IndependentSprings
 from geometries.errors import InputError
 from verification.analyses import ANALYSES
 from verification.fe_convergence import FE_VALUE_DESCRIPTIONS
@@ -82,8 +83,14 @@ METRICS.update(FE_VALUE_DESCRIPTIONS)
 #: the beds a case can pin with its overrides (``[cartilage] coupling``, edem.beds.BEDS). The
 #: built-in ankle scenes default to the coupled thin layer (Pade symbol); a case that compares a
 #: thesis figure, or the independent springs as such, names its bed instead of taking the default.
-THESIS_BED = {"cartilage.coupling": "none"}  # the thesis's independent springs
-COUPLED_BED = {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "pade"}
+THESIS_BED = {"cartilage.coupling": IndependentSprings.coupling}  # the thesis's independent springs
+COUPLED_BED = {"cartilage.coupling": CoupledThinLayer.coupling, "cartilage.thin_layer_symbol": "pade"}
+#: the thesis's idealised ankle (docs/method.md#8-built-in-geometries): its geometry without
+#: cartilage and its threshold law, whose contact area is the ray window's. The built-in ankle
+#: scenes default to the gap law on talar and tibial cartilage measured to the builder's bones; a
+#: case that compares a thesis figure, or DEM with the FE slab (the threshold law's twin; the FE
+#: has no twin of the two measured layers yet), names this instead of taking the default.
+THESIS_ANKLE = {"geometry.cartilage": False, "cartilage.law": "threshold"}
 
 OUTCOMES = ("converges", "refused")
 

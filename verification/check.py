@@ -64,7 +64,7 @@ from edem.resultdir import read_result_dir
 from edem.results import write_results
 from edem.scene import load_scene
 from edem.solver import run
-from verification.campaign_model import SCENES_DIR
+from verification.campaign_model import SCENES_DIR, THESIS_ANKLE
 from verification.metrics import (
     displacement_error,
     l2_relative_error,
@@ -98,10 +98,15 @@ class CheckScene:
         return str(SCENES_DIR / self.scene) if self.scene.endswith(".toml") else self.scene
 
 
+#: the ankles on the thesis's geometry and threshold law (THESIS_ANKLE), which the stored FE slab
+#: values are the twin of (the scenes' default, the gap law on measured layers, has no FE twin
+#: yet). The thesis's toe-off on the coupled layer passes 2 springs (0.16 % of those in contact)
+#: through the plafond at the contact's rim: the gate keeps that baseline ([solver]
+#: allow_bone_overlap), as it was stored, with its warning
 CHECK_SCENES = (
-    CheckScene("ideal-standing", "ideal-standing"),
-    CheckScene("subject-standing", "subject-standing"),
-    CheckScene("ideal-toe-off", "ideal-toe-off"),
+    CheckScene("ideal-standing", "ideal-standing", dict(THESIS_ANKLE)),
+    CheckScene("subject-standing", "subject-standing", dict(THESIS_ANKLE)),
+    CheckScene("ideal-toe-off", "ideal-toe-off", {**THESIS_ANKLE, "solver.allow_bone_overlap": True}),
     CheckScene("flat-plates", "flat-plates.toml"),
 )
 

@@ -39,7 +39,7 @@ from geometries.errors import InputError
 from edem.mechanics import confined_modulus_mpa
 from edem.resultdir import Frame, SurfaceFrame, timeseries_row, write_result_dir
 from edem.scene import Scene, apply_overrides, load_scene, resolve_scene_path
-from geometries.builders import builder_defaults, builder_names
+from geometries.builders import build_geometry, builder_names
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,8 @@ class ClosedFormSolution:
 
 
 def geometry_parameters(scene_ref: str | Path, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The [geometry] table of a scene (after ``overrides``) over its generator's defaults.
+    """The [geometry] table of a scene (after ``overrides``) as its generator resolves it (the
+    defaults of its mode filled in; the build is the one the scene keeps, geometries.builders).
 
     Returns the parameters with the generator's name under "builtin"; raises InputError for
     scenes built from mesh files (no closed form knows their shape).
@@ -78,8 +79,7 @@ def geometry_parameters(scene_ref: str | Path, overrides: dict[str, Any] | None 
     name = table.get("builtin")
     if name not in builder_names():
         raise InputError("a closed form needs a built-in geometry", file=path, key="geometry.builtin", expected="one of " + ", ".join(builder_names()))
-    params = {k: v for k, v in builder_defaults(name).items() if v is not None}
-    params.update({k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm")})
+    params = dict(build_geometry(name, {k: v for k, v in table.items() if k not in ("builtin", "reference_point_mm", "spring_spacing_mm")}, file=str(path)).parameters)
     params["builtin"] = name
     return params
 
@@ -253,6 +253,7 @@ def cylinder_plane(scene: Scene, geometry: dict[str, Any]) -> ClosedFormSolution
 
     form = "cylinder-plane"
     _check_builtin(scene, geometry, ("ideal_ankle",), form)
+    _require(not geometry["cartilage"], scene, f"the closed form '{form}' is for the cylinder under a plane, without cartilage", "geometry.cartilage", "false")
     _check_threshold(scene, form)
     _check_fixed(scene, ("tx", "ty", "rx", "ry", "rz"), form)
     _require(float(geometry.get("plafond_tilt_deg", 0.0)) == 0.0, scene, "the closed form 'cylinder-plane' needs a plane parallel to the axis", "geometry.plafond_tilt_deg", "0")

@@ -14,6 +14,15 @@ directory so that a campaign case compares them like any two sides
 * ``confined-compression``: a slab 10 x 8 x 2 mm bonded at z = 0, lateral faces on rollers,
   120 N on its bone against a rigid plane: p = F / A and d = p h / E' (p = E' d / h).
 
+Two deformable layers (:mod:`fem_reference.two_body`, docs/method.md#two-deformable-layers):
+
+* ``hertz-cylinders``: two equal elastic cylinders, R = 20 mm, each a quarter disk bonded on its
+  diameter (half model, symmetry x = 0), the lower one the mirror image of the upper, plane
+  strain by a one-element slice, loaded for a = 1 mm with E* = E / (2 (1 - nu^2)), R* = R / 2;
+  contact area of the half model a x slice (M's contact face, the upper cylinder's arc).
+* ``two-layer-confined``: M's layer 2 mm (the cartilage) on F's 1 mm (E 5 MPa, nu 0.3), 10 x 8 mm,
+  lateral faces on rollers, 120 N: p = F / A, d = p (h_M / E'_M + h_F / E'_F).
+
 Cartilage of docs/references.md#the-thesiss-figures (E = 10.35 MPa, nu = 0.42). Options of a case: ``mesh_size_mm`` and
 ``element`` (P1, P2, TH; default P2). dolfinx is imported only when an FE problem is solved.
 """
@@ -64,12 +73,65 @@ class ConfinedSetup:
         return tuple(max(1, int(round(length / mesh_size_mm))) for length in (self.lx_mm, self.ly_mm, self.thickness_mm))  # type: ignore[return-value]
 
 
+@dataclass(frozen=True)
+class CylindersSetup:
+    """Two equal elastic cylinders (fem_reference.meshes.hertz_cylinder and mirrored_pair)."""
+
+    radius_mm: float = 20.0
+    half_width_mm: float = 1.0
+    far_factor: float = 10.0  # element size 15 mm from the contact = far_factor x the contact size
+    fine_radius_factor: float = 1.5  # the contact size holds within 1.5 a of the first touch
+    coarse_radius_mm: float = 15.0
+    contact_extent_mm: float = 5.0  # the arc tagged as contact face (5 a)
+
+    def reference(self):
+        from fem_reference import closed_forms as cf
+
+        return cf.HertzLine.for_half_width(self.half_width_mm, self.radius_mm, **MATERIAL, other_radius_mm=self.radius_mm,
+                                           other_youngs_modulus_mpa=MATERIAL["youngs_modulus_mpa"],
+                                           other_poissons_ratio=MATERIAL["poissons_ratio"])
+
+
+@dataclass(frozen=True)
+class TwoLayerSetup:
+    """M's layer on F's, both confined (fem_reference.meshes.two_layer_stack)."""
+
+    lx_mm: float = 10.0
+    ly_mm: float = 8.0
+    mobile_thickness_mm: float = 2.0
+    fixed_thickness_mm: float = 1.0
+    fixed_material: tuple[float, float] = (5.0, 0.3)  # E (MPa), nu of F's layer
+    load_n: float = 120.0  # p = 1.5 MPa
+
+    def divisions(self, mesh_size_mm: float) -> tuple[tuple[int, int], tuple[int, int]]:
+        """(in-plane squares, element layers of M's and F's)."""
+        def n(length: float) -> int:
+            return max(1, int(round(length / mesh_size_mm)))
+
+        return (n(self.lx_mm), n(self.ly_mm)), (n(self.mobile_thickness_mm), n(self.fixed_thickness_mm))
+
+    def approach_mm(self) -> float:
+        """d = p (h_M / E'_M + h_F / E'_F)."""
+        from fem_reference import closed_forms as cf
+
+        p = self.load_n / (self.lx_mm * self.ly_mm)
+        return p * (self.mobile_thickness_mm / cf.confined_modulus(MATERIAL["youngs_modulus_mpa"], MATERIAL["poissons_ratio"])
+                    + self.fixed_thickness_mm / cf.confined_modulus(*self.fixed_material))
+
+
 HERTZ = HertzSetup()
 CONFINED = ConfinedSetup()
+CYLINDERS = CylindersSetup()
+TWO_LAYERS = TwoLayerSetup()
 FE_PROBLEMS: dict[str, str] = {
     "hertz-line": "Hertz line contact: rigid cylinder R 20 mm on a thick bonded block, a = 1 mm",
     "confined-compression": "confined compression of a 10 x 8 x 2 mm slab, 120 N: p = E' d / h",
+    "hertz-cylinders": "Hertz line contact of two equal elastic cylinders R 20 mm (both deformable), a = 1 mm",
+    "two-layer-confined": "two confined layers in series, 2 mm (E 10.35, nu 0.42) on 1 mm (E 5, nu 0.3), 10 x 8 mm, 120 N: "
+                          "d = p (h_M / E'_M + h_F / E'_F)",
 }
+#: the problems whose contact half-width is measured against Hertz
+HERTZ_PROBLEMS = ("hertz-line", "hertz-cylinders")
 ELEMENTS = ("P1", "P2", "TH")
 
 
@@ -112,6 +174,18 @@ def _comm():
 # FE side
 
 
+def _two_body_problem(solid: Any, comm: Any, element: str, fixed_material: tuple[float, float], force_n: tuple):
+    """M's layer (the cartilage of :data:`MATERIAL`) against F's deformable one (``fixed_material``)
+    of a paired solid, lateral / symmetry faces on rollers (tags 4, 5)."""
+    from fem_reference import FEContactProblem, FEMesh, Roller
+    from fem_reference.problem import DeformableCounterpart
+
+    mesh, cell_tags, facet_tags = solid.to_dolfinx(comm)
+    return FEContactProblem(
+        mesh=FEMesh(mesh, facet_tags, cell_tags), element=element, force_n=force_n, rollers=(Roller(4, "x"), Roller(5, "y")),
+        obstacle=DeformableCounterpart.from_solid(solid, *fixed_material), **MATERIAL)
+
+
 def solve_fe_problem(name: str, options: dict[str, Any]):
     """(FEContactResult, setup numbers) of the named FE problem at the options' mesh size."""
     size, element = _options(name, options)
@@ -132,6 +206,22 @@ def solve_fe_problem(name: str, options: dict[str, Any]):
             rollers=(Roller(4, "x"), Roller(5, "y")),
         )
         setup = {"slice_thickness_mm": size, "load_per_length_n_per_mm": ref.load_per_length_n_per_mm}
+    elif name == "hertz-cylinders":
+        ref = CYLINDERS.reference()
+        upper = meshes.hertz_cylinder(
+            comm, radius=CYLINDERS.radius_mm, slice_thickness=size, size_contact=size, size_far=CYLINDERS.far_factor * size,
+            fine_radius=CYLINDERS.fine_radius_factor * CYLINDERS.half_width_mm, coarse_radius=CYLINDERS.coarse_radius_mm,
+            contact_extent=CYLINDERS.contact_extent_mm)
+        problem = _two_body_problem(
+            meshes.mirrored_pair(upper), comm, element, (MATERIAL["youngs_modulus_mpa"], MATERIAL["poissons_ratio"]),
+            force_n=(0.0, 0.0, -ref.load_per_length_n_per_mm * size / 2.0))  # the upper one pressed down
+        setup = {"slice_thickness_mm": size, "load_per_length_n_per_mm": ref.load_per_length_n_per_mm}
+    elif name == "two-layer-confined":
+        squares, layers = TWO_LAYERS.divisions(size)
+        solid = meshes.two_layer_stack(TWO_LAYERS.lx_mm, TWO_LAYERS.ly_mm, TWO_LAYERS.mobile_thickness_mm, TWO_LAYERS.fixed_thickness_mm,
+                                       squares, layers)
+        problem = _two_body_problem(solid, comm, element, TWO_LAYERS.fixed_material, force_n=(0.0, 0.0, -TWO_LAYERS.load_n))
+        setup = {"divisions": list(squares), "layers": list(layers)}
     else:
         mesh = meshes.box_slab(comm, CONFINED.lx_mm, CONFINED.ly_mm, CONFINED.thickness_mm, CONFINED.divisions(size), confined=True)
         problem = FEContactProblem(
@@ -153,10 +243,10 @@ def run_fe_problem(name: str, out_dir: str | Path, options: dict[str, Any]) -> P
     result, setup = solve_fe_problem(name, options)
     points, first = np.unique(np.asarray(result.contact_points_mm, dtype=np.float64), axis=0, return_index=True)
     pressure = np.asarray(result.contact_pressure_mpa, dtype=np.float64)[first]
-    triangles = _planar_triangles(points[:, :2])  # both contact faces are planes z = const
+    triangles = _planar_triangles(points[:, :2])  # every contact face is a graph z(x, y)
     point_data, cell_data = _surface_arrays(points, pressure, triangles)
     extra: dict[str, Any] = {}
-    if name == "hertz-line":
+    if name in HERTZ_PROBLEMS:
         extra["half_width_mm"] = result.contact_area_mm2 / setup["slice_thickness_mm"]
         try:
             extra["half_width_fit_mm"], extra["peak_fit_mpa"] = cf.fit_elliptic_half_width(points[:, 0], pressure)
@@ -207,20 +297,35 @@ def write_exact_result(name: str, out_dir: str | Path, options: dict[str, Any]) 
     start = time.perf_counter()
     size, _ = _options(name, options)
     e, nu = MATERIAL["youngs_modulus_mpa"], MATERIAL["poissons_ratio"]
-    if name == "hertz-line":
-        ref = HERTZ.reference()
+    if name in HERTZ_PROBLEMS:
+        ref = (HERTZ if name == "hertz-line" else CYLINDERS).reference()
         a = ref.half_width_mm
-        xs = np.unique(np.concatenate([np.linspace(0.0, 1.5 * a, 3001), np.linspace(1.5 * a, HERTZ.block_mm, 201)]))
+        extent = HERTZ.block_mm if name == "hertz-line" else CYLINDERS.contact_extent_mm
+        xs = np.unique(np.concatenate([np.linspace(0.0, 1.5 * a, 3001), np.linspace(1.5 * a, extent, 201)]))
         ys = np.array([0.0, size])
         force = np.array([0.0, 0.0, ref.load_per_length_n_per_mm * size / 2.0])
         peak, area = ref.peak_pressure_mpa, a * size
         mean = force[2] / area  # = pi p0 / 4
         disp = np.zeros(3)
-        z = HERTZ.block_mm
+        if name == "hertz-line":
+            z = HERTZ.block_mm
+        else:  # M's contact face: the upper cylinder's arc, pressed down
+            force = -force
+            z = lambda x: CYLINDERS.radius_mm - np.sqrt(CYLINDERS.radius_mm**2 - x**2)  # noqa: E731
         exact = {"half_width_mm": a, "load_per_length_n_per_mm": ref.load_per_length_n_per_mm, "contact_modulus_mpa": ref.contact_modulus_mpa,
                  "formula": "a = sqrt(4 P' R / (pi E*)), p0 = 2 P' / (pi a), p = p0 sqrt(1 - x^2/a^2)",
                  "displacement": "no closed form (the approach depends on the finite block): written as 0, not compared"}
         pressure_of = ref.pressure_mpa
+    elif name == "two-layer-confined":
+        setup = TWO_LAYERS
+        area = setup.lx_mm * setup.ly_mm
+        force = np.array([0.0, 0.0, -setup.load_n])
+        peak = mean = setup.load_n / area
+        disp = np.array([0.0, 0.0, -setup.approach_mm()])  # M's bone moves down, along the load
+        xs, ys = np.linspace(0.0, setup.lx_mm, 21), np.linspace(0.0, setup.ly_mm, 17)
+        z = 0.0  # M's contact face
+        exact = {"approach_mm": setup.approach_mm(), "formula": "p = F / A, d = p (h_M / E'_M + h_F / E'_F)"}
+        pressure_of = lambda x: np.full(np.shape(x), peak)  # noqa: E731
     else:
         area = CONFINED.lx_mm * CONFINED.ly_mm
         force = np.array([0.0, 0.0, CONFINED.load_n])
@@ -232,7 +337,7 @@ def write_exact_result(name: str, out_dir: str | Path, options: dict[str, Any]) 
         exact = {"confined_modulus_mpa": cf.confined_modulus(e, nu), "approach_mm": d, "formula": "p = F / A, d = p h / E' (p = E' d / h)"}
         pressure_of = lambda x: np.full(np.shape(x), peak)  # noqa: E731
     gx, gy = np.meshgrid(xs, ys, indexing="ij")
-    points = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, z)])
+    points = np.column_stack([gx.ravel(), gy.ravel(), z(gx.ravel()) if callable(z) else np.full(gx.size, z)])
     nx, ny = len(xs), len(ys)
     idx = np.arange(nx * ny).reshape(nx, ny)
     quads = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], axis=-1).reshape(-1, 4)

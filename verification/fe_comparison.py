@@ -12,12 +12,13 @@ from the reference's.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from verification.campaign_model import VALUES_AT_REFERENCE_TIMES, Case, uniform_basis
 from verification.fe_convergence import FE_ERROR_TEXT_METRICS
 from verification.metrics import COMPARISON_METRICS
-from verification.verdicts import INVARIANT, SANITY, Basis
+from verification.verdicts import INVARIANT, MODEL_BAND, MODEL_BAND_REASON, MODEL_BAND_REL, SANITY, Basis
 
 FE_COARSE = {"mesh_size_mm": 1.0, "degree": 2}  # P2 at 1.0 mm; Taylor-Hood (auto) from nu = 0.49
 CHECK_METRICS = ("force_residual_rel", "non_finite_outputs")
@@ -55,3 +56,26 @@ def fe_comparison_case(name: str, description: str, scene: str, sides: tuple[str
     """A discrete side against the FE with this module's metrics, generous tolerances and their basis."""
     return Case(name, description, scene, sides, FE_COMPARE_METRICS, dict(FE_COMPARE_TOL), overrides=overrides,
                 options=dict(options), params=params or {}, maps=maps, basis=dict(FE_COMPARE_BASIS))
+
+
+#: the design card's three quantities, each judged against the declared model band: pressure (the
+#: regularised peak and the field's L2 error), contact area and talus displacement; "verified"
+#: needs every one inside (the raw peak and the mean pressure are reported only)
+BAND_METRICS = ("regularised_peak_pressure_rel_error", "pressure_l2_rel_error", "contact_area_rel_error", "displacement_rel_error")
+BAND_BASIS = Basis(MODEL_BAND, MODEL_BAND_REASON)
+
+
+def banded(case: Case, area_basis: Basis | None = None) -> Case:
+    """A DEM-vs-FE case judged against the model band on the regularised peak, the pressure
+    field (L2), the contact area and the displacement (:data:`BAND_METRICS`); the raw peak and
+    mean pressure reported (sanity bounds only). ``area_basis``: the area's own basis where the
+    law fixes it by construction (judged all the same, its reason says why it does not move)."""
+    tolerance = {**case.tolerance, **{m: MODEL_BAND_REL for m in BAND_METRICS}}
+    basis = {**case.basis, **{m: BAND_BASIS for m in BAND_METRICS}}
+    judged = "regularised peak pressure, pressure field (L2), contact area and displacement"
+    if area_basis is not None:
+        basis["contact_area_rel_error"] = area_basis
+        judged = "regularised peak pressure, pressure field (L2), contact area (set by the threshold law by construction) and displacement"
+    description = case.description.replace("Generous tolerances (measured, not judged)", "").replace(". Generous tolerances", "").rstrip(" ;.")
+    description += f"; {judged} judged against the declared +-{MODEL_BAND_REL:.0%} model band, the raw peak and mean pressure reported"
+    return dataclasses.replace(case, tolerance=tolerance, basis=basis, description=description)

@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from geometries.triangle_kernels import triangle_areas
+
 #: the stored study (written by ``edem verify fe-convergence --refresh-reference``)
 REFERENCE_FILE = Path(__file__).resolve().parent / "references" / "fe_convergence.json"
 #: the observed order is believed (the meshes in the asymptotic range) inside these bounds; P2's
@@ -132,11 +134,12 @@ def richardson(sizes: list[float] | tuple[float, ...], values: list[float] | tup
     return Richardson(h, f, order, None, False, spread)
 
 
-def field_difference(dir_a: str | Path, dir_b: str | Path) -> float:
+def field_difference(dir_a: str | Path, dir_b: str | Path, k: int = -1) -> float:
     """||p_a - p_b|| / ||p_b||: the L2 relative difference of two FE runs' pressure per area of M
-    (PRESSURE_ON_MOBILE, the field the comparisons judge) at their last time point, on a's
-    triangles (a's corner mean at each centroid against b interpolated at the centroid's closest
-    point of b's surface, weighted by a's triangle areas; verification.metrics.l2_relative_error)."""
+    (PRESSURE_ON_MOBILE, the field the comparisons judge) at their time point ``k`` (default the
+    last), on a's triangles (a's corner mean at each centroid against b interpolated at the
+    centroid's closest point of b's surface, weighted by a's triangle areas;
+    verification.metrics.l2_relative_error)."""
     from edem.pressure_metrics import PRESSURE_ON_MOBILE
     from edem.resultdir import read_result_dir
     from verification.metrics import frame_index, l2_relative_error, project_onto_surface
@@ -144,7 +147,7 @@ def field_difference(dir_a: str | Path, dir_b: str | Path) -> float:
     frames = []
     for d in (dir_a, dir_b):
         result = read_result_dir(d)
-        frames.append(result.frame(frame_index(result, len(result.time_s) - 1)))
+        frames.append(result.frame(frame_index(result, k % len(result.time_s))))
     a, b = frames
     proj = project_onto_surface(b.points_mm, b.triangles, a.centroids_mm)
     p_b = np.einsum("ij,ij->i", proj.barycentric, b.point_data[PRESSURE_ON_MOBILE][b.triangles[proj.triangle]])
@@ -184,7 +187,7 @@ def pressure_percentile_by_area(pressure_mpa: np.ndarray, vertices_mm: np.ndarra
     p = np.asarray(pressure_mpa, dtype=np.float64)
     tri = np.asarray(triangles)
     v = np.asarray(vertices_mm, dtype=np.float64)
-    area = 0.5 * np.linalg.norm(np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]]), axis=1)
+    area = triangle_areas(v[tri[:, 0]], v[tri[:, 1]], v[tri[:, 2]])
     node_area = np.bincount(tri.ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(p))
     contact = p > 0
     if not np.any(contact):
@@ -195,9 +198,10 @@ def pressure_percentile_by_area(pressure_mpa: np.ndarray, vertices_mm: np.ndarra
     return float(ps[min(int(np.searchsorted(cumulative, percentile / 100.0)), len(ps) - 1)])
 
 
-def fe_values(result_dir: str | Path) -> dict[str, float]:
-    """The study's quantities of one FE result directory, at its last time point, measured as the
-    comparisons measure them (on M, verification.metrics.series_on_mobile), and its cost."""
+def fe_values(result_dir: str | Path, k: int = -1) -> dict[str, float]:
+    """The study's quantities of one FE result directory, at its time point ``k`` (default the
+    last), measured as the comparisons measure them (on M, verification.metrics.series_on_mobile),
+    and its cost (of the whole run)."""
     from edem.pressure_metrics import surface_regularised_peak_mpa
     from edem.resultdir import read_result_dir
     from verification.metrics import PRESSURE_ON_MOBILE, frame_index, measured_on_mobile, series_on_mobile
@@ -205,7 +209,7 @@ def fe_values(result_dir: str | Path) -> dict[str, float]:
     result = read_result_dir(result_dir)
     on_mobile = measured_on_mobile(result)
     series = series_on_mobile(result) if on_mobile else result.timeseries
-    k = len(result.time_s) - 1
+    k = k % len(result.time_s)
     frame = result.frame(frame_index(result, k))
     pressure = frame.point_data[PRESSURE_ON_MOBILE if on_mobile else "pressure_mpa"]
     memory = result.summary.get("peak_memory_mb")
@@ -329,3 +333,10 @@ def fe_error_text(errors: dict[str, float] | None) -> str:
     if errors is None:
         return UNKNOWN_FE_ERROR
     return " / ".join(f"{100.0 * errors[m]:.1f} %" if m in errors else "–" for m in FE_ERROR_TEXT_METRICS)
+
+
+def time_point_count(result_dir: str | Path) -> int:
+    """How many time points an FE result directory holds (timeseries.csv)."""
+    from edem.resultdir import read_result_dir
+
+    return len(read_result_dir(result_dir).time_s)

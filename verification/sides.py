@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from edem.atomic_dirs import ResultWriteError
+from edem.beds import bed_keys
 from geometries.errors import InputError, SolverError
 from edem.resultdir import Provenance, provenance
 from edem.results import write_results
@@ -73,7 +74,9 @@ ANY_MODULES = ("geometries", "edem", "fem_reference", "verification")
 #: scene keys only the discrete bed reads: the FE continuum has no such option (the thin-layer
 #: coupling approximates the lateral coupling the continuum has anyway). The FE sides are run
 #: without them (side_inputs), so their results cannot depend on them.
-DEM_ONLY_OVERRIDES = ("cartilage.coupling", "cartilage.thin_layer_symbol", "cartilage.thin_layer_smoothing_resolution")
+DEM_ONLY_OVERRIDES = tuple(f"cartilage.{key}" for key in bed_keys()) + (
+    # how the discrete Kelvin-Voigt springs step (edem.viscoelastic); the FE twin steps by [fe] time_scheme
+    "viscoelastic.contact_set", "viscoelastic.integrator", "viscoelastic.allow_unstable")
 #: options of a case that reach the FE reference of its scene as fem_reference.run_scene's
 #: settings (fem_reference.settings.resolve_settings: they override the scene's [fe] table)
 FE_SCENE_OPTIONS = ("mesh_size_mm", "degree", "element", "layers_through_thickness")
@@ -287,8 +290,7 @@ SIDES: dict[str, SideRunner] = {
     "edem": _run_discrete("edem"),
     "dem": _run_discrete("dem"),
     **{f"fe-{model}": _run_fe(model) for model in FE_MODELS},
-    "fe-problem:hertz-line": _run_fe_problem("hertz-line"),
-    "fe-problem:confined-compression": _run_fe_problem("confined-compression"),
+    **{f"fe-problem:{name}": _run_fe_problem(name) for name in FE_PROBLEMS},
     "fe-slab-truth": _run_fe_truth,
     "edem-128-steps": _run_edem_truth,
 }

@@ -2,7 +2,9 @@
 
 Every builder is a plain function with keyword parameters and documented defaults; it returns a
 :class:`BuiltGeometry` (the mobile surface M = talus, the fixed surface F = tibia, the ankle axis,
-ligament attachment points, a description and the resolved parameters). ``build_geometry(name,
+ligament attachment points, a description and the resolved parameters; the ankles with
+``cartilage = true``, their default, also the subchondral bones under M and F, which are then the
+articular surfaces). ``build_geometry(name,
 params)`` is the entry point used by scene files: it looks the builder up by name, validates the
 parameters (unknown names, types, ranges) and raises :class:`geometries.errors.InputError` naming the
 key ``geometry.<param>``.
@@ -42,7 +44,8 @@ from geometries.builders.common import BuiltGeometry, LigamentAttachment, Param,
 from geometries.builders.flat_plates import PLATE_PARAMS, flat_plates
 from geometries.builders.hemispheres import HEMISPHERE_PARAMS, hemispheres, icosphere
 from geometries.builders.ideal_ankle import IDEAL_ANKLE_PARAMS, ideal_ankle, ideal_candidate_fraction
-from geometries.builders.subject_ankle import SUBJECT_DEPRESSION_RANGES, SUBJECT_PARAMS, SUBJECT_RANGES, subject_ankle
+from geometries.builders.subject_ankle import (SUBJECT_CARTILAGE_ONLY, SUBJECT_DEPRESSION_RANGES, SUBJECT_PARAMS, SUBJECT_RANGES,
+                                               SUBJECT_THESIS_ONLY, subject_ankle)
 from geometries.builders.tilted_plane import TILTED_PARAMS, tilted_plane
 from geometries.errors import InputError
 
@@ -51,6 +54,7 @@ __all__ = [
     "LigamentAttachment",
     "build_geometry",
     "builder_names",
+    "builds_bones",
     "ideal_ankle",
     "hemispheres",
     "flat_plates",
@@ -58,6 +62,8 @@ __all__ = [
     "subject_ankle",
     "SUBJECT_RANGES",
     "SUBJECT_DEPRESSION_RANGES",
+    "SUBJECT_THESIS_ONLY",
+    "SUBJECT_CARTILAGE_ONLY",
     "PLATE_PARAMS",
     "icosphere",
     "ideal_candidate_fraction",
@@ -82,6 +88,15 @@ _BUILDERS: dict[str, tuple[Callable[..., BuiltGeometry], dict[str, Param]]] = {
 def builder_names() -> tuple[str, ...]:
     """Names accepted by :func:`build_geometry`."""
     return tuple(_BUILDERS)
+
+
+def builds_bones(name: str, params: dict[str, Any]) -> bool:
+    """Whether the builder ``name`` with ``params`` builds bones under articular cartilage (the
+    ankles with ``cartilage = true``, their default; docs/method.md#8-built-in-geometries). False
+    for an unknown builder or a non-boolean value, which :func:`build_geometry` refuses."""
+    if name not in _BUILDERS or "cartilage" not in _BUILDERS[name][1]:
+        return False
+    return params.get("cartilage", builder_defaults(name)["cartilage"]) is True
 
 
 def builder_defaults(name: str) -> dict[str, Any]:

@@ -45,6 +45,12 @@ class BuiltGeometry:
     ligaments: tuple[LigamentAttachment, ...]
     description: str  # what it represents, where its numbers come from
     parameters: dict = field(default_factory=dict)  # the resolved parameters (defaults filled in)
+    # With articular cartilage (docs/method.md#8-built-in-geometries): mobile and fixed above are the
+    # articular surfaces and these the subchondral bones under them, read as a scene's bone meshes
+    # (docs/method.md#measured-cartilage-thickness); None: mobile and fixed are the bones.
+    mobile_bone: TriangleSurface | None = None
+    fixed_bone: TriangleSurface | None = None
+    contact_point_mm: np.ndarray | None = None  # where the articular surfaces touch at zero load (on M)
 
 
 # --------------------------------------------------------------------------------------------
@@ -165,9 +171,51 @@ def validate_parameters(builder: str, specs: dict[str, Param], given: dict[str, 
     return {k: _check_value(builder, k, specs[k], v) for k, v in given.items()}
 
 
+def mode_parameters(builder: str, checked: dict[str, Any], thesis_defaults: dict[str, Any], cartilage_defaults: dict[str, Any]) -> dict[str, Any]:
+    """An ankle builder's parameters for its mode (docs/method.md#8-built-in-geometries):
+    ``checked["cartilage"]`` picks the bones with cartilage or the thesis's geometry; a parameter
+    only the other mode has is refused when given (None: not given) and dropped, and this
+    mode's unset ones take their defaults."""
+    cartilage = checked["cartilage"]
+    own, other = (cartilage_defaults, thesis_defaults) if cartilage else (thesis_defaults, cartilage_defaults)
+    out = dict(checked)
+    for name in other:
+        if name in own:
+            continue
+        if out.pop(name, None) is not None:
+            raise InputError(
+                f"{builder}: {name} is a parameter of the {'thesis geometry (cartilage = false)' if cartilage else 'bones with cartilage (cartilage = true)'}",
+                key=f"geometry.{name}",
+                expected=(f"no {name} with cartilage = true (the tibia is placed so that the articular surfaces touch)" if cartilage
+                          else f"cartilage = true for {name}, or no {name} for the thesis geometry"),
+            )
+    for name, default in own.items():
+        if out.get(name) is None:
+            out[name] = default
+    return out
+
+
 # --------------------------------------------------------------------------------------------
 # shared pieces
 # --------------------------------------------------------------------------------------------
+
+
+def ankle_geometry(radius_mm: float, mobile: TriangleSurface, fixed: TriangleSurface, ligaments: tuple[LigamentAttachment, ...],
+                   description: str, parameters: dict, bones: tuple[TriangleSurface, TriangleSurface] | None = None,
+                   contact_point_mm: np.ndarray | None = None) -> BuiltGeometry:
+    """An ankle builder's result: the ankle axis is the talar cylinder's, along x through (0, 0,
+    -R); G the centroid of M (the default); ``bones`` (talar, tibial) under the articular
+    surfaces M and F when the ankle has cartilage."""
+    mobile_bone, fixed_bone = bones if bones is not None else (None, None)
+    return BuiltGeometry(mobile=mobile, fixed=fixed, reference_point_mm=None, ankle_axis_point_mm=np.array([0.0, 0.0, -radius_mm]),
+                         ankle_axis_direction=np.array([1.0, 0.0, 0.0]), ligaments=ligaments, description=description, parameters=parameters,
+                         mobile_bone=mobile_bone, fixed_bone=fixed_bone, contact_point_mm=contact_point_mm)
+
+
+def lifted(ligaments: tuple[LigamentAttachment, ...], lift_mm: float) -> tuple[LigamentAttachment, ...]:
+    """The ligaments with their fixed (tibial, fibular) points moved up by ``lift_mm`` with the tibia."""
+    up = np.array([0.0, 0.0, lift_mm])
+    return tuple(LigamentAttachment(lig.name, lig.mobile_point_mm, lig.fixed_point_mm + up) for lig in ligaments)
 
 
 def rotation_about_y(angle_rad: float) -> np.ndarray:

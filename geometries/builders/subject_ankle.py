@@ -1,4 +1,5 @@
-"""d. The subject-like ankle: a talar dome and tibial plafond with seeded anatomical variation,
+"""d. The subject-like ankle: a talar dome and tibial plafond with seeded anatomical variation, with
+articular cartilage on both bones (the default) or without it (the thesis's kind of geometry),
 meshed with gmsh (docs/method.md#8-built-in-geometries)."""
 
 from __future__ import annotations
@@ -9,7 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from geometries.builders.common import BuiltGeometry, Param, ankle_ligaments, rotation_about_y, validate_parameters
+from geometries.builders.articular import (DEFAULT_TALAR_MM, DEFAULT_TAPER_MM, DEFAULT_TIBIAL_MM, layer_thickness_mm,
+                                           talus_with_cartilage, tibia_with_cartilage)
+from geometries.builders.common import BuiltGeometry, Param, ankle_geometry, ankle_ligaments, lifted, mode_parameters, rotation_about_y, validate_parameters
 from geometries.builders.gmsh_session import mesh_planar_domain, orient_like
 from geometries.errors import InputError
 from geometries.surface import TriangleSurface
@@ -42,7 +45,18 @@ SUBJECT_RANGES: dict[str, tuple[float, float]] = {
     "tilt_deg": (0.0, 4.0),
     # gap between the medial talar rim and the medial malleolus facet: ~1-2.5 mm
     "malleolus_gap_mm": (1.0, 2.5),
+    # centre thickness of the talar and tibial cartilage (with cartilage = true): a layer whose
+    # tapered margins bring its mean to 0.81-0.84 of its centre value, so that the means cover the
+    # published ones (docs/references.md: talar 1.10 +- 0.18 mm and tibial 1.16 +- 0.14 mm by
+    # stereophotography, talar 1.34 +- 0.14 mm by MRI) within about two standard deviations
+    "talar_cartilage_mm": (1.0, 1.7),
+    "tibial_cartilage_mm": (1.0, 1.7),
 }
+#: the parameters of one mode only (docs/method.md#8-built-in-geometries): the thesis's kind of
+#: plafond, placed plafond_gap_mm above the talus (cartilage = false), or the bones with cartilage,
+#: placed touching (cartilage = true; None: drawn or the default of SUBJECT_DEFAULTS)
+SUBJECT_THESIS_ONLY = {"plafond_gap_mm": None}
+SUBJECT_CARTILAGE_ONLY = {"talar_cartilage_mm": None, "tibial_cartilage_mm": None, "cartilage_taper_mm": DEFAULT_TAPER_MM}
 
 #: depression centres (x_mm, s_mm) on the plafond, ranges as fractions: x of the talar half
 #: width (+ lateral), s of the plafond half arc length (+ anterior). The first (larger, radius
@@ -65,10 +79,13 @@ SUBJECT_DEFAULTS: dict[str, float] = {
     "depression_depth_mm": 1.5,
     "tilt_deg": 2.0,
     "malleolus_gap_mm": 1.5,
+    "talar_cartilage_mm": DEFAULT_TALAR_MM,
+    "tibial_cartilage_mm": DEFAULT_TIBIAL_MM,
 }
 
-SUBJECT_PARAMS: dict[str, Param] = {"seed": Param("seed", 0, None)}
+SUBJECT_PARAMS: dict[str, Param] = {"seed": Param("seed", 0, None), "cartilage": Param("bool")}
 SUBJECT_PARAMS.update({k: Param("float_or_none", lo, hi) for k, (lo, hi) in SUBJECT_RANGES.items()})
+SUBJECT_PARAMS["cartilage_taper_mm"] = Param("float_or_none", 0.0, 50.0, lo_open=True)
 SUBJECT_PARAMS["depression_positions"] = Param("pairs", length=2)
 SUBJECT_PARAMS["mesh_size_mm"] = Param("float_or_none", 0.05, 50.0)
 SUBJECT_PARAMS["fixed_mesh_size_mm"] = Param("float_or_none", 0.05, 50.0)
@@ -93,6 +110,7 @@ def _subject_talus_radius(x: np.ndarray, u: np.ndarray, R: float, hw_of_u: Calla
 
 def subject_ankle(
     seed: int | None = None,
+    cartilage: bool = True,
     talar_radius_mm: float | None = None,
     talar_width_mm: float | None = None,
     anterior_widening_mm: float | None = None,
@@ -106,6 +124,9 @@ def subject_ankle(
     depression_positions: tuple[tuple[float, float], tuple[float, float]] | None = None,
     tilt_deg: float | None = None,
     malleolus_gap_mm: float | None = None,
+    talar_cartilage_mm: float | None = None,
+    tibial_cartilage_mm: float | None = None,
+    cartilage_taper_mm: float | None = None,
     mesh_size_mm: float | None = None,
     fixed_mesh_size_mm: float | None = None,
 ) -> BuiltGeometry:
@@ -149,32 +170,53 @@ def subject_ankle(
     (default 0.93 mm: ~3000 talar triangles for the default talus; the fixed surface uses
     ``fixed_mesh_size_mm``, default the same).
 
+    With ``cartilage = true`` (the default) the surfaces above are the subchondral bones and both
+    carry an articular layer (:mod:`geometries.builders.articular`), as on the idealised ankle:
+    the talar one ``talar_cartilage_mm`` thick at its centre, out along the bone's normal, the
+    tibial one ``tibial_cartilage_mm`` towards the plafond's axis, each tapered to 0
+    at its margin over ``cartilage_taper_mm`` (default 3); the malleolus wall carries a uniform
+    layer of the tibial thickness. The plafond's articular radius is then (R + t_talus) (1 +
+    ``incongruity``): it is incongruent with the talar articular surface, keeps its ridge and
+    depressions, and the tibia is lifted until the articular surfaces touch (at one point with a
+    tilt, the meshes to 1e-4 mm) instead of being placed ``plafond_gap_mm`` above the talus:
+    that parameter belongs to ``cartilage = false`` (the thesis's kind of plafond, without
+    cartilage) and the thickness parameters to ``cartilage = true``; one given for the other
+    mode is refused. The scene's mobile and fixed surfaces are the articular ones; the bones are
+    ``mobile_bone`` and ``fixed_bone`` of the result (docs/method.md#measured-cartilage-thickness).
+
     Ligaments: :func:`ankle_ligaments` with this talus's radius and mean half width (plausible
     placements, not measured).
     """
     given = dict(locals())
     checked = validate_parameters("subject_ankle", SUBJECT_PARAMS, given)
-    seed = checked["seed"]
+    checked = mode_parameters("subject_ankle", checked, SUBJECT_THESIS_ONLY, SUBJECT_CARTILAGE_ONLY)
+    seed, with_cartilage = checked["seed"], checked["cartilage"]
 
-    # --- draw (always every parameter, fixed order) then override with explicit values
-    resolved: dict[str, Any] = {}
+    # --- draw (always every parameter, fixed order) then override with explicit values; the
+    # other mode's parameters are drawn too (so that a seed gives the same subject in both) and dropped
+    resolved: dict[str, Any] = {"cartilage": with_cartilage}
     rng = np.random.default_rng(seed) if seed is not None else None
-    for name, (lo, hi) in SUBJECT_RANGES.items():
-        drawn = float(rng.uniform(lo, hi)) if rng is not None else SUBJECT_DEFAULTS[name]
-        resolved[name] = checked[name] if checked[name] is not None else drawn
+    def draw(names: list[str]) -> None:
+        for name in names:
+            lo, hi = SUBJECT_RANGES[name]
+            drawn = float(rng.uniform(lo, hi)) if rng is not None else SUBJECT_DEFAULTS[name]
+            if name in checked:
+                resolved[name] = checked[name] if checked[name] is not None else drawn
+
+    # the cartilage thicknesses last: the shape and the depressions a seed drew before them stay as they were
+    draw([name for name in SUBJECT_RANGES if name not in SUBJECT_CARTILAGE_ONLY])
     fr_pos = []
     for (xr, sr), default in zip(SUBJECT_DEPRESSION_RANGES, _SUBJECT_DEPRESSION_DEFAULTS):
         if rng is not None:
             fr_pos.append((float(rng.uniform(*xr)), float(rng.uniform(*sr))))
         else:
             fr_pos.append(default)
+    draw([name for name in SUBJECT_RANGES if name in SUBJECT_CARTILAGE_ONLY])
 
     R = resolved["talar_radius_mm"]
     W = resolved["talar_width_mm"]
     widen = resolved["anterior_widening_mm"]
     arc = math.radians(resolved["talar_arc_deg"])
-    Rt = R * (1.0 + resolved["incongruity"])
-    g = resolved["plafond_gap_mm"]
     U = R * arc / 2.0  # talar half arc length
     S = resolved["plafond_length_mm"] / 2.0  # plafond half arc length
     hw_max = W / 2.0 + widen / 4.0
@@ -195,6 +237,8 @@ def subject_ankle(
     fsize = checked["fixed_mesh_size_mm"] if checked["fixed_mesh_size_mm"] is not None else size
     resolved["mesh_size_mm"] = size
     resolved["fixed_mesh_size_mm"] = fsize
+    if with_cartilage:
+        resolved["cartilage_taper_mm"] = checked["cartilage_taper_mm"]
     resolved = {"seed": seed, **resolved}
     groove_half = 0.3 * W
     dgroove = resolved["groove_depth_mm"]
@@ -207,6 +251,24 @@ def subject_ankle(
     talus_poly = [(-hw_of_u(-U), -U), (hw_of_u(-U), -U), (hw_of_u(U), U), (-hw_of_u(U), U)]
     q, tt, _ = mesh_planar_domain("subject_talus", [[(float(a), float(b)) for a, b in talus_poly]],
                                    size)
+    medial_x = -(hw_max + resolved["malleolus_gap_mm"])
+    lateral_x = hw_max + 2.0
+    tilt = math.radians(resolved["tilt_deg"])
+
+    def depressions(x: np.ndarray, s_mm: np.ndarray) -> np.ndarray:
+        dep = np.zeros_like(x)
+        for (x0, s0), rad in zip(resolved["depression_positions"], radii):
+            dep += resolved["depression_depth_mm"] * _plateau(np.hypot(x - x0, s_mm - s0) / rad)
+        return dep
+
+    def ridge(x: np.ndarray) -> np.ndarray:
+        return np.where(np.abs(x) < groove_half, dgroove * np.cos(np.pi * x / (2.0 * groove_half)) ** 2, 0.0)
+
+    if with_cartilage:
+        return _subject_with_cartilage(resolved, q, tt, R, U, S, hw_of_u, medial_x, lateral_x, tilt, ridge, depressions, radii, fsize,
+                                       lambda x, u: _subject_talus_radius(x, u, R, hw_of_u, dgroove, groove_half, rim))
+    Rt = R * (1.0 + resolved["incongruity"])
+    g = resolved["plafond_gap_mm"]
     x, u = q[:, 0], q[:, 1]
     r = _subject_talus_radius(x, u, R, hw_of_u, dgroove, groove_half, rim)
     psi = u / R
@@ -218,8 +280,6 @@ def subject_ankle(
     mobile = TriangleSurface(tv, tt, name="subject-like talus", source="subject_ankle")
 
     # --- tibia: plafond (x, s) + unfolded malleolus (x < medial_x)
-    medial_x = -(hw_max + resolved["malleolus_gap_mm"])
-    lateral_x = hw_max + 2.0
     mall_depth = 0.6 * R
     plaf = [(medial_x, -S), (lateral_x, -S), (lateral_x, S), (medial_x, S)]
     mall = [(medial_x - mall_depth, -S), (medial_x, -S), (medial_x, S), (medial_x - mall_depth, S)]
@@ -227,17 +287,10 @@ def subject_ankle(
     xs, ss = q2[:, 0], q2[:, 1]
     xe = np.maximum(xs, medial_x)  # on the plafond (malleolus points use the medial edge)
     below = np.maximum(medial_x - xs, 0.0)  # distance below the plafond edge (malleolus)
-    groove_t = np.where(np.abs(xe) < groove_half,
-                        dgroove * np.cos(np.pi * xe / (2.0 * groove_half)) ** 2, 0.0)
-    dep = np.zeros_like(xs)
-    for (x0, s0), rad in zip(resolved["depression_positions"], radii):
-        d = np.hypot(xe - x0, ss - s0)
-        dep += resolved["depression_depth_mm"] * _plateau(d / rad)
-    rt = Rt - groove_t + dep
+    rt = Rt - ridge(xe) + depressions(xe, ss)
     psi_t = ss / Rt
     fv = np.column_stack([xe, rt * np.sin(psi_t), (g - Rt) + rt * np.cos(psi_t) - below])
     pivot = np.array([0.0, 0.0, g])
-    tilt = math.radians(resolved["tilt_deg"])
     fv = (fv - pivot) @ rotation_about_y(tilt).T + pivot
     # expected normals: plafond towards the tibial axis (down), malleolus lateral (+x)
     fcen = np.column_stack([xe, rt * np.sin(psi_t), (g - Rt) + rt * np.cos(psi_t)])[ft].mean(axis=1)
@@ -259,16 +312,51 @@ def subject_ankle(
         f"with a medial malleolus wall ({fixed.n_triangles} triangles); "
         + (f"parameters drawn with seed {seed} within documented anatomical ranges"
            if seed is not None else "default parameters")
-        + ". Both surfaces: gmsh-meshed planar domains mapped onto the parametric surfaces. "
+        + ". Both surfaces: gmsh-meshed planar domains mapped onto the parametric surfaces; no cartilage. "
         "Ligament attachments are plausible anatomical placements, not measured."
     )
-    return BuiltGeometry(
-        mobile=mobile,
-        fixed=fixed,
-        reference_point_mm=None,
-        ankle_axis_point_mm=np.array([0.0, 0.0, -R]),
-        ankle_axis_direction=np.array([1.0, 0.0, 0.0]),
-        ligaments=ankle_ligaments(R, W / 2.0, medial_x - 2.0, hw_max + 6.0, rotation_about_y(tilt), pivot),
-        description=description,
-        parameters=resolved,
+    return ankle_geometry(R, mobile, fixed, ankle_ligaments(R, W / 2.0, medial_x - 2.0, hw_max + 6.0, rotation_about_y(tilt), pivot), description, resolved)
+
+
+def _subject_with_cartilage(resolved: dict[str, Any], params: np.ndarray, triangles: np.ndarray, R: float, U: float, S: float,
+                            hw_of_u: Callable, medial_x: float, lateral_x: float, tilt: float, ridge: Callable, depressions: Callable,
+                            radii: tuple[float, float], fixed_size: float, talar_bone_radius: Callable) -> BuiltGeometry:
+    """:func:`subject_ankle` with ``cartilage = true``: the bones, their layers, the tibia placed touching."""
+    t_talus, t_tibia, taper = resolved["talar_cartilage_mm"], resolved["tibial_cartilage_mm"], resolved["cartilage_taper_mm"]
+    narrowest = min(float(hw_of_u(-U)), U, S)
+    if taper > narrowest:
+        raise InputError(
+            f"subject_ankle: a {taper:g} mm taper leaves no plateau of the centre thickness on a layer {2 * narrowest:.3g} mm across",
+            key="geometry.cartilage_taper_mm", expected=f"at most {narrowest:.3g} mm (half the narrowest extent of the talar and tibial layers)",
+        )
+
+    def talar_thickness(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return layer_thickness_mm(t_talus, taper, hw_of_u(u) - np.abs(x), U - np.abs(u))
+
+    def tibial_thickness(x: np.ndarray, s_mm: np.ndarray) -> np.ndarray:
+        return layer_thickness_mm(t_tibia, taper, np.minimum(x - medial_x, lateral_x - x), S - np.abs(s_mm))
+
+    mobile, mobile_bone = talus_with_cartilage(params, triangles, R, talar_bone_radius, talar_thickness, "subject_ankle")
+    radius_f = (R + t_talus) * (1.0 + resolved["incongruity"])  # the plafond's articular radius (without ridge and depressions)
+    pivot = np.array([0.0, 0.0, t_talus])
+    rotation = rotation_about_y(tilt)
+    fixed, fixed_bone, lift, touch = tibia_with_cartilage(
+        "subject_ankle", medial_x, lateral_x, S, 0.6 * R, radius_f, t_talus - radius_f,
+        lambda x, s_mm: radius_f + t_tibia - ridge(x) + depressions(x, s_mm), tibial_thickness, t_tibia, rotation, pivot,
+        mobile, fixed_size)
+    seed = resolved["seed"]
+    description = (
+        "Subject-like ankle with cartilage (docs/method.md#8-built-in-geometries): parametric talar trochlea (bone radius "
+        f"{R:.2f} mm, width {resolved['talar_width_mm']:.2f} mm, {resolved['anterior_widening_mm']:.2f} mm wider anteriorly, arc "
+        f"{resolved['talar_arc_deg']:.1f} deg, central groove {resolved['groove_depth_mm']:.2f} mm, rim roll-off "
+        f"{resolved['rim_rolloff_mm']:.2f} mm) under a {t_talus:.2f} mm talar layer ({mobile.n_triangles} triangles), against an "
+        f"incongruent plafond (articular radius {radius_f:.2f} mm, length {2 * S:.1f} mm, two depressions "
+        f"{resolved['depression_depth_mm']:.2f} mm deep, radii {radii[0]:.1f} and {radii[1]:.1f} mm, tilt "
+        f"{resolved['tilt_deg']:.2f} deg) under a {t_tibia:.2f} mm tibial layer, with a medial malleolus wall "
+        f"({fixed.n_triangles} triangles); each layer tapered to 0 over {taper:g} mm at its margin; the articular "
+        f"surfaces touch at ({touch[0]:.1f}, {touch[1]:.1f}, {touch[2]:.2f}) mm at zero load; "
+        + (f"parameters drawn with seed {seed} within documented anatomical ranges" if seed is not None else "default parameters")
+        + ". Ligament attachments are plausible anatomical placements, not measured."
     )
+    ligaments = lifted(ankle_ligaments(R, resolved["talar_width_mm"] / 2.0, medial_x - 2.0, lateral_x + 4.0, rotation, pivot), lift)
+    return ankle_geometry(R, mobile, fixed, ligaments, description, resolved, bones=(mobile_bone, fixed_bone), contact_point_mm=touch)

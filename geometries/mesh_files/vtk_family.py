@@ -348,6 +348,10 @@ _VTK_XML_TYPES = {
 
 #: bytes per zlib block, as VTK's own writer cuts them
 _BLOCK_BYTES = 1 << 15
+#: zlib's fastest level: on a run's pressure maps (float64 points and pressures, int8 flags) it
+#: compresses 2.6x faster than the default level 6 (a 13k-triangle map: 4.0 against 10.2 ms of
+#: CPU), to arrays 5 % larger
+_ZLIB_LEVEL = 1
 
 
 def _xml_data_array(values: np.ndarray, name: str | None = None) -> str:
@@ -362,7 +366,7 @@ def _xml_data_array(values: np.ndarray, name: str | None = None) -> str:
         raise ValueError(f"write_vtp: array {name!r} of {values.dtype} and shape {values.shape} "
                          "(expected (n,) or (n, k) numbers)")
     data = np.ascontiguousarray(values, dtype=values.dtype.newbyteorder("<")).tobytes()
-    blocks = [zlib.compress(data[start:start + _BLOCK_BYTES]) for start in range(0, len(data), _BLOCK_BYTES)]
+    blocks = [zlib.compress(data[start:start + _BLOCK_BYTES], _ZLIB_LEVEL) for start in range(0, len(data), _BLOCK_BYTES)]
     last = len(data) - (len(blocks) - 1) * _BLOCK_BYTES if blocks else 0
     header = np.array([len(blocks), _BLOCK_BYTES, last, *map(len, blocks)], dtype="<u8").tobytes()
     encoded = (base64.b64encode(header) + base64.b64encode(b"".join(blocks))).decode("ascii")
@@ -373,10 +377,21 @@ def _xml_data_array(values: np.ndarray, name: str | None = None) -> str:
     return f'<DataArray {attributes} NumberOfComponents="{components}" format="binary">{encoded}</DataArray>'
 
 
+def vtp_polys(triangles: np.ndarray) -> str:
+    """The ``<Polys>`` element of a .vtp of these triangles (int64 connectivity and offsets,
+    compressed): what :func:`write_vtp` writes for them, to be given to it as ``polys`` by a
+    writer of many files on one mesh (a run's time points), which then encodes it once."""
+    connectivity = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    offsets = 3 * np.arange(1, len(connectivity) + 1, dtype=np.int64)
+    return "<Polys>" + _xml_data_array(connectivity.ravel(), "connectivity") + _xml_data_array(offsets, "offsets") + "</Polys>"
+
+
 def write_vtp(
     path: str | Path, points_mm: np.ndarray, triangles: np.ndarray,
     cell_data: dict[str, np.ndarray] | None = None,
     point_data: dict[str, np.ndarray] | None = None,
+    *,
+    polys: str | None = None,
 ) -> None:
     """Write a triangulated surface, with optional per-triangle and per-vertex arrays, as VTK
     XML PolyData (docs/result-format.md).
@@ -391,6 +406,8 @@ def write_vtp(
         Vertex indices; written as int64 connectivity with int64 offsets.
     cell_data, point_data : dict of (n_triangles,) / (n_points,) or (n, k) arrays, optional
         Named arrays, written in their own numeric type (bool as UInt8).
+    polys : str, optional
+        :func:`vtp_polys` of ``triangles``, encoded once for many files (default: encoded here).
 
     Every result directory's pressure maps are written here (the discrete runs write cell data,
     the FE runs nodal and facet data). The file is VTK XML's inline binary format (base64,
@@ -399,8 +416,7 @@ def write_vtp(
     A full disk is an OSError (ENOSPC): VTK's own file output crashed (SIGSEGV) there.
     """
     points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
-    connectivity = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    offsets = 3 * np.arange(1, len(connectivity) + 1, dtype=np.int64)
+    n_triangles = np.asarray(triangles).reshape(-1, 3).shape[0]
 
     def data_section(tag: str, arrays: dict[str, np.ndarray] | None) -> str:
         return f"<{tag}>" + "".join(_xml_data_array(values, name) for name, values in (arrays or {}).items()) + f"</{tag}>"
@@ -409,11 +425,11 @@ def write_vtp(
             '<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" header_type="UInt64" '
             'compressor="vtkZLibDataCompressor">\n<PolyData>\n'
             f'<Piece NumberOfPoints="{len(points)}" NumberOfVerts="0" NumberOfLines="0" NumberOfStrips="0" '
-            f'NumberOfPolys="{len(connectivity)}">\n'
+            f'NumberOfPolys="{n_triangles}">\n'
             + data_section("PointData", point_data) + "\n" + data_section("CellData", cell_data) + "\n"
             + "<Points>" + _xml_data_array(points, "Points") + "</Points>\n"
-            + "<Polys>" + _xml_data_array(connectivity.ravel(), "connectivity") + _xml_data_array(offsets, "offsets")
-            + "</Polys>\n</Piece>\n</PolyData>\n</VTKFile>\n")
+            + (vtp_polys(triangles) if polys is None else polys)
+            + "\n</Piece>\n</PolyData>\n</VTKFile>\n")
     with open(path, "w", encoding="ascii") as f:
         f.write(text)
 

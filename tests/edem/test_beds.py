@@ -4,27 +4,29 @@ ways, and the run solves with whatever bed the registry holds."""
 
 from __future__ import annotations
 
-from dataclasses import replace
+import json
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
 from support import grid_plate, plane
 
-from edem.beds import BEDS, IndependentSprings, scene_bed
+from edem.beds import BEDS, CoupledThinLayer, IndependentSprings, scene_bed
+from edem.cli import main
 from geometries.errors import InputError
 from edem.mechanics import generalised_directions
 from edem.raycast import RayCaster
 from edem.scene import Scene, load_scene
 from edem.solver import run
-from edem.thin_layer import LAYER_SYMBOLS
+from edem.layer_symbols import LAYER_SYMBOLS
 
 #: every bed of the registry with each of its symbols (coupling, thin_layer_symbol)
-BED_CHOICES = [("none", None)] + [("thin-layer", symbol) for symbol in LAYER_SYMBOLS]
+BED_CHOICES = [(IndependentSprings.coupling, None)] + [(CoupledThinLayer.coupling, symbol) for symbol in LAYER_SYMBOLS]
 THICKNESS_MM, FORCE_N = 2.0, 333.0
 PLATE_MM2 = 400.0  # 20 x 20 mm
 
 
-def plates(coupling: str = "none", thin_layer_symbol: str | None = None, **kwargs) -> Scene:
+def plates(coupling: str = IndependentSprings.coupling, thin_layer_symbol: str | None = None, **kwargs) -> Scene:
     """A 20 x 20 mm plate (512 springs) 2 mm below a plane, pressed up into it, then also tilted
     by a moment about x and y (G: the plate's centre)."""
     mobile, fixed = grid_plate(20, 20, 16), plane(lambda x, y: THICKNESS_MM)
@@ -47,7 +49,8 @@ def test_every_bed_balances_force_and_moment_on_flat_plates(coupling, symbol):
     Tolerance 1e-9 of the load: the solves balance to round-off (their own residual checks are
     1e-6 relative and looser); the pressures differ between the beds by tens of percent at nu 0.45."""
     scene = plates(coupling, symbol)
-    assert (scene.cartilage.coupling, scene.cartilage.thin_layer_symbol) == (coupling, symbol or "pade")
+    assert scene.cartilage.coupling == coupling
+    assert scene.cartilage.bed_keys == BEDS[coupling].Keys(**({} if symbol is None else {"thin_layer_symbol": symbol}))
     result = run(scene, "dem")
     rows = generalised_directions(scene.spring_centroid_mm, scene.spring_normal, scene.reference_point_mm)
     free = [2, 3, 4]  # tz, rx, ry (tx, ty, rz fixed)
@@ -90,6 +93,8 @@ def test_an_unknown_bed_is_refused_naming_the_key():
     ({"coupling": "thin-layer", "law": "gap-log", "thin_layer_symbol": "two-pole"}, "thin_layer_symbol"),  # columns not linearisable
     ({"thin_layer_smoothing_resolution": 3.0}, "thin_layer_smoothing_resolution"),  # a coarse smoothing without the coupling
     ({"coupling": "thin-layer", "thin_layer_smoothing_resolution": -1.0}, "thin_layer_smoothing_resolution"),
+    ({"thin_layer_stack": "lumped"}, "thin_layer_stack"),  # how two layers couple, without the coupling
+    ({"coupling": "thin-layer", "thin_layer_stack": "bonded"}, "thin_layer_stack"),
     ({"shear_modulus_mpa": -1.0}, "shear_modulus_mpa"),
     ({"law": "elastic"}, "law"),
 ])
@@ -130,3 +135,40 @@ def test_the_run_solves_with_the_bed_the_registry_holds(monkeypatch):
     for a, b in zip(expected.steps, got.steps):
         np.testing.assert_array_equal(a.pressure_mpa, b.pressure_mpa)
         np.testing.assert_array_equal(a.displacement_mm, b.displacement_mm)
+
+
+def test_a_bed_with_keys_of_its_own_is_read_refused_and_summarised_from_the_registry_alone(monkeypatch, tmp_path, capsys):
+    """A bed added to BEDS with a key of its own and nothing else changed: a scene file (through
+    ``--set``) and Scene.from_arrays take its key, the validator refuses a bad value and the key
+    on another bed (naming it and the bed it belongs to), summary.json lists it (null on another
+    bed, whose own keys are null on this one) and the one-line report gives the bed's label."""
+
+    @dataclass(frozen=True)
+    class StiffenedKeys:
+        stiffness_factor: float = 1.0
+
+    class Stiffened(IndependentSprings):
+        coupling, label, Keys = "stiffened", "stiffened springs", StiffenedKeys
+
+        @classmethod
+        def read_keys(cls, table):
+            return cls.Keys(table.number("stiffness_factor", 1.0, positive=True, what="a factor > 0"))
+
+    monkeypatch.setitem(BEDS, Stiffened.coupling, Stiffened)
+    assert plates(Stiffened.coupling, stiffness_factor=2.0).cartilage.bed_keys == StiffenedKeys(2.0)
+    for change, key, expected in (({"cartilage.stiffness_factor": 2.0}, "cartilage.stiffness_factor", 'coupling = "stiffened"'),
+                                  ({"cartilage.coupling": "stiffened", "cartilage.stiffness_factor": -1.0}, "cartilage.stiffness_factor", "> 0"),
+                                  ({"cartilage.coupling": "stiffened", "cartilage.thin_layer_symbol": "pade"}, "cartilage.thin_layer_symbol",
+                                   'coupling = "thin-layer"')):
+        with pytest.raises(InputError) as refused:
+            load_scene("cylinder-layer", change)
+        assert refused.value.key == key and expected in refused.value.expected
+    summaries = {}
+    for coupling, extra in ((Stiffened.coupling, ["--set", "cartilage.stiffness_factor=2"]), (CoupledThinLayer.coupling, [])):
+        out = tmp_path / coupling
+        assert main(["run", "cylinder-layer", "--method", "dem", "--out", str(out), "--set", f"cartilage.coupling={coupling}", *extra]) == 0
+        summaries[coupling] = json.loads((out / "summary.json").read_text())
+        assert BEDS[coupling].label in capsys.readouterr().out
+    assert {k: summaries["stiffened"][k] for k in ("coupling", "stiffness_factor", "thin_layer_symbol")} == {
+        "coupling": "stiffened", "stiffness_factor": 2.0, "thin_layer_symbol": None}
+    assert (summaries["thin-layer"]["stiffness_factor"], summaries["thin-layer"]["thin_layer_symbol"]) == (None, "pade")

@@ -26,6 +26,7 @@ SUMMARY_KEYS = {
     "steps",
     "n_springs",
     "wall_time_s",
+    "setup_time_s",
     "peak_pressure_mpa",
     "max_contact_area_mm2",
     "final_displacement_mm",
@@ -205,6 +206,52 @@ def test_load_pulling_apart_ends_with_a_clear_status(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+def test_sto_moment_that_overflows_in_n_mm_exits_2_naming_file_column_and_line(tmp_path, capsys):
+    """An OpenSim JointReaction .sto whose moment, -1e308 N m, is finite in the file but not in
+    N mm: exit 2 naming the file, the column and the line (it ended in a traceback)."""
+    names = ["time"] + [f"ankle_r_on_talus_r_in_ground_{c}" for c in ("fx", "fy", "fz", "mx", "my", "mz")]
+    rows = [[0.0, 0.0, 0.0, -400.0, 0.0, 0.0, 0.0], [0.1, 0.0, 0.0, -400.0, -1e308, 0.0, 0.0]]
+    (tmp_path / "jr.sto").write_text("\n".join(["JointReaction_ReactionLoads", "version=1", "nRows=2", "nColumns=7", "inDegrees=no",
+                                                "endheader", "\t".join(names)] + ["\t".join(repr(v) for v in row) for row in rows]) + "\n")
+    scene = write_plates_scene(tmp_path, load='file = "jr.sto"\naxes = "same"\nmobile_body = "talus_r"')
+    assert main(["run", str(scene), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert str(tmp_path / "jr.sto") in err and "ankle_r_on_talus_r_in_ground_mx" in err and "line 9" in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_mesh_whose_regularised_peak_would_not_fit_in_memory_exits_2_before_the_solve(tmp_path, capsys):
+    """Eight triangles 1 m across (a joint-sized mesh, 1.98 m diagonal) need 2.2e8 quadrature points for the regularised peak of the
+    result (n^2 sub-triangles, n = edge / (radius / 3)): refused before the solve, naming the
+    mesh and the size it can hold, not after it in a MemoryError."""
+    from edem.pressure_metrics import MAX_QUADRATURE_POINTS
+
+    scene = write_plates_scene(tmp_path)
+    write_surface(tmp_path / "talus.stl", grid_plate(1400, 1400, 2))
+    assert main(["run", str(scene), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "talus.stl" in err and "geometry.mobile" in err and f"{MAX_QUADRATURE_POINTS:,}" in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_bones_through_each_other_exit_2_naming_the_time_points_unless_allowed(tmp_path, capsys):
+    """Plates 2 mm apart (threshold law: the springs are the gap) pressed 3 and 3.2 mm together at
+    time points 1 and 2 (d = F h / (E' A)): the bones pass through each other there, exit 2 naming
+    those time points and the share of the springs in contact (all of them), no result; with
+    [solver] allow_bone_overlap the run is kept, warned."""
+    e_conf = 10.35 * (1 - 0.42) / ((1 + 0.42) * (1 - 2 * 0.42))
+    forces = [[0.0, 0.0, 400.0]] + [[0.0, 0.0, d * e_conf * 400.0 / 2.0] for d in (3.0, 3.2)]
+    scene = write_plates_scene(tmp_path, load=f"time_s = [0.0, 1.0, 2.0]\nforce_n = {forces}")
+    assert main(["run", str(scene), "--method", "dem", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "bones pass through each other" in err and "at 2 of 3 time points (k = 1-2; t = 1-2 s)" in err
+    assert "100 % of those in contact" in err and "[solver] allow_bone_overlap = true" in err
+    assert not (tmp_path / "o").exists()
+    assert main(["run", str(scene), "--method", "dem", "--out", str(tmp_path / "kept"), "--set", "solver.allow_bone_overlap=true"]) == 0
+    warnings = json.loads((tmp_path / "kept" / "summary.json").read_text())["warnings"]
+    assert any("at 2 time points (k = 1-2" in w and "compressed past their length" in w for w in warnings)
+
+
 def test_unknown_builtin_scene(capsys):
     assert main(["run", "no-such-scene"]) == 2
     assert "ideal-standing" in capsys.readouterr().err
@@ -244,7 +291,7 @@ def test_summary_and_report_line_name_the_bed_the_run_used(tmp_path, capsys):
         runs[name] = (json.loads((out / "summary.json").read_text()), capsys.readouterr().out)
     (coupled, coupled_line), (springs, springs_line) = runs["default"], runs["springs"]
     assert (coupled["coupling"], coupled["thin_layer_symbol"], coupled["thin_layer_smoothing_resolution"]) == ("thin-layer", "pade", 0.0)
-    assert "coupled thin layer (pade)" in coupled_line
+    assert "coupled layer (pade)" in coupled_line
     assert (springs["coupling"], springs["thin_layer_symbol"], springs["thin_layer_smoothing_resolution"]) == ("none", None, None)
     assert "independent springs" in springs_line
     assert coupled["final_displacement_mm"][2] > springs["final_displacement_mm"][2]

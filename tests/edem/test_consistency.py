@@ -11,6 +11,7 @@ import pytest
 from support import grid_plate, make_scene, plane
 
 from edem.cli import main
+from edem.beds import IndependentSprings
 from edem.consistency import check_increment, describe_motion, motion_bound_mm, point_motion_mm
 from geometries.errors import SolverError
 from edem.loads import JointKinematics
@@ -24,7 +25,7 @@ ROTATIONS = ("rx", "ry", "rz")
 
 @pytest.fixture(scope="module")
 def ankle():
-    return build_geometry("ideal_ankle", {})
+    return build_geometry("ideal_ankle", {"cartilage": False})  # the thesis's cylinder under a plane
 
 
 def ankle_ligaments(ankle) -> tuple[Ligament, ...]:
@@ -64,7 +65,7 @@ def test_motion_bound_holds_every_point_and_is_reached():
     exact = point_motion_mm(u, np.array([[10.0, 0.0, 0.0]]), np.zeros(3))[0]
     assert exact == pytest.approx(motion_bound_mm(u, 10.0), rel=1e-12)
     # refused with and without the bound (the bound only decides whether to measure)
-    cartilage = Cartilage(1.0, 0.3, max_spring_length_mm=3.5)
+    cartilage = Cartilage(1.0, 0.3, max_spring_length_mm=3.5, coupling=IndependentSprings.coupling, bed_keys=IndependentSprings.Keys())
     big = np.r_[0.0, 0.0, 0.0, 0.0, 0.0, 0.5]  # moves (10, 0, 0) by 10 * 2 sin(0.25) = 4.9 mm > 3.5
     for bound in (np.inf, 10.0):
         with pytest.raises(SolverError, match="more than 1 x the ray window"):

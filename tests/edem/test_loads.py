@@ -449,3 +449,54 @@ def test_empty_time_range_is_an_error(scene):
     with pytest.raises(InputError) as info:
         load_series_from_table({"force_n": [0, 0, 1], "time_range_s": [1.0, 2.0]}, scene)
     assert info.value.key == "load.time_range_s"
+
+
+# --------------------------------------------------------------------------- conversions that overflow
+
+
+def test_moment_finite_in_n_m_but_infinite_in_n_mm_names_file_column_and_line(scene):
+    """-1e308 N m is a finite number in the file and -inf after N m -> N mm (x 1000): refused as
+    bad input naming the .sto, the column and the line, not left to fail as non-finite later."""
+    rows = jointreaction_rows(3)
+    rows[1, 4] = -1e308  # the _mx column of the second data row (file line 9: 6 header lines, the names, row 1)
+    path = write_jointreaction_sto(scene.parent / "jr.sto", rows)
+    with pytest.raises(InputError) as info:
+        load_series_from_table({"file": "jr.sto", "axes": "same", "mobile_body": "talus_r"}, scene)
+    message = str(info.value)
+    assert info.value.file == str(path) and info.value.key == "load.file"
+    assert f"column '{JR}_mx'" in message and "line 9" in message and "N m -> N mm" in message
+    # the largest moment that stays finite in N mm is accepted: the limit is the conversion's
+    rows[1, 4] = -np.finfo(float).max / 1000.0
+    write_jointreaction_sto(scene.parent / "jr.sto", rows)
+    load = load_series_from_table({"file": "jr.sto", "axes": "same", "mobile_body": "talus_r"}, scene)
+    assert np.isfinite(load.moment_nmm).all()
+
+
+def test_joint_centre_finite_in_m_but_infinite_in_mm_names_its_column(scene):
+    rows = jointreaction_rows(3)
+    rows[2, 7] = 1e306  # _px of the last row, m
+    write_jointreaction_sto(scene.parent / "jr.sto", rows)
+    with pytest.raises(InputError) as info:
+        load_series_from_table({"file": "jr.sto", "axes": "same", "mobile_body": "talus_r"}, scene)
+    assert f"column '{JR}_px'" in str(info.value) and "line 10" in str(info.value) and "m -> mm" in str(info.value)
+
+
+def test_force_scale_that_overflows_names_the_force_it_overflows(scene):
+    """force_scale multiplies finite forces: from a file the column and line are named, inline the
+    entry of force_n; the key is force_scale either way."""
+    write_jointreaction_sto(scene.parent / "jr.sto", jointreaction_rows(3))
+    with pytest.raises(InputError) as info:
+        load_series_from_table({"file": "jr.sto", "axes": "same", "mobile_body": "talus_r", "force_scale": 1e307}, scene)
+    assert info.value.key == "load.force_scale" and f"column '{JR}_fy'" in str(info.value) and "line 8" in str(info.value)
+    with pytest.raises(InputError) as info:
+        load_series_from_table({"time_s": [0.0, 1.0], "force_n": [[0, 0, 1], [0, 0, 1e300]], "force_scale": 1e10}, scene)
+    assert info.value.key == "load.force_scale" and "force_n[1][2]" in str(info.value)
+
+
+def test_max_step_s_between_values_whose_difference_overflows_is_refused(scene):
+    """Linear interpolation between -1.7e308 and 1.7e308 needs their difference, which is not a
+    float: the step is named (key max_step_s), no infinity reaches the solver."""
+    table = {"time_s": [0.0, 1.0], "force_n": [[0, 0, -1.7e308], [0, 0, 1.7e308]], "max_step_s": 0.25}
+    with pytest.raises(InputError) as info:
+        load_series_from_table(table, scene)
+    assert info.value.key == "load.max_step_s" and "t = 0 s and t = 1 s" in str(info.value)

@@ -126,6 +126,7 @@ def test_gait2392_reaction_presses_the_ideal_ankle_into_contact_and_the_contact_
 name = "gait2392-ideal-ankle"
 [geometry]
 builtin = "ideal_ankle"
+cartilage = false
 [cartilage]
 youngs_modulus_mpa = 10.35
 poissons_ratio = 0.42

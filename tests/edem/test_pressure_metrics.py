@@ -9,7 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from edem.pressure_metrics import PEAK_DISC_AREA_MM2, regularised_peak_pressure_mpa
+from edem.pressure_metrics import (MAX_QUADRATURE_POINTS, PEAK_DISC_AREA_MM2, DiscMeans, RegularisedPeaks, check_quadrature_size,
+                                   disc_mean_pressure_mpa, quadrature_size, regularised_peak_pressure_mpa)
+from geometries.errors import InputError
+from edem.resultdir import SurfaceFrame
 
 RADIUS_MM = math.sqrt(PEAK_DISC_AREA_MM2 / math.pi)
 
@@ -92,3 +95,90 @@ def test_summary_json_states_the_regularised_peak_of_its_maps(tmp_path):
     expected = regularised_peak_pressure_mpa(points, triangles, frames[1].surface.cell_data["pressure_mpa"], at_points=False)
     assert written["regularised_peak_pressure_mpa"] == expected and 3.0 < expected < 50.0
     assert written["peak_pressure_mpa"] == 50.0 and "1 mm^2" in written["regularised_peak_pressure_definition"]
+
+
+def paraboloid_fields(points: np.ndarray, triangles: np.ndarray, at_points: bool) -> list[np.ndarray]:
+    """Contact-like fields on the square [0, 8]^2: p = p0 (1 - r^2 / a^2)+ about a few centres,
+    contact radii a several disc radii wide (a paraboloid pressed on a plane; the last one
+    reaching over the edge), a flat-topped one (no bound can rule a loaded disc out) and one
+    without contact."""
+    where = points if at_points else points[triangles].mean(axis=1)
+    fields = []
+    for centre, a, p0 in (((4.0, 4.0), 3.0, 3.0), ((3.0, 5.0), 2.5, 7.0), ((6.5, 2.0), 3.5, 1.0)):
+        r2 = ((where[:, :2] - centre) ** 2).sum(axis=1)
+        fields.append(np.maximum(p0 * (1.0 - r2 / a**2), 0.0))
+    fields.append(np.where(((where[:, :2] - 4.0) ** 2).sum(axis=1) < 3.0**2, 2.0, 0.0))
+    fields.append(np.zeros(len(where)))
+    return fields
+
+
+@pytest.mark.parametrize("at_points", [True, False])
+def test_averaging_built_once_gives_exactly_the_per_call_values(at_points):
+    """A run builds the disc averaging once for its surface and applies it to every time point's
+    field: each disc's sum runs over the same quadrature points in the same order as a call for
+    that field alone, so every disc mean and the peak are the same floats, whatever was
+    evaluated, kept or bounded before."""
+    points, triangles = square_mesh(8.0, 0.4)
+    discs = DiscMeans(points, triangles, at_points=at_points)
+    for pressure in paraboloid_fields(points, triangles, at_points) * 2:  # twice: the second pass from the kept rows
+        centres, mean = discs.means(pressure)
+        centres_mm, mean_alone = disc_mean_pressure_mpa(points, triangles, pressure, at_points=at_points)
+        np.testing.assert_array_equal(discs.centres_mm(centres), centres_mm)
+        np.testing.assert_array_equal(mean, mean_alone)
+        assert discs.peak(pressure) == regularised_peak_pressure_mpa(points, triangles, pressure, at_points=at_points) == mean.max(initial=0.0)
+
+
+@pytest.mark.parametrize("at_points", [True, False])
+def test_chunked_and_bounded_peak_equals_the_largest_of_all_disc_means(at_points):
+    """The peak evaluated in chunks of a few discs, largest bound first, stopping where the bound
+    (the largest value in the 27 cells around a centre) falls below the best mean, is the
+    largest of all the disc means exactly; on a peaked field it evaluates a fraction of them,
+    on a flat-topped one (every bound equal to the top) all that could tie."""
+    points, triangles = square_mesh(8.0, 0.25)
+    fields = paraboloid_fields(points, triangles, at_points)
+    for pressure, pruned in zip(fields, (True, True, True, False, False)):
+        full = disc_mean_pressure_mpa(points, triangles, pressure, at_points=at_points)[1]
+        discs = DiscMeans(points, triangles, at_points=at_points, chunk_pairs=2000, cache_pairs=0)
+        assert discs.peak(pressure) == full.max(initial=0.0)
+        if pruned:  # a peak a few disc radii wide: most discs are ruled out (measured: 17-31 % evaluated)
+            assert discs.rows_evaluated < 0.5 * len(full)
+        else:  # flat-topped: every loaded disc's bound is the top, so none is ruled out before a tie
+            assert discs.rows_evaluated == len(full)
+
+
+def test_maps_of_a_rigidly_moving_surface_share_one_averaging():
+    """A discrete run's maps are M at each pose: the averaging is built once and each peak is
+    the one of the map alone (the same discs: a rigid motion changes no distance; to rounding of
+    the posed points, 1e-12); a surface that is not a rigid image of it gets its own."""
+    from scipy.spatial.transform import Rotation
+
+    points, triangles = square_mesh(8.0, 0.4)
+    fields = paraboloid_fields(points, triangles, False)[:3]
+    peaks = RegularisedPeaks()
+    built = []
+    for k, pressure in enumerate(fields):
+        moved = points @ Rotation.from_rotvec([0.3 * k, -0.2, 0.5 * k]).as_matrix().T + [10.0 * k, -3.0, 2.0]
+        value = peaks(SurfaceFrame(moved, triangles, {}, {"pressure_mpa": pressure}))
+        built.append(peaks._discs)
+        assert value == pytest.approx(regularised_peak_pressure_mpa(moved, triangles, pressure, at_points=False), rel=1e-12)
+    assert built[0] is built[1] is built[2]
+    stretched = points * [1.5, 1.0, 1.0]
+    value = peaks(SurfaceFrame(stretched, triangles, {}, {"pressure_mpa": fields[0]}))
+    assert peaks._discs is not built[0]
+    assert value == regularised_peak_pressure_mpa(stretched, triangles, fields[0], at_points=False)
+
+
+def test_a_surface_whose_quadrature_would_not_fit_is_refused_by_name():
+    """Two triangles 3 km across would need ~1e9 quadrature points (n^2 sub-triangles a third of
+    the disc radius across): InputError, before any array of that size exists; the count is the
+    one the averaging would build (quadrature_size, exact on a small mesh)."""
+    points, triangles = square_mesh(8.0, 0.4)
+    assert quadrature_size(points, triangles) == DiscMeans(points, triangles, at_points=False).n_quadrature_points
+    huge = np.array([[0.0, 0.0, 0.0], [3000.0, 0.0, 0.0], [3000.0, 3000.0, 0.0], [0.0, 3000.0, 0.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    assert quadrature_size(huge, faces) > MAX_QUADRATURE_POINTS
+    with pytest.raises(InputError) as info:
+        check_quadrature_size(huge, faces, file="big.stl", key="geometry.mobile")
+    assert info.value.key == "geometry.mobile" and f"{MAX_QUADRATURE_POINTS:,}" in str(info.value)
+    with pytest.raises(InputError):
+        DiscMeans(huge, faces, at_points=False)

@@ -62,7 +62,8 @@ def test_meshes_in_metres_without_units_are_refused(tmp_path, capsys):
 @pytest.mark.parametrize("law", ["gap", "gap-log"])
 def test_gap_bed_that_starts_compressed_is_warned(law):
     """Plates 1.2 mm apart with t = 2 mm: every spring starts 0.8 mm compressed; warned with the
-    amount. 2.5 mm apart: not."""
+    amount. 2.5 mm apart: not; 1.99 mm apart (0.5 % of t, under TOUCHING_OVERLAP = 1 %): touching,
+    not warned; 1.97 mm (1.5 %): warned."""
     compressed = run(make_scene(grid_plate(20, 20, 8), plane(lambda x, y: 1.2), [0, 0, 100.0], law=law, thickness_mm=2.0,
                                 max_spring_length_mm=4.0, fixed_dofs=("tx", "ty", "rx", "ry", "rz")), "dem")
     assert any("pre-compressed" in w and "128 springs" in w and "by up to 0.8 mm" in w for w in compressed.warnings)
@@ -70,3 +71,7 @@ def test_gap_bed_that_starts_compressed_is_warned(law):
                            max_spring_length_mm=4.0, fixed_dofs=("tx", "ty", "rx", "ry", "rz")), "dem")
     assert not any("pre-compressed" in w for w in apart.warnings)
     assert np.isfinite(apart.steps[0].displacement_mm).all()
+    for gap, warned in ((1.99, False), (1.97, True)):
+        touching = run(make_scene(grid_plate(20, 20, 8), plane(lambda x, y: gap), [0, 0, 100.0], law=law, thickness_mm=2.0,
+                                  max_spring_length_mm=4.0, fixed_dofs=("tx", "ty", "rx", "ry", "rz")), "dem")
+        assert any("pre-compressed" in w for w in touching.warnings) == warned, gap

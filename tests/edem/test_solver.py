@@ -241,6 +241,21 @@ def test_edem_load_then_unload_returns_to_start():
     assert last.peak_pressure_mpa * last.contact_area_mm2 < 1e-6 * 2000.0
 
 
+def test_wall_time_is_the_time_points_and_setup_time_what_came_before():
+    """The clocks partition the run: wall_time_s holds every time point's geometry and solve
+    (the first one's ray cast included), setup_time_s what ran once before them, and neither
+    counts anything twice (their sum is at most the call's elapsed time)."""
+    import time
+
+    scene = make_scene(cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), ramp(800.0, 5), fixed_dofs=("tx", "rx", "ry", "rz"))
+    start = time.perf_counter()
+    result = run(scene, "edem")
+    elapsed = time.perf_counter() - start
+    assert result.seconds["geometry"] + result.seconds["solve"] <= result.wall_time_s
+    assert result.setup_time_s > 0.0
+    assert result.wall_time_s + result.setup_time_s <= elapsed
+
+
 def test_dem_and_edem_agree_on_the_first_step():
     """From rest, the first EDEM increment is the DEM solve (no push-back yet, docs/method.md#2-edem-the-time-dependent-incremental-method)."""
     scene = make_scene(cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5), ramp(800.0, 3), fixed_dofs=("tx", "rx", "ry", "rz"))
@@ -336,11 +351,16 @@ def test_gap_law_contact_area_grows_with_load_on_a_tilted_plane():
     assert areas[0] < areas[1] < areas[2]
 
 
-def test_overload_past_the_spring_length_is_reported():
+def test_overload_past_the_spring_length_is_refused_and_kept_with_a_warning_when_allowed():
     """d = F h / (E' A) = 3 mm on 400 mm^2 of 2 mm springs: a strain over 100 % inside the 3.5 mm
-    window, warned; 1e5 N (d = 19 mm, far beyond the window the rays measured) is refused."""
+    window, the plates through each other: refused naming the time point and the share of the
+    springs in contact (all 128); with [solver] allow_bone_overlap kept, warned; 1e5 N (d = 19 mm,
+    far beyond the window the rays measured) is refused either way."""
     force = 3.0 * E_CONF * 400.0 / 2.0
-    scene = make_scene(grid_plate(20, 20, 8), plane(lambda x, y: 2.0), [0, 0, force], fixed_dofs=IN_PLANE)
+    with pytest.raises(SolverError, match=r"compressed past their length .*bones pass through each other.* at 1 of 1 time points "
+                                          r"\(k = 0; t = 0 s\): 128 springs, 100 % of those in contact.*allow_bone_overlap"):
+        run(make_scene(grid_plate(20, 20, 8), plane(lambda x, y: 2.0), [0, 0, force], fixed_dofs=IN_PLANE), "dem")
+    scene = make_scene(grid_plate(20, 20, 8), plane(lambda x, y: 2.0), [0, 0, force], fixed_dofs=IN_PLANE, allow_bone_overlap=True)
     result = run(scene, "dem")
     assert result.steps[0].displacement_mm[2] == pytest.approx(3.0, rel=1e-10)
     assert any("compressed past their length" in w for w in result.warnings)
@@ -355,7 +375,7 @@ def test_nearly_unrestrained_axis_of_a_faceted_cylinder_is_warned():
     exactly free but ~1e-5 as stiff as the vertical: solvable, yet the talus drifts. Warned."""
     from geometries.builders import build_geometry
 
-    ankle = build_geometry("ideal_ankle", {})
+    ankle = build_geometry("ideal_ankle", {"cartilage": False})
     free_axis = run(make_scene(ankle.mobile, ankle.fixed, [0, 0, 333.0], fixed_dofs=("rx", "ry", "rz")), "dem")
     assert any("barely resists motion along tx" in w for w in free_axis.warnings)
     fixed = run(make_scene(ankle.mobile, ankle.fixed, [0, 0, 333.0], fixed_dofs=("tx", "rx", "ry", "rz")), "dem")

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from geometries.errors import InputError
+from edem.beds import CoupledThinLayer, on_bed
 from edem.mechanics import confined_modulus_mpa
 from edem.scene import load_scene
 from edem.solver import solve
@@ -36,7 +37,7 @@ def _arrays(surface: TriangleSurface) -> tuple[np.ndarray, np.ndarray]:
 
 def _plates(which: str, gap_mm: float, law: str, force_n=(0.0, 0.0, FORCE_N)):
     """Two plates whose articular surfaces are ``gap_mm`` apart; ``which`` says where bones are
-    given ("mobile", "fixed", "both"); a side without one is its bone with a uniform layer."""
+    given ("mobile", "fixed", "both"; "neither": none); a side without one is its bone with a uniform layer."""
     mobile_bone = which in ("mobile", "both")
     fixed_bone = which in ("fixed", "both")
     # articular surfaces at z = 0 (M) and z = gap (F); bones T_M below and T_F above them
@@ -104,19 +105,21 @@ def test_tapered_layer_matches_independent_springs_with_local_thickness():
 
 @pytest.mark.parametrize("law", ["gap", "gap-log"])
 def test_measured_uniform_layers_are_the_uniform_coupled_layer(law):
-    # The coupled thin layer's operator takes the local thickness: a measured T = t_M + t_F
-    # everywhere must give the bed of thickness_mm = T (same surfaces, same numbers).
+    # The coupled thin layer's operator takes the local thickness: measured layers t_M and t_F
+    # everywhere must give the bed of uniform layers t_M and t_F (the sandwich, one operator per
+    # layer), and lumped (thin_layer_stack = "lumped") the bed of thickness_mm = T = t_M + t_F
+    # (same surfaces, same numbers).
     measured = _plates("mobile", 0.0, law)
-    coupled = replace(measured, cartilage=replace(measured.cartilage, coupling="thin-layer"))
     mobile = grid_plate(20.0, 20.0, 10, z_mm=-T_M)
     fixed = grid_plate(20.0, 20.0, 10, z_mm=T_F, facing_up=False)
-    uniform = make_scene(mobile, fixed, [0.0, 0.0, FORCE_N], law=law, max_spring_length_mm=4.0, fixed_dofs=PLATE_FIXED,
-                         thickness_mm=T_M + T_F)
-    uniform = replace(uniform, cartilage=replace(uniform.cartilage, coupling="thin-layer"))
-    a, b = solve(coupled, method="dem").steps[0], solve(uniform, method="dem").steps[0]
-    # same equations on the same surfaces: round-off only
-    assert a.displacement_mm[2] == pytest.approx(b.displacement_mm[2], rel=1e-9)
-    np.testing.assert_allclose(a.pressure_mpa, b.pressure_mpa, rtol=1e-7, atol=1e-12)
+    lumped = make_scene(mobile, fixed, [0.0, 0.0, FORCE_N], law=law, max_spring_length_mm=4.0, fixed_dofs=PLATE_FIXED,
+                        thickness_mm=T_M + T_F)
+    for stack, uniform in (("sandwich", _plates("neither", 0.0, law)), ("lumped", lumped)):
+        a, b = (solve(replace(scene, cartilage=on_bed(scene.cartilage, CoupledThinLayer.coupling, thin_layer_stack=stack)), method="dem").steps[0]
+                for scene in (measured, uniform))
+        # same equations on the same surfaces: round-off only
+        assert a.displacement_mm[2] == pytest.approx(b.displacement_mm[2], rel=1e-9)
+        np.testing.assert_allclose(a.pressure_mpa, b.pressure_mpa, rtol=1e-7, atol=1e-12)
 
 
 # --------------------------------------------------------------------------------------------

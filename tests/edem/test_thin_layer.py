@@ -1,4 +1,5 @@
-"""The thin-layer compliance operator against the bonded-layer closed forms (edem.thin_layer)."""
+"""The thin-layer compliance operator against the bonded-layer closed forms: its symbols (edem.layer_symbols),
+its factors (edem.sparse_factors), its coarse space (edem.coarse_space) and the operator (edem.thin_layer)."""
 
 from __future__ import annotations
 
@@ -6,44 +7,24 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
-from support import grid_plate
+from support import grid_plate, periodic_grid
 
 from edem.mechanics import confined_modulus_mpa
-from edem.thin_layer import (
+from edem.layer_symbols import (
     LAYER_SYMBOLS,
     TWO_POLE_MAX_KH,
-    SurfaceMesh,
-    _corner_means,
     _definiteness_margin,
-    _dense_columns,
-    boundary_vertices,
     exact_layer_compliance,
-    layer_compliance,
     pade_coefficients,
     pade_symbol,
     taylor_coefficients,
     two_pole_symbol,
 )
+from edem.sparse_factors import _dense_columns
+from edem.thin_layer import SurfaceMesh, _corner_means, boundary_vertices, layer_compliance
 
 E = 10.35
 NUS = (0.0, 0.1, 0.3, 0.42, 0.45, 0.49, 0.499)
-
-
-def periodic_grid(n: int, spacing_mm: float) -> tuple[SurfaceMesh, np.ndarray]:
-    """Flat n x n square grid, two right triangles per square, periodic both ways (a flat torus).
-
-    Returns the mesh and the triangle centroids (unwrapped, mm). Square (i, j): L = (v00, v10, v11),
-    U = (v00, v11, v01); L triangles come first.
-    """
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    i, j = i.ravel(), j.ravel()
-    vid = lambda a, b: (a % n) * n + (b % n)  # noqa: E731
-    xy = lambda a, b: np.column_stack([a * spacing_mm, b * spacing_mm, np.zeros(a.shape)])  # noqa: E731
-    lower = (np.column_stack([vid(i, j), vid(i + 1, j), vid(i + 1, j + 1)]), np.stack([xy(i, j), xy(i + 1, j), xy(i + 1, j + 1)], axis=1))
-    upper = (np.column_stack([vid(i, j), vid(i + 1, j + 1), vid(i, j + 1)]), np.stack([xy(i, j), xy(i + 1, j + 1), xy(i, j + 1)], axis=1))
-    tri = np.vstack([lower[0], upper[0]])
-    corners = np.concatenate([lower[1], upper[1]])
-    return SurfaceMesh.from_corners(tri, corners), corners.mean(axis=1)
 
 
 def test_taylor_coefficients_are_the_exact_compliance_series():
@@ -94,7 +75,7 @@ def test_sinusoidal_pressure_reproduces_the_discrete_symbol_to_round_off(nu, sym
     for mode in ((1, 0), (3, 2), (6, 0)):
         k = 2 * np.pi * np.array(mode) / (n * spacing)
         p = np.cos(centroid[:, :2] @ k)
-        layer = layer_compliance(mesh, np.arange(mesh.area_mm2.shape[0]), h, E, nu, symbol=symbol)
+        layer = layer_compliance(mesh, np.arange(mesh.area_mm2.shape[0]), h, E, nu, symbol=model)
         w = layer.deflection(p * mesh.area_mm2)
         cell_offsets = np.array([[2, 1], [1, 2], [-1, 1], [-1, -2], [-2, -1], [1, -1]]) / 3 * spacing
         load = np.exp(1j * cell_offsets @ k).sum() / 3 * spacing**2 / 2
@@ -129,7 +110,7 @@ def test_discrete_symbol_converges_to_the_continuum_symbol_at_second_order(nu, s
         for n in (48, 96):
             mesh, centroid = periodic_grid(n, length / n)
             p = np.cos(centroid[:, 0] * k)
-            w = layer_compliance(mesh, np.arange(mesh.area_mm2.shape[0]), h, E, nu, symbol=symbol).deflection(p * mesh.area_mm2)
+            w = layer_compliance(mesh, np.arange(mesh.area_mm2.shape[0]), h, E, nu, symbol=model).deflection(p * mesh.area_mm2)
             lower = slice(0, n * n)
             ratio = w[lower] @ p[lower] / (p[lower] @ p[lower]) * g / h
             errors.append(ratio - model(k * h))
@@ -210,7 +191,7 @@ def test_flat_plate_under_uniform_pressure_deflects_uniformly(symbol):
     mesh, _ = periodic_grid(24, 0.7)
     cells = np.arange(mesh.area_mm2.shape[0])
     for nu in NUS:
-        w = layer_compliance(mesh, cells, 2.0, E, nu, symbol=symbol).deflection(1.5 * mesh.area_mm2)
+        w = layer_compliance(mesh, cells, 2.0, E, nu, symbol=LAYER_SYMBOLS[symbol](nu)).deflection(1.5 * mesh.area_mm2)
         np.testing.assert_allclose(w, 2.0 * 1.5 / confined_modulus_mpa(E, nu), rtol=1e-10)
 
 
@@ -222,7 +203,7 @@ def test_uniform_pressure_on_a_layer_of_varying_thickness_deflects_each_spring_b
     cells = np.arange(mesh.area_mm2.shape[0])
     h = 1.5 + np.sin(centroid[:, 0] * 2 * np.pi / (24 * 0.7)) ** 2  # 1.5 .. 2.5 mm
     for nu in (0.1, 0.42, 0.499):
-        w = layer_compliance(mesh, cells, h, E, nu, symbol=symbol).deflection(2.0 * mesh.area_mm2)
+        w = layer_compliance(mesh, cells, h, E, nu, symbol=LAYER_SYMBOLS[symbol](nu)).deflection(2.0 * mesh.area_mm2)
         np.testing.assert_allclose(w, h * 2.0 / confined_modulus_mpa(E, nu), rtol=1e-9)
 
 
@@ -236,10 +217,10 @@ def test_compliance_is_symmetric_positive_definite(symbol):
     cells = np.arange(plate.n_triangles)
     thickness = 1.0 + 0.1 * np.arange(cells.size) / cells.size  # varying h keeps the symmetry
     for nu in (0.1, 0.42, 0.499):
-        layer = layer_compliance(mesh, cells, thickness, E, nu, symbol=symbol)
+        model = LAYER_SYMBOLS[symbol](nu)
+        layer = layer_compliance(mesh, cells, thickness, E, nu, symbol=model)
         c = np.column_stack([layer.deflection(col) for col in np.eye(cells.size)])
         np.testing.assert_allclose(c, c.T, atol=1e-12 * np.abs(c).max())
-        model = LAYER_SYMBOLS[symbol](nu)
         margin = _definiteness_margin(np.array([model.local]), np.array([model.strengths + (0.0,) * (2 - len(model.strengths))]),
                                       np.array([model.screenings + (1.0,) * (2 - len(model.screenings))]))[0]
         floor = margin * thickness * 2 * (1 + nu) / E / mesh.area_mm2  # mm/N
@@ -278,19 +259,26 @@ def test_incompressible_flat_punch_has_the_thin_layer_parabolic_pressure():
     assert np.all(pressure > 0)
 
 
-@pytest.mark.parametrize("banded", [True, False])
-def test_coupled_factor_solves_to_round_off_on_both_paths(banded, monkeypatch):
-    """(sigma H + Z diag(x) Z^T) x = b through the banded Cholesky and through the sparse LU.
+@pytest.mark.parametrize("path", ["banded", "sparse LU", "cholmod"])
+def test_coupled_factor_solves_to_round_off_on_every_path(path, monkeypatch):
+    """(sigma H + Z diag(x) Z^T) x = b through the banded Cholesky, the sparse LU and CHOLMOD (the
+    optional extra; its bar lowered so that it takes this small whole-surface pattern).
 
     Residual against the assembled matrix within 1e-11 of |A| |x|: round-off (2e-16) times the
     matrix's condition, which for these operators stays below about 1e3 (mass plus a Laplacian
-    at kh ~ 1 on the mesh scale), times a safety factor of 50. Also checks the band layout reused
-    by a second factorisation with other weights on the same pattern.
+    at kh ~ 1 on the mesh scale), times a safety factor of 50. Also checks the band layout (or
+    CHOLMOD's symbolic analysis) reused by a second factorisation with other weights on the same
+    pattern.
     """
-    import edem.thin_layer as thin_layer
+    import edem.sparse_factors as sparse_factors
 
-    if not banded:
-        monkeypatch.setattr(thin_layer, "MAX_BANDED_HALF_WIDTH", -1)
+    if path == "sparse LU":
+        monkeypatch.setattr(sparse_factors, "MAX_BANDED_HALF_WIDTH", -1)
+    if path == "cholmod":
+        pytest.importorskip("cvxopt")
+        monkeypatch.setattr(sparse_factors, "CHOLMOD_MIN_BAND_WORK", 0.0)
+    else:
+        monkeypatch.setattr(sparse_factors, "cholmod_module", lambda: None)
     plate = grid_plate(10.0, 10.0, 12)
     mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
     cells = np.arange(plate.n_triangles)
@@ -305,7 +293,45 @@ def test_coupled_factor_solves_to_round_off_on_both_paths(banded, monkeypatch):
         x = layer.factorise_coupled(weight)(rhs)
         scale = abs(matrix).max() * np.abs(x).max()
         assert np.abs(matrix @ x - rhs).max() <= 1e-11 * scale
-    assert (term.pattern.band[3] <= thin_layer.MAX_BANDED_HALF_WIDTH) == banded
+    assert term.pattern.uses_cholmod == (path == "cholmod")
+    assert (term.pattern.band[3] <= sparse_factors.MAX_BANDED_HALF_WIDTH) == (path != "sparse LU")
+
+
+def test_cholmod_takes_the_whole_surface_past_its_bar_and_matches_the_banded_factor(monkeypatch):
+    """CHOLMOD (the optional extra) factors the whole surface's pattern where the banded work
+    n w^2 reaches CHOLMOD_MIN_BAND_WORK and never a part of the surface (a cell set the run does
+    not keep); its solves equal the banded factor's to round-off (both backward stable: within
+    2 cond(A) eps, cond below 1e3 here (see above), times 50), a solve whose numbers the shared
+    factor no longer holds (another factorisation came since) still solves its own matrix, and a
+    matrix that is not positive definite is a SolverError."""
+    pytest.importorskip("cvxopt")
+    import edem.sparse_factors as sparse_factors
+    from geometries.errors import SolverError
+
+    plate = grid_plate(10.0, 10.0, 12)
+    mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
+    cells = np.arange(plate.n_triangles)
+    whole = mesh.operator_pattern(cells)
+    n, width = whole.n_vertices, whole.band[3]
+    monkeypatch.setattr(sparse_factors, "CHOLMOD_MIN_BAND_WORK", float(n * width * width))
+    assert whole.uses_cholmod and not mesh.operator_pattern(cells[: cells.size // 2]).uses_cholmod
+    monkeypatch.setattr(sparse_factors, "CHOLMOD_MIN_BAND_WORK", float(n * width * width) + 1.0)
+    assert not mesh.operator_pattern(cells).uses_cholmod
+    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49)
+    (term,) = layer.terms
+    rng = np.random.default_rng(8)
+    data = [term.coupled_data(np.where(rng.uniform(size=cells.size) < 0.5, 1.0 / layer.local_mm_per_n, 0.0)) for _ in range(2)]
+    rhs = rng.standard_normal((n, 3))
+    supernodal = sparse_factors.SupernodalCholesky(term.pattern.indices, term.pattern.indptr)
+    first = supernodal.factorise(data[0])
+    second = supernodal.factorise(data[1])  # the factor object now holds the second matrix
+    for values, solve in ((data[0], first), (data[1], second), (data[0], first)):
+        banded = sparse_factors.OperatorPattern(term.pattern.indices, term.pattern.indptr, term.pattern.slots, term.pattern.q)
+        expected = banded.factorise(values)(rhs)
+        assert np.abs(solve(rhs) - expected).max() <= 50 * 2e3 * np.finfo(float).eps * np.abs(expected).max()
+        assert np.abs(solve(rhs[:, 0]) - expected[:, 0]).max() <= 50 * 2e3 * np.finfo(float).eps * np.abs(expected).max()
+    with pytest.raises(SolverError, match="not positive definite"):
+        supernodal.factorise(-data[0])
 
 
 def test_two_term_factor_solves_the_indefinite_block_to_round_off():
@@ -316,7 +342,7 @@ def test_two_term_factor_solves_the_indefinite_block_to_round_off():
     plate = grid_plate(10.0, 10.0, 12)
     mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
     cells = np.arange(plate.n_triangles)
-    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol="two-pole")
+    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=two_pole_symbol(0.49))
     assert [t.sigma for t in layer.terms] == [1.0, -1.0]
     rng = np.random.default_rng(4)
     active = rng.uniform(size=cells.size) < 0.5
@@ -338,18 +364,18 @@ def test_two_pole_block_ldlt_agrees_with_pivoted_lu_within_its_condition(monkeyp
     same x as SuperLU's pivoted LU: both are accepted at a normwise backward error of at most
     V eps, so each is within cond(A) V eps of the exact solution (the forward-error bound of a
     backward-stable solve) and they differ by at most twice that."""
-    import edem.thin_layer as thin_layer
+    import edem.sparse_factors as sparse_factors
     from scipy.sparse.linalg import splu
 
     plate = grid_plate(10.0, 10.0, 12)
     mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
     cells = np.arange(plate.n_triangles)
-    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol="two-pole")
+    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=two_pole_symbol(0.49))
     rng = np.random.default_rng(7)
     weight = np.where(rng.uniform(size=cells.size) < 0.5, 1.0 / layer.local_mm_per_n, 0.0)
     matrix = (sp.block_diag([t.sigma * t.h for t in layer.terms]) + layer.z @ sp.diags(weight) @ layer.z.T).tocsc()
     pivoted = []
-    monkeypatch.setattr(thin_layer, "splu", lambda *a, **k: pivoted.append(1) or splu(*a, **k))
+    monkeypatch.setattr(sparse_factors, "splu", lambda *a, **k: pivoted.append(1) or splu(*a, **k))
     rhs = rng.standard_normal((matrix.shape[0], 3))
     x = layer.factorise_coupled(weight)(rhs)
     assert not pivoted  # the LDL^T's own solve was accepted
@@ -364,7 +390,7 @@ def test_indefinite_solve_pivots_where_diagonal_pivots_would_grow():
     by 1/d (QDLDL's own answer is off by 3e-5); the checked solve sees the backward error and
     solves by SuperLU's pivoted LU instead: within cond(A) n eps of numpy's dense LU, twice over
     (both backward stable)."""
-    from edem.thin_layer import indefinite_solve
+    from edem.sparse_factors import indefinite_solve
 
     n, d = 4, 1e-12
     dense = np.diag(np.full(n, d)) + np.diag(np.ones(n - 1), 1) + np.diag(np.ones(n - 1), -1)
@@ -386,7 +412,7 @@ def test_a_few_changed_springs_reuse_the_factor_and_still_solve_to_round_off(sym
     plate = grid_plate(10.0, 10.0, 12)
     mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
     cells = np.arange(plate.n_triangles)
-    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=symbol)
+    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=LAYER_SYMBOLS[symbol](0.49))
     factored = []
     fresh = thin_layer.LayerCompliance._factorise
     monkeypatch.setattr(thin_layer.LayerCompliance, "_factorise", lambda self, w: factored.append(1) or fresh(self, w))
@@ -400,7 +426,7 @@ def test_a_few_changed_springs_reuse_the_factor_and_still_solve_to_round_off(sym
         weight = np.where(active, 1.0 / layer.local_mm_per_n, 0.0)
         before = len(factored)
         # A layer rebuilt on the same operators (the next time point) shares the kept factor.
-        layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=symbol)
+        layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=LAYER_SYMBOLS[symbol](0.49))
         x_solve = layer.factorise_coupled(weight)
         assert len(factored) - before == refactors
         matrix = sp.block_diag([t.sigma * t.h for t in layer.terms]) + layer.z @ sp.diags(weight) @ layer.z.T
@@ -577,7 +603,7 @@ def test_coarse_smoothing_deflects_a_closed_layer_uniformly_under_uniform_pressu
     centroid = mesh.vertices_mm[mesh.triangles].mean(axis=1)
     h = 3.0 + 0.5 * centroid[:, 2] / 15.0  # 2.5 .. 3.5 mm: the bulge term's coarse cells about 1.2 h = 3.7 mm
     for nu in (0.42, 0.499):  # below nu 1/4 the Pade's term is short (sqrt(b) = 0.24 at nu 0.1) and stays fine
-        layer = layer_compliance(mesh, cells, h, E, nu, symbol=symbol, smoothing_resolution=1.0)
+        layer = layer_compliance(mesh, cells, h, E, nu, symbol=LAYER_SYMBOLS[symbol](nu), smoothing_resolution=1.0)
         coarse = [t.coarse for t in layer.terms if t.coarse is not None]
         assert coarse and all(c.transfer.shape[1] < c.transfer.shape[0] / 4 for c in coarse)  # it is coarse
         w = layer.deflection(2.0 * mesh.area_mm2)

@@ -1,4 +1,6 @@
-"""Viscoelastic EDEM (docs/method.md#4-viscoelastic-edem-thesis-chapter-6, thesis chapter 6) against the 1D creep solution and invariants."""
+"""Viscoelastic EDEM with the thesis's frozen contact set (docs/method.md#4-viscoelastic-edem-thesis-chapter-6,
+thesis chapter 6, ``[viscoelastic] contact_set = "frozen"``) against the 1D creep solution and
+invariants; the creeping contact set (the default) is tests/edem/test_viscoelastic_creeping.py's."""
 
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ def creep_scene(force_n: float, dt_s: float, n_steps: int, tau_s: float, integra
         thickness_mm=THICKNESS,
         max_spring_length_mm=2 * THICKNESS,
         fixed_dofs=IN_PLANE,
-        viscoelastic=Viscoelastic(tau_s, integrator, **kw),
+        viscoelastic=Viscoelastic(tau_s, integrator, contact_set="frozen", **kw),
     )
 
 
@@ -98,7 +100,7 @@ def test_vanishing_relaxation_time_recovers_elastic_edem():
     common = dict(fixed_dofs=("tx", "rx", "ry", "rz"), time_s=np.arange(8.0))
     cylinder, tibia = cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 1.5)
     elastic = run(make_scene(cylinder, tibia, load, **common), "edem")
-    viscous = run(make_scene(cylinder, tibia, load, viscoelastic=Viscoelastic(1e-9), **common), "edem")
+    viscous = run(make_scene(cylinder, tibia, load, viscoelastic=Viscoelastic(1e-9, contact_set="frozen"), **common), "edem")
     np.testing.assert_allclose(displacement(viscous), displacement(elastic), rtol=1e-7, atol=1e-15)
 
 
@@ -113,7 +115,7 @@ def ramp_scene(tau_s: float, dt_s: float = 0.25):
         magnitude[:, None] * direction,
         time_s=time,
         fixed_dofs=("tx", "rx", "ry", "rz"),
-        viscoelastic=Viscoelastic(tau_s),
+        viscoelastic=Viscoelastic(tau_s, contact_set="frozen"),
     )
 
 
@@ -145,7 +147,7 @@ def test_unloading_to_zero_creeps_back_to_the_start_on_the_1d_solution():
     force = np.zeros((time.size, 3))
     force[1:5, 2] = 400.0
     scene = make_scene(grid_plate(20, 20, 4), plane(lambda x, y: THICKNESS), force, time_s=time, law="gap", thickness_mm=THICKNESS,
-                       max_spring_length_mm=2 * THICKNESS, fixed_dofs=IN_PLANE, viscoelastic=Viscoelastic(1.0, "exact"))
+                       max_spring_length_mm=2 * THICKNESS, fixed_dofs=IN_PLANE, viscoelastic=Viscoelastic(1.0, "exact", contact_set="frozen"))
     z = np.array([s.displacement_mm[2] for s in run(scene, "edem").steps])
     exact = [0.0]
     for k in range(1, time.size):  # x' = (F(t) - K x) / (K tau), F linear from F0 to F1 over [t0, t1]: exact step
@@ -170,7 +172,7 @@ def test_unloading_a_curved_contact_to_zero_creeps_back_without_flying_off(coupl
     force[1:5, 2] = 333.0
     scene = make_scene(cylinder_patch(20.0, 30.0, 60.0, 40, 30), plane(lambda x, y: THICKNESS), force, time_s=time, law="gap",
                        thickness_mm=THICKNESS, max_spring_length_mm=2 * THICKNESS, fixed_dofs=("tx", "rx", "ry", "rz"),
-                       viscoelastic=Viscoelastic(1.0, "exact"), coupling=coupling)
+                       viscoelastic=Viscoelastic(1.0, "exact", contact_set="frozen"), coupling=coupling)
     u = np.array([s.displacement_mm for s in run(scene, "edem").steps])
     loaded = float(np.abs(u[4, 2]))
     assert loaded > 0.1  # pressed into the layer (0.22 mm)

@@ -60,3 +60,30 @@ def test_measured_uniform_layer_is_the_uniform_layer_model():
     # nu 0.42 on a 10 mm wide, 1.5 mm thick free-sided layer: stiffer than uniaxial, softer than confined
     d = measured.displacement_mm[2] - GAP_MM
     assert T_MM / (E * (1 - 0.42) / ((1 + 0.42) * (1 - 2 * 0.42))) < d < T_MM / E
+
+
+def test_on_a_curved_articular_surface_the_area_on_m_is_the_contact_face_s():
+    """With a bone mesh under M the scene's M is the articular surface, which is the layer's
+    contact face: the FE's contact area and pressure measured on M (where the springs live) are
+    its own, not the bone's (a sphere cap of R 20 mm over a bone 1.5 mm inside it, whose columns
+    narrow by (18.5 / 20)^2 = 0.86 towards the bone), to round-off."""
+    from support import grid_plate, make_scene
+
+    plate = grid_plate(12.0, 12.0, 8)
+    x, y = plate.vertices_mm[:, 0], plate.vertices_mm[:, 1]
+
+    def cap(radius: float):
+        return np.column_stack([x * radius / 20.0, y * radius / 20.0, np.sqrt(radius**2 - (x * radius / 20.0) ** 2 - (y * radius / 20.0) ** 2) - 20.0])
+
+    from geometries.surface import TriangleSurface
+
+    articular = TriangleSurface(cap(20.0), plate.triangles)
+    bone = cap(20.0 - T_MM)
+    scene = make_scene(articular, plane(lambda x, y: 0.05), (0.0, 0.0, 150.0), law="gap", poissons_ratio=0.3, fixed_dofs=PLATE_FIXED,
+                       mobile_bone=(bone, plate.triangles), fixed_thickness_mm=0.0)
+    run = run_scene(scene, model="layer", degree=1, mesh_size_mm=2.0, layers_through_thickness=1)
+    step = run.steps[0]
+    assert step.contact_area_mm2 > 10.0  # a patch, not a point
+    assert step.contact_area_on_mobile_mm2 == pytest.approx(step.contact_area_mm2, rel=1e-12)
+    np.testing.assert_allclose(step.point_data["mobile_point_mm"], step.points_mm, atol=1e-12)
+    np.testing.assert_allclose(step.point_data["pressure_on_mobile_mpa"], step.point_data["pressure_mpa"], rtol=1e-12, atol=1e-15)

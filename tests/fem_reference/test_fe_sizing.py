@@ -79,7 +79,8 @@ def test_a_solve_that_does_not_fit_is_refused_naming_size_and_memory():
 
 def test_edem_fe_with_a_tiny_mesh_size_exits_2_before_meshing(capsys):
     pytest.importorskip("dolfinx_solver")
-    status = main(["fe", "ideal-standing", "--mesh-size", "0.01", "--out", "/nonexistent/never-written"])
+    status = main(["fe", "ideal-standing", "--mesh-size", "0.01", "--out", "/nonexistent/never-written",
+                   "--set", "geometry.cartilage=false", "--set", "cartilage.law=threshold"])
     err = capsys.readouterr().err
     assert status == 2
     assert "mesh size 0.01 mm" in err and "GB are available" in err and "Traceback" not in err

@@ -21,12 +21,12 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def ideal():
-    return B.ideal_ankle()
+    return B.ideal_ankle(cartilage=False)  # the thesis's geometry: the cylinder under a plane
 
 
 @pytest.fixture(scope="module")
 def ideal_flat():
-    return B.ideal_ankle(plafond_tilt_deg=0.0)
+    return B.ideal_ankle(cartilage=False, plafond_tilt_deg=0.0)
 
 
 def _plane_ray_lengths(mobile, fixed, tri_index):
@@ -58,7 +58,7 @@ def test_cylinder_patch_area_converges_second_order_to_R_arc_width():
     assert exact == pytest.approx(1115.0, rel=2e-3)  # thesis: 11.15 cm^2
     errors = []
     for size in (2.0, 1.0, 0.5):
-        area = B.ideal_ankle(mesh_size_mm=size).mobile.areas_mm2.sum()
+        area = B.ideal_ankle(cartilage=False, mesh_size_mm=size).mobile.areas_mm2.sum()
         errors.append((exact - area) / exact)
     assert all(0 < e < 1e-3 for e in errors)  # inscribed facets: always a little smaller
     assert errors[0] > errors[1] > errors[2]
@@ -130,10 +130,13 @@ def test_ideal_plafond_covers_every_ray_and_malleolus_is_never_hit(ideal):
 
 
 def test_ideal_ankle_is_deterministic():
-    a, b = B.ideal_ankle(mesh_size_mm=1.5), B.ideal_ankle(mesh_size_mm=1.5)
-    assert np.array_equal(a.mobile.vertices_mm, b.mobile.vertices_mm)
-    assert np.array_equal(a.mobile.triangles, b.mobile.triangles)
-    assert np.array_equal(a.fixed.vertices_mm, b.fixed.vertices_mm)
+    for cartilage in (False, True):
+        a, b = B.ideal_ankle(cartilage=cartilage, mesh_size_mm=1.5), B.ideal_ankle(cartilage=cartilage, mesh_size_mm=1.5)
+        assert np.array_equal(a.mobile.vertices_mm, b.mobile.vertices_mm)
+        assert np.array_equal(a.mobile.triangles, b.mobile.triangles)
+        assert np.array_equal(a.fixed.vertices_mm, b.fixed.vertices_mm)
+        for x, y in ((a.mobile_bone, b.mobile_bone), (a.fixed_bone, b.fixed_bone)):
+            assert (x is None and y is None) or (np.array_equal(x.vertices_mm, y.vertices_mm) and np.array_equal(x.triangles, y.triangles))
 
 
 def test_ligaments_four_named_on_talus_sides_and_tibia_fibula(ideal):
@@ -228,11 +231,14 @@ def test_subject_seeded_determinism_and_ranges():
     assert np.array_equal(a.fixed.vertices_mm, b.fixed.vertices_mm)
     assert np.array_equal(a.fixed.triangles, b.fixed.triangles)
     assert a.parameters == b.parameters
-    for name in B.SUBJECT_RANGES:
+    drawn = [name for name in B.SUBJECT_RANGES if name not in B.SUBJECT_THESIS_ONLY]  # cartilage = true, the default
+    for name in drawn:
         assert a.parameters[name] != c.parameters[name], name
+    assert not set(B.SUBJECT_THESIS_ONLY) & set(a.parameters)
     for seed in range(12):
         p = B.subject_ankle(seed=seed, mesh_size_mm=4.0).parameters
-        for name, (lo, hi) in B.SUBJECT_RANGES.items():
+        for name in drawn:
+            lo, hi = B.SUBJECT_RANGES[name]
             assert lo <= p[name] <= hi, (seed, name, p[name])
         hw, half_s = p["talar_width_mm"] / 2.0, p["plafond_length_mm"] / 2.0
         for ((xlo, xhi), (slo, shi)), (x, s) in zip(B.SUBJECT_DEPRESSION_RANGES,
@@ -244,9 +250,106 @@ def test_subject_explicit_parameter_overrides_only_its_draw():
     a = B.subject_ankle(seed=3, mesh_size_mm=4.0).parameters
     b = B.subject_ankle(seed=3, mesh_size_mm=4.0, talar_radius_mm=22.0).parameters
     assert b["talar_radius_mm"] == 22.0
-    for name in B.SUBJECT_RANGES:
+    for name in a:
         if name != "talar_radius_mm":
             assert a[name] == b[name]
+    # the other mode draws the same subject: its shared parameters are the same draws
+    thesis = B.subject_ankle(seed=3, mesh_size_mm=4.0, cartilage=False).parameters
+    assert {k: v for k, v in thesis.items() if k in a and k != "cartilage"} == {k: v for k, v in a.items() if k in thesis and k != "cartilage"}
+    assert set(a) ^ set(thesis) == {"plafond_gap_mm", "talar_cartilage_mm", "tibial_cartilage_mm", "cartilage_taper_mm"}
+
+
+# --------------------------------------------------------------------------------------------
+# ankles with cartilage (the builders' default)
+# --------------------------------------------------------------------------------------------
+
+
+def _corner_thickness(articular, bone, triangles=slice(None)):
+    """Distance from each corner of the articular triangles to the same corner of their bone (mm,
+    (m, 3)): the layer's offset (articular surface and bone share their triangles)."""
+    return np.linalg.norm(articular.vertices_mm[articular.triangles[triangles]] - bone.vertices_mm[bone.triangles[triangles]], axis=2)
+
+
+def _boundary(triangles):
+    """Vertices on the boundary of a triangle set (edges used once)."""
+    edges = np.sort(np.vstack([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    unique, count = np.unique(edges, axis=0, return_counts=True)
+    return np.unique(unique[count == 1])
+
+
+def _plafond(built):
+    """The plafond's triangles (the malleolus wall's face laterally, within the 0-4 deg tilt)."""
+    return built.fixed.unit_normals[:, 0] < 0.99
+
+
+def test_ideal_layers_are_their_closed_form_tapers_of_the_centre_thickness():
+    """Every corner of the ideal ankle's layers is offset by t0 * taper(ML distance) * taper(AP
+    distance) (sin^2 over 3 mm) at its bone's parameters, read back from the bone vertex: the
+    talar bone on the cylinder R (u = R psi), the tibial bone on the cylinder R_F + t_F whose axis
+    the lift placed (s = R_F angle, R_F = (R + t_T)(1 + incongruity)). So the centre value is the
+    parameter, the margin 0 and the taper 3 mm wide, to round-off (1e-9 mm)."""
+    from geometries.builders.articular import layer_thickness_mm
+
+    g = B.ideal_ankle()
+    p = g.parameters
+    R, W, arc, w = 20.0, 28.0, math.radians(114.0), p["cartilage_taper_mm"]
+    t_talus, t_tibia = p["talar_cartilage_mm"], p["tibial_cartilage_mm"]
+    assert (t_talus, t_tibia, w) == (1.3, 1.4, 3.0)
+    # talus: the bone on its cylinder, the offset the closed form at its (x, u)
+    b = g.mobile_bone.vertices_mm
+    np.testing.assert_allclose(np.hypot(b[:, 1], b[:, 2] + R), R, atol=1e-9)
+    expected = layer_thickness_mm(t_talus, w, W / 2 - np.abs(b[:, 0]), R * arc / 2 - R * np.abs(np.arctan2(b[:, 1], b[:, 2] + R)))
+    offset = np.linalg.norm(g.mobile.vertices_mm - b, axis=1)
+    np.testing.assert_allclose(offset, expected, atol=1e-9)
+    assert offset.max() == pytest.approx(t_talus, abs=1e-12) and offset.min() == 0.0
+    # tibia (the plafond): the bone on the cylinder R_F + t_F about an axis along x at z_c (from any vertex)
+    radius_f = (R + t_talus) * (1 + p["incongruity"])
+    plafond = _plafond(g)
+    d = _corner_thickness(g.fixed, g.fixed_bone, plafond)
+    bone = g.fixed_bone.vertices_mm[g.fixed_bone.triangles[plafond]].reshape(-1, 3)
+    axis_z = bone[:, 2] - np.sqrt((radius_f + t_tibia) ** 2 - bone[:, 1] ** 2)
+    assert np.ptp(axis_z) < 1e-9
+    s = radius_f * np.arctan2(bone[:, 1], bone[:, 2] - axis_z[0])
+    edge = W / 2 + p["malleolus_gap_mm"]
+    expected = layer_thickness_mm(t_tibia, w, edge - np.abs(bone[:, 0]), p["plafond_length_mm"] / 2 - np.abs(s))
+    np.testing.assert_allclose(d.ravel(), expected, atol=1e-9)
+    assert d.max() == pytest.approx(t_tibia, abs=1e-12)
+    # the malleolus wall carries the uniform tibial layer
+    np.testing.assert_allclose(_corner_thickness(g.fixed, g.fixed_bone, ~plafond), t_tibia, rtol=1e-12)
+
+
+def test_subject_layers_are_their_centre_thickness_inside_and_zero_on_the_margin():
+    """The subject-like ankle's layers (seeded): at most and somewhere exactly their centre
+    thickness, 0 on every boundary vertex (the articular margin), and every triangle keeps some
+    (its bare corner triangles split); each parameter drawn within its range."""
+    g = B.subject_ankle(seed=11, mesh_size_mm=1.2)
+    p = g.parameters
+    for name in ("talar_cartilage_mm", "tibial_cartilage_mm"):
+        lo, hi = B.SUBJECT_RANGES[name]
+        assert lo <= p[name] <= hi
+    plafond = _plafond(g)
+    for art, bone, t0, tris in ((g.mobile, g.mobile_bone, p["talar_cartilage_mm"], slice(None)),
+                                (g.fixed, g.fixed_bone, p["tibial_cartilage_mm"], plafond)):
+        d = _corner_thickness(art, bone, tris)
+        assert d.max() == pytest.approx(t0, abs=1e-12) and np.all(d <= t0 * (1 + 1e-12))
+        margin = np.isin(art.triangles[tris], _boundary(art.triangles[tris]))
+        assert margin.any() and np.all(d[margin] < 1e-12)
+        assert np.all(d.max(axis=1) > 0.0)  # no triangle lies on its bone
+
+
+def test_ankle_with_cartilage_keeps_the_axis_and_moves_only_the_tibial_ligament_points():
+    """The ankle axis and the talar ligament points are the thesis geometry's; the tibial and
+    fibular points move with the tibia by one vertical lift (its placement; both untilted)."""
+    for build, untilted in ((B.ideal_ankle, {"plafond_tilt_deg": 0.0}), (B.subject_ankle, {"tilt_deg": 0.0})):
+        thesis, cartilage = build(cartilage=False, mesh_size_mm=2.0, **untilted), build(mesh_size_mm=2.0, **untilted)
+        np.testing.assert_array_equal(cartilage.ankle_axis_point_mm, thesis.ankle_axis_point_mm)
+        np.testing.assert_array_equal(cartilage.ankle_axis_direction, thesis.ankle_axis_direction)
+        assert [lig.name for lig in cartilage.ligaments] == [lig.name for lig in thesis.ligaments]
+        for a, b in zip(thesis.ligaments, cartilage.ligaments):
+            np.testing.assert_array_equal(a.mobile_point_mm, b.mobile_point_mm)
+        shift = np.array([b.fixed_point_mm - a.fixed_point_mm for a, b in zip(thesis.ligaments, cartilage.ligaments)])
+        np.testing.assert_allclose(shift[:, :2], 0.0, atol=1e-12)
+        assert np.ptp(shift[:, 2]) < 1e-12
 
 
 # --------------------------------------------------------------------------------------------
@@ -336,8 +439,21 @@ def test_build_geometry_errors_unknown_builder_parameter_type_range():
         B.build_geometry("subject_ankle", {"depression_positions": [[1.0, 2.0]]})
     assert e.value.key == "geometry.depression_positions"
     with pytest.raises(InputError) as e:
-        B.build_geometry("ideal_ankle", {"plafond_tilt_deg": 10.0}, file="scene.toml")
+        B.build_geometry("ideal_ankle", {"cartilage": False, "plafond_tilt_deg": 10.0}, file="scene.toml")
     assert e.value.file == "scene.toml" and e.value.key == "geometry.plafond_tilt_deg"
+    # a parameter of the other mode is refused, naming it and the mode it belongs to
+    with pytest.raises(InputError) as e:
+        B.build_geometry("ideal_ankle", {"plafond_gap_mm": 2.0}, file="scene.toml")
+    assert e.value.key == "geometry.plafond_gap_mm" and "cartilage = false" in str(e.value)
+    with pytest.raises(InputError) as e:
+        B.build_geometry("subject_ankle", {"cartilage": False, "talar_cartilage_mm": 1.2})
+    assert e.value.key == "geometry.talar_cartilage_mm" and "cartilage = true" in str(e.value)
+    with pytest.raises(InputError) as e:
+        B.build_geometry("ideal_ankle", {"cartilage_taper_mm": 15.0, "mesh_size_mm": 4.0})
+    assert e.value.key == "geometry.cartilage_taper_mm" and "at most 14 mm" in str(e.value)
+    with pytest.raises(InputError) as e:
+        B.build_geometry("ideal_ankle", {"incongruity": 0.0})
+    assert e.value.key == "geometry.incongruity" and "out of range" in str(e.value)
 
 
 def test_no_gmsh_or_pyvista_for_scenes_that_need_no_meshing():

@@ -1,11 +1,11 @@
-"""geometries/triangle_kernels.py: the one cross product and the one closest-point kernel."""
+"""geometries/triangle_kernels.py: the one cross product, area and closest-point kernel."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from geometries.triangle_kernels import closest_distance_mm, closest_points_on_triangles, cross_rows
+from geometries.triangle_kernels import closest_distance_mm, closest_points_on_triangles, cross_rows, triangle_area_vectors, triangle_areas
 
 
 def test_cross_rows_is_the_cross_product_row_by_row_and_against_one_vector():
@@ -15,6 +15,23 @@ def test_cross_rows_is_the_cross_product_row_by_row_and_against_one_vector():
     np.testing.assert_array_equal(cross_rows(a, b), np.cross(a, b))
     v = np.array([0.5377, 0.8326, 0.1329])
     np.testing.assert_array_equal(cross_rows(a, v), np.cross(a, v))
+
+
+def test_triangle_areas_are_heron_s_and_the_area_vectors_follow_the_right_hand_rule():
+    """Against Heron's formula from the three side lengths (a different route to the same number:
+    relative 1e-12, Heron's own cancellation on these well-shaped random triangles staying below
+    1e-13), 0 for a degenerate triangle, and the area vector is the area along the unit normal of
+    the corners' order: swapping two corners turns it over."""
+    rng = np.random.default_rng(5)
+    a, b, c = rng.normal(size=(3, 200, 3))
+    x, y, z = (np.linalg.norm(u, axis=1) for u in (b - c, c - a, a - b))
+    s = 0.5 * (x + y + z)
+    np.testing.assert_allclose(triangle_areas(a, b, c), np.sqrt(s * (s - x) * (s - y) * (s - z)), rtol=1e-12)
+    assert triangle_areas(a[:1], a[:1], b[:1])[0] == 0.0
+    vectors = triangle_area_vectors(a, b, c)
+    np.testing.assert_allclose(np.linalg.norm(vectors, axis=1), triangle_areas(a, b, c), rtol=1e-15)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", vectors, b - a), 0.0, atol=1e-12)  # normal to the edges
+    np.testing.assert_array_equal(triangle_area_vectors(a, c, b), -vectors)
 
 
 def test_closest_point_distance_is_the_minimum_over_a_dense_sampling_of_the_triangle():
@@ -80,3 +97,21 @@ def test_closest_distance_is_the_minimum_over_every_vertex_and_triangle_both_way
         # the same kernel on the same pairs: equal up to the round-off of one pair's arithmetic
         assert closest_distance_mm(*case)[0] == pytest.approx(_brute_closest_distance_mm(*case), rel=1e-12)
     assert closest_distance_mm(*cases[0])[0] == pytest.approx(1.3, rel=1e-12)  # the sheet's lowest point over the box's top
+
+
+def test_nearby_distance_is_zero_on_the_surface_and_the_height_above_a_plane():
+    """Points on a triangulated plane (vertices, edge midpoints, inside triangles) are at 0 (round-off
+    of coordinates of order 10: 1e-12), points above it at their height (the triangle below them is
+    among the nearest centroids), as the closest-point kernel measures against every triangle."""
+    from geometries.triangle_kernels import nearby_distance_mm
+    from support import grid_plate
+
+    plate = grid_plate(10.0, 10.0, 10)
+    v, t = plate.vertices_mm, plate.triangles
+    rng = np.random.default_rng(7)
+    on = np.vstack([v, 0.5 * (v[t[:, 0]] + v[t[:, 1]]), v[t].mean(axis=1)])
+    np.testing.assert_allclose(nearby_distance_mm(on, v, t), 0.0, atol=1e-12)
+    above = np.column_stack([rng.uniform(-4.9, 4.9, (50, 2)), rng.uniform(0.1, 2.0, 50)])
+    np.testing.assert_allclose(nearby_distance_mm(above, v, t), above[:, 2], rtol=1e-12)
+    every = np.sqrt(closest_points_on_triangles(above[:, None, :], *(v[t][None, :, k] for k in range(3)))[0].min(axis=1))
+    np.testing.assert_allclose(nearby_distance_mm(above, v, t), every, rtol=1e-12)

@@ -98,7 +98,7 @@ def test_built_in_ankle_scenes_of_one_time_point_default_to_the_bed_the_trust_su
     default = TRUST_BEDS["coupled"][1]
     for scene in ("ideal-standing", "ideal-toe-off", "subject-standing", "subject-toe-off"):
         cartilage = load_scene(scene).cartilage
-        assert (cartilage.coupling, cartilage.thin_layer_symbol) == (default["cartilage.coupling"], default["cartilage.thin_layer_symbol"])
+        assert (cartilage.coupling, cartilage.bed_keys.thin_layer_symbol) == (default["cartilage.coupling"], default["cartilage.thin_layer_symbol"])
         assert load_scene(scene, THESIS_BED).cartilage.coupling == "none"
 
 

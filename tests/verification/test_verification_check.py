@@ -21,6 +21,7 @@ from verification.check import (
     field_difference,
     run_check,
 )
+from verification.campaign_model import THESIS_ANKLE
 
 
 @pytest.fixture()
@@ -237,7 +238,7 @@ def test_stored_quantities_are_the_campaigns_definitions(tmp_path):
 
     if fe_availability() is not None:
         pytest.skip(fe_availability())
-    check = CheckScene("ideal-standing", "ideal-standing", {"fe.mesh_size_mm": 3.0})  # a coarse FE: ~8 s
+    check = CheckScene("ideal-standing", "ideal-standing", {**THESIS_ANKLE, "fe.mesh_size_mm": 3.0})  # the slab's twin; a coarse FE: ~8 s
     scene = load_scene(check.scene_ref(), dict(check.overrides))
     edem_dir = write_results(run(scene, "edem"), tmp_path / "edem")
     outcome = run_side("fe-slab", check.scene_ref(), dict(check.overrides), tmp_path / "fe")

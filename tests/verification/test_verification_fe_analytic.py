@@ -141,3 +141,71 @@ def test_fe_analytic_campaign_converges_at_the_tested_orders(tmp_path):
     assert (tmp_path / "fe-analytic" / "figures" / "fe-hertz-convergence.png").is_file()
     assert "Observed convergence orders" in (tmp_path / "fe-analytic" / "report.html").read_text()
     assert json.loads((tmp_path / "fe-analytic" / "metrics.json").read_text())["analyses"][0]["status"] == "verified"
+
+
+def test_exact_two_cylinders_result_directory(tmp_path):
+    """Two equal cylinders: E* = E / (2 (1 - nu^2)), R* = R / 2, the load for a = 1 mm is the rigid
+    cylinder's (E* and R* both halve); the surface is the upper cylinder's arc, pressed down."""
+    from verification.fe_analytic import CYLINDERS
+
+    size = 0.2
+    result = read_result_dir(write_exact_result("hertz-cylinders", tmp_path / "cyl", {"mesh_size_mm": size}))
+    e_star = MATERIAL["youngs_modulus_mpa"] / (2 * (1 - MATERIAL["poissons_ratio"] ** 2))
+    r_star = CYLINDERS.radius_mm / 2
+    load = math.pi * CYLINDERS.half_width_mm**2 * e_star / (4 * r_star)
+    p0 = 2 * load / (math.pi * CYLINDERS.half_width_mm)
+    series = result.timeseries
+    assert series["peak_pressure_mpa"][0] == pytest.approx(p0, rel=1e-12)
+    assert series["force_z_n"][0] == pytest.approx(-load * size / 2, rel=1e-12)
+    assert series["mean_pressure_mpa"][0] == pytest.approx(math.pi * p0 / 4, rel=1e-12)
+    x, z = result.frame(0).points_mm[:, 0], result.frame(0).points_mm[:, 2]
+    assert np.allclose(x**2 + (z - CYLINDERS.radius_mm) ** 2, CYLINDERS.radius_mm**2)
+    assert result.summary["closed_form"]["half_width_mm"] == pytest.approx(CYLINDERS.half_width_mm)
+
+
+def test_exact_two_layer_confined_result_directory(tmp_path):
+    """Two confined layers in series: p = F / A, d = p (h_M / E'_M + h_F / E'_F), M's bone moving down."""
+    from verification.fe_analytic import TWO_LAYERS
+
+    result = read_result_dir(write_exact_result("two-layer-confined", tmp_path / "stack", {"mesh_size_mm": 1.0}))
+    p = TWO_LAYERS.load_n / (TWO_LAYERS.lx_mm * TWO_LAYERS.ly_mm)
+
+    def confined(e, nu):
+        return e * (1 - nu) / ((1 + nu) * (1 - 2 * nu))
+
+    d = p * (TWO_LAYERS.mobile_thickness_mm / confined(MATERIAL["youngs_modulus_mpa"], MATERIAL["poissons_ratio"])
+             + TWO_LAYERS.fixed_thickness_mm / confined(*TWO_LAYERS.fixed_material))
+    assert result.timeseries["peak_pressure_mpa"][0] == pytest.approx(p, rel=1e-12)
+    assert result.timeseries["disp_z_mm"][0] == pytest.approx(-d, rel=1e-12)
+
+
+def test_fe_two_layers_campaign_is_data_with_three_meshes_each():
+    """Three meshes each (ratio 2), tolerances from the two-layer mesh study, minimum orders below the measured ones."""
+    from verification.campaigns.fe_two_layers import CYLINDER_SIZES_MM, TWO_LAYER_SIZES_MM
+
+    campaign = get_campaign("fe-two-layers")
+    assert {"fe-problem:hertz-cylinders", "closed-form:hertz-cylinders", "fe-problem:two-layer-confined",
+            "closed-form:two-layer-confined"} <= set(side_names())
+    cylinders = [c for c in campaign.cases if c.sides[0] == "fe-problem:hertz-cylinders"]
+    stack = [c for c in campaign.cases if c.sides[0] == "fe-problem:two-layer-confined"]
+    assert [c.params["mesh_size_mm"] for c in cylinders] == list(CYLINDER_SIZES_MM)
+    assert [c.params["mesh_size_mm"] for c in stack] == list(TWO_LAYER_SIZES_MM)
+    assert cylinders[-1].tolerance == {"peak_pressure_rel_error": 0.01, "half_width_rel_error": 0.02}
+    assert all(c.tolerance["displacement_rel_error"] == 1e-6 for c in stack)
+    checks = campaign.analyses[0].settings["checks"]
+    assert {c["metric"]: c.get("min_order") for c in checks if c.get("min_order")} == {
+        "a_displacement_norm_mm": 1.5, "peak_pressure_rel_error": 0.5, "half_width_rel_error": 0.7}
+
+
+@pytest.mark.slow
+@pytest.mark.fe
+def test_fe_two_layers_campaign_converges_at_the_tested_orders(tmp_path):
+    """The whole campaign (about 6 min on 2 shared cores): every case within its tolerance, the
+    orders above their minimums, the confined layers exact."""
+    pytest.importorskip("dolfinx_solver")
+    summary = run_campaign(get_campaign("fe-two-layers"), tmp_path / "fe-two-layers", jobs=2, report=False)
+    assert summary["exit_status"] == 0, [(r["name"], r["verdicts"]) for r in summary["cases"] if r["status"] != "verified"]
+    analysis = summary["analyses"][0]
+    assert analysis["status"] == "verified"
+    assert {c["verdict"] for c in analysis["values"]["checks"] if c["label"].startswith("two confined")} == {
+        "exact to round-off (every error < 1e-09): no order"}

@@ -161,11 +161,11 @@ def test_a_model_added_to_the_fe_registry_is_a_side_and_the_registry_needs_no_fe
     code = (
         f"import json, sys; sys.modules.update(dict.fromkeys({sorted(EXTRA_OF_MODULE)!r}))\n"
         "from fem_reference.models import FE_MODELS, LayerModel\n"
-        "class TwoLayers(LayerModel):\n"
-        "    name = 'two-layers'\n"
-        "FE_MODELS['two-layers'] = TwoLayers()\n"
+        "class StandInModel(LayerModel):\n"
+        "    name = 'stand-in'\n"
+        "FE_MODELS['stand-in'] = StandInModel()\n"
         "import verification.sides as sides\n"
-        "outcome = sides.run_side('fe-two-layers', 'flat-plates.toml', {}, 'out')\n"
+        "outcome = sides.run_side('fe-stand-in', 'flat-plates.toml', {}, 'out')\n"
         "print(json.dumps({'fe_model_sides': [s for s in sides.SIDES if s.removeprefix('fe-') in FE_MODELS],\n"
         "                  'status': outcome.status, 'message': outcome.message}))\n"
     )
@@ -174,7 +174,7 @@ def test_a_model_added_to_the_fe_registry_is_a_side_and_the_registry_needs_no_fe
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]  # an import of a blocked extra is an ImportError here
     out = json.loads(done.stdout.splitlines()[-1])
-    assert out["fe_model_sides"] == ["fe-slab", "fe-layer", "fe-two-layers"]
+    assert out["fe_model_sides"][-1] == "fe-stand-in" and {"fe-slab", "fe-layer"} <= set(out["fe_model_sides"])
     assert out["status"] == "unavailable" and "dolfinx" in out["message"]
 
 

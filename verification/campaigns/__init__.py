@@ -9,11 +9,15 @@ and the analysis kinds :data:`verification.analyses.ANALYSES`.
 Campaigns: ``edem-analytic`` (EDEM/DEM against closed forms), ``stability`` (stiff and extreme
 input, each ending in its declared outcome, no NaN anywhere), ``fe-analytic`` (the FE reference
 against Hertz line contact and confined compression on three meshes each, with observed orders),
+``fe-two-layers`` (the FE of two deformable layers against Hertz of two elastic cylinders and two
+confined layers in series, three meshes each, with observed orders),
 ``stance`` (EDEM vs DEM over the built-in stance scenes, the thesis's figures beside ours, DEM
 vs the FE slab at five instants), ``sensitivity`` (h_max x ligament modulus, 20 x 20 EDEM
 stances, the thesis's fig. 4.3.10), ``quick`` (a subset for CI), and EDEM/DEM against the FE
 reference: ``cylinder-plane``, ``subject``, ``error-vs-runtime``; ``thin-layer`` (the coupled
-thin-layer bed and the independent springs against the FE); ``viscoelastic`` (viscoelastic EDEM
+thin-layer bed and the independent springs against the FE); ``two-layers`` (two cartilage
+layers on a cylinder: the lumping error, the beds against the two-layer FE); ``ankles`` (the
+built-in ankles on their cartilage against the two-layer FE, 333-2000 N); ``viscoelastic`` (viscoelastic EDEM
 against the Kelvin-Voigt FE twin over time); ``fe-convergence`` (the FE reference's own
 mesh-convergence error at quick's FE points); ``population`` (1000 seeded subject-like ankles
 over the stance, EDEM), ``population-coupled`` (the same on the coupled thin layer);
@@ -39,11 +43,13 @@ from verification.campaign_model import (
     validate_campaign,
 )
 from verification.campaigns import (
+    ankles,
     cylinder_plane,
     edem_analytic,
     error_vs_runtime,
     fe_analytic,
     fe_convergence,
+    fe_two_layers,
     population,
     population_coupled,
     quick,
@@ -53,6 +59,7 @@ from verification.campaigns import (
     stance,
     subject,
     thin_layer,
+    two_layers,
     viscoelastic,
 )
 from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, HERTZ_SIZES_MM
@@ -68,8 +75,8 @@ from verification.campaigns.stance import (
 )
 
 #: the registered campaign modules, in the order `edem verify --list` shows them
-CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, viscoelastic, fe_convergence,
-                    population, population_coupled, real_knee)
+CAMPAIGN_MODULES = (edem_analytic, stability, fe_analytic, fe_two_layers, stance, sensitivity, quick, cylinder_plane, subject, error_vs_runtime, thin_layer, two_layers,
+                    ankles, viscoelastic, fe_convergence, population, population_coupled, real_knee)
 #: campaigns on data the user gives (``edem verify NAME --data FOLDER``): name -> their module, whose
 #: ``data_files(data)`` refuses (InputError naming --data or the missing file) a folder without them and
 #: ``with_data(data, work dir)`` builds the campaign on it

@@ -8,7 +8,7 @@ wall time on log axes; analysis: the Pareto front per truth (points no other bea
 
 from __future__ import annotations
 
-from verification.campaign_model import THESIS_BED, Analysis, Campaign, Case, Figure
+from verification.campaign_model import THESIS_ANKLE, THESIS_BED, Analysis, Campaign, Case, Figure
 from verification.campaign_model import ramp_overrides
 from verification.fe_comparison import CHECK_METRICS, FE_COMPARE_BASIS, SANITY_BASIS
 from verification.sides import TRUTH_STEPS
@@ -35,7 +35,7 @@ ERT_DEM_FAMILIES = (("dem", THESIS_BED, "independent springs"), ("dem-coupled", 
 
 
 def _ert_cases() -> list[Case]:
-    base = {"ligaments": []}
+    base = {"ligaments": [], **THESIS_ANKLE}  # the threshold law on the thesis's geometry: the FE slab's twin
     cases = []
     for family, extra, what in ERT_DEM_FAMILIES:
         for size in ERT_DEM_SIZES_MM:

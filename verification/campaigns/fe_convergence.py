@@ -68,15 +68,28 @@ CHECK_BASIS = {"force_residual_rel": Basis(INVARIANT, "the FE solve balances the
 #: elements through it) and 0.7 mm with 4 elements through it; the last step refines only through
 #: the layer, so the estimate mostly falls back to the largest difference between the meshes
 THIN_LAYER_MM = 1.0
+SCENE_TWO_LAYER_CYLINDER = "cylinder-two-layers"
 THIN_LAYER_LEVELS = ({"mesh_size_mm": 1.0, "degree": 2}, {"mesh_size_mm": 0.7, "degree": 2}, {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 4})
+
+
+#: the levels of the two-layer cylinder (scene cylinder-two-layers, layers of 0.5-1.5 mm): M's own
+#: 0.96 mm triangles with one and with two element layers in each cartilage layer, then the
+#: triangles halved (0.48 mm) with two; the campaign (two-layers) uses the finest. Refining both
+#: ways at once (0.7 mm with 4 layers, about 0.7M DOFs) would need an LU of about 25 GB
+TWO_LAYER_CYLINDER_LEVELS = ({"mesh_size_mm": 1.0, "degree": 2, "layers_through_thickness": 1},
+                             {"mesh_size_mm": 1.0, "degree": 2, "layers_through_thickness": 2},
+                             {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 2})
 
 
 def point_levels(source: Case) -> list[dict[str, Any]]:
     """The three FE options of a point, coarsest first: :data:`LEVELS_MM` at P2 (Taylor-Hood
-    from nu 0.49, the FE's own choice), or :data:`THIN_LAYER_LEVELS` for a layer of at most
-    :data:`THIN_LAYER_MM`. A viscoelastic reference keeps its own element (quick's is P1 at
-    nu 0.42, where P1 does not lock): each of its levels is a whole creep history, and P2 at
-    0.7 mm would be seven solves of 10-45 min."""
+    from nu 0.49, the FE's own choice), :data:`THIN_LAYER_LEVELS` for a layer of at most
+    :data:`THIN_LAYER_MM`, or :data:`TWO_LAYER_CYLINDER_LEVELS` for the two-layer cylinder. A
+    viscoelastic reference keeps its own element (quick's is P1 at nu 0.42, where P1 does not
+    lock): each of its levels is a whole creep history, and P2 at 0.7 mm would be seven solves of
+    10-45 min."""
+    if source.scene == SCENE_TWO_LAYER_CYLINDER:
+        return [dict(options) for options in TWO_LAYER_CYLINDER_LEVELS]
     if source.sides[-1] == "fe-layer" and _layer_thickness_mm(source) <= THIN_LAYER_MM:
         return [dict(options) for options in THIN_LAYER_LEVELS]
     viscoelastic = any(key.startswith("viscoelastic.") for key in source.overrides)
@@ -96,7 +109,10 @@ def _cost_rank(case: Case) -> int:
     """How dear a point's finest mesh is, for the order of the runs (measured 2026-11-26 at load
     2-4, docs/campaigns.md): the 2 mm layer (0.7 mm: 0.3M DOFs, 1-15 min), the 1 mm layer (0.38M
     with 4 elements through it, 5-8 min), the ideal ankle (0.4M, 5-20 min), the 3 mm layer
-    (0.46M, 14-20 min), the subject-like ankle (0.53M, 14-30 min)."""
+    (0.46M, 14-20 min), the subject-like ankle (0.53M, 14-30 min); then (2026-11-28) the two-layer
+    cylinder (0.4M, ...) and the two-layer ankles (0.6M, three loads each: hours by LU)."""
+    if case.sides[-1] == "fe-two-layer":
+        return 5 if case.scene == SCENE_TWO_LAYER_CYLINDER else 6
     if case.scene != "cylinder-layer":
         return 2 if case.scene == "ideal-standing" else 4
     return {2.0: 0, 1.0: 1, 3.0: 3}[float(case.overrides.get("cartilage.thickness_mm", 2.0))]
@@ -119,7 +135,7 @@ def study_points() -> list[tuple[str, Case]]:
 
 
 #: the words of a case name that name its bed or its discrete side, not its FE run
-_BED_WORDS = re.compile(r"-(coupled|two-pole|springs|dem-vs-fe|edem-vs-fe)(?=-|$)")
+_BED_WORDS = re.compile(r"-(coupled|two-pole|springs|sandwich|lumped|lumping|dem-vs-fe|edem-vs-fe)(?=-|$)")
 
 
 def _point_key(case: Case) -> str:
@@ -135,15 +151,21 @@ def reference_points(covered: set[str]) -> list[tuple[str, Case]]:
     are one of its study levels (:func:`point_levels`), named by the first case using it without
     its bed words. A reference at other options would have no study: it stays "FE error
     unknown" (tests/verification/test_fe_convergence_study.py checks that none is left)."""
+    from verification.campaigns.ankles import campaign as ankles
     from verification.campaigns.cylinder_plane import campaign as cylinder_plane
     from verification.campaigns.quick import campaign as quick
     from verification.campaigns.subject import campaign as subject
     from verification.campaigns.thin_layer import campaign as thin_layer
+    from verification.campaigns.two_layers import GOAL_NUS, SCENE
+    from verification.campaigns.two_layers import campaign as two_layers
+
+    def studied(case: Case) -> bool:  # the two-layer cylinder: the goal's nus (the others are reported)
+        return case.scene != SCENE or float(case.overrides["cartilage.poissons_ratio"]) in GOAL_NUS
 
     points, seen = [], set(covered)
-    for campaign_of in (quick, subject, cylinder_plane, thin_layer):
+    for campaign_of in (quick, subject, cylinder_plane, thin_layer, two_layers, ankles):
         for case in campaign_of().cases:
-            if len(case.sides) < 2 or not case.sides[-1].startswith("fe-") or dict(case.options) not in point_levels(case):
+            if len(case.sides) < 2 or not case.sides[-1].startswith("fe-") or dict(case.options) not in point_levels(case) or not studied(case):
                 continue
             key = _point_key(case)
             if key not in seen:

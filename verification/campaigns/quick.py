@@ -24,15 +24,10 @@ from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, _fe_analytic_c
 from verification.campaigns.stability import _stability_cases
 from verification.campaigns.subject import campaign as subject_campaign
 from verification.campaigns.viscoelastic import campaign as viscoelastic_campaign
-from verification.fe_comparison import FE_COARSE
+from verification.fe_comparison import FE_COARSE, banded
 from verification.metrics import COMPARISON_METRICS
-from verification.verdicts import BY_CONSTRUCTION, INVARIANT, MODEL_BAND, MODEL_BAND_REASON, MODEL_BAND_REL, Basis
+from verification.verdicts import BY_CONSTRUCTION, INVARIANT, MODEL_BAND_REL, Basis
 
-#: the design card's three quantities, each judged against the declared model band: pressure (the
-#: regularised peak and the field's L2 error), contact area and talus displacement; "verified"
-#: needs every one inside (the raw peak and the mean pressure are reported only)
-BAND_METRICS = ("regularised_peak_pressure_rel_error", "pressure_l2_rel_error", "contact_area_rel_error", "displacement_rel_error")
-BAND_BASIS = Basis(MODEL_BAND, MODEL_BAND_REASON)
 #: the threshold law's contact area on an ankle is its candidate springs' area (463 mm^2 on the ideal
 #: ankle, 607 mm^2 on the subject-like one, with either bed, at every load and nu): set by
 #: construction, and judged against the model band all the same ("verified" needs every card metric
@@ -73,22 +68,6 @@ EXPECTED_TIME_S = 1070.0
 VISCOELASTIC_CASE = "slab-step-dt2-coupled-nu0.42"
 
 
-def _banded(case: Case, area_by_construction: bool = False) -> Case:
-    """A DEM-vs-FE case judged against the model band on the regularised peak, the pressure
-    field (L2), the contact area and the displacement; the raw peak and mean pressure reported
-    (sanity bounds only). ``area_by_construction``: the law fixes the area (judged all the same, its
-    basis says why it does not move)."""
-    tolerance = {**case.tolerance, **{m: MODEL_BAND_REL for m in BAND_METRICS}}
-    basis = {**case.basis, **{m: BAND_BASIS for m in BAND_METRICS}}
-    judged = "regularised peak pressure, pressure field (L2), contact area and displacement"
-    if area_by_construction:
-        basis["contact_area_rel_error"] = THRESHOLD_AREA_BASIS
-        judged = "regularised peak pressure, pressure field (L2), contact area (set by the threshold law by construction) and displacement"
-    description = case.description.replace("Generous tolerances (measured, not judged)", "").replace(". Generous tolerances", "").rstrip(" ;.")
-    description += f"; {judged} judged against the declared +-{MODEL_BAND_REL:.0%} model band, the raw peak and mean pressure reported"
-    return dataclasses.replace(case, tolerance=tolerance, basis=basis, description=description)
-
-
 def trust_name(ankle: str, bed: str, nu: float) -> str:
     """The trust case of an ankle ("slab": the ideal ankle, "subject") and a bed (a key of
     :data:`TRUST_BEDS`) at Poisson's ratio ``nu``, 333 N."""
@@ -106,9 +85,9 @@ def _with_bed(case: Case, ankle: str, bed: str, nu: float) -> Case:
     role = "the built-in standing scenes' default bed" if bed == "coupled" else "the thesis's bed"
     description = (f"{TRUST_ANKLES[ankle]} standing, threshold law, {what} ({role}): DEM vs the FE slab (333 N, nu {nu:g}, no ligaments); FE {element} at 1.0 mm"
                    + ("; its FE run is shared with the other beds' cases (the FE never reads the bed)" if bed != "coupled" else ""))
-    return _banded(dataclasses.replace(case, name=trust_name(ankle, bed, nu), overrides=overrides, options=dict(FE_P1) if p1 else dict(FE_COARSE),
+    return banded(dataclasses.replace(case, name=trust_name(ankle, bed, nu), overrides=overrides, options=dict(FE_P1) if p1 else dict(FE_COARSE),
                                        params={**case.params, "poissons_ratio": nu}, description=description,
-                                       maps=bed == "coupled" and nu == TRUST_BASE_NU), area_by_construction=True)
+                                       maps=bed == "coupled" and nu == TRUST_BASE_NU), THRESHOLD_AREA_BASIS)
 
 
 def trust_cases() -> list[Case]:
@@ -122,7 +101,7 @@ def trust_cases() -> list[Case]:
              for nu in sorted(TRUST_NUS, reverse=True)  # the slowest FE (highest nu) starts first
              for ankle in TRUST_ANKLES for bed in TRUST_BEDS]
     names = [f"layer-F333-nu0.42-t{t:g}" for t in TRUST_THICKNESS_MM] + [f"layer-F{TRUST_LOW_LOAD_N:g}-nu0.42-t2"]
-    cases += [_banded(cp[n]) for n in names]
+    cases += [banded(cp[n]) for n in names]
     return cases
 
 

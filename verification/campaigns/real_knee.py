@@ -67,6 +67,14 @@ FE_LEVELS = (
 BEDS = {"springs": ({}, "independent springs"), "coupled": ({"cartilage.coupling": "thin-layer"}, "coupled thin layer")}
 GOAL_REL = 0.15
 SCENE_NAME = "real-knee.toml"
+#: the same knee with the femoral layer deformable: the femoral bone as F with a uniform
+#: FEMORAL_LAYER_MM layer (``fixed_thickness_mm``), both layers in the springs (the coupled
+#: layer's sandwich) and in the FE (the two-layer model)
+TWO_LAYER_SCENE_NAME = "real-knee-two-layers.toml"
+#: the beds against the two-layer FE: the coupled layer (the scene's default, the sandwich of the
+#: two layers) and the independent springs (the two layers in series)
+TWO_LAYER_BEDS = {"springs-2L": ({"cartilage.coupling": "none"}, "independent springs"),
+                  "coupled-2L": ({"cartilage.coupling": "thin-layer"}, "coupled layer, sandwich")}
 QUANTITIES = (
     ("displacement (mm)", "a_at_b_displacement_norm_mm", "b_displacement_norm_mm"),
     ("peak pressure (MPa)", "a_at_b_peak_pressure_mpa", "b_peak_pressure_mpa"),
@@ -124,6 +132,30 @@ def prepare_inputs(data: Path | str, work: Path | str) -> Path:
     _write_mm(work / "tibia-cartilage.vtp", tibia.vertices_mm[used], remap[kept])
     _write_mm(work / "tibia-bone.vtp", bone.vertices_mm, bone.triangles)
     _write_mm(work / "femur-articular.vtp", articular.vertices_mm, articular.triangles)
+    _write_mm(work / "femur-bone.vtp", femur.vertices_mm, femur.triangles)
+    (work / TWO_LAYER_SCENE_NAME).write_text(f"""[scene]
+name = "real-knee-two-layers"
+description = "Lenhart 2015 knee (OpenSim JAM): tibial cartilage with its bone (measured thickness) against the femoral bone with a deformable uniform {FEMORAL_LAYER_MM:g} mm layer; tibia cropped to {CROP_MM:g} mm of the femoral articular surface"
+
+[geometry]
+mobile = "tibia-cartilage.vtp"
+mobile_bone = "tibia-bone.vtp"
+fixed = "femur-bone.vtp"
+
+[cartilage]
+youngs_modulus_mpa = {YOUNGS_MODULUS_MPA}
+poissons_ratio = {POISSONS_RATIO}
+law = "gap"
+max_spring_length_mm = 8.0
+fixed_thickness_mm = {FEMORAL_LAYER_MM}
+coupling = "thin-layer"
+
+[load]
+force_n = [0.0, {LOADS_N[0]}, 0.0]
+
+[constraints]
+fixed_dofs = ["tx", "tz", "rx", "ry", "rz"]
+""", encoding="utf-8")
     scene = work / SCENE_NAME
     scene.write_text(f"""[scene]
 name = "real-knee"
@@ -154,9 +186,10 @@ def case_name(bed: str, load_n: float, level: str) -> str:
     return f"{bed}-F{load_n:g}-{level}"
 
 
-def campaign(scene: str = SCENE_NAME) -> Campaign:
-    """The campaign on the prepared scene (:func:`prepare_inputs`); without it the cases name
-    :data:`SCENE_NAME` (listed, not runnable: ``edem verify`` prepares it from ``--data``)."""
+def campaign(scene: str = SCENE_NAME, two_layer_scene: str = TWO_LAYER_SCENE_NAME) -> Campaign:
+    """The campaign on the prepared scenes (:func:`prepare_inputs`); without them the cases name
+    :data:`SCENE_NAME` and :data:`TWO_LAYER_SCENE_NAME` (listed, not runnable: ``edem verify``
+    prepares them from ``--data``)."""
     cases = []
     for bed, (overrides, what) in BEDS.items():
         for load in LOADS_N:
@@ -168,17 +201,45 @@ def campaign(scene: str = SCENE_NAME) -> Campaign:
                     scene, ("dem", "fe-layer"), overrides={"load.force_n": [0.0, load, 0.0], **overrides}, options=options,
                     params={"load_n": load}, maps=(load == LOADS_N[-1] and level == "L1"),
                 ))
-    points = tuple((f"{bed} {load:g} N", tuple(case_name(bed, load, level) for level, _ in FE_LEVELS)) for bed in BEDS for load in LOADS_N)
+    rigid = tuple(c.name for c in cases)
+    for bed, (overrides, what) in TWO_LAYER_BEDS.items():
+        for load in LOADS_N:
+            for level, options in FE_LEVELS:
+                cases.append(fe_comparison_case(
+                    case_name(bed, load, level),
+                    f"Lenhart knee, both layers deformable, {what}, {load:g} N up the tibia; FE two-layer (measured tibial cartilage, femur + a deformable 2 mm layer) "
+                    f"P2 at {options['mesh_size_mm']:g} mm, {options['layers_through_thickness']} element(s) through each layer",
+                    two_layer_scene, ("dem", "fe-two-layer"), overrides={"load.force_n": [0.0, load, 0.0], **overrides}, options=options,
+                    params={"load_n": load}, maps=(bed == "coupled-2L" and load == LOADS_N[-1] and level == "L1"),
+                ))
+    for load in LOADS_N:
+        for level, options in FE_LEVELS:
+            cases.append(fe_comparison_case(
+                case_name("lumping", load, level),
+                f"Lenhart knee, {load:g} N: the FE of one layer of the summed thickness (tibial + 2 mm) on the tibial bone against the femoral bone (lumped) "
+                f"against the two-layer FE; P2 at {options['mesh_size_mm']:g} mm, {options['layers_through_thickness']} element(s) through each layer",
+                two_layer_scene, ("fe-lumped", "fe-two-layer"), overrides={"load.force_n": [0.0, load, 0.0]}, options=options,
+                params={"load_n": load}, maps=False))
+    points = tuple((f"{bed} {load:g} N", tuple(case_name(bed, load, level) for level, _ in FE_LEVELS)) for bed in (*BEDS, *TWO_LAYER_BEDS) for load in LOADS_N)
+    # the femoral layer's compliance: the two-layer FE against the rigid femur's (each FE value on the three meshes)
+    compliance = tuple((f"{load:g} N {level}", case_name("coupled-2L", load, level), case_name("coupled", load, level)) for load in LOADS_N for level, _ in FE_LEVELS)
+    lumping = tuple(case_name("lumping", load, level) for load in LOADS_N for level, _ in FE_LEVELS)
     analyses = (
-        Analysis("band", f"DEM against the FE on the real knee: goal {GOAL_REL:.0%}, judged where the FE's mesh error is below it",
-                 "fe-band", tuple(c.name for c in cases), {"points": points, "quantities": QUANTITIES, "goal": GOAL_REL}),
+        Analysis("band", f"DEM against the FE on the real knee, rigid femur and (-2L) both layers deformable: goal {GOAL_REL:.0%}, judged where the FE's mesh error is below it",
+                 "fe-band", tuple(c.name for c in cases if c.name not in lumping), {"points": points, "quantities": QUANTITIES, "goal": GOAL_REL}),
+        Analysis("femoral-compliance", "What the femoral layer's compliance changes: the FE with both layers deformable against the FE with the femur rigid, "
+                                       "(two layers - rigid femur) / rigid femur, on each mesh", "pairs", tuple(n for _, a, b in compliance for n in (a, b)),
+                 {"pairs": compliance, "quantities": tuple((q, b, b) for q, _, b in QUANTITIES)}),
+        Analysis("lumping", "The lumping error on the knee: one layer of the summed thickness on the tibial bone against the two-layer FE, signed (lumped - two layers) / two layers",
+                 "table", lumping, {"columns": FE_VALUE_COLUMNS}),
         # (the FE's own error is the band's, from this campaign's own meshes: the fe-convergence
         # study, whose columns would read "unknown" here, does not hold the knee)
-        Analysis("table", "DEM against the FE, every case (the FE's own error: the band above)", "table", tuple(c.name for c in cases),
+        Analysis("table", "DEM against the FE, every case (the FE's own error: the band above)", "table", tuple(c.name for c in cases if c.name not in lumping),
                  {"columns": FE_VALUE_COLUMNS}),
     )
     # the errors against the FE refined through the thickness (L1: every load fits in memory)
-    series = tuple((what, tuple(case_name(bed, load, "L1") for load in LOADS_N)) for bed, (_, what) in BEDS.items())
+    series = tuple((what, tuple(case_name(bed, load, "L1") for load in LOADS_N)) for bed, (_, what) in BEDS.items()) + tuple(
+        (f"{what}, both layers deformable", tuple(case_name(bed, load, "L1") for load in LOADS_N)) for bed, (_, what) in TWO_LAYER_BEDS.items())
     figures = (Figure("errors-vs-load", f"Lenhart knee: errors of the two beds against the FE (two elements through the cartilage) vs the load; dashed: the {GOAL_REL:.0%} goal",
                       "sweep", tuple(n for _, group in series for n in group), x="load_n", y=ERROR_PANELS, logy=True, series=series,
                       lines=tuple((m, GOAL_REL, f"goal {GOAL_REL:.0%}") for m in ERROR_PANELS[:3])),)
@@ -191,4 +252,5 @@ def campaign(scene: str = SCENE_NAME) -> Campaign:
 
 def with_data(data: Path | str | None, work: Path | str) -> Campaign:
     """The campaign on ``data`` (the Lenhart knee folder), its inputs prepared in ``work``."""
-    return campaign(str(prepare_inputs(data, work)))
+    scene = prepare_inputs(data, work)
+    return campaign(str(scene), str(scene.with_name(TWO_LAYER_SCENE_NAME)))

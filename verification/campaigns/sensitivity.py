@@ -1,8 +1,10 @@
-"""``sensitivity``: h_max x ligament modulus, 20 x 20 EDEM stances (the thesis's fig. 4.3.10)."""
+"""``sensitivity``: h_max x ligament modulus, 20 x 20 EDEM stances (the thesis's fig. 4.3.10), on
+the thesis's ankle, law and bed (named in the overrides: the scene's default is the gap law on
+both layers, whose answer the window does not set)."""
 
 from __future__ import annotations
 
-from verification.campaign_model import THESIS_BED, Analysis, Campaign, Case, Expect, Figure
+from verification.campaign_model import THESIS_ANKLE, THESIS_BED, Analysis, Campaign, Case, Expect, Figure
 from verification.campaigns.stance import THESIS_FLAG_REL
 from verification.verdicts import INVARIANT, Basis
 
@@ -37,14 +39,14 @@ def _sensitivity_cases(n: int = SENSITIVITY_GRID) -> list[Case]:
             cases.append(
                 Case(
                     sensitivity_case_name(h, e),
-                    f"EDEM ideal stance, h_max {h:.4g} mm, ligament modulus {e:.4g} MPa (all four ligaments); the thesis's bed "
-                    "(independent springs, named in the overrides) as its fig. 4.3.10 is compared",
+                    f"EDEM ideal stance, h_max {h:.4g} mm, ligament modulus {e:.4g} MPa (all four ligaments); the thesis's geometry, law and bed "
+                    "(no cartilage, threshold law, independent springs, named in the overrides) as its fig. 4.3.10 is compared",
                     SENSITIVITY_SCENE,
                     ("edem",),
                     ("a_peak_pressure_mpa", "a_mean_contact_area_mm2", "outcome_mismatch"),
                     {"outcome_mismatch": 0.0},  # every run of the grid must solve its stance
                     basis={"outcome_mismatch": Basis(INVARIANT, "the run must solve every time point: a requirement, not an accuracy claim")},
-                    overrides={**THESIS_BED, "cartilage.max_spring_length_mm": h, "ligaments[*].youngs_modulus_mpa": e},
+                    overrides={**THESIS_BED, **THESIS_ANKLE, "cartilage.max_spring_length_mm": h, "ligaments[*].youngs_modulus_mpa": e},
                     expect=Expect("converges"),
                     options={"frames": "none"},  # the metrics need the time series only: no pressure map to write
                     params={"h_max_mm": h, "ligament_modulus_mpa": e},

@@ -1,7 +1,9 @@
 """``stance``: EDEM vs DEM over the built-in stance scenes (docs/references.md#the-thesiss-figures, thesis 4.3.4), the thesis's
 figures beside ours, DEM vs the FE slab at five instants ("unavailable" without
-``fem_reference.run_scene``). The EDEM-vs-DEM cases, whose figures are set beside the thesis's,
-name the thesis's bed (independent springs) in their overrides, whatever the scenes' default."""
+``fem_reference.run_scene``). Every case names the thesis's ankle in its overrides (its geometry
+without cartilage and its threshold law: :data:`verification.campaign_model.THESIS_ANKLE`), the
+EDEM-vs-DEM cases, whose figures are set beside the thesis's, its bed too (independent springs),
+whatever the scenes' default (the gap law on both layers, coupled)."""
 
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from edem.scene import resolve_scene_path
-from verification.campaign_model import THESIS_BED, VALUES_AT_REFERENCE_TIMES, Analysis, Campaign, Case, Expect, Figure
+from verification.campaign_model import THESIS_ANKLE, THESIS_BED, VALUES_AT_REFERENCE_TIMES, Analysis, Campaign, Case, Expect, Figure
 from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import INVARIANT, MODEL_BAND_REL, Basis
 
@@ -67,13 +69,14 @@ def _stance_cases() -> list[Case]:
         cases.append(
             Case(
                 f"{scene}-edem-vs-dem",
-                f"{scene}: EDEM (incremental, push-back) against DEM (each time point static), 65 time points, the thesis's bed (independent springs, "
-                "named in the overrides: the scene's default is the coupled layer) as the thesis's figures are compared; no tolerance: the methods differ by design",
+                f"{scene}: EDEM (incremental, push-back) against DEM (each time point static), 65 time points, the thesis's ankle, law and bed (its geometry "
+                "without cartilage, the threshold law, independent springs: named in the overrides, the scene's default being the gap law on both layers, coupled) "
+                "as the thesis's figures are compared; no tolerance: the methods differ by design",
                 scene,
                 ("edem", "dem"),
                 COMPARISON_METRICS + STANCE_SERIES + ("outcome_mismatch",),
                 {"outcome_mismatch": 0.0},  # EDEM must solve the whole stance
-                overrides=dict(THESIS_BED),
+                overrides={**THESIS_BED, **THESIS_ANKLE},
                 expect=Expect("converges"),
                 basis={"outcome_mismatch": Basis(INVARIANT, "the run must solve every time point: a requirement, not an accuracy claim")},
             )
@@ -109,9 +112,9 @@ STANCE_FE_FIXED = {"ideal-stance": ("ty",)}
 
 
 def stance_fe_overrides(scene: str) -> dict[str, Any]:
-    """Overrides of the DEM-vs-FE cases: no ligaments (the FE models none), STANCE_FE_FIXED added
-    to the scene's own fixed DOFs."""
-    overrides: dict[str, Any] = {"ligaments": []}
+    """Overrides of the DEM-vs-FE cases: the thesis's ankle (the threshold law, the FE slab's twin),
+    no ligaments (the FE models none), STANCE_FE_FIXED added to the scene's own fixed DOFs."""
+    overrides: dict[str, Any] = {"ligaments": [], **THESIS_ANKLE}
     if scene in STANCE_FE_FIXED:
         data = tomllib.loads(resolve_scene_path(scene).read_text(encoding="utf-8"))
         fixed = list(data.get("constraints", {}).get("fixed_dofs", []))

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from verification.campaign_model import THESIS_BED, Analysis, Campaign, Case, Figure
+from verification.campaign_model import THESIS_ANKLE, THESIS_BED, Analysis, Campaign, Case, Figure
 from verification.fe_comparison import ERROR_PANELS, FE_COARSE, FE_TABLE_COLUMNS, fe_comparison_case
 
 #: the FE layer of the base cylinder sweep: the fe-convergence study's finest level (module docstring)
@@ -93,6 +93,7 @@ def _cases() -> list[Case]:
         overrides: dict[str, Any] = {"load.force_n": [0.0, 0.0, load], "cartilage.poissons_ratio": nu}
         if thickness is None:
             overrides["ligaments"] = []
+            overrides.update(THESIS_ANKLE)  # the threshold law on the thesis's geometry: the FE slab's twin
         else:
             overrides.update({"geometry.plafond_gap_mm": thickness, "cartilage.thickness_mm": thickness})
         element = "Taylor-Hood P2-P1" if nu >= 0.49 else "P2"

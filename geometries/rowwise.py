@@ -1,5 +1,5 @@
 """Row-wise products of (n, 3) and (n, 6) arrays, the layout of points, vectors and generalised
-directions throughout edem.
+directions throughout the project (the array kernels on triangles are :mod:`geometries.triangle_kernels`).
 
 * numpy's elementwise machinery pays per row when the last axis has only 3 entries:
   ``np.einsum("ij,ij->i")`` runs about 5x slower per element than products of the columns, and

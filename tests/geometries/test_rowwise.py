@@ -1,10 +1,10 @@
-"""edem/rowwise.py: row-wise products equal the plain numpy expressions they replace."""
+"""geometries/rowwise.py: row-wise products equal the plain numpy expressions they replace."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from edem.rowwise import add_rows, min_rows, row_dot, rows_times
+from geometries.rowwise import add_rows, min_rows, row_dot, rows_times
 
 
 def test_row_dot_is_the_rowwise_dot_product():

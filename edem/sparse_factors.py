@@ -1,0 +1,372 @@
+"""Sparse factors of the coupled layer's matrices, and their low-rank updates.
+
+The coupled layer's vertex matrices are SPD and banded once renumbered by reverse Cuthill-McKee
+(half-bandwidth about the square root of the vertex count on a surface patch), so LAPACK's banded
+Cholesky factors them; it took 0.35-0.65x the time of SuperLU's symmetric-mode LU on the ankle
+surfaces (1.1k-14k vertices). The ordering depends on the sparsity only and is found once per
+cell set (``OperatorPattern``); past ``MAX_BANDED_HALF_WIDTH`` the sparse LU takes over. A
+refactorisation on the same pattern keeps the factor's columns before the first one whose
+entries changed and factors only the trailing block (``OperatorPattern._banded_cholesky``).
+Of the fill-reducing sparse factors measured on the stances' matrices (0.6k-14k vertices,
+``benchmarks/bench_factorisations.py``, docs/method.md), QDLDL's LDL^T with its ordering kept
+and only the numbers refactored took 1.2-3.6x the banded path's time, CHOLMOD through cholespy
+(no numeric-only refactorisation) 3.1-6.2x, SuperLU 2.7-4.1x; CHOLMOD through cvxopt (the
+optional extra ``cholmod``: a supernodal Cholesky, its symbolic analysis once per pattern, then
+the numbers only) beat it where the pattern is kept over a run and large, the gap laws' layer
+over the whole surface at 5k-14k vertices (0.5-0.8x), and lost on smaller layers and on the
+threshold law's, a new pattern at every time point (1.2-2.8x). So CHOLMOD factors the whole
+surface's pattern past ``CHOLMOD_MIN_BAND_WORK`` where cvxopt is installed
+(``SupernodalCholesky``), the banded path everything else; the two agree to round-off. The
+two-pole's block matrix is indefinite; QDLDL factors it, each solve checked against its backward
+error (``indefinite_solve``).
+
+A factor is kept over a run and corrected rather than refactored where only a few springs'
+weights changed (``LowRankUpdate``, the Woodbury identity).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.linalg import cho_solve_banded, lu_factor, lu_solve
+from scipy.linalg.lapack import dpbtrf
+from scipy.sparse.csgraph import reverse_cuthill_mckee
+from scipy.sparse.linalg import splu
+
+from geometries.errors import SolverError
+
+
+@functools.cache
+def cholmod_module():
+    """cvxopt's CHOLMOD (the optional extra "cholmod": SuiteSparse inside cvxopt's wheels), or
+    None where cvxopt is not installed (imported on first use: the independent springs never need it)."""
+    try:
+        from cvxopt import cholmod
+    except ImportError:
+        return None
+    return cholmod
+
+
+def concatenated_ranges(start: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """The positions start[i], ..., start[i] + count[i] - 1 of every i, concatenated (a CSR
+    matrix's entries of chosen rows, given their indptr starts and lengths)."""
+    return np.repeat(start - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
+
+
+# CHOLMOD (cvxopt) factors the whole surface's pattern where the banded factor's work, n w^2 for
+# n vertices of half-bandwidth w, is at least this. On the stances' gap-law layers (the whole
+# surface) it took 1.5-1.8x the banded path's time at n w^2 = 3e6 (1.5k vertices) and 0.5-0.8x
+# from 4e7 on (5k-14k vertices, and the 30k-spring layer's coarse space); on the threshold law,
+# whose pattern is new at every time point, the symbolic analysis each time made it 1.2-2.8x
+# slower (benchmarks/bench_factorisations.py, docs/method.md).
+CHOLMOD_MIN_BAND_WORK = 1e7
+
+# Past this half-bandwidth (after reverse Cuthill-McKee) the sparse LU is the cheaper factor: on
+# the ankle surfaces LAPACK's banded Cholesky took 0.35-0.65x SuperLU's time at half-bandwidths
+# 47-156 (1.1k-14k vertices), a ratio growing about like the bandwidth (benchmarks/bench_thin_layer.py).
+MAX_BANDED_HALF_WIDTH = 256
+
+
+@dataclass
+class OperatorPattern:
+    """Sparsity of H = M + K on a cell set (v, v), canonical CSC, and the transfer Q (m, v).
+
+    ``slots[t]`` (9,) int: where triangle t's corner pair (i, j), row-major, sits in the
+    matrix's data, -1 for a pair on the free edge; Q^T diag(x) Q is then the pattern with x / 9
+    added at the slots (no sparse product, no re-assembly). The band layout of the factorisation
+    (an ordering and where each stored entry goes) depends on the pattern only, so it is found
+    at the first factorisation and reused; so is the last band factor, in part
+    (``_banded_cholesky``).
+    """
+
+    indices: np.ndarray
+    indptr: np.ndarray
+    slots: np.ndarray  # (m, 9) int
+    q: sp.csr_matrix  # (m, v)
+    #: the pattern of the whole surface (or of its coarse space): the cell set a run keeps at
+    #: every time point (the gap laws' layer), where one symbolic analysis serves the whole run
+    whole_surface: bool = False
+    #: the stored lower entries and band factor of the last banded factorisation on this pattern
+    last_factor: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+
+    @property
+    def n_vertices(self) -> int:
+        return self.indptr.shape[0] - 1
+
+    def matrix(self, data: np.ndarray) -> sp.csc_matrix:
+        return sp.csc_matrix((data, self.indices, self.indptr), shape=(self.n_vertices, self.n_vertices))
+
+    def sum_at_slots(self, per_pair: np.ndarray) -> np.ndarray:
+        """Matrix data (nnz,) from values per triangle and corner pair (m, 9), or per triangle
+        (m,) for the same value on its nine pairs, summed where they meet."""
+        kept, slot = self.kept_pairs
+        weights = per_pair.ravel()[kept] if per_pair.ndim == 2 else per_pair[kept // 9]
+        return np.bincount(slot, weights=weights, minlength=self.indices.shape[0])
+
+    @functools.cached_property
+    def kept_pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The corner pairs off the free edge: their flat positions in (m, 9) and their slots."""
+        kept = np.flatnonzero(self.slots.ravel() >= 0)
+        return kept, self.slots.ravel()[kept]
+
+    @functools.cached_property
+    def band(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """(ordering, the stored entries in the lower band, their flat positions in LAPACK's band
+        storage (column-major, as LAPACK reads it), half-width) of the reverse Cuthill-McKee
+        renumbering; built on first use."""
+        n = self.n_vertices
+        # The pattern is symmetric, so its CSC arrays read as CSR are the same graph (no conversion).
+        graph = sp.csr_matrix((np.ones(self.indices.shape[0]), self.indices, self.indptr), shape=(n, n))
+        order = reverse_cuthill_mckee(graph, symmetric_mode=True).astype(np.int64)
+        position = np.empty(n, np.int64)
+        position[order] = np.arange(n)
+        row = position[self.indices]
+        col = position[np.repeat(np.arange(n), np.diff(self.indptr))]
+        lower = np.flatnonzero(row >= col)  # LAPACK's lower band storage: ab[i - j, j] = A[i, j]
+        width = int((row - col)[lower].max(initial=0))
+        return order, lower, col[lower] * (width + 1) + (row - col)[lower], width
+
+    def factorise(self, data: np.ndarray):
+        """Factor of the SPD matrix with this pattern and ``data`` (nnz,); returns solve(rhs (v,) or (v, k)).
+
+        CHOLMOD where it wins (``uses_cholmod``); otherwise the banded Cholesky in reverse
+        Cuthill-McKee order up to MAX_BANDED_HALF_WIDTH (of the trailing part only where the last
+        factor on this pattern can be kept, ``_banded_cholesky``), SuperLU's symmetric-mode LU
+        (diagonal pivots, minimum-degree ordering) beyond.
+        """
+        n = self.n_vertices
+        if n == 0:  # every vertex on a free edge: the smoothed field vanishes, the layer is local
+            return np.zeros_like
+        if self.uses_cholmod:
+            return self.supernodal.factorise(data)
+        order, lower, flat, width = self.band
+        try:
+            if width > MAX_BANDED_HALF_WIDTH:
+                return splu(self.matrix(data), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}).solve
+            entries = data[lower]
+            factor = self._banded_cholesky(entries)
+        except (np.linalg.LinAlgError, RuntimeError) as error:  # RuntimeError: SuperLU's "singular matrix"
+            raise SolverError(f"the coupled thin-layer matrix is not positive definite ({error})") from None
+        self.last_factor = (entries, factor)
+
+        def solve(rhs: np.ndarray) -> np.ndarray:
+            out = np.empty_like(rhs)
+            out[order] = cho_solve_banded((factor, True), rhs[order], overwrite_b=True, check_finite=False)
+            return out
+
+        return solve
+
+    @property
+    def uses_cholmod(self) -> bool:
+        """Whether the factorisations on this pattern go to CHOLMOD (``SupernodalCholesky``):
+        where it is installed, on the whole surface's pattern (its symbolic analysis once serves
+        the run), where the banded factor's work n w^2 is at least CHOLMOD_MIN_BAND_WORK."""
+        if not self.whole_surface or cholmod_module() is None:
+            return False
+        width = self.band[3]
+        return self.n_vertices * width * width >= CHOLMOD_MIN_BAND_WORK
+
+    @functools.cached_property
+    def supernodal(self) -> "SupernodalCholesky":
+        return SupernodalCholesky(self.indices, self.indptr)
+
+    def _banded_cholesky(self, entries: np.ndarray) -> np.ndarray:
+        """LAPACK's lower band factor (width + 1, v), column-major, of the matrix whose lower band
+        holds ``entries`` (the stored lower entries, in ``band`` order).
+
+        Only the trailing part is refactored where the matrix differs from the last one factored
+        on this pattern from band column k on: with A = L L^T split at k, L11 and L21 depend on
+        A11 and A21 alone and are kept, and L22 = chol(A22 - L21 L21^T), where L21 L21^T touches
+        A22's leading w x w block only (w the half-width). The active-set iterations change the
+        weights of the springs at the contact's edge, so on the gap law's layer (the whole surface,
+        the same operators over a run) k sat at 0.12-0.6 of the vertices on the 30k-spring ankle.
+        Exact to round-off.
+        """
+        order, lower, flat, width = self.band
+        n = self.n_vertices
+        band = np.zeros((width + 1) * n)
+        band[flat] = entries
+        band = band.reshape((width + 1, n), order="F")  # column j of the band is contiguous
+        last = self.last_factor
+        start = 0
+        if last is not None:
+            changed = np.flatnonzero(entries != last[0])
+            start = int(flat[changed].min()) // (width + 1) if changed.size else n  # the first column that differs
+        if start == n:
+            return last[1]
+        if start > 0:
+            factor = last[1]
+            band[:, :start] = factor[:, :start]
+            # L21: rows start .. start + w - 1, columns start - w .. start - 1, L[i, j] = factor[i - j, j].
+            rows = np.arange(start, min(start + width, n))
+            cols = np.arange(max(start - width, 0), start)
+            offset = rows[:, None] - cols[None, :]
+            l21 = np.where(offset <= width, factor[np.minimum(offset, width), cols[None, :]], 0.0)
+            a, b = _lower_triangle(rows.size)
+            band[a - b, start + b] -= (l21 @ l21.T)[a, b]
+        trailing, info = dpbtrf(band[:, start:], lower=1, overwrite_ab=1)  # in place: the view is column-major
+        if info > 0:
+            raise np.linalg.LinAlgError(f"leading minor {start + info} is not positive definite")
+        if not np.shares_memory(trailing, band):  # LAPACK worked on a copy
+            band[:, start:] = trailing
+        return band
+
+
+class SupernodalCholesky:
+    """CHOLMOD's Cholesky factor (cvxopt) of the matrices on one sparsity pattern: the symbolic
+    analysis (fill-reducing ordering, elimination tree, supernodes) once, then a numeric
+    factorisation per matrix into the same factor object."""
+
+    def __init__(self, indices: np.ndarray, indptr: np.ndarray) -> None:
+        from cvxopt import matrix, spmatrix
+
+        self.cholmod, self.dense = cholmod_module(), matrix
+        n = indptr.shape[0] - 1
+        column = np.repeat(np.arange(n), np.diff(indptr))
+        self.lower = np.flatnonzero(indices >= column)  # CHOLMOD reads the lower triangle, in CSC order
+        self.matrix = spmatrix(1.0, indices[self.lower], column[self.lower], (n, n))
+        self.factor = self.cholmod.symbolic(self.matrix)
+        self.numbers = None  # the lower entries the factor holds now
+
+    def factorise(self, data: np.ndarray):
+        """solve(rhs (v,) or (v, k)) with the matrix of this pattern and ``data`` (nnz,), SPD.
+
+        The factor object is shared by every factorisation on the pattern, so a solve whose
+        numbers it no longer holds (another factorisation came since) factors them again first."""
+        entries = data[self.lower]
+        self._numeric(entries)
+
+        def solve(rhs: np.ndarray) -> np.ndarray:
+            if self.numbers is not entries:
+                self._numeric(entries)
+            x = self.dense(rhs)
+            self.cholmod.solve(self.factor, x)
+            return np.array(x).reshape(rhs.shape)
+
+        return solve
+
+    def _numeric(self, entries: np.ndarray) -> None:
+        self.matrix.V = self.dense(entries)
+        try:
+            self.cholmod.numeric(self.matrix, self.factor)
+        except ArithmeticError as error:
+            self.numbers = None
+            raise SolverError(f"the coupled thin-layer matrix is not positive definite (CHOLMOD: {error})") from None
+        self.numbers = entries
+
+
+@functools.lru_cache(maxsize=8)
+def _lower_triangle(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """np.tril_indices(n), kept (read-only): a run refactors with the same half-width over and over."""
+    rows, cols = np.tril_indices(n)
+    rows.flags.writeable = cols.flags.writeable = False
+    return rows, cols
+
+
+# Past this many changed spring weights the coupled matrix is refactored rather than corrected by
+# the Woodbury identity: each changed weight costs one solve with the old factor, and on the ankle
+# surfaces (14k vertices, half-bandwidth 156) a banded factorisation cost about 16 single solves
+# (benchmarks/bench_thin_layer.py). The two-pole's indefinite block (QDLDL, each solve checked)
+# cost 24-25 checked single solves a factorisation at 3k and 29k springs (3k and 29k unknowns), so
+# it takes twice as many.
+LOW_RANK_MAX = 8
+LOW_RANK_MAX_INDEFINITE = 16
+
+
+@dataclass
+class LowRankUpdate:
+    """A factor of A(w0) = sigma H + Z diag(w0) Z^T, reused for A(w) with w - w0 nonzero on k springs:
+
+        A(w)^-1 = A0^-1 - Y (I + D Z_k^T Y)^-1 D Z_k^T A0^-1,   Y = A0^-1 Z_k,  D = diag(w - w0)_k,
+
+    (the Woodbury identity; the k x k capacitance is nonsingular whenever A(w) is). The columns Y
+    of the springs met so far are kept (up to 8 LOW_RANK_MAX of them), so a spring toggling back
+    and forth is solved for once.
+    """
+
+    key: tuple  # edem.thin_layer.LayerCompliance._operator_key() of the factored matrix
+    weight: np.ndarray  # (m,) w0
+    solve: object  # A0^-1
+    columns: dict = field(default_factory=dict)  # spring -> its column of Y (V,)
+
+    def matches(self, key: tuple, n_springs: int) -> bool:
+        if self.weight.shape[0] != n_springs or len(key) != len(self.key):
+            return False
+        return all(a[:2] == b[:2] and np.array_equal(a[2], b[2]) and np.array_equal(a[3], b[3]) for a, b in zip(key, self.key))
+
+    def updated(self, z_t: sp.csr_matrix, changed: np.ndarray, delta: np.ndarray):
+        """solve(rhs) with A(w) for the weights changed by ``delta`` (k,) on the springs ``changed``
+        (k,); ``z_t`` (m, V): Z^T."""
+        z_k = _dense_columns(z_t, changed)  # (V, k): each spring's column has its triangle's corners
+        new = [j for j in changed.tolist() if j not in self.columns]
+        if len(self.columns) + len(new) > 8 * LOW_RANK_MAX:  # bounded memory: keep the columns in use
+            self.columns = {j: self.columns[j] for j in changed.tolist() if j in self.columns}
+        if new:
+            solved = self.solve(z_k[:, np.searchsorted(changed, new)])
+            self.columns.update(zip(new, solved.T))
+        y = np.column_stack([self.columns[j] for j in changed.tolist()])
+        capacitance = lu_factor(np.eye(changed.size) + delta[:, None] * (z_k.T @ y), check_finite=False)
+
+        def solve(rhs: np.ndarray) -> np.ndarray:
+            x = self.solve(rhs)
+            return x - y @ lu_solve(capacitance, delta[:, None] * (z_k.T @ x) if x.ndim > 1 else delta * (z_k.T @ x), check_finite=False)
+
+        return solve
+
+
+def _dense_columns(z_t: sp.csr_matrix, rows: np.ndarray) -> np.ndarray:
+    """(V, k): the rows ``rows`` (k,) of the CSR matrix ``z_t`` (m, V) as dense columns (a CSR row cut
+    and conversion cost several times as much)."""
+    start, count = z_t.indptr[rows], np.diff(z_t.indptr)[rows]
+    column = np.repeat(np.arange(rows.shape[0]), count)
+    entry = concatenated_ranges(start, count)
+    out = np.zeros((rows.shape[0], z_t.shape[1]))
+    out[column, z_t.indices[entry]] = z_t.data[entry]
+    return out.T
+
+
+def indefinite_solve(matrix: sp.csc_matrix):
+    """solve(rhs (v,) or (v, k)) with a symmetric indefinite matrix (v, v): QDLDL's LDL^T, checked.
+
+    QDLDL (approximate minimum degree, then an LDL^T with its pivots on the diagonal) factored
+    and solved the two-pole's block matrices of the ankle stances in 0.55-0.77x SuperLU's time
+    (symmetric mode, threshold pivoting), with residuals at round-off (relative <= 5e-15 against
+    SuperLU's 2e-15; ``benchmarks/bench_factorisations.py``). The
+    block is not quasi-definite (the bulge term's local compliance is below its strength, so its
+    diagonal block is indefinite where springs are in contact), so no pivot order is guaranteed
+    stable; each solve is therefore checked, and past a normwise backward error of v times the
+    unit round-off (the bound of a factorisation without element growth) the matrix is factored by
+    SuperLU with threshold pivoting instead. A zero pivot (QDLDL refuses it) goes the same way.
+    """
+    import qdldl  # a core dependency, imported where the two-pole needs it
+
+    n = matrix.shape[0]
+    try:
+        ldl = qdldl.Solver(matrix)
+    except RuntimeError:  # a zero pivot
+        ldl = None
+    norm = float(np.abs(matrix).sum(axis=1).max()) if n else 0.0  # ||A||_inf
+    pivoted = []
+
+    def superlu():
+        if not pivoted:
+            try:
+                pivoted.append(splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve)
+            except RuntimeError as error:  # SuperLU's "singular matrix"
+                raise SolverError(f"the coupled thin-layer matrix is singular ({error})") from None
+        return pivoted[0]
+
+    def solve(rhs: np.ndarray) -> np.ndarray:
+        if ldl is None or pivoted:
+            return superlu()(rhs)
+        columns = rhs.reshape(n, -1)
+        x = np.column_stack([ldl.solve(b) for b in columns.T])  # QDLDL solves one vector at a time
+        backward = np.abs(matrix @ x - columns).max(axis=0) / (norm * np.abs(x).max(axis=0) + np.abs(columns).max(axis=0))
+        if not np.all(backward <= n * np.finfo(float).eps):  # also NaN
+            return superlu()(rhs)
+        return x.reshape(rhs.shape)
+
+    return solve
