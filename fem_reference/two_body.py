@@ -208,33 +208,38 @@ class TwoBodySetup(ContactSetup):
 class TwoBodySystem(BorderedSystem):
     """The bordered Newton system of :mod:`fem_reference.contact` for two layers: the residual
     R = F_u + P^T F_w and the Jacobian J = J_uu + J_uw P + P^T J_wu + P^T J_ww P in one matrix of
-    fixed sparsity; K = J E, G = J^T E, H = E^T J E from it (E: M's rigid modes)."""
+    fixed sparsity; K = J E, G = J^T E, H = E^T J E from it (E: M's rigid modes). As in the
+    one-body system, the bulk part of J_uu (both layers' elasticity, linear) is assembled once and
+    each Newton step assembles the contact facets' terms alone."""
 
     @staticmethod
     def forms(s: ContactSetup, bulk: Any, contact: Any, uh: Any, E: list, pressure: Any, nu: Any) -> dict:
         """F_u = ``bulk`` + ``contact`` (the contact term holds u - w), F_w = p z . nu ds on M's
-        contact face, and their derivatives in u and w (all assembled at each Newton step)."""
+        contact face, and their derivatives in u and w: the bulk's (``bulk``) once, the contact
+        terms' (``F``, ``Fw``, ``J..``) at each Newton step."""
         fem, ufl = s.m["fem"], s.m["ufl"]
-        F = bulk + contact
         z = ufl.TestFunction(s.W)
         Fw = pressure * ufl.dot(z, nu) * s.ds_c
         du, dw = ufl.TrialFunction(s.V), ufl.TrialFunction(s.W)
-        return {"F": fem.form(F), "Fw": fem.form(Fw),
-                "Juu": fem.form(ufl.derivative(F, uh, du)), "Juw": fem.form(ufl.derivative(F, s.w, dw)),
+        return {"bulk": fem.form(ufl.derivative(bulk, uh, du)), "F": fem.form(contact), "Fw": fem.form(Fw),
+                "Juu": fem.form(ufl.derivative(contact, uh, du)), "Juw": fem.form(ufl.derivative(contact, s.w, dw)),
                 "Jwu": fem.form(ufl.derivative(Fw, uh, du)), "Jww": fem.form(ufl.derivative(Fw, s.w, dw))}
 
     def _create_matrix(self) -> Any:
-        """The blocks, their products with P and A with the union of their sparsity patterns."""
+        """The bulk matrix, the contact blocks, their products with P and A with the union of
+        their sparsity patterns."""
         PETSc, fp = self.s.m["PETSc"], self.s.m["fem_petsc"]
         P = self.s.P
+        self.A_bulk = fp.assemble_matrix(self.f["bulk"])
+        self.A_bulk.assemble()
         # assembled once (explicit zeros included): a matrix assembled empty would lose its pattern
         self.blocks = {key: fp.assemble_matrix(self.f[key]) for key in ("Juu", "Juw", "Jwu", "Jww")}
         for mat in self.blocks.values():
             mat.assemble()
         b = self.blocks
         self.products = [b["Juw"].matMult(P), P.transposeMatMult(b["Jwu"]), b["Jww"].PtAP(P)]
-        A = b["Juu"].duplicate(copy=True)
-        for C in self.products:
+        A = self.A_bulk.duplicate(copy=True)
+        for C in (b["Juu"], *self.products):
             A.axpy(1.0, C, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
         return A
 
@@ -248,7 +253,8 @@ class TwoBodySystem(BorderedSystem):
         fw.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.s.P.multTranspose(fw, self.zu)
         fw.destroy()
-        return self.s.vector_owned(self.f["F"]) + np.array(self.zu.getArray(readonly=True))
+        coupling = np.array(self.zu.getArray(readonly=True))
+        return super()._residual_vector() + coupling
 
     def _assemble_jacobian(self) -> None:
         PETSc, fp, s = self.s.m["PETSc"], self.s.m["fem_petsc"], self.s
@@ -263,7 +269,7 @@ class TwoBodySystem(BorderedSystem):
         b["Jww"].PtAP(P, result=self.products[2])
         A = self.A
         A.zeroEntries()
-        for C in (b["Juu"], *self.products):
+        for C in (self.A_bulk, b["Juu"], *self.products):
             A.axpy(1.0, C, structure=subset)
         JE = []
         for j, e in enumerate(self.E_vecs):
