@@ -42,11 +42,14 @@ from .progress import SolveProgress
 
 #: The inner solves' forcing term on the iterative path (:meth:`BorderedSystem._forcing`): its
 #: range while the contact set settles, and the tightest solve tried to finish Newton in one step.
-#: Measured on the subject-like ankle at 1.0 mm (P2): plain Eisenstat-Walker (forcing down to
-#: 1e-12) 8 Newton steps and 82 Krylov iterations; with these XX.
+#: Measured 2026-11-28: on the subject-like ankle's slab at 1.0 mm (P2) plain Eisenstat-Walker
+#: (forcing down to 1e-12) took 8 Newton steps and 82 Krylov iterations. With these, on the
+#: two-layer subject-standing at 1.0 mm (P2, 141k DOFs) 10 Newton steps and 95 Krylov iterations
+#: (the LU 6 Newton steps), the LU's answer within 5e-4 % (benchmarks/bench_fe_iterative.py).
 ETA_MAX = 1e-2
 ETA_SETTLING = 1e-3
 ETA_FINISH = 1e-5
+
 
 class BorderedSystem:
     """Residual, Jacobian (shell) and exact block preconditioner of the bordered Newton system."""
@@ -445,7 +448,7 @@ def _solve(problem: FEContactProblem, comm: Any, progress: SolveProgress | None)
     # the contact face of a confined layer: on the subject-like ankle at nu 0.499 the contact area
     # on M was 380 / 328 / 413 mm^2 at 2.0 / 1.0 / 0.7 mm and Newton did not converge at 0.4999
     # (LU); with 2 mu 518 / 509 / 517 mm^2, and the field split's iterations no longer grow with
-    # lambda / mu (docs/method.md, section 6, "Linear solver").
+    # lambda / mu (docs/method.md#the-iterative-path).
     modulus = 2.0 * mu if element == "TH" else lam + 2.0 * mu
     # A Kelvin-Voigt step (gap_scale c0) constrains u = (v + h) / c0: gamma (u . n - gap) is
     # (gamma / c0) (v . n - gap'), so a steady state solves the elastic discrete problem exactly
