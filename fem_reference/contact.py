@@ -188,18 +188,24 @@ class BorderedSystem:
         self.A_bulk.copy(self.A, structure=s.m["PETSc"].Mat.Structure.SAME_NONZERO_PATTERN)
         fp.assemble_matrix(self.A, self.f["J"])  # adds the contact facets' terms
         self.A.assemble()
+        self._borders()
+
+    def _borders(self) -> None:
+        """K_j = J E_j, G_j = J^T E_j (both zero on the bonded and roller rows) and H = E^T J E
+        from the assembled Jacobian J = A; then A's bonded and roller rows and columns identity."""
+        cons = self.s.cons_owned
         JE = []
         for j, e in enumerate(self.E_vecs):
             self.A.mult(e, self.zu)
             JE.append(np.array(self.zu.getArray(readonly=True)))
             self.A.multTranspose(e, self.zu)
             self.G[j] = np.array(self.zu.getArray(readonly=True))
-            self.G[j][s.cons_owned] = 0.0
+            self.G[j][cons] = 0.0
         for j in range(self.k):
             for m_ in range(self.k):
                 self.H[j, m_] = self.dot(self.Eo[j], JE[m_])
             self.K[j] = JE[j]
-            self.K[j][s.cons_owned] = 0.0
+            self.K[j][cons] = 0.0
         self.A.zeroRowsColumns(self.cons_global, diag=1.0)
 
     def _jacobian(self, X: Any, J: Any) -> None:

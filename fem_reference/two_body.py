@@ -271,20 +271,7 @@ class TwoBodySystem(BorderedSystem):
         A.zeroEntries()
         for C in (self.A_bulk, b["Juu"], *self.products):
             A.axpy(1.0, C, structure=subset)
-        JE = []
-        for j, e in enumerate(self.E_vecs):
-            A.mult(e, self.zu)
-            JE.append(np.array(self.zu.getArray(readonly=True)))
-            A.multTranspose(e, self.zu)
-            self.G[j] = np.array(self.zu.getArray(readonly=True))
-        eo = [np.array(e.getArray(readonly=True)) for e in self.E_vecs]
-        for j in range(self.k):
-            for m_ in range(self.k):
-                self.H[j, m_] = self.dot(eo[j], JE[m_])
-            self.K[j] = JE[j]
-            self.K[j][s.cons_owned] = 0.0
-            self.G[j][s.cons_owned] = 0.0
-        A.zeroRowsColumns(self.cons_global, diag=1.0)
+        self._borders()
 
     def release(self) -> None:
         super().release()
