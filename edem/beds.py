@@ -48,7 +48,7 @@ from edem.raycast import RayCaster
 from edem.springs import Cartilage, Placement, SpringGeometry
 from edem.tables import SceneTable
 from edem.layer_symbols import LAYER_SYMBOLS, taylor_coefficients
-from edem.thin_layer_contact import CoupledStep, coupled_layer_mesh
+from edem.thin_layer_contact import ContactHistory, CoupledStep, coupled_layer_mesh
 from edem.viscoelastic import Creep, touch_motion
 
 
@@ -292,8 +292,8 @@ class CoupledThinLayer(Bed):
     def __init__(self, scene, caster: RayCaster) -> None:
         super().__init__(scene, caster)
         self.mesh = coupled_layer_mesh(scene)
-        # The candidates out of contact at the previous time point: the next solve's first guess.
-        self.released: np.ndarray | None = None
+        # The last time points' forces and gaps: the next solve's first guess.
+        self.history = ContactHistory(scene.spring_area_mm2.shape[0])
         self.layer: CoupledStep | None = None  # the time point last solved
         self._stiffer: tuple[float, Cartilage] | None = None  # (c0, the cartilage c0 times stiffer) of creeping steps
 
@@ -354,13 +354,12 @@ class CoupledThinLayer(Bed):
 
     def solve(self, step, load):
         self._build(step)
-        solution = self.layer.solve(load, step.fixed_dofs, step.shear, step.length_scale_mm, self.released)
+        solution = self.layer.solve(load, step.fixed_dofs, step.shear, step.length_scale_mm, self.history)
         self._release(step, solution)
         return solution
 
     def _release(self, step: ContactStep, solution: UnilateralSolution) -> None:
-        self.released = np.zeros(self.scene.spring_area_mm2.shape[0], bool)
-        self.released[step.geometry.candidate_index] = ~solution.active[: step.n_candidates]
+        self.history.record(step.geometry.candidate_index, solution)
 
     def spring_gaps_mm(self, step, solution):
         return solution.gap_mm

@@ -52,7 +52,8 @@ SECTIONS = {
     "ligaments": {"name", "mobile_point_mm", "fixed_point_mm", "youngs_modulus_mpa", "area_mm2", "rest_length_mm"},
     "viscoelastic": {"relaxation_time_s", "contact_set", "integrator", "allow_unstable"},
     "solver": {"method", "allow_bone_overlap"},
-    "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness", "time_scheme"},
+    "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness", "time_scheme", "material"},
+    "biphasic": {"permeability_mm4_per_n_s", "counter_surface"},  # the FE's (fem_reference.settings.biphasic_settings)
     "opensim": None,  # checked by edem.opensim_model
 }
 FILE_GEOMETRY_KEYS = {"mobile", "fixed", "units", "reference_point_mm", "spring_spacing_mm", *GEOMETRY_KEYS}
@@ -109,6 +110,7 @@ class Scene:
     # [solver] allow_bone_overlap: a result whose springs are compressed past their layer (the bones
     # through each other) is kept with a warning instead of refused (stability studies)
     allow_bone_overlap: bool = False
+    biphasic: dict | None = None  # the FE's biphasic cartilage ([fe] material = "biphasic"); EDEM does not read it
     warnings: tuple[str, ...] = ()
 
     # The springs' arrays are formed once per scene (a run reads them, and every RunResult's
@@ -565,6 +567,9 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
     fe = data.get("fe")
     if fe is not None:
         SceneTable(fe, file, "fe", SECTIONS["fe"])
+    biphasic = data.get("biphasic")
+    if biphasic is not None:
+        SceneTable(biphasic, file, "biphasic", SECTIONS["biphasic"])
 
     return Scene(
         name=name,
@@ -582,6 +587,7 @@ def load_scene(scene: str | Path, overrides: dict[str, Any] | None = None) -> Sc
         method=method,
         fe=fe,
         allow_bone_overlap=allow_bone_overlap,
+        biphasic=biphasic,
         warnings=tuple(notes),
     )
 

@@ -79,13 +79,14 @@ class OperatorPattern:
     added at the slots (no sparse product, no re-assembly). The band layout of the factorisation
     (an ordering and where each stored entry goes) depends on the pattern only, so it is found
     at the first factorisation and reused; so is the last band factor, in part
-    (``_banded_cholesky``).
+    (``_banded_cholesky``). A pattern that is not one cell set's H (a coarse space's, a stack
+    of terms', ``StackedPattern``) has no slots and may have no Q: it is factored the same way.
     """
 
     indices: np.ndarray
     indptr: np.ndarray
-    slots: np.ndarray  # (m, 9) int
-    q: sp.csr_matrix  # (m, v)
+    slots: np.ndarray = field(default_factory=lambda: np.zeros((0, 9), np.int64))  # (m, 9) int
+    q: sp.csr_matrix | None = None  # (m, v)
     #: the pattern of the whole surface (or of its coarse space): the cell set a run keeps at
     #: every time point (the gap laws' layer), where one symbolic analysis serves the whole run
     whole_surface: bool = False
@@ -102,9 +103,22 @@ class OperatorPattern:
     def sum_at_slots(self, per_pair: np.ndarray) -> np.ndarray:
         """Matrix data (nnz,) from values per triangle and corner pair (m, 9), or per triangle
         (m,) for the same value on its nine pairs, summed where they meet."""
+        if per_pair.ndim == 1:
+            return self.triangle_sums @ per_pair
         kept, slot = self.kept_pairs
-        weights = per_pair.ravel()[kept] if per_pair.ndim == 2 else per_pair[kept // 9]
-        return np.bincount(slot, weights=weights, minlength=self.indices.shape[0])
+        return np.bincount(slot, weights=per_pair.ravel()[kept], minlength=self.indices.shape[0])
+
+    @functools.cached_property
+    def triangle_sums(self) -> sp.csc_matrix:
+        """(nnz, m): the sum at each slot of the values of the triangles whose pairs sit there, a
+        sparse product in place of a gather and a bincount (the coupled matrix's data at each
+        factorisation; several times cheaper). Column t holds triangle t's pairs in their order
+        in ``kept_pairs`` and its entries are ones, so each sum is the bincount's to the bit."""
+        kept, slot = self.kept_pairs
+        m = self.slots.shape[0]
+        indptr = np.zeros(m + 1, np.int64)
+        np.cumsum(np.bincount(kept // 9, minlength=m), out=indptr[1:])
+        return sp.csc_matrix((np.ones(kept.shape[0]), slot, indptr), shape=(self.indices.shape[0], m))
 
     @functools.cached_property
     def kept_pairs(self) -> tuple[np.ndarray, np.ndarray]:
@@ -215,6 +229,89 @@ class OperatorPattern:
         return band
 
 
+@dataclass(frozen=True)
+class StackedPattern:
+    """The pattern of the stacked vertex matrix sigma H + Z diag(x) Z^T of several terms
+    (``edem.thin_layer.LayerCompliance``): sigma H = diag(sigma_1 H_1, sigma_2 H_2, ...) and
+    Z (V, m) the terms' Z stacked, whose column j couples the fields of every term at spring j.
+
+    Its pattern holds every term's H (``block_slots``: where their entries go) and every pair
+    (a, b) of the entries of a row of Z^T (m, V), so Z diag(x) Z^T is one sparse product
+    (``coupling``: (nnz, m), spring j's pairs in its column), with no sparse assembly per
+    factorisation. Where the terms have one sign (a Pade sandwich) the matrix is sigma times an
+    SPD one (docs/method.md), factored as one term's is (``OperatorPattern``: the banded Cholesky
+    in reverse Cuthill-McKee order over the stacked fields, or CHOLMOD); where they have both (the
+    two-pole's), the LDL^T takes the pairs of the springs in contact only (``present``).
+    """
+
+    pattern: OperatorPattern
+    block_slots: tuple[np.ndarray, ...]  # each term's stored entries' positions in the stacked data
+    pair_first: np.ndarray  # (pairs,) the entries of Z^T's data whose product each pair is, in slot order
+    pair_second: np.ndarray
+    pair_spring: np.ndarray  # (pairs,) its spring
+    pair_indptr: np.ndarray  # (nnz + 1,) the pairs of each slot
+
+    @staticmethod
+    def build(patterns: list[OperatorPattern], z_t: sp.csr_matrix) -> "StackedPattern":
+        """From the terms' patterns and Z^T (m, V) as the terms' Z^T side by side (CSR, laid out
+        as the layers' Z^T will be)."""
+        offsets = np.cumsum([0] + [p.n_vertices for p in patterns])
+        n = int(offsets[-1])
+        block_keys = [(np.repeat(np.arange(p.n_vertices), np.diff(p.indptr)) + o) * n + p.indices + o for p, o in zip(patterns, offsets)]
+        # every ordered pair of entries (first, second) of each row of Z^T
+        count = np.diff(z_t.indptr)
+        spring = np.repeat(np.arange(count.shape[0]), count * count)
+        k = np.arange(spring.shape[0]) - np.repeat(np.cumsum(count * count) - count * count, count * count)
+        first, second = z_t.indptr[spring] + k // count[spring], z_t.indptr[spring] + k % count[spring]
+        # canonical CSC: by column, then row
+        stored, slot = np.unique(np.concatenate(block_keys + [z_t.indices[second] * n + z_t.indices[first]]), return_inverse=True)
+        indptr = np.zeros(n + 1, np.int64)
+        np.cumsum(np.bincount(stored // n, minlength=n), out=indptr[1:])
+        ends = np.cumsum([keys.shape[0] for keys in block_keys])
+        pair_slot = slot[ends[-1]:]
+        order = np.argsort(pair_slot, kind="stable")
+        pair_indptr = np.zeros(stored.shape[0] + 1, np.int64)
+        np.cumsum(np.bincount(pair_slot, minlength=stored.shape[0]), out=pair_indptr[1:])
+        pattern = OperatorPattern(stored % n, indptr, whole_surface=all(p.whole_surface for p in patterns))
+        return StackedPattern(pattern, tuple(np.split(slot[: ends[-1]], ends[:-1])), first[order], second[order], spring[order], pair_indptr)
+
+    def blocks(self, h_data: list[np.ndarray]) -> np.ndarray:
+        """The stacked data (nnz,) of diag(H_1, H_2, ...) from each term's H data."""
+        out = np.zeros(self.pattern.indices.shape[0])
+        for slots, data in zip(self.block_slots, h_data):
+            out[slots] = data
+        return out
+
+    @functools.cached_property
+    def _entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(row, column (nnz,) of each stored entry, whether it is one of the terms' H's (nnz,) bool)."""
+        n = self.pattern.n_vertices
+        block = np.zeros(self.pattern.indices.shape[0], bool)
+        for slots in self.block_slots:
+            block[slots] = True
+        return self.pattern.indices, np.repeat(np.arange(n), np.diff(self.pattern.indptr)), block
+
+    def present(self, data: np.ndarray) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """The matrix with ``data`` (nnz,) without the pairs that no spring of nonzero weight holds
+        (zero off the terms' H: a fill-reducing ordering then sees only the springs in contact),
+        and its upper triangle, both (V, V) canonical CSC."""
+        row, column, block = self._entries
+        n = self.pattern.n_vertices
+        kept = block | (data != 0.0)
+        matrices = []
+        for keep in (kept, kept & (row <= column)):
+            indptr = np.zeros(n + 1, np.int64)
+            np.cumsum(np.bincount(column[keep], minlength=n), out=indptr[1:])
+            matrices.append(sp.csc_matrix((data[keep], row[keep], indptr), shape=(n, n)))
+        return matrices[0], matrices[1]
+
+    def coupling(self, z_t: sp.csr_matrix) -> sp.csr_matrix:
+        """(nnz, m): the stacked data of Z diag(x) Z^T is this times x (m,), for Z^T (m, V) laid
+        out as the one the pattern was built from."""
+        products = z_t.data[self.pair_first] * z_t.data[self.pair_second]
+        return sp.csr_matrix((products, self.pair_spring, self.pair_indptr), shape=(self.pair_indptr.shape[0] - 1, z_t.shape[0]))
+
+
 class SupernodalCholesky:
     """CHOLMOD's Cholesky factor (cvxopt) of the matrices on one sparsity pattern: the symbolic
     analysis (fill-reducing ordering, elimination tree, supernodes) once, then a numeric
@@ -295,7 +392,8 @@ class LowRankUpdate:
     def matches(self, key: tuple, n_springs: int) -> bool:
         if self.weight.shape[0] != n_springs or len(key) != len(self.key):
             return False
-        return all(a[:2] == b[:2] and np.array_equal(a[2], b[2]) and np.array_equal(a[3], b[3]) for a, b in zip(key, self.key))
+        same = lambda x, y: x is y or np.array_equal(x, y)  # noqa: E731 (the layer kept over a run holds the same arrays)
+        return all(a[:2] == b[:2] and same(a[2], b[2]) and same(a[3], b[3]) for a, b in zip(key, self.key))
 
     def updated(self, z_t: sp.csr_matrix, changed: np.ndarray, delta: np.ndarray):
         """solve(rhs) with A(w) for the weights changed by ``delta`` (k,) on the springs ``changed``
@@ -328,8 +426,9 @@ def _dense_columns(z_t: sp.csr_matrix, rows: np.ndarray) -> np.ndarray:
     return out.T
 
 
-def indefinite_solve(matrix: sp.csc_matrix):
+def indefinite_solve(matrix: sp.csc_matrix, upper: sp.csc_matrix | None = None):
     """solve(rhs (v,) or (v, k)) with a symmetric indefinite matrix (v, v): QDLDL's LDL^T, checked.
+    ``upper``: its upper triangle (CSC), where the caller has it (QDLDL reads only that).
 
     QDLDL (approximate minimum degree, then an LDL^T with its pivots on the diagonal) factored
     and solved the two-pole's block matrices of the ankle stances in 0.55-0.77x SuperLU's time
@@ -345,7 +444,7 @@ def indefinite_solve(matrix: sp.csc_matrix):
 
     n = matrix.shape[0]
     try:
-        ldl = qdldl.Solver(matrix)
+        ldl = qdldl.Solver(matrix) if upper is None else qdldl.Solver(upper, upper=True)
     except RuntimeError:  # a zero pivot
         ldl = None
     norm = float(np.abs(matrix).sum(axis=1).max()) if n else 0.0  # ||A||_inf
@@ -364,8 +463,9 @@ def indefinite_solve(matrix: sp.csc_matrix):
             return superlu()(rhs)
         columns = rhs.reshape(n, -1)
         x = np.column_stack([ldl.solve(b) for b in columns.T])  # QDLDL solves one vector at a time
-        backward = np.abs(matrix @ x - columns).max(axis=0) / (norm * np.abs(x).max(axis=0) + np.abs(columns).max(axis=0))
-        if not np.all(backward <= n * np.finfo(float).eps):  # also NaN
+        # the normwise backward error, as a product (a zero column, x = 0, is exact: no 0 / 0)
+        residual = np.abs(matrix @ x - columns).max(axis=0)
+        if not np.all(residual <= n * np.finfo(float).eps * (norm * np.abs(x).max(axis=0) + np.abs(columns).max(axis=0))):  # also NaN
             return superlu()(rhs)
         return x.reshape(rhs.shape)
 

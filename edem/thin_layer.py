@@ -81,7 +81,7 @@ import scipy.sparse as sp
 from edem.coarse_space import COARSE_MIN_SPRINGS, CoarseSpace, coarse_transfer
 from edem.layer_symbols import LayerSymbol, pade_symbol
 from geometries.triangle_kernels import triangle_areas
-from edem.sparse_factors import LOW_RANK_MAX, LOW_RANK_MAX_INDEFINITE, LowRankUpdate, OperatorPattern, indefinite_solve
+from edem.sparse_factors import LOW_RANK_MAX, LOW_RANK_MAX_INDEFINITE, LowRankUpdate, OperatorPattern, StackedPattern, indefinite_solve
 
 
 # --------------------------------------------------------------------------- surface operators
@@ -394,17 +394,38 @@ class LayerCompliance:
 
     @property
     def low_rank_max(self) -> int:
-        """Past this many changed weights a refactorisation is cheaper than the Woodbury correction."""
-        return LOW_RANK_MAX if len(self.terms) == 1 else LOW_RANK_MAX_INDEFINITE
+        """Past this many changed weights a refactorisation is cheaper than the Woodbury correction
+        (the checked LDL^T's factorisation costs more single solves than a Cholesky's)."""
+        return LOW_RANK_MAX if len(self.terms) == 1 or (self.definite and self.stacked) else LOW_RANK_MAX_INDEFINITE
 
-    def factored_set(self) -> np.ndarray | None:
-        """(m,) bool: the springs in contact (positive weight) in the kept factor, if it was
-        built on these operators; None otherwise. A first contact set for the active-set
-        iteration that needs no factorisation."""
-        base = None if self.reuse is None else self.reuse.get("base")
-        if base is None or not base.matches(self._operator_key(), self.local_mm_per_n.shape[0]):
-            return None
-        return base.weight > 0.0
+    @property
+    def definite(self) -> bool:
+        """Whether the stacked matrix sigma H + Z diag(x) Z^T is definite: its terms have one sign
+        (a Pade layer, a Pade sandwich), so it is sigma times an SPD matrix (``_factorise``)."""
+        return len({t.sigma for t in self.terms}) == 1
+
+    @property
+    def stacked(self) -> bool:
+        """Whether several terms' matrix is assembled on their stacked pattern (``_stack``): where
+        the terms' patterns are kept over the run (the layer over the whole surface, or its
+        coarse space), so the pattern is built once. A layer whose cells change at every time
+        point (the threshold law's candidates) assembles its matrix by sparse products instead:
+        there building the stacked pattern at each time point cost more than it saved (docs/method.md)."""
+        return len(self.terms) > 1 and all(t.pattern.whole_surface for t in self.terms)
+
+    @functools.cached_property
+    def _stack(self) -> tuple[StackedPattern, np.ndarray, sp.csr_matrix]:
+        """More than one term: their stacked pattern (kept in ``reuse`` over the layers built on
+        the same operator patterns: a run's time points on one cell set), sigma H's data in it
+        and the product giving Z diag(x) Z^T's (``StackedPattern``)."""
+        patterns = tuple(t.pattern for t in self.terms)
+        kept = None if self.reuse is None else self.reuse.get("stack")
+        if kept is None or len(kept[0]) != len(patterns) or not all(a is b for a, b in zip(kept[0], patterns)):
+            kept = (patterns, StackedPattern.build(list(patterns), self.z_t))
+            if self.reuse is not None:
+                self.reuse["stack"] = kept
+        stack = kept[1]
+        return stack, stack.blocks([t.sigma * t.h.data for t in self.terms]), stack.coupling(self.z_t)
 
     def _operator_key(self) -> tuple:
         """What the factored matrix depends on besides the spring weights: each term's sign, its
@@ -414,21 +435,32 @@ class LayerCompliance:
     def _factorise(self, spring_weight: np.ndarray):
         """Factor of sigma H + Z diag(spring_weight) Z^T: solve(rhs).
 
-        One term: sigma (H + sigma Z diag(x) Z^T), SPD (module docstring), by the pattern's
-        banded Cholesky. More (the two-pole's two, a sandwich's two or four): the block matrix is
-        symmetric, indefinite where its blocks' signs differ, factored by QDLDL's LDL^T, checked
-        (``indefinite_solve``). Its pattern follows the
-        contact set (the two terms' fields are coupled only through springs in contact), so the
-        ordering is found anew each time: one pattern holding every spring of the layer would keep
-        it, but on the gap law's 30k-spring layer (the whole surface) its fill made each
-        factorisation 2x slower (217 ms against 111 ms), and one growing with the springs in
-        contact over a time point was found again at 56 of 76 factorisations (docs/method.md).
+        One term: sigma (H + sigma Z diag(x) Z^T), SPD (module docstring), by its pattern's
+        banded Cholesky or CHOLMOD. More terms on a pattern kept over the run (``stacked``):
+        assembled on their ``StackedPattern``; of one sign (a Pade sandwich's two) the matrix is
+        sigma times an SPD one (docs/method.md, "Two layers: the sandwich"), factored as one
+        term's is; of both signs (the two-pole's, a two-pole sandwich's four) it is indefinite and
+        QDLDL's checked LDL^T (``indefinite_solve``) factors the pairs of the springs in contact.
+        More terms on cells that change at every time point: assembled by sparse products, by
+        the checked LDL^T whatever their signs. Its pattern follows the contact set (the terms'
+        fields are coupled only through springs in contact), so the ordering is found anew each
+        time: one pattern holding every spring of the layer would keep it, but on the gap law's
+        30k-spring layer (the whole surface) its fill made each factorisation 2x slower (217 ms
+        against 111 ms), and one growing with the springs in contact over a time point was found
+        again at 56 of 76 factorisations (docs/method.md).
         """
+        sigma = self.terms[0].sigma
         if len(self.terms) == 1:
-            term = self.terms[0]
-            solve = term.pattern.factorise(term.coupled_data(spring_weight))
-            return solve if term.sigma > 0 else (lambda rhs: -solve(rhs))
-        return indefinite_solve((self._signed_block + self.z @ (self.z_t.multiply(spring_weight[:, None])).tocsc()).tocsc())
+            solve = self.terms[0].pattern.factorise(self.terms[0].coupled_data(spring_weight))
+        elif not self.stacked:
+            return indefinite_solve((self._signed_block + self.z @ (self.z_t.multiply(spring_weight[:, None])).tocsc()).tocsc())
+        else:
+            stack, signed_blocks, coupling = self._stack
+            data = signed_blocks + coupling @ spring_weight
+            if not self.definite:
+                return indefinite_solve(*stack.present(data))
+            solve = stack.pattern.factorise(sigma * data)
+        return solve if sigma > 0 else (lambda rhs: -solve(rhs))
 
     def deflection(self, force_n: np.ndarray) -> np.ndarray:
         """Surface deflection w (m,) in mm under spring forces f (m,) in N."""
@@ -475,15 +507,21 @@ def layer_compliance(
     coarse_cells = smoothing_resolution > 0.0 and cells.size > 0
     if coarse_cells:  # (the springs' size: only where a coarse space may be built)
         spring_mm = float(np.sqrt(2.0 * np.median(mesh.area_mm2[cells])))
-    terms = []
+    # A sandwich's layer whose thickness did not change (M's, on the gap laws) keeps its terms
+    # while the other's are built again (F's, measured where each ray meets F).
+    built, terms = mesh.memo.get("terms", {}), []
     for layer_h in layers:
         if not np.any(layer_h):
             continue  # no cartilage on this side: a rigid body, no term
         for strength, b, dirichlet in zip(model.strengths, model.screenings, model.dirichlet):
-            terms.append(_smoothing_term(mesh, cells, layer_h, g, strength, b, dirichlet, edge_at_cells,
-                                         np.sqrt(b) * float(np.median(layer_h)) / smoothing_resolution if coarse_cells else 0.0,
-                                         spring_mm if coarse_cells else 0.0))
-    layer = LayerCompliance(model.local * (h / g) / mesh.area_mm2[cells], tuple(terms), mesh.memo.setdefault("factor", {}))
+            size_mm = np.sqrt(b) * float(np.median(layer_h)) / smoothing_resolution if coarse_cells else 0.0
+            term_key = (key[0], np.ascontiguousarray(layer_h).tobytes(), g, strength, b, dirichlet, edge_at_cells, size_mm)
+            term = built.get(term_key)
+            if term is None:
+                term = _smoothing_term(mesh, cells, layer_h, g, strength, b, dirichlet, edge_at_cells, size_mm, spring_mm if coarse_cells else 0.0)
+            terms.append((term_key, term))
+    mesh.memo["terms"] = dict(terms)
+    layer = LayerCompliance(model.local * (h / g) / mesh.area_mm2[cells], tuple(term for _, term in terms), mesh.memo.setdefault("factor", {}))
     mesh.memo["layer"] = (key, layer)
     return layer
 

@@ -63,7 +63,7 @@ import numpy as np
 
 from geometries.errors import SolverError
 from edem.laws import LinearElements
-from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, singular_stiffness_error, unrestrained_dofs
+from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, _regular_solve, singular_stiffness_error, unrestrained_dofs
 from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance
 from edem.viscoelastic import touch_motion
 
@@ -84,8 +84,8 @@ class ActiveSystem:
     active: np.ndarray  # (n_c,) bool
     force0_n: np.ndarray  # (n_I,)
     force_per_mm: np.ndarray  # (n_I, 6)
-    vertex0: np.ndarray  # (V,) the stacked vertex fields z at u = 0 (LayerCompliance)
-    vertex_per_mm: np.ndarray  # (V, 6)
+    nonlocal0_mm: np.ndarray  # (n_c,) the smoothing terms' deflection Z^T z at every spring at u = 0 (LayerCompliance)
+    nonlocal_per_mm: np.ndarray  # (n_c, 6)
     local_mm_per_n: np.ndarray  # (n_c,) the local compliance it was built with
     carried_force_n: np.ndarray | None = None  # (n_c,) c: f and z are then over the stored state (module docstring)
 
@@ -102,42 +102,40 @@ class ActiveSystem:
         lam = 1.0 / local[active]
         rhs = np.column_stack([overlap_mm[active], directions[active]])  # (n_I, 7)
         forces = lam[:, None] * rhs
-        vertex = np.zeros((layer.z_t.shape[1] if layer.coupled else 0, 7))
+        nonlocal_mm = np.zeros((active.shape[0], 7))  # Z^T z at every spring
         if layer.coupled:
             # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T.
             weight = np.zeros(active.shape[0])
             weight[active] = lam
             solve = layer.factorise_coupled(weight)
-            loads = np.zeros((active.shape[0], 7))
-            loads[active] = forces
             # A zero column (DEM: no overlap before the increment; a fixed DOF) needs no solves.
             nonzero = np.any(forces, axis=0)
-            if carried_force_n is not None:
-                loads[:, 0] -= np.where(active, 0.0, carried_force_n)  # -Z_N c_N joins the u-free column
-                nonzero[0] = np.any(loads[:, 0])
+            released = None if carried_force_n is None else np.where(active, 0.0, carried_force_n)
+            if released is not None:
+                nonzero[0] = nonzero[0] or np.any(released)
             nonzero = np.flatnonzero(nonzero)
             if nonzero.size:
-                vertex[:, nonzero] = solve(np.asarray(layer.z_t.T @ loads[:, nonzero]))
+                loads = np.zeros((active.shape[0], nonzero.size))
+                loads[active] = forces[:, nonzero]
+                if released is not None and nonzero[0] == 0:
+                    loads[:, 0] -= released  # -Z_N c_N joins the u-free column
                 # Every spring's row, then those in contact: cheaper than cutting Z^T's rows.
-                forces[:, nonzero] -= lam[:, None] * (layer.z_t @ vertex[:, nonzero])[active]
+                nonlocal_mm[:, nonzero] = layer.z_t @ solve(layer.z @ loads)
+                forces[:, nonzero] -= lam[:, None] * nonlocal_mm[active][:, nonzero]
         if carried_force_n is not None:
             forces[:, 0] += carried_force_n[active]
-        return ActiveSystem(active, forces[:, 0], forces[:, 1:], vertex[:, 0], vertex[:, 1:], local, carried_force_n)
+        return ActiveSystem(active, forces[:, 0], forces[:, 1:], nonlocal_mm[:, 0], nonlocal_mm[:, 1:], local, carried_force_n)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
         return self.force0_n + self.force_per_mm @ u
 
-    def deflection(self, layer: LayerCompliance, u: np.ndarray) -> np.ndarray:
-        """w = C f at every candidate for the forces of this set under u (local part as built);
-        with carried forces c, w - C c (module docstring, "Carried forces")."""
-        f = np.zeros(self.active.shape[0])
-        f[self.active] = self.forces(u)
-        w = self.local_mm_per_n * f
+    def deflection(self, layer: LayerCompliance, u: np.ndarray, force_n: np.ndarray) -> np.ndarray:
+        """w = C f at every candidate for the forces f (n_c,) of this set under u (local part as
+        built); with carried forces c, w - C c (module docstring, "Carried forces")."""
+        w = self.local_mm_per_n * force_n
         if self.carried_force_n is not None:
             w = w - layer.local_mm_per_n * self.carried_force_n
-        if layer.coupled:
-            w = w + layer.z_t @ (self.vertex0 + self.vertex_per_mm @ u)
-        return w
+        return w + self.nonlocal0_mm + self.nonlocal_per_mm @ u
 
     def stiffness(self, directions: np.ndarray) -> np.ndarray:
         """Coupled contact stiffness D_I^T dF/du (6, 6), symmetrised against round-off."""
@@ -173,12 +171,6 @@ def _offset(layer: LayerCompliance, overlap_mm: np.ndarray, shift, local: np.nda
     if pushback_force_n is not None and local is not None:
         offset = offset - (local - layer.local_mm_per_n) * pushback_force_n
     return offset
-
-
-def _solve_free(k: np.ndarray, rhs: np.ndarray, free: np.ndarray) -> np.ndarray:
-    u = np.zeros(6)
-    u[free] = np.linalg.solve(k[np.ix_(free, free)], rhs[free])
-    return u
 
 
 def solve_thin_layer(
@@ -224,13 +216,14 @@ def solve_thin_layer(
         free[DOF_NAMES.index(name)] = False
     load = np.where(free, np.asarray(load, float), 0.0)
     to_newton = np.array([1.0, 1.0, 1.0] + [1.0 / length_scale_mm] * 3)
+    free_block, dof_scale = np.ix_(free, free), 1.0 / to_newton[free]
     spring_scale = 1.0 / layer.local_mm_per_n  # N/mm: weighs the gap against the force in the NCP
     touchable = np.isfinite(overlap_mm)  # -inf: free layer with no opposing surface
     # A fixed DOF never moves, so its column of df/du is never used: zero rows skip its solves.
     free_directions = directions * free
     warm = None if initial_active is None else initial_active & touchable
     active = warm if warm is not None and np.any(warm) else touchable.copy()  # cold: every candidate, as DEM does
-    ligament_active = np.ones(ligament_rows.shape[0], bool)
+    ligament_active = ligament_law.offset_n > 0.0 if warm is not None else np.ones(ligament_rows.shape[0], bool)
     everything: np.ndarray | None = None
     seen: set[bytes] = set()
     force_scale = 1e-300
@@ -244,7 +237,10 @@ def solve_thin_layer(
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         stiffness = system.stiffness(directions) + k_other
         rhs = load - system.pushback(directions) - f_other
-        if unrestrained_dofs(stiffness, free, length_scale_mm):
+        u = np.zeros(6)
+        # The 6 x 6's Cholesky factor both solves and says whether a free DOF is unrestrained.
+        solved = _regular_solve(stiffness[free_block], dof_scale, rhs[free])
+        if solved is None and unrestrained_dofs(stiffness, free, length_scale_mm):
             if everything is None:
                 full = ActiveSystem.build(layer, free_directions, offset, touchable, local, pushback_force_n)
                 k_all, _ = _others(ligament_rows, ligament_law, np.ones_like(ligament_active), shear, touchable)
@@ -255,10 +251,12 @@ def solve_thin_layer(
             if not np.any(active) and not np.any(ligament_active):
                 raise SolverError("no equilibrium: no spring stays in compression under this load, so the load pulls the bodies apart")
             stiffness = stiffness + 1e-8 * everything  # a transiently small contact set
-        u = _solve_free(stiffness, rhs, free)
+        if solved is None:
+            solved = np.linalg.solve(stiffness[free_block], rhs[free])
+        u[free] = solved
         f = np.zeros(n_c)
         f[active] = system.forces(u)
-        w = system.deflection(layer, u) + shift
+        w = system.deflection(layer, u, f) + shift
         gap = w - overlap_mm - directions @ u
         tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
         new_active = np.where(active, f > 0.0, gap < 0.0)
@@ -398,10 +396,61 @@ def sandwich_thickness_mm(thickness_mm: np.ndarray, geometry, cartilage, domain:
         return thickness_mm
     total = geometry.thickness_mm[domain]
     mobile = layers.mobile.thickness_mm[domain]
-    shares = [share for share in (mobile / total, (total - mobile) / total) if np.any(share > 0.0)]
-    if len(shares) == 1:  # one side without cartilage: one layer, the lumped bed's to the bit
+    sides = [side for side in (mobile, total - mobile) if np.any(side > 0.0)]
+    if len(sides) == 1:  # one side without cartilage: one layer, the lumped bed's to the bit
         return thickness_mm
-    return np.stack([thickness_mm * share for share in shares])
+    # t_i (h / T): exactly t_M and t_F where h is T (the gap laws), so M's layer, bonded to the
+    # moving body, keeps its thickness's bits from one time point to the next (its terms are kept)
+    ratio = thickness_mm / total
+    return np.stack([side * ratio for side in sides])
+
+
+class ContactHistory:
+    """The forces and gaps of M's springs at the last two time points solved, whose extrapolation
+    is the next solve's first contact set.
+
+    Over a stance the contact grows, shrinks and moves by tens of springs a time point, and
+    starting from the last contact set the active set took two or three more iterations to reach
+    it (the first finding the springs that enter, the next the few that the entering ones lift
+    or press). Each spring's force and gap vary smoothly from one time point to the next, so
+    their linear extrapolation, f_k + (f_k - f_k-1) for a spring in contact at k and
+    y_k + (y_k - y_k-1) out of contact, predicts the next set: on the idealised ankle's stances
+    within 0-2 springs of the answer at most time points (docs/method.md). A spring that was not
+    a candidate at k - 1 keeps its state at k; one that was not a candidate at k starts in contact
+    where the surfaces overlap before the layer deflects (d0 >= 0: the threshold law's candidates,
+    whose window the contact fills; on the gap laws, new candidates lie at the window's far edge,
+    out of contact)."""
+
+    def __init__(self, n_springs: int) -> None:
+        self.force_n = np.zeros((2, n_springs))  # at k - 1, k
+        self.gap_mm = np.full((2, n_springs), np.nan)  # NaN: not a candidate then
+        self.in_contact = np.zeros(n_springs, bool)  # at k
+        self.recorded = 0
+
+    def record(self, candidate_index: np.ndarray, solution: ThinLayerSolution) -> None:
+        """The solution of a time point (candidates in ``candidate_index`` order, then ligaments)."""
+        n_c = candidate_index.shape[0]
+        self.force_n[0], self.gap_mm[0] = self.force_n[1], self.gap_mm[1]
+        self.force_n[1] = 0.0
+        self.gap_mm[1] = np.nan
+        self.in_contact[:] = False
+        active = solution.active[:n_c]
+        self.force_n[1, candidate_index] = np.where(active, solution.element_force_n[:n_c], 0.0)
+        self.gap_mm[1, candidate_index] = solution.gap_mm
+        self.in_contact[candidate_index] = active
+        self.recorded += 1
+
+    def first_set(self, springs: np.ndarray, overlap_mm: np.ndarray) -> np.ndarray | None:
+        """(n_d,) bool over the layer's springs ``springs`` (indices into M's), whose overlaps d0
+        (n_d,) mm are ``overlap_mm``; None before any record."""
+        if not self.recorded:
+            return None
+        force, gap, contact = self.force_n[:, springs], self.gap_mm[:, springs], self.in_contact[springs]
+        before = np.isfinite(gap[0]) if self.recorded > 1 else np.zeros(springs.shape[0], bool)
+        force_next = np.where(before, 2.0 * force[1] - force[0], force[1])
+        gap_next = np.where(before, 2.0 * gap[1] - gap[0], gap[1])
+        new = np.isnan(gap[1])  # not a candidate at k
+        return np.where(contact, force_next > 0.0, np.where(new, overlap_mm >= 0.0, gap_next < 0.0))
 
 
 @dataclass(frozen=True)
@@ -434,8 +483,20 @@ class CoupledStep:
     ligament_rows: np.ndarray
     ligament_law: LinearElements
     column: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None  # a nonlinear law's columns (solve_thin_layer)
-    shortest_smoothing_mm: float = np.inf  # sqrt(b) h of the symbol's shortest term at the candidates' median thickness
     pushback_force_n: np.ndarray | None = None  # (n_d,) a "carried" law's forces c, whose push-back C c adds to overlap_mm
+    layer_thickness_mm: np.ndarray | None = None  # (n_d,) or (L, n_d) each layer's local thickness (layer_compliance's)
+    shortest_screening: float | None = None  # b of the symbol's shortest term (None: no term)
+
+    @functools.cached_property
+    def shortest_smoothing_mm(self) -> float:
+        """sqrt(b) h of the symbol's shortest term at the candidates' median thickness of the
+        thinnest layer (a sandwich's terms are as short as their own layer is thin); inf: no term.
+        Formed only for the resolution warning."""
+        if self.shortest_screening is None:
+            return np.inf
+        layers = np.reshape(self.layer_thickness_mm, (-1, self.candidate.shape[0]))[:, self.candidate]
+        thinnest = min((float(np.median(h[h > 0.0])) for h in layers if np.any(h > 0.0)), default=np.inf)
+        return float(np.sqrt(self.shortest_screening) * thinnest)
 
     @staticmethod
     def build(mesh: SurfaceMesh, geometry, cartilage, carried_force_n: np.ndarray, directions: np.ndarray, ligament_rows, ligament_law,
@@ -491,11 +552,8 @@ class CoupledStep:
         if law.nonlinear:
             column = functools.partial(law.column_excess_mm, area_mm2=mesh.area_mm2[domain], confined_modulus_mpa=cartilage.confined_modulus_mpa,
                                        thickness_mm=thickness)
-        # at the thinnest layer's median (a sandwich's terms are as short as their own layer is thin)
-        thinnest = min((float(np.median(h[h > 0.0])) for h in np.reshape(stack, (-1, domain.size))[:, is_candidate] if np.any(h > 0.0)),
-                       default=np.inf)
-        shortest = float(np.sqrt(min(screenings)) * thinnest) if screenings else np.inf
-        return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law, column, shortest, pushback)
+        return CoupledStep(layer, overlap, rows, is_candidate, domain, ligament_rows, ligament_law, column, pushback, stack,
+                           min(screenings, default=None))
 
     def resolution_warning(self, mesh: SurfaceMesh) -> list[str]:
         """A warning when the symbol's shortest smoothing length is below the springs' size (the
@@ -518,26 +576,18 @@ class CoupledStep:
         solution.deflection_mm, solution.gap_mm = solution.deflection_mm[c], solution.gap_mm[c]
         return solution
 
-    def solve(self, load, fixed_dofs, shear, length_scale_mm, released_before: np.ndarray | None = None) -> ThinLayerSolution:
+    def solve(self, load, fixed_dofs, shear, length_scale_mm, history: "ContactHistory | None" = None) -> ThinLayerSolution:
         """The coupled solve; forces, contact set, deflection and gap of the candidates (then ligaments).
 
-        ``released_before`` (n_springs,) bool over all of M's springs: the candidates out of
-        contact at the previous time point. The first iterate of the active set is every
-        candidate but those (new candidates start in contact, as in a cold start). Where the
-        layer's kept factor was built on the same operators (the gap laws' layer on the whole
-        surface, from one time point to the next), its contact set is the first iterate instead:
-        the first iteration then needs no factorisation, and new candidates that touch enter at
-        the second, as the programme's answer does not depend on the first iterate."""
-        initial = None if released_before is None else ~released_before[self.springs]
-        if self.column is None and initial is not None:
-            factored = self.layer.factored_set()
-            if factored is not None and np.any(factored & (self.overlap_mm > -np.inf)):
-                initial = factored
+        ``history``: the previous time points' solutions, whose extrapolation is the active set's
+        first iterate (``ContactHistory.first_set``); None: every candidate (a cold start, as
+        DEM's first time point). The programme's answer does not depend on the first iterate."""
         return self._to_candidates(
             solve_thin_layer(
                 self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
-                initial_active=initial, column=self.column, pushback_force_n=self.pushback_force_n,
+                initial_active=None if history is None else history.first_set(self.springs, self.overlap_mm), column=self.column,
+                pushback_force_n=self.pushback_force_n,
             )
         )
 

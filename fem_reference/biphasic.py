@@ -39,16 +39,13 @@ is that undrained response; histories start with it (:func:`solve_history`), and
 evolution that follows begins from it. Between time points loads are read as linear, as EDEM
 reads a load history.
 
-Design for what comes next: the same solver will indent the 2 mm cylinder layer (frictionless
-contact against a rigid cylinder under force control) through the time-scheme object that
-:mod:`fem_reference.scene_run` is getting. The per-step solve is therefore a function of (the state at
-t_{n-1}, dt, the load at t_n) -> the state at t_n (:meth:`BiphasicFE.step`, an immutable
-:class:`BiphasicState` that carries t_{n-2} for BDF2); contact will replace the loaded face's
-traction by the Nitsche terms of :mod:`fem_reference.contact` and add the flow rows and the
-history h_n to its residual. The compiled forms take dt*, the material and the load as dolfinx
-Constants, so one bilinear and one linear form (and one small form per face whose means are
-read) serve every time step, material and mesh; the LU factor of each distinct (dt*, boundary
-set) is kept (the last six).
+Each step is a function of (the state at t_{n-1}, dt, the load at t_n) -> the state at t_n
+(:meth:`BiphasicFE.step`, an immutable :class:`BiphasicState` that carries t_{n-2} for BDF2).
+Contact (a rigid obstacle under force control) is :mod:`fem_reference.biphasic_contact`: the same
+equations as bulk terms of :func:`fem_reference.contact.solve_contact`. The compiled forms take
+dt*, the material and the load as dolfinx Constants, so one bilinear and one linear form (and one
+small form per face whose means are read) serve every time step, material and mesh; the LU
+factor of each distinct (dt*, boundary set) is kept (the last six).
 
 Units: mm, N, MPa (N/mm^2), s; k in mm^4/(N s), so H_A k is in mm^2/s and the consolidation time
 of a layer of thickness h is h^2 / (H_A k). Typical cartilage: H_A 0.5-1 MPa, k about 1e-15

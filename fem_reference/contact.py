@@ -377,6 +377,22 @@ class _ShellContext:
 MAX_PAIRING_PASSES = 10
 
 
+def nitsche_modulus_mpa(element: str, lam_mpa: float, mu_mpa: float, *, own_bulk: bool = False) -> float:
+    """The modulus Nitsche's penalty gamma0 E / h scales with (MPa): the stiffness of the stress's
+    displacement part.
+
+    P1 / P2: lambda + 2 mu. Taylor-Hood elasticity (sigma = 2 mu eps(u) - p I): 2 mu, the pressure
+    being its own unknown; with lambda + 2 mu the penalty grows like 1 / (1 - 2 nu) against the
+    shear stiffness and locks the contact face of a confined layer (on the subject-like ankle at nu
+    0.499 the contact area on M was 380 / 328 / 413 mm^2 at 2.0 / 1.0 / 0.7 mm and Newton did not
+    converge at 0.4999 by LU; with 2 mu 518 / 509 / 517 mm^2, and the field split's iterations no
+    longer grow with lambda / mu; docs/method.md#the-iterative-path). A time scheme's own bulk
+    terms (``own_bulk``, the biphasic matrix: sigma_e(u) = lambda tr eps I + 2 mu eps, the pore
+    pressure apart) keep lambda + 2 mu, lambda being the drained matrix's.
+    """
+    return 2.0 * mu_mpa if element == "TH" and not own_bulk else lam_mpa + 2.0 * mu_mpa
+
+
 def solve_contact(problem: FEContactProblem, comm: Any = None, *,
                   keep_fields: bool = True, progress: SolveProgress | None = None) -> FEContactResult:
     """Solve ``problem`` by Nitsche contact with force control (bordered semi-smooth Newton).
@@ -431,7 +447,12 @@ def _solve(problem: FEContactProblem, comm: Any, progress: SolveProgress | None)
     w = ufl.TestFunction(s.V)
     E = s.rigid_modes()
 
-    if element == "TH":
+    bulk = None
+    if problem.bulk_form is not None:  # a time scheme's own bulk terms (FEContactProblem.bulk_form)
+        bulk = problem.bulk_form(s, uh, w)
+        u, v = bulk.displacement, bulk.test_displacement
+        sig_u, sig_v = bulk.stress_u, bulk.stress_v
+    elif element == "TH":
         u, p_ = ufl.split(uh)
         v, q = ufl.split(w)
         sig_u, sig_v = s.sigma(u, p_), s.sigma(v, q)
@@ -448,14 +469,7 @@ def _solve(problem: FEContactProblem, comm: Any, progress: SolveProgress | None)
     else:
         h = ufl.CellDiameter(s.mesh)
     lam, mu = problem.lame()
-    # The penalty's modulus: the stiffness of the stress's displacement part. P1/P2: lambda + 2 mu.
-    # Taylor-Hood (sigma = 2 mu eps(u) - p I): 2 mu, the pressure being its own unknown; with
-    # lambda + 2 mu the penalty grows like 1 / (1 - 2 nu) against the shear stiffness and locks
-    # the contact face of a confined layer: on the subject-like ankle at nu 0.499 the contact area
-    # on M was 380 / 328 / 413 mm^2 at 2.0 / 1.0 / 0.7 mm and Newton did not converge at 0.4999
-    # (LU); with 2 mu 518 / 509 / 517 mm^2, and the field split's iterations no longer grow with
-    # lambda / mu (docs/method.md#the-iterative-path).
-    modulus = 2.0 * mu if element == "TH" else lam + 2.0 * mu
+    modulus = nitsche_modulus_mpa(element, lam, mu, own_bulk=bulk is not None)
     # A Kelvin-Voigt step (gap_scale c0) constrains u = (v + h) / c0: gamma (u . n - gap) is
     # (gamma / c0) (v . n - gap'), so a steady state solves the elastic discrete problem exactly
     gamma = fem.Constant(s.mesh, float(problem.nitsche.gamma0 * modulus / problem.gap_scale)) / h
@@ -466,6 +480,13 @@ def _solve(problem: FEContactProblem, comm: Any, progress: SolveProgress | None)
     un, vn = -ufl.dot(s.relative_displacement(u), nu), -ufl.dot(v, nu)
     pressure = ufl.max_value(0.0, gamma * (un - gap) - sn_u)
     contact = (-theta / gamma * sn_u * sn_v - theta / gamma * pressure * sn_v + pressure * vn) * s.ds_c
+    if bulk is not None:
+        # A time scheme's own bulk terms may switch with the contact set (a biphasic face's drainage)
+        # and carry its history, so they are not linear in u alone: they are assembled each Newton
+        # step with the contact terms. The part assembled once is then an elastic bilinear form of the
+        # same unknowns (its sparsity is the cells'), added once and taken away again here.
+        a_int = ufl.inner(sig_u, s.eps(v)) * s.dx
+        contact = contact + bulk.residual(pressure) - a_int
     forms = system_class.forms(s, a_int, contact, uh, E, pressure, nu)
     prefix = options_prefix("fecontact")
     system = system_class(s, uh, ut, E, forms, prefix)

@@ -516,6 +516,12 @@ class FEContactProblem:
     # h = gap_history (a dolfinx Function in the vector Lagrange space of the displacement degree)
     gap_scale: float = 1.0
     gap_history: Any = None
+    # A time scheme's own bulk terms in place of the elastic ones (fem_reference.biphasic_contact): a
+    # callable (ContactSetup, solution, test function) -> an object with ``displacement`` and
+    # ``test_displacement`` (the displacement parts, UFL), ``stress_u`` and ``stress_v`` (the total
+    # stress of each, whose normal part Nitsche's terms take) and ``residual(contact_pressure)`` (the
+    # bulk part of the residual form, given the contact pressure as a UFL expression). None: elastic
+    bulk_form: Any = None
 
     def __post_init__(self) -> None:
         e, nu = float(self.youngs_modulus_mpa), float(self.poissons_ratio)

@@ -20,7 +20,9 @@ Each time point is independent (the DEM convention: displacement of G from the i
 that time point; :class:`fem_reference.time_stepping.ElasticStepping`), except with
 ``[viscoelastic]``: the Kelvin-Voigt continuum (:class:`fem_reference.time_stepping.KelvinVoigtStepping`,
 :mod:`fem_reference.viscoelastic`) solves every time point up to the last selected one, in
-order, on one mesh, and reports the creeping displacement. Consecutive time points with the same
+order, on one mesh, and reports the creeping displacement; and likewise with ``[fe] material =
+"biphasic"`` the biphasic layer (:class:`fem_reference.time_stepping.BiphasicStepping`,
+:mod:`fem_reference.biphasic_contact`), which creeps by its fluid flow. Consecutive time points with the same
 geometry (no kinematics, or the layer at the same joint angle) reuse the mesh; the elastic ones
 start Newton from the previous solution scaled to the new load (exact for a slab whose contact
 set does not change: 0 Newton iterations).
@@ -451,6 +453,10 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     if scene.ligaments:
         warnings.append(f"the FE reference does not model ligaments: the scene's "
                         f"{len(scene.ligaments)} ligament(s) are left out")
+    if scene.biphasic is not None and settings.biphasic is None:
+        warnings.append('[biphasic] is read only with [fe] material = "biphasic": this FE run is not biphasic')
+    if settings.biphasic is not None and scene.viscoelastic is not None:
+        warnings.append("the biphasic FE creeps by its fluid flow: it does not read [viscoelastic] (the springs' tau)")
     stepping = time_stepping(scene, settings)
     warnings += stepping.start_warnings(loads[0, :3])
     solved = stepping.time_points(selected)

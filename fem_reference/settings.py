@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from edem.laws import LAWS
+from fem_reference.biphasic import TIME_SCHEMES as BIPHASIC_TIME_SCHEMES
+from fem_reference.biphasic_contact import COUNTER_SURFACES, DEFAULT_COUNTER_SURFACE
 from fem_reference.models import FE_MODELS, fixed_has_cartilage
 from fem_reference.problem import LINEAR_SOLVERS
 from fem_reference.viscoelastic import DEFAULT_TIME_SCHEME, TIME_SCHEMES
@@ -25,6 +27,23 @@ DEFAULT_DEGREE = 2
 DEFAULT_MESH_SIZE_MM = {1: 0.5, 2: 1.0}
 #: Nearly incompressible cartilage: Taylor-Hood (P2-P1 u-p) by default from this Poisson's ratio.
 TAYLOR_HOOD_FROM_NU = 0.49
+#: The FE's materials (``[fe] material``): what the cartilage continuum is
+MATERIALS = {
+    "elastic": "linear elastic; with [viscoelastic] the Kelvin-Voigt continuum",
+    "biphasic": "linear biphasic (a drained matrix, the [cartilage] Young's modulus and Poisson's ratio, and "
+                "interstitial fluid, [biphasic]), Taylor-Hood",
+}
+
+#: the models whose one deformable layer can be biphasic (against a rigid F)
+BIPHASIC_MODELS = ("layer", "slab")
+
+
+@dataclass(frozen=True)
+class BiphasicSettings:
+    """The scene's ``[biphasic]`` (:mod:`fem_reference.biphasic_contact`)."""
+
+    permeability_mm4_per_n_s: float
+    counter_surface: str = DEFAULT_COUNTER_SURFACE
 
 
 @dataclass(frozen=True)
@@ -41,6 +60,8 @@ class FESettings:
     time_scheme: str = DEFAULT_TIME_SCHEME
     # the inner linear solve, a key of fem_reference.problem.LINEAR_SOLVERS
     linear_solver: str = "auto"
+    # [fe] material = "biphasic": the scene's [biphasic] (None: elastic)
+    biphasic: BiphasicSettings | None = None
 
     @property
     def method(self) -> str:
@@ -59,8 +80,10 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     element: "auto" (default) is P1 for degree 1 and P2 for degree 2, and Taylor-Hood (P2-P1 u-p,
     degree 2) when nu >= 0.49 unless the degree is given as 1 (P1 then locks: the core warns).
     mesh_size_mm: default :data:`DEFAULT_MESH_SIZE_MM` of the degree.
-    time_scheme: the implicit scheme of a viscoelastic scene (:mod:`fem_reference.viscoelastic`),
-    default BDF2.
+    time_scheme: the implicit scheme of a viscoelastic or biphasic scene (:mod:`fem_reference.viscoelastic`,
+    :mod:`fem_reference.biphasic`), default BDF2.
+    The scene's ``[fe] material`` (:data:`MATERIALS`, default elastic): "biphasic" takes its
+    ``[biphasic]`` table (:func:`biphasic_settings`) and Taylor-Hood.
     linear_solver: the inner linear solve (:data:`fem_reference.problem.LINEAR_SOLVERS`), default
     "auto" (Krylov from 20,000 unknowns or where the LU does not fit in memory, direct below).
     argument_keys: how errors name an argument given here (default: its parameter name).
@@ -94,6 +117,19 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     if el not in ELEMENTS:
         raise InputError(f"unknown element {el!r}", file=file, key=el_key,
                          expected="auto, P1, P2 or TH (Taylor-Hood P2-P1)")
+    material = fe.get("material", "elastic")
+    if material not in MATERIALS:
+        raise InputError(f"unknown FE material {material!r}", file=file, key="fe.material",
+                         expected=" or ".join(f'"{m}" ({what})' for m, what in MATERIALS.items()))
+    biphasic_table = biphasic_settings(scene) if material == "biphasic" else None
+    if biphasic_table is not None and fe_model.name not in BIPHASIC_MODELS:
+        raise InputError(f"the FE {fe_model.name} model has no biphasic layer (only the layer and slab models, one layer on M)", file=file, key="fe.material",
+                         expected=f'[fe] material = "elastic", or the {" or ".join(BIPHASIC_MODELS)} model with "biphasic"')
+    if biphasic_table is not None:  # displacement and pore pressure: Taylor-Hood
+        if el not in ("auto", "TH"):
+            raise InputError(f"element {el} cannot carry the fluid pressure", file=file, key=el_key,
+                             expected='TH (or auto) with [fe] material = "biphasic"')
+        el = "TH"
     nu = float(scene.cartilage.poissons_ratio)
     if el == "auto":
         d = DEFAULT_DEGREE if deg is None else int(deg)
@@ -153,9 +189,31 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     if scheme not in TIME_SCHEMES:
         raise InputError(f"unknown time scheme {scheme!r}", file=file, key=scheme_key,
                          expected=" or ".join(TIME_SCHEMES) + " (the viscoelastic FE's implicit scheme)")
+    if biphasic_table is not None and scheme not in BIPHASIC_TIME_SCHEMES:
+        raise InputError(f"the biphasic FE has no {scheme} scheme", file=file, key=scheme_key,
+                         expected=" or ".join(BIPHASIC_TIME_SCHEMES) + " (the trapezoid leaves a step load's finest pressure "
+                                  "modes undamped: docs/method.md#the-biphasic-anchor)")
     solver, solver_key = pick(linear_solver, "linear_solver")
     solver = "auto" if solver is None else solver
     if solver not in LINEAR_SOLVERS:
         raise InputError(f"unknown linear solver {solver!r}", file=file, key=solver_key,
                          expected="; ".join(f"{k} ({v})" for k, v in LINEAR_SOLVERS.items()))
-    return FESettings(fe_model.name, el, el_degree, float(size), layers, scheme, solver)
+    return FESettings(fe_model.name, el, el_degree, float(size), layers, scheme, solver, biphasic_table)
+
+
+def biphasic_settings(scene: Any) -> BiphasicSettings:
+    """The scene's ``[biphasic]`` table, validated (InputError naming the file and key)."""
+    file = scene.source
+    table = scene.biphasic
+    if table is None:
+        raise InputError('[fe] material = "biphasic" needs the fluid\'s properties', file=file, key="biphasic",
+                         expected="a [biphasic] table with permeability_mm4_per_n_s (README.md#scene-files)")
+    k = table.get("permeability_mm4_per_n_s")
+    if isinstance(k, bool) or not isinstance(k, (int, float)) or not (math.isfinite(k) and k > 0):
+        raise InputError(f"{k!r} is not a permeability", file=file, key="biphasic.permeability_mm4_per_n_s",
+                         expected="the permeability k in mm^4/(N s), > 0 (cartilage: about 1e-3, i.e. 1e-15 m^4/(N s))")
+    surface = table.get("counter_surface", DEFAULT_COUNTER_SURFACE)
+    if surface not in COUNTER_SURFACES:
+        raise InputError(f"unknown counter-surface {surface!r}", file=file, key="biphasic.counter_surface",
+                         expected=" or ".join(f'"{c}" ({what})' for c, what in COUNTER_SURFACES.items()))
+    return BiphasicSettings(float(k), str(surface))

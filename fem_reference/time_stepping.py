@@ -25,14 +25,12 @@ An implementation provides:
 * :meth:`~TimeStepping.summary`: its keys in summary.json.
 
 Implementations: :class:`ElasticStepping` (each time point its own elastic problem, warm-started
-from the previous one on the same geometry) and :class:`KelvinVoigtStepping` (the Kelvin-Voigt
+from the previous one on the same geometry), :class:`KelvinVoigtStepping` (the Kelvin-Voigt
 continuum of :mod:`fem_reference.viscoelastic`: a history on one mesh, each time point an
-elastic contact problem for v = c0 u - h with a shifted gap). :func:`time_stepping` picks one for
-a scene. A model whose state is not a displacement alone (a biphasic u-p model: displacement and
-pore pressure, each step a coupled u-p contact problem) is one more implementation: its
-:meth:`~TimeStepping.prepare` takes the stored state on its one mesh, its
-:meth:`~TimeStepping.solve` solves its own step instead of :func:`solve_contact` and stores the
-new state, its :meth:`~TimeStepping.unloaded` lets the body consolidate without load.
+elastic contact problem for v = c0 u - h with a shifted gap) and :class:`BiphasicStepping` (the
+biphasic layer of :mod:`fem_reference.biphasic_contact`: a history of (u, p) on one mesh, each time
+point a Taylor-Hood contact problem whose bulk terms are the flow step's). :func:`time_stepping`
+picks one for a scene.
 """
 
 from __future__ import annotations
@@ -44,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from fem_reference.biphasic_contact import BiphasicContactHistory
 from fem_reference.contact import solve_contact
 from fem_reference.models import FE_MODELS, FEGeometry
 from fem_reference.problem import FEContactProblem, FEContactResult, FEConvergenceError, FEMesh
@@ -51,7 +50,7 @@ from fem_reference.progress import SolveProgress
 from fem_reference.settings import FESettings
 from fem_reference.viscoelastic import KelvinVoigtHistory, first_load_warning
 from geometries.errors import InputError
-from geometries.fe_solids import CONTACT_TAG
+from geometries.fe_solids import CONTACT_TAG, FREE_TAG
 
 
 @dataclass
@@ -195,17 +194,88 @@ class KelvinVoigtStepping(TimeStepping):
         return {"relaxation_time_s": self.relaxation_time_s, "time_scheme": self.scheme}
 
     def _same_mesh(self, point: TimePoint) -> None:
-        """A Kelvin-Voigt history lives on one mesh: refuse a time point that needs another."""
-        key = point.geometry.key
-        if self.history.mesh is not point.mesh or point.mesh_key not in (key, key[0]):
-            raise InputError(f"{point.where}: the viscoelastic FE needs one mesh at every time point, and the FE slab follows "
-                             "the joint angle", file=self.scene_file, key="kinematics",
-                             expected="no [kinematics] with [viscoelastic], or the layer model (--model layer)")
+        same_mesh(point, self.history.mesh, "viscoelastic", self.scene_file)
+
+
+def same_mesh(point: TimePoint, mesh: FEMesh, what: str, scene_file: Any) -> None:
+    """A history lives on one mesh: refuse (InputError) a time point that needs another than ``mesh``.
+    ``what``: the FE's name in the message, as the scene asks for it (its section)."""
+    key = point.geometry.key
+    if mesh is not point.mesh or point.mesh_key not in (key, key[0]):
+        raise InputError(f"{point.where}: the {what} FE needs one mesh at every time point, and the FE slab follows "
+                         "the joint angle", file=scene_file, key="kinematics",
+                         expected=f"no [kinematics] with [{what}], or the layer model (--model layer)")
+
+
+class BiphasicStepping(TimeStepping):
+    """The biphasic layer (:mod:`fem_reference.biphasic_contact`): every time point up to the last
+    asked for, in order, on one mesh. The body starts at rest at the last unloaded time point before
+    the first load (loads are linear between time points: the first loaded step is a ramp), else
+    with the undrained response to the load at the first time point. The drained matrix is the
+    scene's cartilage (its Young's modulus and Poisson's ratio); the contact face drains where the
+    counter-surface lets it (``counter_surface``), the free faces drain, the bonded face does not.
+
+    ``permeability_mm4_per_n_s``, ``counter_surface``: the scene's ``[biphasic]``; ``scheme``:
+    :data:`fem_reference.biphasic.TIME_SCHEMES`; ``scene_file``: named by the refusals.
+    """
+
+    def __init__(self, permeability_mm4_per_n_s: float, counter_surface: str, scheme: str, scene_file: Any) -> None:
+        self.permeability_mm4_per_n_s = permeability_mm4_per_n_s
+        self.counter_surface = counter_surface
+        self.scheme = scheme
+        self.scene_file = scene_file
+        self.history: BiphasicContactHistory | None = None  # from the first loaded time point on
+        self.rest_time_s: float | None = None  # the last unloaded time point before it
+        self.fluid_load_fraction: dict[int, float] = {}  # per solved loaded time point
+
+    def time_points(self, selected: Sequence[int]) -> list[int]:
+        return list(range(selected[-1] + 1))  # the history needs every time point up to the last asked for
+
+    def start_warnings(self, force_n: np.ndarray) -> list[str]:
+        if not np.any(force_n):
+            return []
+        return ["the first time point carries a load: the biphasic FE starts with the undrained response to it (the load "
+                "applied at that instant), viscoelastic EDEM's creeping contact set with the elastic solution (a load held "
+                "since long before); start the load history at zero to compare them"]
+
+    def unloaded(self, point: TimePoint) -> tuple[np.ndarray, np.ndarray, str]:
+        if self.history is None:
+            if not np.any(point.force_n):
+                self.rest_time_s = point.time_s
+            return np.zeros(3), np.zeros(3), "nothing to solve"
+        raise InputError(f"{point.where}: the biphasic FE does not model unloading (the layer would swell back, free of the bone)",
+                         file=self.scene_file, key="load.force_n",
+                         expected="a load along the free DOFs at every time point after the first loaded one, or [fe] material = \"elastic\"")
+
+    def prepare(self, point: TimePoint, problem: FEContactProblem) -> None:
+        if self.history is None:
+            self.history = BiphasicContactHistory(point.mesh, self.permeability_mm4_per_n_s, self.scheme,
+                                                  self.counter_surface, drained_tags=(FREE_TAG,))
+            if self.rest_time_s is not None:
+                self.history.start_at_rest(self.rest_time_s)
+        same_mesh(point, self.history.mesh, "biphasic", self.scene_file)
+        self.history.prepare(problem, point.time_s)
+
+    def solve(self, point: TimePoint, problem: FEContactProblem) -> FEContactResult:
+        result = self.history.solve(problem, point.time_s, point.comm, point.solve_progress())
+        self.fluid_load_fraction[point.index] = self.history.fluid_load_fraction[-1]
+        return result
+
+    def summary(self) -> dict[str, Any]:
+        last = max(self.fluid_load_fraction, default=-1)
+        return {"material": "biphasic", "permeability_mm4_per_n_s": self.permeability_mm4_per_n_s,
+                "counter_surface": self.counter_surface, "time_scheme": self.scheme,
+                # per time point from the first to the last solved (0 where unloaded)
+                "fluid_load_fraction": [self.fluid_load_fraction.get(k, 0.0) for k in range(last + 1)]}
 
 
 def time_stepping(scene: Any, settings: FESettings) -> TimeStepping:
-    """The time stepping of ``scene`` (an :class:`edem.scene.Scene`): Kelvin-Voigt with
-    ``[viscoelastic]``, else elastic. A new time-dependent material is one more line here."""
+    """The time stepping of ``scene`` (an :class:`edem.scene.Scene`): biphasic with ``[fe] material =
+    "biphasic"``, else Kelvin-Voigt with ``[viscoelastic]``, else elastic. A new time-dependent
+    material is one more line here."""
+    if settings.biphasic is not None:
+        return BiphasicStepping(settings.biphasic.permeability_mm4_per_n_s, settings.biphasic.counter_surface,
+                                settings.time_scheme, scene.source)
     if scene.viscoelastic is not None:
         return KelvinVoigtStepping(float(scene.viscoelastic.relaxation_time_s), settings.time_scheme,
                                    settings.degree, scene.source)

@@ -13,6 +13,7 @@ import hashlib
 import html
 import json
 import math
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -20,8 +21,8 @@ import numpy as np
 
 from edem.resultdir import read_timeseries_csv
 from reports.maps import render_pressure_maps
-from reports.plots import axis_label, plot_timeseries
-from verification.analyses import grid_of
+from reports.plots import axis_label, figure_legend, fit_title, plot_timeseries
+from verification.analyses import grid_of, per_time_comparison
 from verification.campaigns import instant_indices
 from verification.status import Status
 from verification.verdicts import CASE_VERDICTS, FE_ERROR_UNKNOWN, FE_TOO_COARSE, NOT_JUDGED, VERDICT_MEANINGS, headline
@@ -72,6 +73,15 @@ def _matplotlib():
 # Figures
 
 
+def side_label(row: dict[str, Any], side: str) -> str:
+    """A side of a case as its figures name it: a discrete side with its bed's label (edem.beds:
+    "dem, coupled layer"; the key's value, "thin-layer", is no name), an FE side as it is."""
+    from edem.beds import BEDS
+
+    coupling = (row.get("overrides") or {}).get("cartilage.coupling")
+    return f"{side}, {BEDS[coupling].label}" if coupling in BEDS and not side.startswith("fe-") else side
+
+
 def _histogram_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
     """kind "histogram": the distribution of each metric of y over the cases, one panel each,
     with its median and 5-95 % range."""
@@ -87,7 +97,7 @@ def _histogram_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], pat
             lo, mid, hi = np.percentile(ys, [5, 50, 95])
             ax.axvline(mid, color="k", label=f"median {mid:.3g}")
             ax.axvspan(lo, hi, color="grey", alpha=0.2, label=f"5-95 %: {lo:.3g} to {hi:.3g}")
-        _finish_panel(ax, False, False, axis_label(metric), f"cases (of {len(names)})")
+        _finish_panel(ax, False, False, axis_label(metric), f"cases (of {len(names)})", legend=True)
     _save(plt, fig, spec["title"], path)
 
 
@@ -133,7 +143,59 @@ def _sweep_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: P
             xr = np.array([gx[ok].min(), gx[ok].max()])
             ax.plot(xr, y0 * (xr / x0) ** slope, ":", color="grey", label=f"slope {slope:g}")
         _finish_panel(ax, spec["logx"], log, axis_label(spec["x"]), axis_label(metric, magnitude=log))
-    _save(plt, fig, spec["title"], path)
+    _save(plt, fig, spec["title"], path, axes)
+
+
+def _series_per_time(spec: dict[str, Any], rows: dict[str, dict[str, Any]]) -> list[tuple[str, str, list[dict[str, Any]]]]:
+    """(label, case, its comparison at each load, by load) for each case of each series of a
+    figure of kind "area-vs-load" or "per-load"; ValueError when none has a comparison."""
+    out = []
+    for label, group in spec.get("series") or [(n, (n,)) for n in spec["cases"]]:
+        for name in group:
+            per_time = per_time_comparison(rows[name]) if name in rows else None
+            if per_time:
+                out.append((label, name, sorted(per_time, key=lambda e: e["load_n"])))
+    if not out:
+        raise ValueError("no case of the figure has a comparison over its loads")
+    return out
+
+
+def _area_load_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
+    """kind "area-vs-load": the contact area of both sides of each case against the load (its
+    time points): side a solid, one line per series; side b (the FE) dashed, once per distinct
+    curve (cases sharing one FE run share its line)."""
+    plt = _matplotlib()
+    fig, ax = plt.subplots(figsize=(7.2, 4.6), constrained_layout=True)
+    drawn: set[tuple[float, ...]] = set()
+    for k, (label, _name, per_time) in enumerate(_series_per_time(spec, rows)):
+        loads = [e["load_n"] for e in per_time]
+        colour = f"C{k}"
+        ax.plot(loads, [e["contact_area_a_mm2"] for e in per_time], "o-", color=colour, label=f"{label}: DEM")
+        fe = tuple(round(e["contact_area_b_mm2"], 6) for e in per_time)
+        if fe not in drawn:
+            drawn.add(fe)
+            ax.plot(loads, fe, "s--", color=colour, mfc="none", label=f"{label.split(',')[0]}: FE")
+    _finish_panel(ax, False, False, "load (N)", "contact area (mm²)")
+    _save(plt, fig, spec["title"], path, ax)
+
+
+def _per_load_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
+    """kind "per-load": each comparison metric of ``y`` at each load of each case (its time
+    points), one panel per metric, one line per series, the case's tolerance as bars at +-t."""
+    plt = _matplotlib()
+    panels = list(spec["y"])
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 4.2), constrained_layout=True, squeeze=False)
+    entries = _series_per_time(spec, rows)
+    for ax, metric in zip(axes[0], panels):
+        for k, (label, _name, per_time) in enumerate(entries):
+            ax.plot([e["load_n"] for e in per_time], [_value(e.get(metric)) for e in per_time], "o-", color=f"C{k}", label=label)
+        loads = sorted({e["load_n"] for _l, _n, per_time in entries for e in per_time})
+        tols = {rows[name]["tolerance"].get(metric) for _l, name, _p in entries} - {None}
+        for t in tols:
+            ax.plot(loads + loads, [t] * len(loads) + [-t] * len(loads), "k_", markersize=14, mew=2, label="model band")
+        ax.axhline(0.0, color="grey", lw=0.6)
+        _finish_panel(ax, False, False, "load (N)", axis_label(metric))
+    _save(plt, fig, spec["title"], path, axes)
 
 
 def _error_time_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Path) -> None:
@@ -164,22 +226,34 @@ def _error_time_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], pa
             if front:
                 ax.plot([p[2] for p in front], [p[3] for p in front], "--", color=f"{0.2 * k:.1f}", lw=1, label=f"Pareto front vs {truth or 'b'}")
         _finish_panel(ax, spec["logx"], spec["logy"], "wall time of side a (s)", axis_label(metric, magnitude=spec["logy"]))
-    _save(plt, fig, spec["title"], path)
+    _save(plt, fig, spec["title"], path, axes)
 
 
-def _finish_panel(ax: Any, logx: bool, logy: bool, xlabel: str, ylabel: str) -> None:
+#: characters of a y-axis label on one line: longer labels wrap, so that they stay within the panel's
+#: height (about 36 characters of 10 pt text fit along a 3.6 in panel's axis)
+YLABEL_CHARS = 36
+
+
+def _finish_panel(ax: Any, logx: bool, logy: bool, xlabel: str, ylabel: str, legend: bool = False) -> None:
+    """Scales, labels and grid of a panel; ``legend``: its own legend (where the panels' entries
+    differ, e.g. a histogram's median), else the figure's one below the panels (:func:`_save`)."""
     if logx:
         ax.set_xscale("log")
     if logy:
         ax.set_yscale("log")
     ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
+    # "(a − b)" is one word to the wrapping: no line ends inside it
+    ax.set_ylabel(textwrap.fill(ylabel.replace("a − b", "a\u00a0−\u00a0b"), YLABEL_CHARS, break_on_hyphens=False))
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
+    if legend:
+        ax.legend(fontsize=8)
 
 
-def _save(plt: Any, fig: Any, title: str, path: Path) -> None:
-    fig.suptitle(title, fontsize=10)
+def _save(plt: Any, fig: Any, title: str, path: Path, axes: Any = None) -> None:
+    """Title (wrapped to the figure), the panels' legend below them (``axes``), written to ``path``."""
+    if axes is not None:
+        figure_legend(fig, axes)
+    fit_title(fig, title)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -192,7 +266,7 @@ def _timeseries_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], ou
             continue
         for rel, side in zip(row["result_dirs"], [s for s in row["sides"] if s.get("result_dir")]):
             dirs.append(out_dir / rel)
-            labels.append(f"{name}: {side['side']}")
+            labels.append(f"{name}: {side_label(row, side['side'])}")
     if not dirs:
         raise ValueError("no result directory to plot")
     plot_timeseries(dirs, spec["column"], path, labels)
@@ -226,9 +300,7 @@ def _grid_figure(spec: dict[str, Any], rows: dict[str, dict[str, Any]], path: Pa
             ax.set_ylabel(label_z)
             ax.grid(alpha=0.3)
             ax.legend(fontsize=8)
-    fig.suptitle(spec["title"], fontsize=10)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(plt, fig, spec["title"], path)
 
 
 def _instant_times(spec: dict[str, Any], row: dict[str, Any], out_dir: Path) -> list[tuple[str, float, float]]:
@@ -306,7 +378,7 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
             except Exception as exc:
                 jobs.append((spec["name"], spec["title"], {"kind": "note", "error": f"{type(exc).__name__}: {exc}", "unavailable": False}, None))
                 continue
-            labels = [s["side"] for s in row["sides"][:2]]
+            labels = [side_label(row, s["side"]) for s in row["sides"][:2]]
             for k, (label, time_s, percent) in enumerate(instants):
                 title = f"{spec['title']}: {label}, {percent:.0f} % stance (t = {time_s:.3g} s)"
                 job = {"kind": "maps-at", "case": row["name"], "time_s": time_s, "labels": labels, "caption": f"{label}: {percent:.0f} % stance (t = {time_s:.3g} s)"}
@@ -315,7 +387,7 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
         jobs.append((spec["name"], spec["title"], spec, involved))
     for row in summary["cases"]:
         if row.get("maps") and len(row["result_dirs"]) == 2:
-            jobs.append((f"{row['name']}-maps", f"{row['name']}: pressure maps, {' vs '.join(s['side'] for s in row['sides'])}", {"kind": "maps", "case": row["name"]}, [keys[row["name"]]]))
+            jobs.append((f"{row['name']}-maps", f"{row['name']}: pressure maps, {' vs '.join(side_label(row, s['side']) for s in row['sides'])}", {"kind": "maps", "case": row["name"]}, [keys[row["name"]]]))
     jobs.append(("wall-times", "Wall time per case", {"kind": "wall-times"}, [(r["name"], r["wall_time_s"], r["status"]) for r in summary["cases"]]))
 
     figures = []
@@ -337,9 +409,13 @@ def _make_figures(summary: dict[str, Any], out_dir: Path) -> list[dict[str, str]
                     _timeseries_figure(spec, rows, out_dir, path)
                 elif spec["kind"] == "error-vs-time":
                     _error_time_figure(spec, rows, path)
+                elif spec["kind"] == "area-vs-load":
+                    _area_load_figure(spec, rows, path)
+                elif spec["kind"] == "per-load":
+                    _per_load_figure(spec, rows, path)
                 elif spec["kind"] == "maps":
                     row = rows[spec["case"]]
-                    render_pressure_maps(out_dir / row["result_dirs"][0], out_dir / row["result_dirs"][1], path, labels=tuple(s["side"] for s in row["sides"][:2]))
+                    render_pressure_maps(out_dir / row["result_dirs"][0], out_dir / row["result_dirs"][1], path, labels=tuple(side_label(row, s["side"]) for s in row["sides"][:2]))
                 elif spec["kind"] == "maps-at":
                     row = rows[spec["case"]]
                     render_pressure_maps(
@@ -379,7 +455,7 @@ td.metrics { min-width: 24em; font-size: 0.95em; } td.links { font-size: 0.9em; 
 tr.flag td { background: #fff3e0; } .analysis-status { font-weight: bold; }
 .flagged { color: #c05600; font-weight: bold; } .fecoarse { color: #6a3d9a; font-weight: bold; } .why { font-size: 0.85em; color: #555; }
 #trust-summary { background: #f7f9fc; border: 1px solid #d8e0ea; padding: 0.2em 1em 0.8em; }
-#trust-summary li { margin: 0.3em 0; } figure.small-figure img { max-width: 620px; }
+#trust-summary li { margin: 0.3em 0; }
 table.legend { margin: 0.5em 0; }
 """
 
@@ -426,7 +502,7 @@ def _trust_html(result: dict[str, Any], figures: list[dict[str, Any]]) -> list[s
         parts.append("<ul>" + "".join(f"<li>{h(text)}</li>" for text in sentences) + "</ul>")
     wanted = result.get("values", {}).get("figures", [])
     for figure in sorted((f for f in figures if f.get("name") in wanted and f.get("file") and not f.get("error")), key=lambda f: wanted.index(f["name"])):
-        parts.append(f'<figure class="small-figure"><img src="{h(figure["file"])}" alt="{h(figure["title"])}"><figcaption>{h(figure["title"])}</figcaption></figure>')
+        parts.append(f'<figure><img src="{h(figure["file"])}" alt="{h(figure["title"])}"><figcaption>{h(figure["title"])}</figcaption></figure>')
     parts += _analysis_table(result)
     parts.append("</section>")
     return parts

@@ -14,6 +14,7 @@ each panel is labelled anterior/posterior/medial/lateral; every panel carries an
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -115,6 +116,10 @@ def _label_directions(plotter) -> None:
         prop = actor.GetTextProperty()
         prop.SetJustificationToCentered() if position[0] == 0.5 else (prop.SetJustificationToLeft() if position[0] < 0.5 else prop.SetJustificationToRight())
         prop.SetItalic(True)
+
+
+#: width of a heading's character at font size 10 (px, VTK's default font, with a margin)
+HEADING_PX_PER_CHAR = 8
 
 
 def render_pressure_maps(
@@ -226,9 +231,9 @@ def render_pressure_maps(
         if anatomical:
             _label_directions(plotter)
     plotter.link_views()
-    if heading:
+    if heading:  # written in the first panel: wrapped to its width (about 8 px a character at font size 10)
         plotter.subplot(0, 0)
-        plotter.add_text(heading, position="upper_left", font_size=10, color="black")
+        plotter.add_text(textwrap.fill(heading, width=max(20, window_size[0] // 3 // HEADING_PX_PER_CHAR)), position="upper_left", font_size=10, color="black")
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
     plotter.screenshot(str(out))

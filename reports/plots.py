@@ -1,7 +1,10 @@
-"""Time-series figures from result directories (matplotlib, imported only here)."""
+"""Time-series figures from result directories, and what every figure of the reports shares: axis
+labels from names, a title wrapped to its figure, one legend below the panels (matplotlib, imported
+only by the functions that draw)."""
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +48,27 @@ def axis_label(name: str, *, magnitude: bool = False) -> str:
     return f"{text} ({unit})" if unit else text
 
 
+#: characters of a 10 pt title per inch of figure width (about 0.55 em a character, with a margin)
+TITLE_CHARS_PER_INCH = 12
+
+
+def fit_title(fig: Any, title: str, fontsize: float = 10) -> None:
+    """The figure's title, wrapped to its width so that no line runs past the figure's edges."""
+    width = max(20, int(fig.get_figwidth() * TITLE_CHARS_PER_INCH * 10 / fontsize))
+    fig.suptitle(textwrap.fill(title, width=width, break_on_hyphens=False), fontsize=fontsize)
+
+
+def figure_legend(fig: Any, axes: Any) -> None:
+    """One legend for every panel's labelled lines (each label once), below the panels: it covers no data."""
+    entries: dict[str, Any] = {}
+    for ax in np.ravel(axes):
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            entries.setdefault(label, handle)
+    if entries:
+        columns = max(1, min(len(entries), int(fig.get_figwidth() // 2.6)))
+        fig.legend(list(entries.values()), list(entries), loc="outside lower center", ncol=columns, fontsize=8)
+
+
 def read_timeseries(result_dir: str | Path) -> dict[str, np.ndarray]:
     """Columns of a result directory's timeseries.csv as float arrays, plus the derived
     :data:`DERIVED` columns (``disp_norm_mm``); the directory must verify against its manifest
@@ -84,7 +108,7 @@ def plot_timeseries(result_dirs: list[str | Path], column: str, out_png: str | P
     ax.set_xlabel("time (s)")
     ax.set_ylabel(axis_label(column))
     ax.grid(alpha=0.3)
-    ax.legend()
+    figure_legend(fig, ax)
     out = Path(out_png) if out_png else default_plot_path(result_dirs, column)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=150)

@@ -163,7 +163,9 @@ class Figure:
     metric); kind "scatter": the same as unjoined points (a population); kind "histogram": the
     distribution of each metric of ``y`` over the cases (a "sweep" may split its cases into
     labelled ``series``, one line each); kind "timeseries": timeseries.csv
-    ``column`` of both sides of each case.
+    ``column`` of both sides of each case; kinds "area-vs-load" and "per-load", for cases
+    against the FE at several loads (their time points): the contact area of both sides against
+    the load, and each comparison metric of ``y`` against the load, one line per ``series``.
     """
 
     name: str

@@ -90,6 +90,59 @@ def displacement_error(displacement_mm: np.ndarray, reference_displacement_mm: n
     return -magnitude if shorter else magnitude
 
 
+def unloading_branch(load_n: np.ndarray) -> np.ndarray:
+    """(T,) bool: the time points whose load magnitude ``load_n`` (T,) N is below the largest one
+    before them (by more than 1e-9 of it: round-off of a held load is not unloading)."""
+    load = np.abs(np.asarray(load_n, dtype=np.float64))
+    before = np.concatenate([[-np.inf], np.maximum.accumulate(load)[:-1]])
+    return load < before * (1.0 - 1e-9)
+
+
+#: per-time scalar errors and the (a, b) values they compare: on the unloading branch each is
+#: taken against b's largest magnitude up to that instant (:func:`against_cycle_peak`)
+_CYCLE_PEAK_ERRORS = (
+    ("regularised_peak_pressure_rel_error", "regularised_peak_pressure_a_mpa", "regularised_peak_pressure_b_mpa"),
+    ("peak_pressure_rel_error", "peak_pressure_a_mpa", "peak_pressure_b_mpa"),
+    ("mean_pressure_rel_error", "mean_pressure_a_mpa", "mean_pressure_b_mpa"),
+    ("contact_area_rel_error", "contact_area_a_mm2", "contact_area_b_mm2"),
+)
+
+
+def against_cycle_peak(per_time: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The per-time comparison with its relative errors on the unloading branch taken against the
+    reference's peak in the cycle (docs/method.md#7-comparison-metrics).
+
+    Unloaded towards zero, the reference's response goes to zero with the load, and (a - b) / |b|
+    grows without bound while both sides agree to a fraction of what the cycle loaded them with.
+    At a time point on the unloading branch (:func:`unloading_branch` of the loads) each scalar
+    error is (a - b) divided by the largest |b| up to that instant, the displacement error is
+    |u_a - u_b| / max |u_b| (its sign as :func:`displacement_error`'s) and the pressure field's is
+    its L2 misfit over the largest L2 norm of b's field so far; those entries say so
+    (``relative_to``: "cycle peak"). Loading branches are unchanged. Returns new dicts.
+    """
+    if not per_time:
+        return per_time
+    down = unloading_branch(np.array([e["load_n"] for e in per_time], dtype=np.float64))
+    peaks = {b: np.fmax.accumulate([abs(float(e[b])) for e in per_time]) for _, _, b in _CYCLE_PEAK_ERRORS}
+    disp_peak = np.fmax.accumulate([float(np.linalg.norm(e["displacement_b_mm"])) for e in per_time])
+    has_field = all("pressure_l2_reference_norm" in e for e in per_time)
+    field_peak = np.fmax.accumulate([e["pressure_l2_reference_norm"] for e in per_time]) if has_field else None
+    out = []
+    for k, entry in enumerate(per_time):
+        entry = dict(entry)
+        if down[k]:
+            for error, a, b in _CYCLE_PEAK_ERRORS:
+                entry[error] = signed_relative_error(float(entry[a]), float(entry[b])) if peaks[b][k] == 0.0 else (float(entry[a]) - float(entry[b])) / peaks[b][k]
+            u_a, u_b = np.asarray(entry["displacement_a_mm"]), np.asarray(entry["displacement_b_mm"])
+            magnitude = float(np.linalg.norm(u_a - u_b)) / disp_peak[k] if disp_peak[k] > 0.0 else relative_error(u_a, u_b)
+            entry["displacement_rel_error"] = -magnitude if np.linalg.norm(u_a) < np.linalg.norm(u_b) else magnitude
+            if field_peak is not None and field_peak[k] > 0.0:
+                entry["pressure_l2_rel_error"] = entry["pressure_l2_misfit_norm"] / field_peak[k]
+            entry["relative_to"] = "cycle peak"
+        out.append(entry)
+    return out
+
+
 def largest_magnitude(values) -> float:
     """The value of largest magnitude, its sign kept (the worst of a signed error over time points)."""
     values = [float(v) for v in values]
@@ -335,8 +388,11 @@ def field_error(frame_a, frame_b, max_distance_mm: float | None = None, pressure
     else:
         raise InputError("the surface of side b has no pressure_mpa array", expected="cell or point data pressure_mpa")
     common = np.ones(points.shape[0], bool) if max_distance_mm is None else distance <= max_distance_mm
+    weights = areas[keep][common]
     return {
-        "pressure_l2_rel_error": l2_relative_error(p_a[common], p_b[common], areas[keep][common]),
+        "pressure_l2_rel_error": l2_relative_error(p_a[common], p_b[common], weights),
+        "pressure_l2_reference_norm": float(np.sqrt(np.sum(weights * p_b[common] ** 2))),
+        "pressure_l2_misfit_norm": float(np.sqrt(np.sum(weights * (p_a[common] - p_b[common]) ** 2))),
         "n_common_points": int(common.sum()),
         "max_projection_distance_mm": float(distance.max(initial=0.0)),
         "b_pressure_source": source,
@@ -394,6 +450,7 @@ def compare_result_dirs(a_dir: str | Path, b_dir: str | Path, *, max_distance_mm
         entry.update(field_error(frame_a, frame_b, max_distance_mm,
                                  PRESSURE_ON_MOBILE if on_mobile else "pressure_mpa"))
         per_time.append(entry)
+    per_time = against_cycle_peak(per_time)
     metrics = {name: largest_magnitude(e[name] for e in per_time) for name in COMPARISON_METRICS}
     return {
         "a": str(a.path),

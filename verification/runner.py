@@ -58,6 +58,7 @@ import platform
 import re
 import shutil
 import sys
+import textwrap
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
@@ -720,9 +721,18 @@ def _run_campaign_locked(
 
 
 def format_summary(summary: dict[str, Any]) -> str:
-    """The text `edem verify` prints: counts, outcomes, then a table of what failed."""
+    """The text `edem verify` prints: the answer of a trust analysis first (the main job's ankle
+    answer, in sentences), then counts, outcomes, a table of what failed, the flagged metrics and
+    every analysis's table."""
     counts, outcomes = summary["counts"], summary["outcomes"]
-    lines = [
+    lines = []
+    for result in summary.get("analyses") or ():
+        if result.get("kind") == "trust":
+            lines.append(f"{result['title']} [{result['status']}]")
+            lines += [textwrap.fill(sentence, width=110, initial_indent="- ", subsequent_indent="  ", break_on_hyphens=False)
+                      for sentence in result.get("values", {}).get("sentences", [])]
+            lines.append("")
+    lines += [
         f"{summary['campaign']}: {len(summary['cases'])} cases: {headline(counts)} ({summary['computed']} run, {summary['cached']} from the cache) "
         f"in {summary['wall_time_s']:.1f} s",
         f"outcomes: {outcomes['converges']} converge, {outcomes['refused']} refused",

@@ -112,7 +112,7 @@ def test_a_sweep_with_series_draws_one_line_per_series_and_goal_lines_on_their_p
     import reports.html as report
 
     drawn = {}
-    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path: drawn.update(fig=fig))
+    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path, axes=None: drawn.update(fig=fig))
     rows = {f"{m}-{nu}": {"params": {"nu": nu}, "metrics": {"a": e * nu, "b": 2 * e * nu}, "tolerance": {}}
             for m, e in (("x", 1.0), ("y", 0.1)) for nu in (0.1, 0.2, 0.3)}
     spec = {"name": "s", "title": "s", "kind": "sweep", "cases": list(rows), "x": "nu", "y": ["a", "b"], "logx": False, "logy": True,
@@ -129,7 +129,7 @@ def test_a_sweep_draws_accuracy_tolerances_but_not_sanity_bounds(tmp_path, monke
     import reports.html as report
 
     drawn = {}
-    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path: drawn.update(fig=fig))
+    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path, axes=None: drawn.update(fig=fig))
     rows = {f"c{nu}": {"params": {"nu": nu}, "metrics": {"a": nu, "b": nu}, "tolerance": {"a": 10.0, "b": 0.5},
                        "verdicts": {"a": {"kind": "sanity"}, "b": {"kind": "model-band"}}} for nu in (0.1, 0.2)}
     spec = {"name": "s", "title": "s", "kind": "sweep", "cases": list(rows), "x": "nu", "y": ["a", "b"], "logx": False, "logy": True}
@@ -145,7 +145,7 @@ def test_the_report_opens_with_its_figures_and_folds_a_long_case_table(tmp_path,
     report put 1000 case rows before its distributions."""
     import reports.html as report
 
-    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path: fig.savefig(path, dpi=20))
+    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path, axes=None: fig.savefig(path, dpi=20))
     rows = [{**_row(f"c{i}", result_dirs=[f"cases/c{i}/a-dem"]), "params": {"nu": 0.1 * i}, "metrics": {"peak_pressure_mpa": 1.0 + i}} for i in range(30)]
     figure = {"name": "spread", "title": "peak over the population", "kind": "histogram", "cases": [r["name"] for r in rows], "y": ["peak_pressure_mpa"]}
     analysis = {"name": "t", "title": "A long analysis", "kind": "table", "status": "reported", "columns": ["case"],
@@ -172,7 +172,7 @@ def test_a_signed_error_on_a_log_panel_is_drawn_by_its_magnitude(tmp_path, monke
     import reports.html as report
 
     drawn = {}
-    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path: drawn.update(fig=fig))
+    monkeypatch.setattr(report, "_save", lambda plt, fig, title, path, axes=None: drawn.update(fig=fig))
     rows = {f"c{nu}": {"params": {"poissons_ratio": nu}, "metrics": {"displacement_rel_error": -0.59 * nu}, "tolerance": {}} for nu in (0.1, 0.2)}
     spec = {"name": "s", "title": "s", "kind": "sweep", "cases": list(rows), "x": "poissons_ratio", "y": ["displacement_rel_error"], "logx": False, "logy": True}
     report._sweep_figure(spec, rows, tmp_path / "s.png")

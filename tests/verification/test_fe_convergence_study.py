@@ -144,7 +144,7 @@ def test_a_judged_case_takes_its_fe_error_from_the_study_and_a_band_within_it_ju
     assert verdicts["displacement_rel_error"]["verdict"] == FE_NOT_CONVERGED and verdicts["displacement_rel_error"]["fe_error"] == 0.30
     assert verdicts["regularised_peak_pressure_rel_error"]["verdict"] == "met" and verdicts["regularised_peak_pressure_rel_error"]["fe_error"] == 0.02
     assert status == FE_NOT_CONVERGED
-    other = next(c for c in trust_cases() if c.name == "slab-F333-nu0.3")  # not in this study: judged on its value
+    other = next(c for c in trust_cases() if c.name == "layer-F333-nu0.42-t2")  # not in this study: judged on its value
     status, verdicts = judge(other, record)
     assert status == FLAGGED and "fe_error" not in verdicts["displacement_rel_error"]
     assert verdicts["regularised_peak_pressure_rel_error"]["verdict"] == FE_ERROR_UNKNOWN

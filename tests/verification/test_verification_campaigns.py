@@ -12,7 +12,9 @@ from verification.campaigns.quick import VISCOELASTIC_CASE
 from verification.runner import run_campaign
 from edem.scene import load_scene
 from verification.campaign_model import THESIS_BED
-from verification.campaigns.quick import TRUST_ANKLES, TRUST_BEDS, TRUST_NUS, trust_name
+from verification.campaigns.ankles import ANKLES, LOADS_N, ankle_case_name
+from verification.campaigns.ankles import BEDS as ANKLE_BEDS
+from verification.campaigns.quick import ANSWER_BEDS, ANSWER_NUS, FE_ANSWER, THRESHOLD_CASE, answer_cases, bed_label
 from verification.sides import is_shared_side, side_inputs, side_names
 from verification.verdicts import MODEL_BAND_REL
 
@@ -45,60 +47,73 @@ def test_stability_cases_declare_outcomes_and_cover_the_extremes():
         assert dt > 2 * case.overrides["viscoelastic.relaxation_time_s"]
 
 
-def test_quick_is_a_subset_of_the_other_campaigns_plus_ideal_standing_and_the_trust_beds():
-    known = {c.name: c for name in ("edem-analytic", "stability", "fe-analytic", "cylinder-plane", "subject", "viscoelastic") for c in get_campaign(name).cases}
+def test_quick_is_a_subset_of_the_other_campaigns_plus_ideal_standing():
+    """quick's cases are other campaigns' cases: the ankle answer the ankles campaign's (on a coarser
+    FE), the threshold law's row and the layers cylinder-plane's (the same runs, every card metric
+    judged against the model band), the rest as they are."""
+    known = {c.name: c for name in ("edem-analytic", "stability", "fe-analytic", "cylinder-plane", "viscoelastic") for c in get_campaign(name).cases}
+    ankles = {c.name: c for c in get_campaign("ankles").cases}
     quick = get_campaign("quick")
     # the design card's three quantities: pressure (regularised peak and field), area, displacement
     banded = {"regularised_peak_pressure_rel_error", "pressure_l2_rel_error", "contact_area_rel_error", "displacement_rel_error"}
-    trust = {trust_name(ankle, bed, nu) for ankle in TRUST_ANKLES for bed in TRUST_BEDS for nu in TRUST_NUS}
+    answer = {c.name for c in answer_cases()}
     for case in quick.cases:
-        if case.name == "ideal-standing-edem-vs-dem" or case.name in trust:
+        if case.name == "ideal-standing-edem-vs-dem":
+            continue
+        if case.name in answer:
+            twin = ankles[case.name]
+            assert (case.scene, case.sides, case.overrides) == (twin.scene, twin.sides, twin.overrides)
+            assert case.options == FE_ANSWER and case.params["poissons_ratio"] in ANSWER_NUS
+            assert {m for m, b in case.bases().items() if b.kind == "model-band"} == banded  # nothing set by construction
             continue
         twin = known[case.name]
         if case.name == VISCOELASTIC_CASE:
             assert twin == case  # the viscoelastic campaign's case as it is
         elif any(side.startswith("fe-") for side in case.sides) and case.sides[0] in ("dem", "edem"):
-            # the layer cases: the same runs, every card metric judged against the declared model band
-            assert (case.scene, case.sides, case.overrides) == (twin.scene, twin.sides, twin.overrides)
-            assert {m for m, b in case.bases().items() if b.kind == "model-band"} == banded
+            assert (case.scene, case.sides) == (twin.scene, twin.sides)
+            assert case.overrides == {**twin.overrides, **(THESIS_BED if case.name == THRESHOLD_CASE else {})}
+            judged = banded - ({"contact_area_rel_error"} if case.name == THRESHOLD_CASE else set())
+            assert {m for m, b in case.bases().items() if b.kind == "model-band"} == judged
         else:
             assert twin == case
-    # the springs at the base nu are the cylinder-plane and subject campaigns' runs (options: a coarser FE)
-    for name, twin in ((trust_name("slab", "springs", 0.42), known["slab-F333-nu0.42"]), (trust_name("subject", "springs", 0.42), known["subject-standing-dem-vs-fe"])):
-        case = quick.case(name)
-        assert (case.scene, case.sides) == (twin.scene, twin.sides)
-        assert case.overrides == {**twin.overrides, "cartilage.poissons_ratio": 0.42}
-    for name in trust:  # the threshold law's area on the ankles is set by construction, and judged against the same band
-        case = quick.case(name)
-        bases = case.bases()
-        assert {m for m, b in bases.items() if b.kind == "model-band"} == banded - {"contact_area_rel_error"}
-        assert bases["contact_area_rel_error"].kind == "by-construction"
-        assert case.tolerance["contact_area_rel_error"] == MODEL_BAND_REL
+    # the threshold law's one row: its area set by h_max (by construction), judged against the same band
+    threshold = quick.case(THRESHOLD_CASE)
+    assert threshold.overrides["cartilage.law"] == "threshold" and threshold.overrides["cartilage.coupling"] == THESIS_BED["cartilage.coupling"]
+    assert threshold.bases()["contact_area_rel_error"].kind == "by-construction" and "h_max" in threshold.bases()["contact_area_rel_error"].reason
+    assert threshold.tolerance["contact_area_rel_error"] == MODEL_BAND_REL
+    # one static row of the threshold law against the FE (the viscoelastic case is the ideal ankle's twin over time)
+    assert [c.name for c in quick.cases if c.overrides.get("cartilage.law") == "threshold" and c.sides[0] == "dem" and c.sides[-1].startswith("fe-")] == [THRESHOLD_CASE]
     assert quick.case("ideal-standing-edem-vs-dem").sides == ("edem", "dem")
-    assert quick.cases[0].name in trust  # the ankle answer first
+    assert quick.cases[0].name in answer  # the ankle answer first
     assert [a.kind for a in quick.analyses] == ["trust"]
 
 
-def test_quick_trust_beds_share_one_fe_run_per_ankle_and_nu():
+def test_quick_answers_on_both_cartilage_ankles_with_both_beds_sharing_one_fe_run_per_ankle_and_nu():
     """The beds differ only in the keys the FE never reads, so each (ankle, nu) runs one FE (the
-    runner's side store), and each bed is named in the overrides, not taken from the scene."""
+    runner's side store), against the two-layer FE at every load; each bed named in the overrides."""
     quick = get_campaign("quick")
-    for ankle in TRUST_ANKLES:
-        for nu in TRUST_NUS:
-            cases = [quick.case(trust_name(ankle, bed, nu)) for bed in TRUST_BEDS]
+    for ankle, (scene, _what) in ANKLES.items():
+        for nu in ANSWER_NUS:
+            cases = [quick.case(ankle_case_name(ankle, bed, nu)) for bed in ANSWER_BEDS]
+            assert all(case.scene == scene and case.sides == ("dem", "fe-two-layer") for case in cases)
             fe_inputs = [side_inputs(case.sides[1], case.overrides, case.options) for case in cases]
             assert all(inputs == fe_inputs[0] for inputs in fe_inputs)
             assert all(is_shared_side(case.sides[1]) for case in cases)
-            assert [case.overrides["cartilage.coupling"] for case in cases] == [TRUST_BEDS[bed][1]["cartilage.coupling"] for bed in TRUST_BEDS]
+            assert [case.overrides["cartilage.coupling"] for case in cases] == [ANKLE_BEDS[bed][0]["cartilage.coupling"] for bed in ANSWER_BEDS]
+            assert all(case.overrides["load.force_n"] == [[0.0, 0.0, f] for f in LOADS_N] for case in cases)
             assert all(case.params["poissons_ratio"] == case.overrides["cartilage.poissons_ratio"] == nu for case in cases)
+    # the labels the report and the answer use are the beds' own (edem.beds), not the keys' values
+    labels = {bed_label(c) for c in answer_cases()}
+    assert labels == {"coupled layer", "independent springs"}
 
 
 def test_built_in_ankle_scenes_of_one_time_point_default_to_the_bed_the_trust_summary_calls_default():
     """The main job's "default bed" is what `edem run ideal-standing` uses; the thesis's springs stay one --set away."""
-    default = TRUST_BEDS["coupled"][1]
+    default = ANKLE_BEDS[ANSWER_BEDS[0]][0]
     for scene in ("ideal-standing", "ideal-toe-off", "subject-standing", "subject-toe-off"):
         cartilage = load_scene(scene).cartilage
-        assert (cartilage.coupling, cartilage.bed_keys.thin_layer_symbol) == (default["cartilage.coupling"], default["cartilage.thin_layer_symbol"])
+        assert (cartilage.coupling, cartilage.bed_keys.thin_layer_symbol, cartilage.bed_keys.thin_layer_stack) == (
+            default["cartilage.coupling"], default["cartilage.thin_layer_symbol"], default["cartilage.thin_layer_stack"])
         assert load_scene(scene, THESIS_BED).cartilage.coupling == "none"
 
 

@@ -15,6 +15,7 @@ from edem.pressure_metrics import regularised_peak_pressure_mpa
 from edem.resultdir import non_finite_count, read_result_dir, write_surface_frame
 from edem.results import TIMESERIES_COLUMNS, write_pvd
 from verification.metrics import (
+    against_cycle_peak,
     COMPARISON_METRICS,
     compare_result_dirs,
     contact_area_error,
@@ -27,6 +28,7 @@ from verification.metrics import (
     relative_error,
     sample_cells_onto,
     sample_onto,
+    unloading_branch,
 )
 
 
@@ -362,3 +364,40 @@ def test_field_difference_of_two_fe_runs_is_the_l2_of_their_on_m_fields(tmp_path
     b = write_result_dir(tmp_path / "b", [row], [(pb, tb, {"pressure_mpa": np.zeros(len(pb)), "pressure_on_mobile_mpa": linear_pressure(pb)}, None)], "fe-slab")
     assert field_difference(a, b) == pytest.approx(0.03, rel=1e-12)
     assert field_difference(b, a) == pytest.approx(0.03 / 1.03, rel=1e-12)
+
+
+def _cycle_entry(load_n: float, b: float, offset: float) -> dict:
+    """One per-time comparison where side a is the reference b plus a constant ``offset`` in every
+    scalar (and the field a uniform offset on a unit area), as compare_result_dirs writes it."""
+    entry = {"load_n": load_n, "displacement_a_mm": [0.0, 0.0, -(b + offset)], "displacement_b_mm": [0.0, 0.0, -b],
+             "displacement_rel_error": displacement_error(np.array([0.0, 0.0, -(b + offset)]), np.array([0.0, 0.0, -b])),
+             "pressure_l2_reference_norm": b, "pressure_l2_misfit_norm": offset, "pressure_l2_rel_error": offset / b}
+    for error, a_key, b_key in (("regularised_peak_pressure_rel_error", "regularised_peak_pressure_a_mpa", "regularised_peak_pressure_b_mpa"),
+                                ("peak_pressure_rel_error", "peak_pressure_a_mpa", "peak_pressure_b_mpa"),
+                                ("mean_pressure_rel_error", "mean_pressure_a_mpa", "mean_pressure_b_mpa"),
+                                ("contact_area_rel_error", "contact_area_a_mm2", "contact_area_b_mm2")):
+        entry.update({a_key: b + offset, b_key: b, error: (b + offset - b) / b})
+    return entry
+
+
+def test_unloading_errors_are_taken_against_the_cycle_peak_and_loading_errors_are_unchanged():
+    """A load/unload cycle in which side a is the reference plus a constant offset of 0.01: on the
+    loading branch every error is 0.01 / b(t) as before; on the unloading branch (the reference
+    going to zero with the load) it is 0.01 over the largest b of the cycle, 0.01 / 1.0, not
+    0.01 / 0.001 = 10 (the exact values of the construction)."""
+    loads = [100.0, 333.0, 333.0, 33.3, 0.333]
+    responses = [0.3, 0.9, 1.0, 0.1, 0.001]  # creeping to its peak while held, then unloaded
+    per_time = [_cycle_entry(f, b, 0.01) for f, b in zip(loads, responses)]
+    assert unloading_branch(np.array(loads)).tolist() == [False, False, False, True, True]
+    out = against_cycle_peak(per_time)
+    names = ("regularised_peak_pressure_rel_error", "peak_pressure_rel_error", "mean_pressure_rel_error",
+             "contact_area_rel_error", "displacement_rel_error", "pressure_l2_rel_error")
+    for k in range(3):
+        assert out[k] == per_time[k]  # loading: untouched
+        assert out[k]["contact_area_rel_error"] == pytest.approx(0.01 / responses[k], rel=1e-12)
+    for k in (3, 4):
+        assert out[k]["relative_to"] == "cycle peak"
+        for name in names:
+            assert out[k][name] == pytest.approx(0.01 / 1.0, rel=1e-12), name
+    # a held load is not unloading, however the response moves
+    assert not unloading_branch(np.array([333.0, 333.0 * (1 - 1e-12), 333.0])).any()

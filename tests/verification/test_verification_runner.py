@@ -409,3 +409,22 @@ def test_declared_outcomes_are_checked_not_assumed(tmp_path):
         "missing-warning": ("failed", 1.0),
         "right": ("refused as declared", 0.0),
     }
+
+
+def test_the_terminal_summary_opens_with_the_ankle_answer_before_any_flagged_metric():
+    """`make demo` prints the trust analysis's sentences first, then the counts and the flagged metrics."""
+    from verification.runner import format_summary
+    from verification.verdicts import count_verdicts
+
+    flagged = {"name": "slab-F333-nu0.42", "status": "flagged", "verdicts": {"contact_area_rel_error": {"verdict": "outside band", "value": 0.3, "tolerance": 0.25}},
+               "sides": []}
+    answer = {"name": "trust", "title": "Can I trust it for my ankle?", "kind": "trust", "status": "reported", "columns": [], "rows": [],
+              "values": {"sentences": ["The default bed " + "agrees " * 30 + "at every load.", "Goal reached."]}}
+    summary = {"campaign": "quick", "cases": [flagged], "counts": count_verdicts(["flagged"]), "outcomes": {"converges": 1, "refused": 0},
+               "computed": 1, "cached": 0, "wall_time_s": 1.0, "analyses": [answer]}
+    lines = format_summary(summary).splitlines()
+    assert lines[0] == "Can I trust it for my ankle? [reported]"
+    assert lines[1].startswith("- The default bed") and all(len(line) <= 110 for line in lines[:4])
+    first_count = next(k for k, line in enumerate(lines) if line.startswith("quick: 1 cases"))
+    assert any(line.startswith("- Goal reached.") for line in lines[:first_count])
+    assert first_count < next(k for k, line in enumerate(lines) if "slab-F333-nu0.42" in line)

@@ -1,108 +1,112 @@
-"""``quick``: the main job (``make demo``): 246 s of CPU time over 2 cores (:data:`EXPECTED_TIME_S`: its wall time measured on the shared machine).
+"""``quick``: the main job (``make demo``; :data:`EXPECTED_TIME_S`: its wall time measured on the shared machine).
 
-It opens with the ankle answer: DEM against the FE reference on the ideal and subject-like ankles
-standing over Poisson's ratio (:data:`TRUST_NUS`), with the default bed of the built-in standing
-scenes (the coupled thin layer, Pade symbol) beside the thesis's independent springs (each bed
-named in the case's overrides; the two share one FE run per ankle and nu), then the layer over
-thickness and at a low load, each of the design card's three quantities (:data:`BAND_METRICS`:
-pressure as the regularised peak and the field, contact area, displacement) judged against the
-declared model band (:data:`MODEL_BAND_REL`), verified needing all of them inside; one chart per
-card metric (displacement, regularised peak pressure, contact area) against nu. Then every
-closed-form case, a few stability cases, ideal standing EDEM vs DEM and one cheap FE verification
-case. The FE here is coarse (P1 at 1.0 mm up to nu 0.42, P2 above, Taylor-Hood from nu = 0.49) to
-keep the job short; ``cylinder-plane``, ``subject`` and ``thin-layer`` have the full sweeps.
+It opens with the ankle answer: the built-in ankles on their cartilage (``ideal-standing`` and
+``subject-standing``: talar and tibial layers tapered to their margins, the gap law), DEM with the
+scenes' default bed (the coupled layer, the two layers as a sandwich) beside the independent
+springs, against their FE twin (``fe-two-layer``: both layers deformable) at 333, 1000 and 2000 N
+(three time points of one run) and Poisson's ratio :data:`ANSWER_NUS`: the cases of the ``ankles``
+campaign (:func:`verification.campaigns.ankles.ankle_cases`) on this job's FE
+(:data:`FE_ANSWER`). Each of the design card's three quantities (displacement, regularised peak
+pressure, contact area; and the pressure field) is judged against the declared model band
+(:data:`verification.verdicts.MODEL_BAND_REL`) at every load; the contact area is an outcome of the
+anatomy here, nothing is set by construction. One row of its own keeps the thesis's threshold law
+(:data:`THRESHOLD_CASE`: the thesis's ankle geometry and bed against the FE slab), its contact area
+marked as set by h_max. Then the layer over thickness and at a low load, every closed-form case, a
+few stability cases, ideal standing EDEM vs DEM, one cheap FE verification case and one
+viscoelastic case. ``ankles``, ``cylinder-plane``, ``subject`` and ``thin-layer`` have the full
+sweeps.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-from verification.campaign_model import COUPLED_BED, THESIS_BED, Analysis, Campaign, Case, Figure, uniform_basis, uniform_tolerance
+from edem.beds import BEDS as BED_CLASSES
+from verification.campaign_model import THESIS_BED, Analysis, Campaign, Case, Figure, uniform_basis, uniform_tolerance
+from verification.campaigns.ankles import ANKLES, AREA_GROWTH, LOADS_N, ankle_case_name, ankle_cases
+from verification.campaigns.ankles import BEDS as ANKLE_BEDS
 from verification.campaigns.cylinder_plane import campaign as cylinder_plane_campaign
 from verification.campaigns.edem_analytic import _analytic_cases, _analytic_figures
 from verification.campaigns.fe_analytic import CONFINED_SIZES_MM, _fe_analytic_cases
 from verification.campaigns.stability import _stability_cases
-from verification.campaigns.subject import campaign as subject_campaign
 from verification.campaigns.viscoelastic import campaign as viscoelastic_campaign
-from verification.fe_comparison import FE_COARSE, banded
+from verification.fe_comparison import banded
 from verification.metrics import COMPARISON_METRICS
 from verification.verdicts import BY_CONSTRUCTION, INVARIANT, MODEL_BAND_REL, Basis
 
-#: the threshold law's contact area on an ankle is its candidate springs' area (463 mm^2 on the ideal
-#: ankle, 607 mm^2 on the subject-like one, with either bed, at every load and nu): set by
-#: construction, and judged against the model band all the same ("verified" needs every card metric
-#: inside its band; verification.verdicts)
-THRESHOLD_AREA_BASIS = Basis(BY_CONSTRUCTION, f"declared band of agreement between two models, +-{MODEL_BAND_REL:.0%}, for an area the law sets by construction: the threshold "
+#: the ankle answer's Poisson's ratio: the built-in scenes' own. One value: the two-layer FE of one
+#: ankle and nu (three loads) costs 218 s of CPU time on the ideal ankle at P2 2.0 mm (measured
+#: 2026-11-28), so a second nu would take the job past 10 minutes; ``ankles`` sweeps 0.3-0.49
+ANSWER_NUS = (0.42,)
+#: the ankle answer's FE: P2 at 2.0 mm, the coarsest level of the ``fe-convergence`` study (M's own
+#: 0.96 mm triangles, two elements through each layer; 118 k DOFs on the ideal ankle). Its own
+#: error is the study's (:func:`verification.fe_convergence.fe_relative_error`), unknown until the
+#: study has run the two-layer ankles
+FE_ANSWER = {"mesh_size_mm": 2.0, "degree": 2}
+#: the ankles' beds in the answer (keys of verification.campaigns.ankles.BEDS), the scenes' default first
+ANSWER_BEDS = tuple(ANKLE_BEDS)
+#: the thesis's threshold law, one row: the ideal ankle on the thesis's geometry (no cartilage
+#: layers), independent springs, against the FE slab at 333 N and nu 0.42 (cylinder-plane's case
+#: on this job's FE)
+THRESHOLD_CASE = "slab-F333-nu0.42"
+#: the threshold law's contact area on an ankle is its candidate springs' area (463 mm^2 on the
+#: ideal ankle at every load and nu, whatever the bed): set by h_max, and judged against the
+#: model band all the same ("verified" needs every card metric inside its band; verification.verdicts)
+THRESHOLD_AREA_BASIS = Basis(BY_CONSTRUCTION, f"declared band of agreement between two models, +-{MODEL_BAND_REL:.0%}, for an area set by h_max, by construction: the threshold "
                                               "law puts every candidate spring (within h_max of F) in contact on the ankles, so its contact area is the "
-                                              "candidates' area (463 mm^2 on the ideal ankle, 607 mm^2 on the subject-like one) at every load and Poisson's "
-                                              "ratio; no bed moves it, and verified needs it inside the band")
-TRUST_NUS = (0.3, 0.42, 0.45, 0.49)
-TRUST_BASE_NU = 0.42
-#: the ankles of the trust summary (case-name prefix: what)
-TRUST_ANKLES = {"slab": "ideal ankle", "subject": "subject-like ankle"}
-#: the beds compared on them: key -> (case-name suffix, overrides, what); "coupled" is the built-in ankle scenes' default
-TRUST_BEDS = {
-    "coupled": ("-coupled", COUPLED_BED, "coupled thin layer (Pade)"),
-    "springs": ("", THESIS_BED, "independent springs"),
-}
-#: issue 24's goal for the default bed: displacement, peak and area within 10 % of the FE at nu 0.3-0.49 (reported, not judged)
+                                              "candidates' area (463 mm^2 on the ideal ankle) at every load and Poisson's ratio; no bed moves it, and "
+                                              "verified needs it inside the band")
+#: the default bed's goal: displacement, regularised peak and area within 10 % of the FE at every load (reported, not judged)
 TRUST_GOAL_REL = 0.10
-#: the card metrics charted against nu, one chart each: (metric, what)
-TRUST_CHARTS = (("displacement_rel_error", "talus displacement"), ("regularised_peak_pressure_rel_error", "regularised peak pressure"), ("contact_area_rel_error", "contact area (the threshold law's candidates: set by construction)"))
 TRUST_THICKNESS_MM = (1.0, 2.0, 3.0)
 TRUST_LOW_LOAD_N = 100.0
-#: the cheapest FE that is still a reference: P1 at 1.0 mm (10 k DOFs, within 2.5 % of P2 at 0.7 mm
-#: on the ideal ankle at nu 0.42, fem_reference.scene_run) where P1 does not lock (nu <= 0.42);
-#: P2 / Taylor-Hood at 1.0 mm above, and for the thin layers
+#: the threshold row's FE: P1 at 1.0 mm (10 k DOFs, a few seconds; within 2.5 % of P2 at 0.7 mm on
+#: the ideal ankle's slab at nu 0.42, fe-convergence's P1 column)
 FE_P1 = {"mesh_size_mm": 1.0, "degree": 1}
 
-#: wall time with 2 jobs on 2 cores, nothing cached: measured 1030 s on the shared 2-core machine at
-#: load 12-15 (246 s of CPU time), its 48 cases running 13 FE runs (the two beds of an ankle and nu
-#: share one); the two Taylor-Hood runs at nu = 0.49 are the longest (718 s subject, 538 s ideal at
-#: that load). Before the subject-like ankle over nu: 220 s at load 4-8 (120 s of CPU time); plus
-#: the viscoelastic case (its FE run, 7 time points of P1, measured 37 s at load 2-7)
-EXPECTED_TIME_S = 1070.0
+#: wall time with 2 jobs on 2 cores, nothing cached: measured 874 s on 2026-11-28 at load 4-8 (464 s
+#: of CPU time, 1.9x the 246 s of the job on the thesis's ankle before); the ideal ankle's two-layer
+#: FE (218 s of CPU time alone) is the longest case (docs/campaigns.md#quick-the-main-job-make-demo)
+EXPECTED_TIME_S = 880.0
 
 
 #: the viscoelastic campaign's cheapest case (verification.campaigns.viscoelastic)
 VISCOELASTIC_CASE = "slab-step-dt2-coupled-nu0.42"
 
 
-def trust_name(ankle: str, bed: str, nu: float) -> str:
-    """The trust case of an ankle ("slab": the ideal ankle, "subject") and a bed (a key of
-    :data:`TRUST_BEDS`) at Poisson's ratio ``nu``, 333 N."""
-    return f"{ankle}{TRUST_BEDS[bed][0]}-F333-nu{nu:g}"
+def bed_label(case: Case) -> str:
+    """The bed of ``case`` as the reports name it (edem.beds: "independent springs", "coupled layer")."""
+    return BED_CLASSES[case.overrides["cartilage.coupling"]].label
 
 
-def _with_bed(case: Case, ankle: str, bed: str, nu: float) -> Case:
-    """``case`` (independent springs, its bed named in the overrides) on the bed ``bed`` at ``nu``,
-    with the FE P1 at 1.0 mm where P1 does not lock (nu <= 0.42)."""
-    _suffix, bed_overrides, what = TRUST_BEDS[bed]
-    overrides = {k: v for k, v in case.overrides.items() if k not in COUPLED_BED}  # the bed keys
-    overrides.update({**bed_overrides, "cartilage.poissons_ratio": nu})
-    p1 = nu <= 0.42
-    element = "P1" if p1 else ("Taylor-Hood P2-P1" if nu >= 0.49 else "P2")
-    role = "the built-in standing scenes' default bed" if bed == "coupled" else "the thesis's bed"
-    description = (f"{TRUST_ANKLES[ankle]} standing, threshold law, {what} ({role}): DEM vs the FE slab (333 N, nu {nu:g}, no ligaments); FE {element} at 1.0 mm"
-                   + ("; its FE run is shared with the other beds' cases (the FE never reads the bed)" if bed != "coupled" else ""))
-    return banded(dataclasses.replace(case, name=trust_name(ankle, bed, nu), overrides=overrides, options=dict(FE_P1) if p1 else dict(FE_COARSE),
-                                       params={**case.params, "poissons_ratio": nu}, description=description,
-                                       maps=bed == "coupled" and nu == TRUST_BASE_NU), THRESHOLD_AREA_BASIS)
+def answer_cases() -> list[Case]:
+    """The ankle answer: each bed of :data:`ANSWER_BEDS` against the two-layer FE on each ankle at
+    each nu of :data:`ANSWER_NUS` (the ``ankles`` campaign's cases on :data:`FE_ANSWER`; the beds of
+    an ankle and nu share one FE run)."""
+    return ankle_cases(tuple(ANKLES), ANSWER_BEDS, ANSWER_NUS, FE_ANSWER)
+
+
+def threshold_case() -> Case:
+    """The thesis's threshold law, one row: cylinder-plane's ``slab-F333-nu0.42`` (the thesis's
+    ankle, independent springs, the FE slab) on the P1 FE, its area marked as set by h_max."""
+    template = {c.name: c for c in cylinder_plane_campaign().cases}[THRESHOLD_CASE]
+    description = ("the thesis's threshold law on its ideal ankle (no cartilage layers), independent springs (the thesis's bed): DEM vs the FE slab "
+                   "(333 N, nu 0.42, no ligaments); FE P1 at 1.0 mm. Its contact area is set by h_max (every candidate spring carries load)")
+    return banded(dataclasses.replace(template, overrides={**template.overrides, **THESIS_BED}, options=dict(FE_P1), description=description, maps=False),
+                  THRESHOLD_AREA_BASIS)
+
+
+def layer_case_names() -> list[str]:
+    """The bonded layer's cases (cylinder-plane's): over thickness at 333 N, then at a low load."""
+    return [f"layer-F333-nu0.42-t{t:g}" for t in TRUST_THICKNESS_MM] + [f"layer-F{TRUST_LOW_LOAD_N:g}-nu0.42-t2"]
 
 
 def trust_cases() -> list[Case]:
-    """DEM vs the FE reference: the ideal and subject-like ankles standing over Poisson's ratio,
-    each with the default bed (the coupled thin layer) and the independent springs (their FE run
-    shared); the layer over thickness and at a low load (independent springs, gap law)."""
+    """DEM against the FE: the ankle answer (:func:`answer_cases`), the threshold law's row
+    (:func:`threshold_case`), the layer over thickness and at a low load (independent springs,
+    gap law)."""
     cp = {c.name: c for c in cylinder_plane_campaign().cases}
-    standing = {c.name: c for c in subject_campaign().cases}["subject-standing-dem-vs-fe"]
-    templates = {"slab": cp[f"slab-F333-nu{TRUST_BASE_NU:g}"], "subject": dataclasses.replace(standing, params={"load_n": 333.0})}
-    cases = [_with_bed(templates[ankle], ankle, bed, nu)
-             for nu in sorted(TRUST_NUS, reverse=True)  # the slowest FE (highest nu) starts first
-             for ankle in TRUST_ANKLES for bed in TRUST_BEDS]
-    names = [f"layer-F333-nu0.42-t{t:g}" for t in TRUST_THICKNESS_MM] + [f"layer-F{TRUST_LOW_LOAD_N:g}-nu0.42-t2"]
-    cases += [banded(cp[n]) for n in names]
-    return cases
+    return answer_cases() + [threshold_case()] + [banded(cp[n]) for n in layer_case_names()]
 
 
 def _ideal_standing_case() -> Case:
@@ -118,39 +122,54 @@ def _ideal_standing_case() -> Case:
     )
 
 
+#: the card metrics charted against the load, one panel each
+ANSWER_ERRORS = ("displacement_rel_error", "regularised_peak_pressure_rel_error", "contact_area_rel_error")
+
+
+def _answer_series() -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """(label, (case,)) per ankle and bed of the answer at each nu: "ideal ankle, coupled layer"..."""
+    cases = {c.name: c for c in answer_cases()}
+    several = len(ANSWER_NUS) > 1
+    return tuple((f"{ANKLES[ankle][1]}, {bed_label(cases[name])}" + (f", nu {nu:g}" if several else ""), (name,))
+                 for nu in ANSWER_NUS for ankle in ANKLES for bed in ANSWER_BEDS for name in [ankle_case_name(ankle, bed, nu)])
+
+
 def _trust_figures() -> tuple[Figure, ...]:
-    """One chart per card metric: its error against nu, one line per ankle and bed."""
-    series = tuple((f"{TRUST_ANKLES[ankle]}, {TRUST_BEDS[bed][2]}", tuple(trust_name(ankle, bed, nu) for nu in TRUST_NUS))
-                   for ankle in TRUST_ANKLES for bed in TRUST_BEDS)
-    return tuple(
-        Figure(f"trust-{metric.removesuffix('_rel_error').replace('_', '-')}-vs-nu", f"{what}: signed error (DEM - FE) / |FE| vs nu (333 N)",
-               "sweep", tuple(n for _label, group in series for n in group), x="poissons_ratio", y=(metric,), series=series)  # the judged band: its tolerance marks
-        for metric, what in TRUST_CHARTS
+    """The contact area against the load (DEM and FE) and the card metrics' signed errors against the load."""
+    series = _answer_series()
+    cases = tuple(n for _label, group in series for n in group)
+    loads = ", ".join(f"{f:g}" for f in LOADS_N)
+    return (
+        Figure("ankle-area-vs-load", f"Contact area against load ({loads} N): DEM (solid) and the two-layer FE (dashed)", "area-vs-load", cases, series=series),
+        Figure("ankle-errors-vs-load", "Signed error (DEM - FE) / |FE| against load; black bars: the model band", "per-load", cases, y=ANSWER_ERRORS, series=series),
     )
 
 
 def _trust_analysis() -> Analysis:
-    layers = tuple(f"layer-F333-nu0.42-t{t:g}" for t in TRUST_THICKNESS_MM)
-    low = f"layer-F{TRUST_LOW_LOAD_N:g}-nu0.42-t2"
-    beds = {TRUST_BEDS[bed][2]: {TRUST_ANKLES[ankle]: [trust_name(ankle, bed, nu) for nu in TRUST_NUS] for ankle in TRUST_ANKLES} for bed in TRUST_BEDS}
-    ankle_cases = tuple(n for by_ankle in beds.values() for group in by_ankle.values() for n in group)
+    answer = answer_cases()
+    cases = {c.name: c for c in answer}
+    by_ankle = {ANKLES[ankle][1]: {bed_label(cases[ankle_case_name(ankle, bed, ANSWER_NUS[0])]): [ankle_case_name(ankle, bed, nu) for nu in ANSWER_NUS]
+                                   for bed in ANSWER_BEDS} for ankle in ANKLES}
+    layers = layer_case_names()
     return Analysis(
         "trust",
-        "Can I trust it for my ankle? DEM against the FE reference",
+        "Can I trust it for my ankle? DEM against the FE on the cartilage ankles",
         "trust",
-        ankle_cases + layers + (low,),
+        tuple(c.name for c in answer) + (THRESHOLD_CASE,) + tuple(layers),
         {
-            "base": trust_name("slab", "coupled", TRUST_BASE_NU),
-            "beds": beds,
-            "layer_cases": list(layers),
+            "ankles": by_ankle,
+            "threshold": THRESHOLD_CASE,
+            "layer_cases": layers[:-1],
             "layer_base": "layer-F333-nu0.42-t2",
-            "low_load": low,
+            "low_load": layers[-1],
             "band": MODEL_BAND_REL,
             "goal": TRUST_GOAL_REL,
+            "area_growth": AREA_GROWTH,
             "figures": [f.name for f in _trust_figures()],
-            "fe_note": "The FE reference here is coarse so that this job stays short on 2 cores: P1 elements at 1.0 mm for the ideal and subject ankles up to nu = 0.42 "
-                       "(within 2.5 % of P2 at 0.7 mm on the ideal ankle), P2 at 1.0 mm at nu = 0.45 and for the layers (within 0.7 %), Taylor-Hood P2-P1 at nu = 0.49. "
-                       "The cylinder-plane, subject and thin-layer campaigns run P2 throughout and the full sweeps (nu up to 0.499, loads up to 4190 N, toe-off).",
+            "fe_note": f"The FE of the ankle answer is the two-layer model (both cartilage layers deformable, each bonded to its bone) at P2 "
+                       f"{FE_ANSWER['mesh_size_mm']:g} mm (the coarsest level of fe-convergence: M's own triangles, two elements through each layer), "
+                       f"nu {', '.join(f'{nu:g}' for nu in ANSWER_NUS)} only, so that this job stays short on 2 cores; the ankles campaign has nu 0.3-0.49 at 1.0 mm. "
+                       "The threshold law's row runs the FE slab at P1 1.0 mm (within 2.5 % of P2 at 0.7 mm), the layers P2 at 1.0 mm.",
         },
     )
 
@@ -166,8 +185,8 @@ def campaign() -> Campaign:
     viscous = viscoelastic_campaign().case(VISCOELASTIC_CASE)
     return Campaign(
         "quick",
-        "The main job: first the ankle answer (DEM with the default bed, the coupled thin layer, and with the independent springs against the FE reference on the ideal "
-        "and subject-like ankles over Poisson's ratio: where each agrees, where it breaks), then every "
+        "The main job: first the ankle answer (the ideal and subject-like ankles on their cartilage at 333, 1000 and 2000 N: DEM with the default bed, the coupled "
+        "layer, and with the independent springs against the two-layer FE; the thesis's threshold law in one row of its own), then every "
         "closed-form case, a few stability cases, ideal standing EDEM vs DEM, one cheap FE verification case (confined compression, coarse) "
         "and one viscoelastic case (coupled EDEM against the Kelvin-Voigt FE twin over a step held 3 tau).",
         tuple(trust) + tuple(_analytic_cases()) + tuple(stability[n] for n in picks) + (_ideal_standing_case(),) + tuple(fe[n] for n in fe_picks) + (viscous,),
