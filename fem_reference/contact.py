@@ -50,6 +50,10 @@ ETA_MAX = 1e-2
 ETA_SETTLING = 1e-3
 ETA_FINISH = 1e-5
 
+#: The factor the penetration beyond first touch (along the load) may change by per Newton step
+#: (:meth:`BorderedSystem.step_limit`), and the approach step of an iterate that touches nowhere.
+PENETRATION_GROWTH = 4.0
+
 
 class BorderedSystem:
     """Residual, Jacobian (shell) and exact block preconditioner of the bordered Newton system."""
@@ -89,6 +93,8 @@ class BorderedSystem:
         self.limited_steps = 0
         self.ehat: np.ndarray | None = None  # set with t_touch to enable the step limit
         self.t_touch = 0.0
+        self.touching = True  # whether the iterate has a point in the contact set (_jacobian)
+        self.approach: np.ndarray | None = None  # the rigid step of an untouching start (_approach_step)
         # the iterative path: the inner solves' forcing term and the Krylov iterations per Newton step
         self.newton_tolerances = (0.0, 0.0)  # SNES's (rtol, atol): it stops at max(atol, rtol |F_0|)
         self.fnorm = self.fnorm_previous = self.fnorm_first = float("nan")
@@ -101,11 +107,21 @@ class BorderedSystem:
         (test function and trial direction of ``uh``'s space): the bulk part is linear in u, so
         its matrix is assembled once (``bulk``: its Jacobian) and each Newton step assembles the
         contact facets alone (``F``, ``J``). The borders K, G, H are products of the Jacobian
-        with the rigid modes (:meth:`_assemble_jacobian`)."""
+        with the rigid modes (:meth:`_assemble_jacobian`); ``touching``: :meth:`touching_form`."""
         fem, ufl = s.m["fem"], s.m["ufl"]
         du = ufl.TrialFunction(s.V)
         return {"bulk": fem.form(ufl.derivative(bulk, uh, du)), "F": fem.form(contact),
-                "J": fem.form(ufl.derivative(contact, uh, du))}
+                "J": fem.form(ufl.derivative(contact, uh, du)), "touching": BorderedSystem.touching_form(s, pressure)}
+
+    @staticmethod
+    def touching_form(s: ContactSetup, pressure: Any) -> Any:
+        """The area of the contact facets where the contact pressure is positive (mm^2, at the
+        quadrature points): zero when the iterate touches nowhere, and then the contact terms
+        carry no stiffness against the rigid modes (their part of K, G, H is zero), so the Schur
+        complement S is only the round-off of E^T J E - G^T A^-1 K, whose sign is arbitrary
+        (:meth:`_jacobian`)."""
+        fem, ufl = s.m["fem"], s.m["ufl"]
+        return fem.form(ufl.conditional(ufl.gt(pressure, 0.0), 1.0, 0.0) * s.ds_c)
 
     def _create_matrix(self) -> Any:
         """The PETSc matrix A the Jacobian is assembled into: the bulk's sparsity (the contact
@@ -214,6 +230,16 @@ class BorderedSystem:
         self.inner.set_operator(self.A)
         self._forcing()
         self.krylov_per_step.append(0)
+        # Touching nowhere, S = H - G^T A^-1 K is zero but for round-off: E^T J E holds the bulk's
+        # E^T A_bulk E, zero only to round-off (-6e-14 on a 4 x 4 x 1 mm slab; either sign), and a
+        # negative S steps away from the obstacle. A start that touches nowhere (the touching
+        # estimate's penetration between the contact facets' quadrature points) approaches along
+        # the load instead; a later iterate keeps the last regular S (_schur).
+        self.touching = self.s.scalar(self.f["touching"]) > 0.0
+        self.approach = None if self.touching or self.S_ref is not None else self._approach_step()
+        if self.approach is not None:
+            J.assemble()
+            return
         for j in range(self.k):
             # X_j = A^-1 K_j = Ef_j + A^-1 L_j with Ef_j the rigid mode zero on the bonded rows and
             # L_j = K_j - A Ef_j the elastic force of moving the bonded face alone (K_j holds the
@@ -242,7 +268,7 @@ class BorderedSystem:
         S = self.H - np.array([[self.dot(self.G[j], self.Xs[m_]) for m_ in range(self.k)]
                                for j in range(self.k)])
         sv = np.linalg.svd(S, compute_uv=False)
-        if self.S_ref is None:
+        if self.S_ref is None:  # touching (_jacobian)
             if sv.min() <= 1e-12 * max(sv.max(), 1e-300):
                 raise FEConvergenceError(
                     "no contact stiffness along (a combination of) the free translations at the "
@@ -251,7 +277,7 @@ class BorderedSystem:
                     "obstacle (fix that translation through free_dofs)", reason="NO_CONTACT")
             self.S_ref = S.copy()
         ref = np.linalg.svd(self.S_ref, compute_uv=False).max()
-        if sv.min() <= 1e-8 * ref:
+        if not self.touching or sv.min() <= 1e-8 * ref:
             self.singular_steps += int(initial)
             S = self.S_ref.copy()
         else:
@@ -303,9 +329,29 @@ class BorderedSystem:
         self.eta = float(max(eta, 0.1 * target / self.fnorm if self.fnorm > 0.0 else eta))
         self.fnorm_previous = self.fnorm
 
+    def _approach_step(self) -> np.ndarray:
+        """The rigid step (k,) of a start that touches nowhere: along the load, the penetration
+        beyond first touch grown by :data:`PENETRATION_GROWTH` (the step limit's largest step; in
+        SNES's sign, X <- X - Y). With no contact term the bulk rows of the bordered system do not
+        depend on the rigid unknowns (K = 0), so its u~ rows are solved as they stand."""
+        kt = self.s.kt
+        along = self.s.dirs @ self.ehat if self.ehat is not None else np.zeros(kt)  # (kt,)
+        pen = float(along @ self.delta[:kt]) - self.t_touch
+        if pen <= 0.0 or float(along @ along) == 0.0:
+            raise FEConvergenceError(
+                "the contact surface does not touch the obstacle at the initial state (no contact "
+                "pressure on the contact facets, and the start is not beyond first touch along the "
+                "load)", reason="NO_CONTACT")
+        dd = np.zeros(self.k)
+        dd[:kt] = -(PENETRATION_GROWTH - 1.0) * pen * along / float(along @ along)
+        return dd
+
     def apply(self, pc: Any, x: Any, y: Any) -> None:
         xu, xd = self.split(x)
         z0 = self.solve_A(xu, self.eta)
+        if self.approach is not None:
+            self.join(y, z0, self.approach)
+            return
         yu, dd = self.eliminate(z0, xd)
         # The step's residual in the u rows is r(z0) - sum_j dd_j r(Y_j): the Y_j were solved to the
         # forcing term of |L_j|, which can be far larger than |F| / |dd_j|. Solve them further
@@ -328,10 +374,10 @@ class BorderedSystem:
 
     def step_limit(self, dd: np.ndarray) -> float:
         """Damping factor keeping the penetration beyond first touch (along the load) within a
-        factor ``growth`` of the current one per Newton step (SNES steps X <- X - Y)."""
+        factor :data:`PENETRATION_GROWTH` of the current one per Newton step (SNES steps X <- X - Y)."""
         if self.ehat is None:
             return 1.0
-        growth = 4.0
+        growth = PENETRATION_GROWTH
         kt = self.s.kt
         pen = float(self.ehat @ (self.s.dirs.T @ self.delta[:kt])) - self.t_touch
         new = pen - float(self.ehat @ (self.s.dirs.T @ dd[:kt]))

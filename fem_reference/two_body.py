@@ -216,14 +216,15 @@ class TwoBodySystem(BorderedSystem):
     def forms(s: ContactSetup, bulk: Any, contact: Any, uh: Any, E: list, pressure: Any, nu: Any) -> dict:
         """F_u = ``bulk`` + ``contact`` (the contact term holds u - w), F_w = p z . nu ds on M's
         contact face, and their derivatives in u and w: the bulk's (``bulk``) once, the contact
-        terms' (``F``, ``Fw``, ``J..``) at each Newton step."""
+        terms' (``F``, ``Fw``, ``J..``) at each Newton step; ``touching``: :meth:`BorderedSystem.touching_form`."""
         fem, ufl = s.m["fem"], s.m["ufl"]
         z = ufl.TestFunction(s.W)
         Fw = pressure * ufl.dot(z, nu) * s.ds_c
         du, dw = ufl.TrialFunction(s.V), ufl.TrialFunction(s.W)
         return {"bulk": fem.form(ufl.derivative(bulk, uh, du)), "F": fem.form(contact), "Fw": fem.form(Fw),
                 "Juu": fem.form(ufl.derivative(contact, uh, du)), "Juw": fem.form(ufl.derivative(contact, s.w, dw)),
-                "Jwu": fem.form(ufl.derivative(Fw, uh, du)), "Jww": fem.form(ufl.derivative(Fw, s.w, dw))}
+                "Jwu": fem.form(ufl.derivative(Fw, uh, du)), "Jww": fem.form(ufl.derivative(Fw, s.w, dw)),
+                "touching": BorderedSystem.touching_form(s, pressure)}
 
     def _create_matrix(self) -> Any:
         """The bulk matrix, the contact blocks, their products with P and A with the union of
