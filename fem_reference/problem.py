@@ -411,7 +411,8 @@ class Roller:
 
 @dataclass(frozen=True)
 class NitscheParameters:
-    """Chouly-Hild Nitsche contact: gamma = gamma0 * (lambda + 2 mu) / h.
+    """Chouly-Hild Nitsche contact: gamma = gamma0 * (lambda + 2 mu) / h, with 2 mu in place of
+    lambda + 2 mu for Taylor-Hood (whose stress's displacement part is 2 mu eps(u)).
 
     h = "height": the height of the cell over its contact facet, 3 * volume / facet area (what
     the discrete trace inequality needs; robust on anisotropic cells) or "diameter": the cell
@@ -435,13 +436,14 @@ class NitscheParameters:
 #: Inner linear solves of the bordered Newton (``SolverOptions.linear_solver``, ``[fe]
 #: linear_solver``, ``edem fe --linear-solver``); docs/method.md, section 6.
 LINEAR_SOLVERS = {
-    "auto": "direct while the LU's memory estimate (x2) fits the memory available "
-            "(fem_reference.sizing.direct_fits), iterative past that",
+    "auto": "iterative from 20,000 unknowns (fem_reference.sizing.ITERATIVE_FROM_DOFS) or where the "
+            "LU's memory estimate (x2) does not fit, direct below",
     "direct": "MUMPS LU of the Jacobian",
-    "iterative": "Krylov: P1/P2 GMRES (CG for Nitsche theta = 1) + GAMG with the rigid-body "
-                 "near-nullspace; Taylor-Hood GMRES + Schur-complement field split (GAMG with the "
-                 "near-nullspace on the displacement, a pressure mass matrix scaled by "
-                 "1/mu + 1/lambda on the pressure)",
+    "iterative": "Krylov to an Eisenstat-Walker forcing term: P2 GMRES (CG for Nitsche theta = 1) + "
+                 "P2 -> P1 p-multigrid (SOR, GAMG with the rigid-body near-nullspace on P1); P1 "
+                 "the same with GAMG alone; Taylor-Hood GMRES + Schur-complement field split (the "
+                 "p-multigrid on the displacement, the pressure mass matrix scaled by 1/mu + "
+                 "1/lambda on the pressure)",
 }
 
 
@@ -665,6 +667,7 @@ class FEContactResult:
     warnings: list[str] = field(default_factory=list)
     linear_solver: str = "direct"  # the inner solve used: "direct" or "iterative" (LINEAR_SOLVERS)
     krylov_iterations: int = 0  # iterative path: inner Krylov iterations summed over all solves
+    krylov_iterations_per_step: list[int] = field(default_factory=list)  # iterative path: per Newton step
     # free rotations (empty without them): small rotation vector of the bone about G, the moment
     # of the contact force about G and |P_rot (M_c - moment)|
     rotation_axes: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))

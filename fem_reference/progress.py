@@ -59,14 +59,17 @@ class SolveProgress:
     def _prefix(self) -> str:
         return f"fe: {self.label}: " if self.label else "fe: "
 
-    def newton(self, iteration: int, residual_n: float, contact_nodes: int, entered: int, left: int) -> None:
-        """After Newton iteration ``iteration`` (0 = the initial guess) with residual norm ``residual_n``."""
+    def newton(self, iteration: int, residual_n: float, contact_nodes: int, entered: int, left: int,
+               krylov: int | None = None) -> None:
+        """After Newton iteration ``iteration`` (0 = the initial guess) with residual norm ``residual_n``;
+        ``krylov``: the inner Krylov iterations of the step that led here (iterative path)."""
         self.newton_iteration = iteration
         elapsed = self.elapsed_s()
         if elapsed < self.quiet_s:
             return
         change = "" if iteration == 0 else f" (+{entered} -{left})"
-        self.write(f"{self._prefix()}Newton {iteration}: |F| = {residual_n:.3e} N, {contact_nodes} contact nodes{change}, "
+        inner = "" if krylov is None or iteration == 0 else f", {krylov} Krylov iterations"
+        self.write(f"{self._prefix()}Newton {iteration}: |F| = {residual_n:.3e} N, {contact_nodes} contact nodes{change}{inner}, "
                    f"{elapsed:.1f} s")
 
     def krylov(self, iteration: int, residual: float, method: str) -> None:

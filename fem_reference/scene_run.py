@@ -132,6 +132,7 @@ class FEStepResult:
     warnings: list[str] = field(default_factory=list)
     linear_solver: str = ""  # the inner solve used: "direct" or "iterative"; "" when nothing was solved
     krylov_iterations: int = 0  # iterative path: inner Krylov iterations over the time point's solves
+    krylov_iterations_per_step: list[int] = field(default_factory=list)  # iterative path: per Newton step
 
 
 @dataclass
@@ -200,6 +201,10 @@ class FERunResult:
             # the inner solves: "direct" (LU) or "iterative" (Krylov; its iterations over all solves)
             "linear_solver": sorted({x.linear_solver for x in steps if x.linear_solver}),
             "krylov_iterations": int(sum(x.krylov_iterations for x in steps)),
+            # per solved time point (timeseries.csv's order): its Newton steps, and on the iterative
+            # path the Krylov iterations of each step (an empty list for the LU)
+            "newton_iterations_per_time_point": [int(x.iterations) for x in steps],
+            "krylov_iterations_per_newton_step": [[int(n) for n in x.krylov_iterations_per_step] for x in steps],
             "max_nominal_strain": max(float(x.max_nominal_strain) for x in steps),
             "nominal_strain_definition": NOMINAL_STRAIN_DEFINITION,
             "max_principal_strain": max(float(x.max_principal_strain) for x in steps),
@@ -710,6 +715,7 @@ def _step_result(k: int, t: float, force: np.ndarray, moment: np.ndarray, geom: 
         contact_area_on_mobile_mm2=float(area_on_mobile),
         iterations=int(res.newton_iterations),
         linear_solver=res.linear_solver, krylov_iterations=int(res.krylov_iterations),
+        krylov_iterations_per_step=list(res.krylov_iterations_per_step),
         force_residual_n=float(res.force_residual_n),
         moment_residual_nmm=float(res.moment_residual_nmm),
         n_dofs=int(res.n_dofs),

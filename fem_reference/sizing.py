@@ -20,9 +20,11 @@ and on the subject-like ankle's slab at 0.7 mm 532k DOFs, 11 GB by LU (estimated
 ``fe-convergence``, docs/campaigns.md): past one midpoint refinement the counts run 20-30 % low
 and the memory 1.6-1.7x, which the x2 margin covers.
 
-The direct solver's (MUMPS LU) factor grows like N^(4/3) for 3D meshes (nested dissection), the
-Krylov solver's (GAMG) memory like N; both are scaled from that point and the estimate is
-doubled as a safety margin before it is compared with the memory available.
+The direct solver's (MUMPS LU) factor grows like N^(4/3) for 3D meshes (nested dissection) and is
+scaled from that point; the Krylov solver's (p-multigrid) memory grows like N, a measured cost per
+DOF (:data:`ITERATIVE_BYTES_PER_DOF`). The estimate is doubled as a safety margin before it is
+compared with the memory available. The Krylov path is the default from
+:data:`ITERATIVE_FROM_DOFS` unknowns (:func:`iterative_is_default`), where it is the faster.
 """
 
 from __future__ import annotations
@@ -42,6 +44,15 @@ _CALIBRATION_DOFS = 71_011
 _CALIBRATION_BYTES = 1.06e9 - BASE_BYTES
 #: factor between the estimate and what must be available (the calibration is one machine, one mesh)
 SAFETY = 2.0
+#: The Krylov path's memory per DOF above BASE_BYTES, bytes: measured 2026-11-28 (peak resident
+#: set) on the subject-like ankle at 0.7 mm, Taylor-Hood at nu 0.499 (556k DOFs, 2.6 GB: 3.9 kB);
+#: P2 there 532k DOFs, 1.7 GB (2.3 kB); P2 at 1.0 mm 94k DOFs, 0.44 GB.
+ITERATIVE_BYTES_PER_DOF = 4.0e3
+#: From this many unknowns ``auto`` takes the Krylov path even where the LU fits: measured
+#: 2026-11-28 (CPU time of ``edem fe``, the ideal ankle) P1 10k DOFs 1.9 s by LU, 2.1 s Krylov;
+#: P1 71k 20 s, 15 s; P2 39k 5.7 s, 4.5 s; Taylor-Hood 42k 8.3 s, 6.8 s and 74k 26 s, 12 s; the
+#: subject-like ankle P2 94k 25 s, 14 s (docs/method.md, section 6, "Linear solver").
+ITERATIVE_FROM_DOFS = 20_000
 
 
 @dataclass(frozen=True)
@@ -68,9 +79,11 @@ def solid_size(n_surface_triangles: int, surface_mean_edge_mm: float, max_thickn
 
 def memory_bytes(dofs: int, solver: str) -> float:
     """Estimated peak resident memory (bytes) of a solve with ``dofs`` unknowns: the calibration
-    point scaled like N^(4/3) for the direct solver (LU fill), like N for the Krylov solver."""
-    ratio = dofs / _CALIBRATION_DOFS
-    return BASE_BYTES + _CALIBRATION_BYTES * (ratio if solver == "iterative" else ratio ** (4.0 / 3.0))
+    point scaled like N^(4/3) for the direct solver (LU fill); :data:`ITERATIVE_BYTES_PER_DOF`
+    per DOF for the Krylov solver."""
+    if solver == "iterative":
+        return BASE_BYTES + ITERATIVE_BYTES_PER_DOF * dofs
+    return BASE_BYTES + _CALIBRATION_BYTES * (dofs / _CALIBRATION_DOFS) ** (4.0 / 3.0)
 
 
 def direct_fits(dofs: int, available_bytes: float | None = None) -> bool:
@@ -85,6 +98,12 @@ def direct_fits(dofs: int, available_bytes: float | None = None) -> bool:
     return SAFETY * memory_bytes(dofs, "direct") <= available
 
 
+def iterative_is_default(dofs: int, available_bytes: float | None = None) -> bool:
+    """The ``auto`` choice of the inner linear solve: Krylov from :data:`ITERATIVE_FROM_DOFS`
+    unknowns, or wherever the LU does not fit (:func:`direct_fits`)."""
+    return dofs >= ITERATIVE_FROM_DOFS or not direct_fits(dofs, available_bytes)
+
+
 def estimate(cells: int, vertices: int, element: str, available_bytes: float | None = None,
              linear_solver: str = "auto") -> FESize:
     """DOFs of the element on a tetrahedral mesh, the solver used and its peak memory.
@@ -92,13 +111,13 @@ def estimate(cells: int, vertices: int, element: str, available_bytes: float | N
     Edges of a tetrahedral mesh: about vertices + cells (Euler's formula with two faces per
     cell). P1: 3 per vertex; P2: 3 per vertex and edge; Taylor-Hood: P2 plus 1 per vertex.
     Solver (``linear_solver``, :data:`fem_reference.problem.LINEAR_SOLVERS`): "direct" or
-    "iterative" as given; "auto" is direct while :func:`direct_fits` (with ``available_bytes``,
-    default the memory available now), iterative past that (P1, P2 and Taylor-Hood alike).
+    "iterative" as given; "auto" is :func:`iterative_is_default` (with ``available_bytes``,
+    default the memory available now; P1, P2 and Taylor-Hood alike).
     """
     edges = vertices + cells
     dofs = 3 * vertices if element == "P1" else 3 * (vertices + edges) + (vertices if element == "TH" else 0)
     if linear_solver == "auto":
-        solver = "direct" if direct_fits(dofs, available_bytes) else "iterative"
+        solver = "iterative" if iterative_is_default(dofs, available_bytes) else "direct"
     else:
         solver = linear_solver
     return FESize(cells, vertices, dofs, solver, memory_bytes(dofs, solver))

@@ -208,35 +208,40 @@ class TwoBodySetup(ContactSetup):
 class TwoBodySystem(BorderedSystem):
     """The bordered Newton system of :mod:`fem_reference.contact` for two layers: the residual
     R = F_u + P^T F_w and the Jacobian J = J_uu + J_uw P + P^T J_wu + P^T J_ww P in one matrix of
-    fixed sparsity; K = J E, G = J^T E, H = E^T J E from it (E: M's rigid modes)."""
+    fixed sparsity; K = J E, G = J^T E, H = E^T J E from it (E: M's rigid modes). As in the
+    one-body system, the bulk part of J_uu (both layers' elasticity, linear) is assembled once and
+    each Newton step assembles the contact facets' terms alone."""
 
     @staticmethod
-    def forms(s: ContactSetup, F: Any, uh: Any, E: list, pressure: Any, nu: Any) -> dict:
-        """F_u (``F``: its contact term holds u - w), F_w = p z . nu ds on M's contact face, and
-        their derivatives in u and w."""
+    def forms(s: ContactSetup, bulk: Any, contact: Any, uh: Any, E: list, pressure: Any, nu: Any) -> dict:
+        """F_u = ``bulk`` + ``contact`` (the contact term holds u - w), F_w = p z . nu ds on M's
+        contact face, and their derivatives in u and w: the bulk's (``bulk``) once, the contact
+        terms' (``F``, ``Fw``, ``J..``) at each Newton step; ``touching``: :meth:`BorderedSystem.touching_form`."""
         fem, ufl = s.m["fem"], s.m["ufl"]
         z = ufl.TestFunction(s.W)
         Fw = pressure * ufl.dot(z, nu) * s.ds_c
         du, dw = ufl.TrialFunction(s.V), ufl.TrialFunction(s.W)
-        return {"F": fem.form(F), "Fw": fem.form(Fw),
-                "Juu": fem.form(ufl.derivative(F, uh, du)), "Juw": fem.form(ufl.derivative(F, s.w, dw)),
-                "Jwu": fem.form(ufl.derivative(Fw, uh, du)), "Jww": fem.form(ufl.derivative(Fw, s.w, dw))}
+        return {"bulk": fem.form(ufl.derivative(bulk, uh, du)), "F": fem.form(contact), "Fw": fem.form(Fw),
+                "Juu": fem.form(ufl.derivative(contact, uh, du)), "Juw": fem.form(ufl.derivative(contact, s.w, dw)),
+                "Jwu": fem.form(ufl.derivative(Fw, uh, du)), "Jww": fem.form(ufl.derivative(Fw, s.w, dw)),
+                "touching": BorderedSystem.touching_form(s, pressure)}
 
     def _create_matrix(self) -> Any:
-        """The blocks, their products with P and A with the union of their sparsity patterns."""
+        """The bulk matrix, the contact blocks, their products with P and A with the union of
+        their sparsity patterns."""
         PETSc, fp = self.s.m["PETSc"], self.s.m["fem_petsc"]
         P = self.s.P
+        self.A_bulk = fp.assemble_matrix(self.f["bulk"])
+        self.A_bulk.assemble()
         # assembled once (explicit zeros included): a matrix assembled empty would lose its pattern
         self.blocks = {key: fp.assemble_matrix(self.f[key]) for key in ("Juu", "Juw", "Jwu", "Jww")}
         for mat in self.blocks.values():
             mat.assemble()
         b = self.blocks
         self.products = [b["Juw"].matMult(P), P.transposeMatMult(b["Jwu"]), b["Jww"].PtAP(P)]
-        A = b["Juu"].duplicate(copy=True)
-        for C in self.products:
+        A = self.A_bulk.duplicate(copy=True)
+        for C in (b["Juu"], *self.products):
             A.axpy(1.0, C, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        self.cons_global = self.s._v_global(self.s.cons_owned).astype(PETSc.IntType)
-        self.E_vecs = [e.x.petsc_vec for e in self.E]
         return A
 
     def set_state(self, X: Any) -> None:
@@ -249,7 +254,8 @@ class TwoBodySystem(BorderedSystem):
         fw.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.s.P.multTranspose(fw, self.zu)
         fw.destroy()
-        return self.s.vector_owned(self.f["F"]) + np.array(self.zu.getArray(readonly=True))
+        coupling = np.array(self.zu.getArray(readonly=True))
+        return super()._residual_vector() + coupling
 
     def _assemble_jacobian(self) -> None:
         PETSc, fp, s = self.s.m["PETSc"], self.s.m["fem_petsc"], self.s
@@ -264,22 +270,9 @@ class TwoBodySystem(BorderedSystem):
         b["Jww"].PtAP(P, result=self.products[2])
         A = self.A
         A.zeroEntries()
-        for C in (b["Juu"], *self.products):
+        for C in (self.A_bulk, b["Juu"], *self.products):
             A.axpy(1.0, C, structure=subset)
-        JE = []
-        for j, e in enumerate(self.E_vecs):
-            A.mult(e, self.zu)
-            JE.append(np.array(self.zu.getArray(readonly=True)))
-            A.multTranspose(e, self.zu)
-            self.G[j] = np.array(self.zu.getArray(readonly=True))
-        eo = [np.array(e.getArray(readonly=True)) for e in self.E_vecs]
-        for j in range(self.k):
-            for m_ in range(self.k):
-                self.H[j, m_] = self.dot(eo[j], JE[m_])
-            self.K[j] = JE[j]
-            self.K[j][s.cons_owned] = 0.0
-            self.G[j][s.cons_owned] = 0.0
-        A.zeroRowsColumns(self.cons_global, diag=1.0)
+        self._borders()
 
     def release(self) -> None:
         super().release()

@@ -25,6 +25,7 @@ from fem_reference import FEContactProblem, RigidCylinder, RigidPlane, Roller, m
 from fem_reference import closed_forms as cf  # noqa: E402
 from fem_reference.biphasic import BiphasicMaterial  # noqa: E402
 from fem_reference.biphasic_contact import solve_history  # noqa: E402
+from fem_reference.contact import nitsche_modulus_mpa  # noqa: E402
 from fem_reference.problem import NitscheParameters, SolverOptions  # noqa: E402
 
 pytestmark = pytest.mark.fe
@@ -112,7 +113,9 @@ def test_indentation_starts_incompressible_and_ends_drained(comm):
     nu_u = 0.5 - 1e-7
     e_u = 2.0 * mu * (1.0 + nu_u)
     lam_u = e_u * nu_u / ((1.0 + nu_u) * (1.0 - 2.0 * nu_u))
-    gamma0 = NitscheParameters().gamma0 * (lam + 2.0 * mu) / (lam_u + 2.0 * mu)  # the same gamma as the biphasic step's
+    # the same gamma as the biphasic step's (its drained matrix's lambda + 2 mu; the undrained
+    # Taylor-Hood body's penalty scales with 2 mu)
+    gamma0 = NitscheParameters().gamma0 * nitsche_modulus_mpa("TH", lam, mu, own_bulk=True) / nitsche_modulus_mpa("TH", lam_u, mu)
     undrained = solve_contact(dataclasses.replace(base, youngs_modulus_mpa=e_u, poissons_ratio=nu_u,
                                                   nitsche=NitscheParameters(gamma0=gamma0)))
     drained = solve_contact(dataclasses.replace(base, element="P2"))

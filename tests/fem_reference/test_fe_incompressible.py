@@ -107,10 +107,51 @@ def test_plain_amg_on_the_taylor_hood_saddle_point_does_not_converge(comm, monke
     from fem_reference import krylov
 
     def plain_amg(ksp, s):
-        ksp.setTolerances(rtol=krylov.INNER_RTOL, atol=0.0, max_it=krylov.INNER_MAX_IT)
-        return [], krylov.set_inner_options(ksp, {"ksp_type": "gmres", "ksp_pc_side": "right",
+        return None, [], krylov.set_inner_options(ksp, {"ksp_type": "gmres", "ksp_pc_side": "right",
                                                   "ksp_gmres_restart": str(krylov.GMRES_RESTART), "pc_type": "gamg"})
 
     monkeypatch.setattr(krylov, "krylov_fieldsplit", plain_amg)
     with pytest.raises(FEConvergenceError, match="inner Krylov solve"):
         solve_contact(_cylinder_on_th_slab(comm, "iterative"))
+
+
+def _undrained_quarter_slab(comm, **kw):
+    """The undrained Taylor-Hood quarter slab (4 x 4 x 1 mm, free sides, mu = 0.35 MPa,
+    nu = 0.4999) under a rigid cylinder R = 10 mm pressed by 0.1 N."""
+    from fem_reference import RigidCylinder
+
+    msh = meshes.box_slab(comm, 4.0, 4.0, 1.0, (8, 8, 2), confined=False, quarter=True)
+    nu = 0.4999
+    return FEContactProblem(mesh=msh, youngs_modulus_mpa=2.0 * 0.35 * (1.0 + nu), poissons_ratio=nu,
+                            obstacle=RigidCylinder((0.0, 0.0, 11.0), (0.0, 1.0, 0.0), 10.0),
+                            force_n=(0.0, 0.0, 0.1), rollers=(Roller(4, "x"), Roller(5, "y")),
+                            element="TH", **kw)
+
+
+def test_a_start_touching_nowhere_approaches_and_finds_the_touching_starts_answer(comm):
+    """Invariant: the answer does not depend on the start. The touching estimate's Winkler bed
+    takes lambda + 2 mu, so at nu = 0.4999 the start penetrates 2.9e-5 mm, a strip of 0.02 mm
+    under the cylinder's line that holds no quadrature point of the contact facets: no contact
+    pressure and no contact stiffness, the Schur complement of the rigid translation is round-off
+    of either sign (it was -6e-14 and Newton walked away from the obstacle). From there Newton
+    approaches along the load and converges to the answer of a start that touches (0.01 mm
+    beyond first touch).
+
+    Tolerance 1e-7: both runs end with |F| below 1e-11 of the load (the direct path reaches
+    round-off), within condition x 1e-11 of the discrete solution; the condition number of the
+    Jacobian of this Taylor-Hood slab is of the order of 1e7 (9.3e6 on the full slab above).
+    Measured: the two agree to 2e-16."""
+    from fem_reference.progress import SolveProgress
+
+    lines: list[str] = []
+    untouching = solve_contact(_undrained_quarter_slab(comm), comm, progress=SolveProgress(lines.append))
+    touching = solve_contact(_undrained_quarter_slab(comm, initial_penetration_mm=0.01), comm)
+    report("untouching start", newton=untouching.newton_iterations, d=untouching.bone_displacement_mm[2],
+           newton_touching=touching.newton_iterations, d_touching=touching.bone_displacement_mm[2])
+    if comm.rank == 0:
+        assert ", 0 contact nodes" in lines[0]  # Newton 0: the start touches nowhere
+    for r in (untouching, touching):
+        assert r.relative_force_residual < 1e-6
+    np.testing.assert_allclose(untouching.bone_displacement_mm, touching.bone_displacement_mm, rtol=1e-7)
+    assert untouching.peak_pressure_mpa == pytest.approx(touching.peak_pressure_mpa, rel=1e-7)
+    assert untouching.contact_area_mm2 == pytest.approx(touching.contact_area_mm2, rel=1e-7)

@@ -9,7 +9,7 @@ import pytest
 
 from edem.cli import main
 from edem.scene import load_scene
-from fem_reference.sizing import SAFETY, FESize, check_fits, direct_fits, estimate, memory_bytes, solid_size
+from fem_reference.sizing import ITERATIVE_FROM_DOFS, SAFETY, FESize, check_fits, direct_fits, estimate, memory_bytes, solid_size
 from geometries.errors import InputError
 from geometries.fe_solids import layer_solid
 
@@ -36,21 +36,26 @@ def _flat_plates():
     return SCENES_DIR / "flat-plates.toml"
 
 
-def test_dofs_per_element_and_the_direct_solver_while_its_memory_fits():
+def test_dofs_per_element_and_the_direct_solver_below_its_threshold_while_its_memory_fits():
     """P1: 3 per vertex; P2: 3 per vertex and edge (edges ~ vertices + cells); TH adds a pressure
-    per vertex. The LU is used while its estimate times the safety factor fits the memory
-    available, the Krylov solver past that, for every element."""
+    per vertex. The LU is used below ITERATIVE_FROM_DOFS while its estimate times the safety
+    factor fits the memory available, the Krylov solver from there or past that, for every
+    element."""
     small = estimate(1000, 300, "P1", available_bytes=24e9)
     assert small.dofs == 900 and small.solver == "direct"
     assert estimate(1000, 300, "P2").dofs == 3 * (300 + 1300)
     assert estimate(1000, 300, "TH").dofs == 3 * (300 + 1300) + 300
-    cells = 300_000  # about 1.1 M P2 DOFs: the LU's estimate (about 20 GB) fits 100 GB, not 24 GB
+    cells = 2_000  # about 7.6k P2 DOFs, below the threshold: the LU while it fits
     dofs = estimate(cells, cells // 5, "P2", available_bytes=100e9).dofs
+    assert dofs < ITERATIVE_FROM_DOFS
     need = SAFETY * memory_bytes(dofs, "direct")
     assert estimate(cells, cells // 5, "P2", available_bytes=need).solver == "direct" and direct_fits(dofs, need)
     assert estimate(cells, cells // 5, "P2", available_bytes=need * 0.99).solver == "iterative" and not direct_fits(dofs, need * 0.99)
     # Taylor-Hood too: past the LU's memory its Krylov path is the Schur-complement field split
     assert estimate(cells, cells // 5, "TH", available_bytes=need * 0.99).solver == "iterative"
+    # from the threshold on, the Krylov path whatever the memory
+    big = estimate(300_000, 60_000, "P2", available_bytes=1e15)
+    assert big.dofs >= ITERATIVE_FROM_DOFS and big.solver == "iterative"
     # a forced solver is estimated as such, whatever fits
     assert estimate(cells, cells // 5, "P2", available_bytes=need * 0.99, linear_solver="direct").solver == "direct"
     assert estimate(1000, 300, "P1", available_bytes=24e9, linear_solver="iterative").solver == "iterative"
