@@ -322,7 +322,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mesh-size", type=float, metavar="MM", help="element size in mm; overrides [fe] mesh_size_mm")
     p.add_argument("--degree", type=int, choices=(1, 2), help="element degree (2: P2, or Taylor-Hood at nu >= 0.49); overrides [fe] degree")
     p.add_argument("--linear-solver", metavar="NAME",
-                   help="inner linear solve: auto (Krylov from 20,000 unknowns or where the LU does not fit in memory, MUMPS LU below), direct or iterative "
+                   help="inner linear solve: auto (Krylov from 20,000 unknowns for P2 and Taylor-Hood, or where the LU does not fit in memory, MUMPS LU below), direct or iterative "
                         "(docs/method.md, section 6); overrides [fe] linear_solver")
     p.add_argument("--steps", metavar="LIST", help="time points to solve, e.g. 0,5-9,10:65:8 (default: all)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,

@@ -35,7 +35,7 @@ def use_iterative(s: ContactSetup) -> bool:
     from fem_reference.sizing import iterative_is_default
 
     choice = s.problem.solver.linear_solver
-    return choice == "iterative" or (choice == "auto" and iterative_is_default(s.n_global))
+    return choice == "iterative" or (choice == "auto" and iterative_is_default(s.n_global, s.problem.resolved_element()))
 
 
 #: Relative tolerance of an inner Krylov solve when the caller does not give one, on the

@@ -436,7 +436,7 @@ class NitscheParameters:
 #: Inner linear solves of the bordered Newton (``SolverOptions.linear_solver``, ``[fe]
 #: linear_solver``, ``edem fe --linear-solver``); docs/method.md, section 6.
 LINEAR_SOLVERS = {
-    "auto": "iterative from 20,000 unknowns (fem_reference.sizing.ITERATIVE_FROM_DOFS) or where the "
+    "auto": "iterative from 20,000 unknowns for P2 and Taylor-Hood (fem_reference.sizing.ITERATIVE_FROM_DOFS) or where the "
             "LU's memory estimate (x2) does not fit, direct below",
     "direct": "MUMPS LU of the Jacobian",
     "iterative": "Krylov to an Eisenstat-Walker forcing term: P2 GMRES (CG for Nitsche theta = 1) + "

@@ -85,7 +85,7 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     The scene's ``[fe] material`` (:data:`MATERIALS`, default elastic): "biphasic" takes its
     ``[biphasic]`` table (:func:`biphasic_settings`) and Taylor-Hood.
     linear_solver: the inner linear solve (:data:`fem_reference.problem.LINEAR_SOLVERS`), default
-    "auto" (Krylov from 20,000 unknowns or where the LU does not fit in memory, direct below).
+    "auto" (Krylov from 20,000 unknowns for P2 and Taylor-Hood, or where the LU does not fit in memory, direct below).
     argument_keys: how errors name an argument given here (default: its parameter name).
     """
     fe = dict(scene.fe or {})

@@ -24,7 +24,8 @@ The direct solver's (MUMPS LU) factor grows like N^(4/3) for 3D meshes (nested d
 scaled from that point; the Krylov solver's (p-multigrid) memory grows like N, a measured cost per
 DOF (:data:`ITERATIVE_BYTES_PER_DOF`). The estimate is doubled as a safety margin before it is
 compared with the memory available. The Krylov path is the default from
-:data:`ITERATIVE_FROM_DOFS` unknowns (:func:`iterative_is_default`), where it is the faster.
+:data:`ITERATIVE_FROM_DOFS` unknowns for P2 and Taylor-Hood (:func:`iterative_is_default`), where
+it is the faster.
 """
 
 from __future__ import annotations
@@ -98,10 +99,20 @@ def direct_fits(dofs: int, available_bytes: float | None = None) -> bool:
     return SAFETY * memory_bytes(dofs, "direct") <= available
 
 
-def iterative_is_default(dofs: int, available_bytes: float | None = None) -> bool:
+#: The elements whose Krylov path ``auto`` takes from :data:`ITERATIVE_FROM_DOFS` unknowns (the
+#: p-multigrid's). P1 (GAMG alone) keeps the LU wherever it fits: on the fine Hertz mesh of
+#: tests/fem_reference/test_fe_convergence.py (P1, 35.9k DOFs) the Krylov path's Newton walked
+#: away from the obstacle (the Schur complement of the rigid motions, a near-cancellation of the
+#: bulk's terms, took the wrong sign from the inexact inner solves) where the LU converges in 15
+#: steps (measured 2026-11-28; docs/method.md#the-iterative-path)
+ITERATIVE_ELEMENTS = ("P2", "TH")
+
+
+def iterative_is_default(dofs: int, element: str, available_bytes: float | None = None) -> bool:
     """The ``auto`` choice of the inner linear solve: Krylov from :data:`ITERATIVE_FROM_DOFS`
-    unknowns, or wherever the LU does not fit (:func:`direct_fits`)."""
-    return dofs >= ITERATIVE_FROM_DOFS or not direct_fits(dofs, available_bytes)
+    unknowns for the elements of :data:`ITERATIVE_ELEMENTS`, or wherever the LU does not fit
+    (:func:`direct_fits`)."""
+    return (element in ITERATIVE_ELEMENTS and dofs >= ITERATIVE_FROM_DOFS) or not direct_fits(dofs, available_bytes)
 
 
 def estimate(cells: int, vertices: int, element: str, available_bytes: float | None = None,
@@ -117,7 +128,7 @@ def estimate(cells: int, vertices: int, element: str, available_bytes: float | N
     edges = vertices + cells
     dofs = 3 * vertices if element == "P1" else 3 * (vertices + edges) + (vertices if element == "TH" else 0)
     if linear_solver == "auto":
-        solver = "iterative" if iterative_is_default(dofs, available_bytes) else "direct"
+        solver = "iterative" if iterative_is_default(dofs, element, available_bytes) else "direct"
     else:
         solver = linear_solver
     return FESize(cells, vertices, dofs, solver, memory_bytes(dofs, solver))

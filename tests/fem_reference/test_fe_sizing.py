@@ -39,8 +39,8 @@ def _flat_plates():
 def test_dofs_per_element_and_the_direct_solver_below_its_threshold_while_its_memory_fits():
     """P1: 3 per vertex; P2: 3 per vertex and edge (edges ~ vertices + cells); TH adds a pressure
     per vertex. The LU is used below ITERATIVE_FROM_DOFS while its estimate times the safety
-    factor fits the memory available, the Krylov solver from there or past that, for every
-    element."""
+    factor fits the memory available, the Krylov solver past that for every element and from
+    the threshold for P2 and Taylor-Hood (ITERATIVE_ELEMENTS)."""
     small = estimate(1000, 300, "P1", available_bytes=24e9)
     assert small.dofs == 900 and small.solver == "direct"
     assert estimate(1000, 300, "P2").dofs == 3 * (300 + 1300)
@@ -56,6 +56,9 @@ def test_dofs_per_element_and_the_direct_solver_below_its_threshold_while_its_me
     # from the threshold on, the Krylov path whatever the memory
     big = estimate(300_000, 60_000, "P2", available_bytes=1e15)
     assert big.dofs >= ITERATIVE_FROM_DOFS and big.solver == "iterative"
+    # ... for the p-multigrid's elements only: P1 keeps the LU wherever it fits
+    big_p1 = estimate(300_000, 60_000, "P1", available_bytes=1e15)
+    assert big_p1.dofs >= ITERATIVE_FROM_DOFS and big_p1.solver == "direct"
     # a forced solver is estimated as such, whatever fits
     assert estimate(cells, cells // 5, "P2", available_bytes=need * 0.99, linear_solver="direct").solver == "direct"
     assert estimate(1000, 300, "P1", available_bytes=24e9, linear_solver="iterative").solver == "iterative"
