@@ -375,6 +375,15 @@ def fixed_has_cartilage(scene: Any) -> bool:
     return layers is not None and (layers.fixed.has_bone or float(layers.fixed.thickness_mm.max()) > 0.0)
 
 
+def _cache_mobile_layer(cache: dict, scene, mesh_size_mm, layers) -> list[str]:
+    """M's layer solid (as :class:`LayerModel` builds it), built once per run into ``cache["mobile"]``
+    (it does not depend on F's pose); the warnings of building it, once."""
+    if "mobile" in cache:
+        return []
+    cache["mobile"], notes = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers))
+    return list(notes)
+
+
 class TwoLayerModel(FEModel):
     """M's layer (as :class:`LayerModel` builds it) and F's, both elastic, each bonded to its bone,
     in frictionless contact (docs/method.md#two-deformable-layers).
@@ -395,10 +404,7 @@ class TwoLayerModel(FEModel):
 
     def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
         key = ("two-layer", pose_key)
-        warnings: list[str] = []
-        if "mobile" not in cache:
-            cache["mobile"], cache["mobile_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers))
-            warnings += cache.pop("mobile_notes")
+        warnings = _cache_mobile_layer(cache, scene, mesh_size_mm, layers)
         if cache.get("key") != key:
             solid, notes = _build_solid("two-layer solid", lambda: self._paired(scene, cache["mobile"], f_pose, layers))
             cache.update(key=key, solid=solid)
@@ -473,10 +479,7 @@ class LumpedLayerModel(FEModel):
 
     def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
         key = ("lumped", pose_key)
-        warnings: list[str] = []
-        if "mobile" not in cache:
-            cache["mobile"], cache["mobile_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers))
-            warnings += cache.pop("mobile_notes")
+        warnings = _cache_mobile_layer(cache, scene, mesh_size_mm, layers)
         if cache.get("key") != key:
             (solid, on_mobile), _ = _build_solid("lumped layer", lambda: self._summed(scene, cache["mobile"], f_pose, mesh_size_mm, layers))
             cache.update(key=key, solid=solid, on_mobile=on_mobile)
