@@ -325,13 +325,11 @@ class SmoothingTerm:
 
         Z diag(x) Z^T = Q^T diag(c_nl^2 x) Q puts c_nl^2 x / 9 on every corner pair of each
         triangle, all of them entries of H, so only H's data changes. On a coarse space, Q P
-        in place of Q (``CoarseSpace``): only the springs of nonzero weight are summed.
+        in place of Q (``CoarseSpace.pair_sums``).
         """
         if self.coarse is None:
             return self.h.data + self.pattern.sum_at_slots(self.sigma * self.weight**2 * spring_weight / 9.0)
-        pair, spring = self.coarse.pairs_of(np.flatnonzero(spring_weight))
-        added = self.sigma * self.weight[spring] ** 2 * spring_weight[spring] * self.coarse.pair_product[pair]
-        return self.h.data + np.bincount(self.coarse.pair_slot[pair], weights=added, minlength=self.h.data.shape[0])
+        return self.h.data + self.coarse.pair_sums @ (self.sigma * self.weight**2 * spring_weight)
 
 
 @dataclass(frozen=True)
