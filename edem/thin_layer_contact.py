@@ -79,36 +79,43 @@ class ThinLayerSolution(UnilateralSolution):
 
 @dataclass(frozen=True)
 class ActiveSystem:
-    """Spring forces of the contact set I as affine functions of u: f_I = F0 + F1 u (module docstring)."""
+    """Spring forces of the contact set I as affine functions of u: f_I = F0 + F1 u (module docstring).
+
+    u is over the free DOFs only (p of them): a fixed DOF never moves, so its columns are never
+    formed (on the stances, with four DOFs fixed, that halves the arrays of every spring).
+    """
 
     active: np.ndarray  # (n_c,) bool
     force0_n: np.ndarray  # (n_I,)
-    force_per_mm: np.ndarray  # (n_I, 6)
+    force_per_mm: np.ndarray  # (n_I, p)
     nonlocal0_mm: np.ndarray  # (n_c,) the smoothing terms' deflection Z^T z at every spring at u = 0 (LayerCompliance)
-    nonlocal_per_mm: np.ndarray  # (n_c, 6)
+    nonlocal_per_mm: np.ndarray  # (n_c, p)
     local_mm_per_n: np.ndarray  # (n_c,) the local compliance it was built with
     carried_force_n: np.ndarray | None = None  # (n_c,) c: f and z are then over the stored state (module docstring)
 
     @staticmethod
     def build(
-        layer: LayerCompliance, directions: np.ndarray, overlap_mm: np.ndarray, active: np.ndarray, local_mm_per_n: np.ndarray | None = None,
+        layer: LayerCompliance, rows: np.ndarray, overlap_mm: np.ndarray, active: np.ndarray, local_mm_per_n: np.ndarray | None = None,
         carried_force_n: np.ndarray | None = None,
     ) -> "ActiveSystem":
-        """``local_mm_per_n`` (n_c,): the local compliance, the layer's unless a nonlinear column
-        is linearised (``solve_thin_layer``). ``carried_force_n`` (n_c,): the forces c whose
-        push-back C c adds to ``overlap_mm`` (module docstring, "Carried forces"); the vertex
-        fields are then the increments zeta over z_c."""
+        """``rows`` (n_c, p): the springs' rows g_j over the free DOFs. ``local_mm_per_n`` (n_c,):
+        the local compliance, the layer's unless a nonlinear column is linearised
+        (``solve_thin_layer``). ``carried_force_n`` (n_c,): the forces c whose push-back C c adds
+        to ``overlap_mm`` (module docstring, "Carried forces"); the vertex fields are then the
+        increments zeta over z_c."""
         local = layer.local_mm_per_n if local_mm_per_n is None else local_mm_per_n
         lam = 1.0 / local[active]
-        rhs = np.column_stack([overlap_mm[active], directions[active]])  # (n_I, 7)
-        forces = lam[:, None] * rhs
-        nonlocal_mm = np.zeros((active.shape[0], 7))  # Z^T z at every spring
+        forces = np.empty((lam.shape[0], 1 + rows.shape[1]))  # the u-free column, then one per free DOF
+        forces[:, 0] = overlap_mm[active]
+        forces[:, 1:] = rows[active]
+        forces *= lam[:, None]
+        nonlocal_mm = np.zeros((active.shape[0], forces.shape[1]))  # Z^T z at every spring
         if layer.coupled:
             # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T.
             weight = np.zeros(active.shape[0])
             weight[active] = lam
             solve = layer.factorise_coupled(weight)
-            # A zero column (DEM: no overlap before the increment; a fixed DOF) needs no solves.
+            # A zero column (DEM: no overlap before the increment) needs no solves.
             nonzero = np.any(forces, axis=0)
             released = None if carried_force_n is None else np.where(active, 0.0, carried_force_n)
             if released is not None:
@@ -120,30 +127,34 @@ class ActiveSystem:
                 if released is not None and nonzero[0] == 0:
                     loads[:, 0] -= released  # -Z_N c_N joins the u-free column
                 # Every spring's row, then those in contact: cheaper than cutting Z^T's rows.
-                nonlocal_mm[:, nonzero] = layer.z_t @ solve(layer.z @ loads)
-                forces[:, nonzero] -= lam[:, None] * nonlocal_mm[active][:, nonzero]
+                solved = layer.z_t @ solve(layer.z @ loads)
+                nonlocal_mm[:, nonzero] = solved
+                forces[:, nonzero] -= lam[:, None] * solved[active]
         if carried_force_n is not None:
             forces[:, 0] += carried_force_n[active]
         return ActiveSystem(active, forces[:, 0], forces[:, 1:], nonlocal_mm[:, 0], nonlocal_mm[:, 1:], local, carried_force_n)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
+        """f_I (n_I,) under the free DOFs' motion u (p,)."""
         return self.force0_n + self.force_per_mm @ u
 
     def deflection(self, layer: LayerCompliance, u: np.ndarray, force_n: np.ndarray) -> np.ndarray:
-        """w = C f at every candidate for the forces f (n_c,) of this set under u (local part as
-        built); with carried forces c, w - C c (module docstring, "Carried forces")."""
+        """w = C f at every candidate for the forces f (n_c,) of this set under u (p,) (local part
+        as built); with carried forces c, w - C c (module docstring, "Carried forces")."""
         w = self.local_mm_per_n * force_n
         if self.carried_force_n is not None:
             w = w - layer.local_mm_per_n * self.carried_force_n
         return w + self.nonlocal0_mm + self.nonlocal_per_mm @ u
 
-    def stiffness(self, directions: np.ndarray) -> np.ndarray:
-        """Coupled contact stiffness D_I^T dF/du (6, 6), symmetrised against round-off."""
-        k = directions[self.active].T @ self.force_per_mm
+    def stiffness(self, rows: np.ndarray) -> np.ndarray:
+        """Coupled contact stiffness D_I^T dF/du (p, p) over the free DOFs (``rows`` as built),
+        symmetrised against round-off."""
+        k = rows[self.active].T @ self.force_per_mm
         return 0.5 * (k + k.T)
 
-    def pushback(self, directions: np.ndarray) -> np.ndarray:
-        return directions[self.active].T @ self.force0_n
+    def pushback(self, rows: np.ndarray) -> np.ndarray:
+        """D_I^T F0 (p,): the generalised force of the set at u = 0."""
+        return rows[self.active].T @ self.force0_n
 
 
 def _others(ligament_rows, ligament_law, ligament_active, shear, active):
@@ -220,8 +231,8 @@ def solve_thin_layer(
     free_block, dof_scale = np.ix_(free, free), 1.0 / to_newton[free]
     spring_scale = 1.0 / layer.local_mm_per_n  # N/mm: weighs the gap against the force in the NCP
     touchable = np.isfinite(overlap_mm)  # -inf: free layer with no opposing surface
-    # A fixed DOF never moves, so its column of df/du is never used: zero rows skip its solves.
-    free_directions = directions * free
+    # A fixed DOF never moves: the contact set's system is formed over the free DOFs only.
+    rows = np.ascontiguousarray(directions[:, free])
     warm = None if initial_active is None else initial_active & touchable
     # A cold start: the springs whose surfaces overlap before the layer deflects (d0 >= 0, every
     # candidate of a "carried" law), as ContactHistory.first_set starts a new candidate; on the
@@ -239,18 +250,20 @@ def solve_thin_layer(
         if column is not None:
             local, shift = _linearised(layer, column, linearised_at)
         offset = _offset(layer, overlap_mm, shift, local, pushback_force_n)
-        system = ActiveSystem.build(layer, free_directions, offset, active, local, pushback_force_n)
+        system = ActiveSystem.build(layer, rows, offset, active, local, pushback_force_n)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
-        stiffness = system.stiffness(directions) + k_other
-        rhs = load - system.pushback(directions) - f_other
+        stiffness = np.zeros((6, 6))
+        stiffness[free_block] = system.stiffness(rows) + k_other[free_block]
+        rhs = load[free] - system.pushback(rows) - f_other[free]
         u = np.zeros(6)
         # The 6 x 6's Cholesky factor both solves and says whether a free DOF is unrestrained.
-        solved = _regular_solve(stiffness[free_block], dof_scale, rhs[free])
+        solved = _regular_solve(stiffness[free_block], dof_scale, rhs)
         if solved is None and unrestrained_dofs(stiffness, free, length_scale_mm):
             if everything is None:
-                full = ActiveSystem.build(layer, free_directions, offset, touchable, local, pushback_force_n)
+                full = ActiveSystem.build(layer, rows, offset, touchable, local, pushback_force_n)
                 k_all, _ = _others(ligament_rows, ligament_law, np.ones_like(ligament_active), shear, touchable)
-                everything = full.stiffness(directions) + k_all
+                everything = np.zeros((6, 6))
+                everything[free_block] = full.stiffness(rows) + k_all[free_block]
                 missing = unrestrained_dofs(everything, free, length_scale_mm)
                 if missing:
                     raise singular_stiffness_error(missing)
@@ -258,12 +271,12 @@ def solve_thin_layer(
                 raise SolverError("no equilibrium: no spring stays in compression under this load, so the load pulls the bodies apart")
             stiffness = stiffness + 1e-8 * everything  # a transiently small contact set
         if solved is None:
-            solved = np.linalg.solve(stiffness[free_block], rhs[free])
+            solved = np.linalg.solve(stiffness[free_block], rhs)
         u[free] = solved
         f = np.zeros(n_c)
-        f[active] = system.forces(u)
-        w = system.deflection(layer, u, f) + shift
-        gap = w - overlap_mm - directions @ u
+        f[active] = system.forces(solved)
+        w = system.deflection(layer, solved, f) + shift
+        gap = w - overlap_mm - rows @ solved
         tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
         new_active = np.where(active, f > 0.0, gap < 0.0)
         new_ligaments = tension > 0.0
@@ -359,13 +372,14 @@ def thin_layer_viscoelastic_increment(
         local, shift = (None, 0.0) if column is None else _linearised(layer, column, carried_force_n)
         pushed = carried_force_n if pushback else None
         offset = _offset(layer, overlap_mm, shift, local, pushed)
-        system = ActiveSystem.build(layer, directions * free, offset, active, local, pushed)  # fixed DOFs: no solves (solve_thin_layer)
+        rows = np.ascontiguousarray(directions[:, free])  # the free DOFs' (solve_thin_layer)
+        system = ActiveSystem.build(layer, rows, offset, active, local, pushed)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         if phi or psi:
-            k = system.stiffness(directions) + k_other
-            rhs = phi * (previous_load - system.pushback(directions) - f_other) + psi * (load - previous_load)
-            u[free] = np.linalg.lstsq(k[np.ix_(free, free)], rhs[free], rcond=None)[0]
-        f[active] = np.maximum(system.forces(u), 0.0)
+            k = system.stiffness(rows) + k_other[np.ix_(free, free)]
+            rhs = phi * (previous_load[free] - system.pushback(rows) - f_other[free]) + psi * (load - previous_load)[free]
+            u[free] = np.linalg.lstsq(k, rhs, rcond=None)[0]
+        f[active] = np.maximum(system.forces(u[free]), 0.0)
     tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
     return u, np.concatenate([f, np.where(ligament_active, np.maximum(tension, 0.0), 0.0)])
 
