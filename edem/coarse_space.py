@@ -146,14 +146,12 @@ class CoarseSpace:
         valid = (vertex[:, :, None] >= 0) & (vertex[:, None, :] >= 0)
         a, b = np.broadcast_to(vertex[:, :, None], valid.shape)[valid], np.broadcast_to(vertex[:, None, :], valid.shape)[valid]
         pattern = OperatorPattern(structure.indices, structure.indptr, np.zeros((0, 9), np.int64), qp, fine.whole_surface)
-        # valid is row-major, spring by spring; each spring's pairs sit at distinct entries, so a
-        # stable sort by entry keeps every row's springs ascending (canonical CSR, no duplicates)
-        slot, spring = np.searchsorted(keys, b * n_c + a), np.repeat(np.arange(m), count * count)
-        order = np.argsort(slot, kind="stable")
-        indptr = np.zeros(keys.shape[0] + 1, np.int64)
-        np.cumsum(np.bincount(slot, minlength=keys.shape[0]), out=indptr[1:])
-        sums = sp.csr_matrix(((value[:, :, None] * value[:, None, :])[valid][order], spring[order], indptr), shape=(keys.shape[0], m))
-        return CoarseSpace(transfer, pattern, keys, sums)
+        # valid is row-major, spring by spring: spring t's column, each pair at a distinct entry;
+        # the conversion to rows (a counting transpose, no sort) keeps every row's springs ascending
+        start = np.zeros(m + 1, np.int64)
+        np.cumsum(count * count, out=start[1:])
+        by_spring = sp.csc_matrix(((value[:, :, None] * value[:, None, :])[valid], np.searchsorted(keys, b * n_c + a), start), shape=(keys.shape[0], m))
+        return CoarseSpace(transfer, pattern, keys, by_spring.tocsr())
 
     def operator(self, fine_h: sp.csc_matrix) -> sp.csc_matrix:
         """H_c = P^T H P (V_c, V_c) on the coupled pattern."""
