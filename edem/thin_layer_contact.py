@@ -91,6 +91,7 @@ class ActiveSystem:
     nonlocal0_mm: np.ndarray  # (n_c,) the smoothing terms' deflection Z^T z at every spring at u = 0 (LayerCompliance)
     nonlocal_per_mm: np.ndarray  # (n_c, p)
     local_mm_per_n: np.ndarray  # (n_c,) the local compliance it was built with
+    active_rows: np.ndarray  # (n_I, p) the rows of the springs in contact
     carried_force_n: np.ndarray | None = None  # (n_c,) c: f and z are then over the stored state (module docstring)
 
     @staticmethod
@@ -105,11 +106,12 @@ class ActiveSystem:
         increments zeta over z_c."""
         local = layer.local_mm_per_n if local_mm_per_n is None else local_mm_per_n
         lam = 1.0 / local[active]
+        active_rows = rows[active]
         forces = np.empty((lam.shape[0], 1 + rows.shape[1]))  # the u-free column, then one per free DOF
         forces[:, 0] = overlap_mm[active]
-        forces[:, 1:] = rows[active]
+        forces[:, 1:] = active_rows
         forces *= lam[:, None]
-        nonlocal_mm = np.zeros((active.shape[0], forces.shape[1]))  # Z^T z at every spring
+        nonlocal_mm = None  # Z^T z at every spring (n_c, 1 + p)
         if layer.coupled:
             # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T.
             weight = np.zeros(active.shape[0])
@@ -128,11 +130,18 @@ class ActiveSystem:
                     loads[:, 0] -= released  # -Z_N c_N joins the u-free column
                 # Every spring's row, then those in contact: cheaper than cutting Z^T's rows.
                 solved = layer.z_t @ solve(layer.z @ loads)
-                nonlocal_mm[:, nonzero] = solved
-                forces[:, nonzero] -= lam[:, None] * solved[active]
+                if nonzero.size == forces.shape[1]:  # (the usual case: no column gathers)
+                    nonlocal_mm = solved
+                    forces -= lam[:, None] * solved[active]
+                else:
+                    nonlocal_mm = np.zeros((active.shape[0], forces.shape[1]))
+                    nonlocal_mm[:, nonzero] = solved
+                    forces[:, nonzero] -= lam[:, None] * solved[active]
+        if nonlocal_mm is None:
+            nonlocal_mm = np.zeros((active.shape[0], forces.shape[1]))
         if carried_force_n is not None:
             forces[:, 0] += carried_force_n[active]
-        return ActiveSystem(active, forces[:, 0], forces[:, 1:], nonlocal_mm[:, 0], nonlocal_mm[:, 1:], local, carried_force_n)
+        return ActiveSystem(active, forces[:, 0], forces[:, 1:], nonlocal_mm[:, 0], nonlocal_mm[:, 1:], local, active_rows, carried_force_n)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
         """f_I (n_I,) under the free DOFs' motion u (p,)."""
@@ -146,15 +155,14 @@ class ActiveSystem:
             w = w - layer.local_mm_per_n * self.carried_force_n
         return w + self.nonlocal0_mm + self.nonlocal_per_mm @ u
 
-    def stiffness(self, rows: np.ndarray) -> np.ndarray:
-        """Coupled contact stiffness D_I^T dF/du (p, p) over the free DOFs (``rows`` as built),
-        symmetrised against round-off."""
-        k = rows[self.active].T @ self.force_per_mm
+    def stiffness(self) -> np.ndarray:
+        """Coupled contact stiffness D_I^T dF/du (p, p) over the free DOFs, symmetrised against round-off."""
+        k = self.active_rows.T @ self.force_per_mm
         return 0.5 * (k + k.T)
 
-    def pushback(self, rows: np.ndarray) -> np.ndarray:
+    def pushback(self) -> np.ndarray:
         """D_I^T F0 (p,): the generalised force of the set at u = 0."""
-        return rows[self.active].T @ self.force0_n
+        return self.active_rows.T @ self.force0_n
 
 
 def _others(ligament_rows, ligament_law, ligament_active, shear, active):
@@ -253,8 +261,8 @@ def solve_thin_layer(
         system = ActiveSystem.build(layer, rows, offset, active, local, pushback_force_n)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         stiffness = np.zeros((6, 6))
-        stiffness[free_block] = system.stiffness(rows) + k_other[free_block]
-        rhs = load[free] - system.pushback(rows) - f_other[free]
+        stiffness[free_block] = system.stiffness() + k_other[free_block]
+        rhs = load[free] - system.pushback() - f_other[free]
         u = np.zeros(6)
         # The 6 x 6's Cholesky factor both solves and says whether a free DOF is unrestrained.
         solved = _regular_solve(stiffness[free_block], dof_scale, rhs)
@@ -263,7 +271,7 @@ def solve_thin_layer(
                 full = ActiveSystem.build(layer, rows, offset, touchable, local, pushback_force_n)
                 k_all, _ = _others(ligament_rows, ligament_law, np.ones_like(ligament_active), shear, touchable)
                 everything = np.zeros((6, 6))
-                everything[free_block] = full.stiffness(rows) + k_all[free_block]
+                everything[free_block] = full.stiffness() + k_all[free_block]
                 missing = unrestrained_dofs(everything, free, length_scale_mm)
                 if missing:
                     raise singular_stiffness_error(missing)
@@ -376,8 +384,8 @@ def thin_layer_viscoelastic_increment(
         system = ActiveSystem.build(layer, rows, offset, active, local, pushed)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         if phi or psi:
-            k = system.stiffness(rows) + k_other[np.ix_(free, free)]
-            rhs = phi * (previous_load[free] - system.pushback(rows) - f_other[free]) + psi * (load - previous_load)[free]
+            k = system.stiffness() + k_other[np.ix_(free, free)]
+            rhs = phi * (previous_load[free] - system.pushback() - f_other[free]) + psi * (load - previous_load)[free]
             u[free] = np.linalg.lstsq(k, rhs, rcond=None)[0]
         f[active] = np.maximum(system.forces(u[free]), 0.0)
     tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
@@ -461,11 +469,14 @@ class ContactHistory:
         self.recorded += 1
 
     def first_set(self, springs: np.ndarray, overlap_mm: np.ndarray) -> np.ndarray | None:
-        """(n_d,) bool over the layer's springs ``springs`` (indices into M's), whose overlaps d0
-        (n_d,) mm are ``overlap_mm``; None before any record."""
+        """(n_d,) bool over the layer's springs ``springs`` (sorted indices into M's), whose overlaps
+        d0 (n_d,) mm are ``overlap_mm``; None before any record."""
         if not self.recorded:
             return None
-        force, gap, contact = self.force_n[:, springs], self.gap_mm[:, springs], self.in_contact[springs]
+        if springs.shape[0] == self.in_contact.shape[0]:  # every spring, in order (the layer over the whole surface): no gathers
+            force, gap, contact = self.force_n, self.gap_mm, self.in_contact
+        else:
+            force, gap, contact = self.force_n[:, springs], self.gap_mm[:, springs], self.in_contact[springs]
         before = np.isfinite(gap[0]) if self.recorded > 1 else np.zeros(springs.shape[0], bool)
         force_next = np.where(before, 2.0 * force[1] - force[0], force[1])
         gap_next = np.where(before, 2.0 * gap[1] - gap[0], gap[1])
