@@ -471,11 +471,10 @@ def checked_solve(matrix: sp.csc_matrix, ldl_solve, norm: float | None = None):
 
 # An ordering is found for the springs in contact and this many rings of springs around them (the
 # springs sharing an unknown with them, ring by ring), so the next time points' growing contact stays
-# within it: on the 3k-spring gap-law stance (two-pole; cProfile, 2026-11-28) 24 orderings were
-# found with none, 10 with one ring, 5 with two, 4 with three, and the factorisations took 152, 129,
-# 128, 123 ms in all (a numeric refactorisation costs more with each ring's fill: 2.2, 2.3, 2.4,
-# 2.4 ms; with four rings 2.6 ms and the whole 0.367 s against 0.351 s with two); the 29k-spring
-# stance took 10.0 s with none or two (one run each, load 1).
+# within it. On the 3k-spring gap-law stance (two-pole; cProfile, 2026-11-28) 24 / 10 / 5 / 4 / 3
+# orderings were found with 0 / 1 / 2 / 3 / 4 rings, each refactorisation on them cost 2.2 / 2.3 /
+# 2.4 / 2.4 / 2.6 ms (the rings' fill) and the stance 0.389 / 0.356 / 0.351 / 0.346 / 0.367 s; the
+# 29k-spring stance took 10.0 s with none or two (one run each, load 1).
 ORDERING_RINGS = 2
 
 
@@ -487,13 +486,15 @@ class KeptOrderingLDL:
     The stacked matrix couples the terms' fields only through springs in contact (nonzero
     weight), so its pattern is the terms' H and the pairs of those springs: an ordering found for
     a contact set (grown by ``ORDERING_RINGS`` rings of springs) serves every subset of it, with
-    the pairs of the springs out of contact as stored zeros. The active set's first iterate at a time point is the contact extrapolated from the
-    last two (``edem.thin_layer_contact.ContactHistory``), which on the ankle stances held the
-    answer (the later iterates remove springs): so the first factorisation of a time point finds
-    the ordering and the later ones refactor the numbers only (``qdldl.Solver.update``: 1.75 ms
-    against 4.5 ms with the ordering on the 3k-spring ankle's 3k unknowns). A set with a spring
-    outside it finds a new ordering. One pattern holding every spring of the layer would keep it
-    over the run, but its fill made each factorisation 2x slower at 30k springs (docs/method.md).
+    the pairs of the springs out of contact as stored zeros. The active set's first iterate at a
+    time point is the contact extrapolated from the last two
+    (``edem.thin_layer_contact.ContactHistory``), which on the ankle stances held the answer (the
+    later iterates remove springs), and the contact grows by less than two rings a time point: so
+    the orderings serve several time points and the other factorisations refactor the numbers
+    only (``qdldl.Solver.update``: 2.3 against 4.4 ms with a new ordering at the 3k-spring ankle's
+    3k unknowns). A set with a spring outside finds a new ordering. One pattern holding every
+    spring of the layer would keep it over the run, but its fill made each factorisation 2x
+    slower at 30k springs (docs/method.md).
     """
 
     def __init__(self, stack: StackedPattern, z_t: sp.csr_matrix) -> None:
