@@ -489,9 +489,9 @@ class KeptOrderingLDL:
     the pairs of the springs out of contact as stored zeros. The active set's first iterate at a
     time point is the contact extrapolated from the last two
     (``edem.thin_layer_contact.ContactHistory``), which on the ankle stances held the answer (the
-    later iterates remove springs), and the contact grows by less than two rings a time point: so
-    the orderings serve several time points and the other factorisations refactor the numbers
-    only (``qdldl.Solver.update``: 2.3 against 4.4 ms with a new ordering at the 3k-spring ankle's
+    later iterates remove springs), and grown by two rings an ordering served four time points
+    on the 3k-spring gap-law stance (5 orderings for its 55 factorisations): the other
+    factorisations refactor the numbers only (``qdldl.Solver.update``: 2.3 against 4.4 ms with a new ordering at the 3k-spring ankle's
     3k unknowns). A set with a spring outside finds a new ordering. One pattern holding every
     spring of the layer would keep it over the run, but its fill made each factorisation 2x
     slower at 30k springs (docs/method.md).
