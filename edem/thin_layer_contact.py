@@ -607,17 +607,24 @@ class CoupledStep:
         solution.deflection_mm, solution.gap_mm = solution.deflection_mm[c], solution.gap_mm[c]
         return solution
 
-    def solve(self, load, fixed_dofs, shear, length_scale_mm, history: "ContactHistory | None" = None) -> ThinLayerSolution:
+    def solve(self, load, fixed_dofs, shear, length_scale_mm, history: "ContactHistory | None" = None,
+              first: np.ndarray | None = None) -> ThinLayerSolution:
         """The coupled solve; forces, contact set, deflection and gap of the candidates (then ligaments).
 
-        ``history``: the previous time points' solutions, whose extrapolation is the active set's
-        first iterate (``ContactHistory.first_set``); None: a cold start (``solve_thin_layer``'s
-        default). The programme's answer does not depend on the first iterate."""
+        ``first`` (n_c,) bool over the candidates: the active set's first iterate; else
+        ``history``: the previous time points' solutions, whose extrapolation is the first iterate
+        (``ContactHistory.first_set``); None: a cold start (``solve_thin_layer``'s default). The
+        programme's answer does not depend on the first iterate."""
+        if first is not None:
+            initial = np.zeros(self.candidate.shape[0], bool)
+            initial[self.candidate] = first
+        else:
+            initial = None if history is None else history.first_set(self.springs, self.overlap_mm)
         return self._to_candidates(
             solve_thin_layer(
                 self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
-                initial_active=None if history is None else history.first_set(self.springs, self.overlap_mm), column=self.column,
+                initial_active=initial, column=self.column,
                 pushback_force_n=self.pushback_force_n,
             )
         )
