@@ -6,8 +6,11 @@ layer on the whole talus), solved by EDEM (the viscoelastic stance, every time p
 solved) on the independent springs and on the coupled layer (Pade and two-pole symbols), at about
 3k and 30k springs. The Embree scene is built once. The models run alternately round by round (so
 a load spike of the shared machine hits all of them) and the script prints, per size and law, the
-medians of the whole run and of its solve stage (assembly + unilateral solve + viscoelastic
-increment, without the ray casting they share), the coupled layer's factorisations (and LAPACK's
+medians of the run's time points (``RunResult.wall_time_s``, on which the goals are judged), of
+their solve stage (assembly + unilateral solve + viscoelastic increment, without the ray casting
+they share), of the whole call with the run's set-up (the bed's surface mesh, the pre-flight) and
+of its CPU time (all threads of the process: on a loaded machine the waits for a core drop out, so
+that ratio moves least between runs), the coupled layer's factorisations (and LAPACK's
 banded factorisations, of the contact matrix or any other, with the share of their columns they
 factored: a refactorisation keeps those before the first changed one), and the ratios coupled /
 independent against the goals (``GOALS``). With ``--resolution r`` > 0 each symbol also runs with
@@ -32,6 +35,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as the command line runs (
 import argparse  # noqa: E402
 import contextlib  # noqa: E402
 import statistics  # noqa: E402
+import time  # noqa: E402
 from dataclasses import replace  # noqa: E402
 
 from bench_edem import stance_like_scene  # noqa: E402
@@ -119,6 +123,8 @@ def bench(mesh_size_mm: float, law: str, n_steps: int, rounds: int, counter: Fac
                     models[name] = (replace(base, cartilage=layer), banded)
     totals: dict[str, list[float]] = {name: [] for name in models}
     solves: dict[str, list[float]] = {name: [] for name in models}
+    whole: dict[str, list[float]] = {name: [] for name in models}  # the call, set-up included
+    cpu: dict[str, list[float]] = {name: [] for name in models}
     factorisations: dict[str, int] = {}
     band_share: dict[str, str] = {}
     results = {}
@@ -127,19 +133,23 @@ def bench(mesh_size_mm: float, law: str, n_steps: int, rounds: int, counter: Fac
         for name, (scene, banded) in models.items():
             before, n_banded, columns = counter.count, counter.banded, list(counter.band_columns)
             with banded_only(banded):
+                wall, processor = time.perf_counter(), time.process_time()
                 results[name] = run(scene, "edem", caster=caster)
+                whole[name].append(time.perf_counter() - wall)
+                cpu[name].append(time.process_time() - processor)
             factorisations[name] = counter.count - before
             of = counter.band_columns[1] - columns[1]
             band_share[name] = (f" (LAPACK banded {counter.banded - n_banded}, of their columns factored "
                                 f"{100 * (counter.band_columns[0] - columns[0]) / of:.0f} %)") if of else ""
             totals[name].append(results[name].wall_time_s)
             solves[name].append(results[name].seconds["solve"])
-    medians = {name: (statistics.median(totals[name]), statistics.median(solves[name])) for name in models}
+    medians = {name: tuple(statistics.median(figures[name]) for figures in (totals, solves, whole, cpu)) for name in models}
     n_springs = results["springs"].n_springs
     for name in models:
         result, last = results[name], results[name].steps[-1]
         print(
-            f"{law:9s} {n_springs:6d} springs, {name:26s}: run {medians[name][0]:8.3f} s, solve {medians[name][1]:8.3f} s "
+            f"{law:9s} {n_springs:6d} springs, {name:26s}: run {medians[name][0]:8.3f} s, solve {medians[name][1]:8.3f} s, "
+            f"with set-up {medians[name][2]:8.3f} s, CPU {medians[name][3]:8.3f} s "
             f"(median of {rounds}, EDEM, {n_steps} time points); iterations {sum(s.iterations for s in result.steps)}, "
             f"factorisations {factorisations[name]}{band_share[name]}; final peak {last.peak_pressure_mpa:.3f} MPa, area {last.contact_area_mm2:.0f} mm^2"
         )
@@ -149,7 +159,8 @@ def bench(mesh_size_mm: float, law: str, n_steps: int, rounds: int, counter: Fac
         ratio = medians[name][0] / medians["springs"][0]
         verdict = f"goal <= {goal:g}x: {'met' if ratio <= goal else 'MISSED'}" if goal is not None else "no goal here"
         print(f"  {law} {n_springs} springs, coupled ({name}) / independent: run {ratio:.2f}x, "
-              f"solve stage {medians[name][1] / medians['springs'][1]:.2f}x ({verdict})", flush=True)
+              f"solve stage {medians[name][1] / medians['springs'][1]:.2f}x, with set-up {medians[name][2] / medians['springs'][2]:.2f}x, "
+              f"CPU {medians[name][3] / medians['springs'][3]:.2f}x ({verdict})", flush=True)
     for name in (n for n in models if " sandwich" in n):
         lumped = name.replace(" sandwich", " lumped")
         print(f"  {law} {n_springs} springs, {name} / {lumped}: run {medians[name][0] / medians[lumped][0]:.2f}x, "

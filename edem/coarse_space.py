@@ -116,17 +116,17 @@ class CoarseSpace:
     the fine vertices and the pattern of H_c + Z_c diag(x) Z_c^T (V_c, V_c), whose Q is Q P (m, V_c).
 
     Z_c diag(x) Z_c^T adds x_t c_nl,t^2 (QP)_ta (QP)_tb at each pair (a, b) of spring t's coarse
-    vertices: ``pair_slot`` and ``pair_product`` ((QP)_ta (QP)_tb) list them spring by spring,
-    spring t's from ``pair_start[t]`` to ``pair_start[t + 1]``, so the coupled matrix's data is
-    one bincount over the springs of nonzero weight (``SmoothingTerm.coupled_data``).
+    vertices: ``pair_sums`` (nnz, m) holds (QP)_ta (QP)_tb at the pair's stored entry and spring
+    t's column, so the coupled matrix's data is one sparse product (``SmoothingTerm.coupled_data``;
+    0.6 ms against 1.5 ms for a gather and bincount over the springs of nonzero weight on the
+    30k-spring ankle's coarse space, 0.43M pairs, and the same sums to the bit: each row adds its
+    springs in ascending order, as the bincount did).
     """
 
     transfer: sp.csr_matrix
     pattern: OperatorPattern
     keys: np.ndarray  # (nnz,) column * V_c + row of each stored entry (sorted)
-    pair_slot: np.ndarray
-    pair_product: np.ndarray
-    pair_start: np.ndarray  # (m + 1,)
+    pair_sums: sp.csr_matrix  # (nnz, m)
 
     @staticmethod
     def build(fine: OperatorPattern, transfer: sp.csr_matrix) -> "CoarseSpace":
@@ -146,14 +146,12 @@ class CoarseSpace:
         valid = (vertex[:, :, None] >= 0) & (vertex[:, None, :] >= 0)
         a, b = np.broadcast_to(vertex[:, :, None], valid.shape)[valid], np.broadcast_to(vertex[:, None, :], valid.shape)[valid]
         pattern = OperatorPattern(structure.indices, structure.indptr, np.zeros((0, 9), np.int64), qp, fine.whole_surface)
+        # valid is row-major, spring by spring: spring t's column, each pair at a distinct entry;
+        # the conversion to rows (a counting transpose, no sort) keeps every row's springs ascending
         start = np.zeros(m + 1, np.int64)
-        np.cumsum(count * count, out=start[1:])  # valid is row-major: spring by spring
-        return CoarseSpace(transfer, pattern, keys, np.searchsorted(keys, b * n_c + a), (value[:, :, None] * value[:, None, :])[valid], start)
-
-    def pairs_of(self, springs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(the pairs' positions, their springs) of the springs (k,), spring by spring."""
-        count = self.pair_start[springs + 1] - self.pair_start[springs]
-        return concatenated_ranges(self.pair_start[springs], count), np.repeat(springs, count)
+        np.cumsum(count * count, out=start[1:])
+        by_spring = sp.csc_matrix(((value[:, :, None] * value[:, None, :])[valid], np.searchsorted(keys, b * n_c + a), start), shape=(keys.shape[0], m))
+        return CoarseSpace(transfer, pattern, keys, by_spring.tocsr())
 
     def operator(self, fine_h: sp.csc_matrix) -> sp.csc_matrix:
         """H_c = P^T H P (V_c, V_c) on the coupled pattern."""

@@ -241,7 +241,7 @@ class StackedPattern:
     factorisation. Where the terms have one sign (a Pade sandwich) the matrix is sigma times an
     SPD one (docs/method.md), factored as one term's is (``OperatorPattern``: the banded Cholesky
     in reverse Cuthill-McKee order over the stacked fields, or CHOLMOD); where they have both (the
-    two-pole's), the LDL^T takes the pairs of the springs in contact only (``present``).
+    two-pole's), the LDL^T takes the pairs of the springs in contact only (``KeptOrderingLDL``).
     """
 
     pattern: OperatorPattern
@@ -290,20 +290,6 @@ class StackedPattern:
         for slots in self.block_slots:
             block[slots] = True
         return self.pattern.indices, np.repeat(np.arange(n), np.diff(self.pattern.indptr)), block
-
-    def present(self, data: np.ndarray) -> tuple[sp.csc_matrix, sp.csc_matrix]:
-        """The matrix with ``data`` (nnz,) without the pairs that no spring of nonzero weight holds
-        (zero off the terms' H: a fill-reducing ordering then sees only the springs in contact),
-        and its upper triangle, both (V, V) canonical CSC."""
-        row, column, block = self._entries
-        n = self.pattern.n_vertices
-        kept = block | (data != 0.0)
-        matrices = []
-        for keep in (kept, kept & (row <= column)):
-            indptr = np.zeros(n + 1, np.int64)
-            np.cumsum(np.bincount(column[keep], minlength=n), out=indptr[1:])
-            matrices.append(sp.csc_matrix((data[keep], row[keep], indptr), shape=(n, n)))
-        return matrices[0], matrices[1]
 
     def coupling(self, z_t: sp.csr_matrix) -> sp.csr_matrix:
         """(nnz, m): the stacked data of Z diag(x) Z^T is this times x (m,), for Z^T (m, V) laid
@@ -367,8 +353,11 @@ def _lower_triangle(n: int) -> tuple[np.ndarray, np.ndarray]:
 # the Woodbury identity: each changed weight costs one solve with the old factor, and on the ankle
 # surfaces (14k vertices, half-bandwidth 156) a banded factorisation cost about 16 single solves
 # (benchmarks/bench_thin_layer.py). The two-pole's indefinite block (QDLDL, each solve checked)
-# cost 24-25 checked single solves a factorisation at 3k and 29k springs (3k and 29k unknowns), so
-# it takes twice as many.
+# cost 24-25 checked single solves a factorisation at 3k and 29k springs (3k and 29k unknowns) where
+# its ordering is found anew (the threshold law's cells, new at every time point), so it takes
+# twice as many there; on a kept ordering (``KeptOrderingLDL``) a refactorisation costs about 13
+# (2.3 against 0.17 ms at 3k), and the two-pole's gap-law stance at 3k springs took 0.321 s with
+# 8, 0.330 s with 12 and 0.351 s with 16 (medians of 5, load 0.5, 2026-11-28), so it takes 8.
 LOW_RANK_MAX = 8
 LOW_RANK_MAX_INDEFINITE = 16
 
@@ -436,18 +425,26 @@ def indefinite_solve(matrix: sp.csc_matrix, upper: sp.csc_matrix | None = None):
     SuperLU's 2e-15; ``benchmarks/bench_factorisations.py``). The
     block is not quasi-definite (the bulge term's local compliance is below its strength, so its
     diagonal block is indefinite where springs are in contact), so no pivot order is guaranteed
-    stable; each solve is therefore checked, and past a normwise backward error of v times the
-    unit round-off (the bound of a factorisation without element growth) the matrix is factored by
-    SuperLU with threshold pivoting instead. A zero pivot (QDLDL refuses it) goes the same way.
+    stable; each solve is therefore checked (``checked_solve``).
     """
     import qdldl  # a core dependency, imported where the two-pole needs it
 
-    n = matrix.shape[0]
     try:
         ldl = qdldl.Solver(matrix) if upper is None else qdldl.Solver(upper, upper=True)
     except RuntimeError:  # a zero pivot
-        ldl = None
-    norm = float(np.abs(matrix).sum(axis=1).max()) if n else 0.0  # ||A||_inf
+        return checked_solve(matrix, None)
+    return checked_solve(matrix, ldl.solve)
+
+
+def checked_solve(matrix: sp.csc_matrix, ldl_solve, norm: float | None = None):
+    """solve(rhs (v,) or (v, k)) with the symmetric matrix (v, v) by ``ldl_solve`` (one vector at a
+    time; None: none), checked: past a normwise backward error of v times the unit round-off (the
+    bound of a factorisation without element growth) the matrix is factored by SuperLU with
+    threshold pivoting instead, as it is where there is no ``ldl_solve`` (QDLDL met a zero pivot).
+    ``norm``: ||A||_inf where the caller has it."""
+    n = matrix.shape[0]
+    if norm is None:
+        norm = float(np.abs(matrix).sum(axis=1).max()) if n else 0.0  # ||A||_inf
     pivoted = []
 
     def superlu():
@@ -459,10 +456,10 @@ def indefinite_solve(matrix: sp.csc_matrix, upper: sp.csc_matrix | None = None):
         return pivoted[0]
 
     def solve(rhs: np.ndarray) -> np.ndarray:
-        if ldl is None or pivoted:
+        if ldl_solve is None or pivoted:
             return superlu()(rhs)
         columns = rhs.reshape(n, -1)
-        x = np.column_stack([ldl.solve(b) for b in columns.T])  # QDLDL solves one vector at a time
+        x = np.column_stack([ldl_solve(b) for b in columns.T])  # QDLDL solves one vector at a time
         # the normwise backward error, as a product (a zero column, x = 0, is exact: no 0 / 0)
         residual = np.abs(matrix @ x - columns).max(axis=0)
         if not np.all(residual <= n * np.finfo(float).eps * (norm * np.abs(x).max(axis=0) + np.abs(columns).max(axis=0))):  # also NaN
@@ -470,3 +467,105 @@ def indefinite_solve(matrix: sp.csc_matrix, upper: sp.csc_matrix | None = None):
         return x.reshape(rhs.shape)
 
     return solve
+
+
+# An ordering is found for the springs in contact and this many rings of springs around them (the
+# springs sharing an unknown with them, ring by ring), so the next time points' growing contact stays
+# within it. On the 3k-spring gap-law stance (two-pole; cProfile, 2026-11-28) 24 / 10 / 5 / 4 / 3
+# orderings were found with 0 / 1 / 2 / 3 / 4 rings, each refactorisation on them cost 2.2 / 2.3 /
+# 2.4 / 2.4 / 2.6 ms (the rings' fill) and the stance 0.389 / 0.356 / 0.351 / 0.346 / 0.367 s; the
+# 29k-spring stance took 10.0 s with none or two (one run each, load 1).
+ORDERING_RINGS = 2
+
+
+class KeptOrderingLDL:
+    """QDLDL's checked LDL^T (``checked_solve``) of the two-pole's stacked matrices on one
+    ``StackedPattern``, its symbolic analysis (ordering, elimination tree) kept while the springs
+    of nonzero weight stay among those it was found for.
+
+    The stacked matrix couples the terms' fields only through springs in contact (nonzero
+    weight), so its pattern is the terms' H and the pairs of those springs: an ordering found for
+    a contact set (grown by ``ORDERING_RINGS`` rings of springs) serves every subset of it, with
+    the pairs of the springs out of contact as stored zeros. The active set's first iterate at a
+    time point is the contact extrapolated from the last two
+    (``edem.thin_layer_contact.ContactHistory``), which on the ankle stances held the answer (the
+    later iterates remove springs), and grown by two rings an ordering served four time points
+    on the 3k-spring gap-law stance (5 orderings for its 55 factorisations): the other
+    factorisations refactor the numbers only (``qdldl.Solver.update``: 2.3 against 4.4 ms with a new ordering at the 3k-spring ankle's
+    3k unknowns). A set with a spring outside finds a new ordering. One pattern holding every
+    spring of the layer would keep it over the run, but its fill made each factorisation 2x
+    slower at 30k springs (docs/method.md).
+    """
+
+    def __init__(self, stack: StackedPattern, z_t: sp.csr_matrix) -> None:
+        self.stack = stack
+        self.z_t = z_t
+        self.support: np.ndarray | None = None  # (m,) bool: the springs the ordering was found for
+        self.kept: np.ndarray | None = None  # positions in the stacked data of the upper triangle's stored entries
+        self.ordering: _Ordering | None = None
+
+    @functools.cached_property
+    def _held(self) -> sp.csr_matrix:
+        """(nnz, m): 1 where spring j holds a pair at entry i."""
+        return sp.csr_matrix((np.ones(self.stack.pair_spring.shape[0]), self.stack.pair_spring, self.stack.pair_indptr),
+                             shape=(self.stack.pair_indptr.shape[0] - 1, self.z_t.shape[0]))
+
+    def factorise(self, data: np.ndarray, spring_weight: np.ndarray):
+        """solve(rhs) with the stacked matrix of ``data`` (nnz,) and its springs' weights (m,)."""
+        support = spring_weight != 0.0
+        matrix = self.stack.pattern.matrix(data)  # every pair stored (zeros included): for the check
+        row, column, block = self.stack._entries
+        norm = float(np.bincount(column, weights=np.abs(data), minlength=matrix.shape[0]).max(initial=0.0))  # ||A||_inf, A symmetric
+        ordering = self.ordering
+        if ordering is not None and not np.any(support & ~self.support):
+            upper = data[self.kept]
+            try:
+                ordering.numeric(upper)
+            except RuntimeError:  # a zero pivot in this ordering: find a new one
+                ordering = None
+        else:
+            ordering = None
+        if ordering is None:
+            grown = support.astype(float)
+            for _ in range(ORDERING_RINGS):
+                grown = (self.z_t @ (self.z_t.T @ grown) > 0.0).astype(float)
+            support = grown > 0.0
+            self.kept = np.flatnonzero((block | (self._held @ grown > 0.0)) & (row <= column))
+            n = matrix.shape[0]
+            indptr = np.zeros(n + 1, np.int64)
+            np.cumsum(np.bincount(column[self.kept], minlength=n), out=indptr[1:])
+            self.support, upper = support, data[self.kept]
+            try:
+                ordering = _Ordering(row[self.kept], indptr, upper)
+            except RuntimeError:  # a zero pivot
+                self.ordering = None
+                return checked_solve(matrix, None, norm)
+            self.ordering = ordering
+
+        def ldl_solve(rhs: np.ndarray) -> np.ndarray:
+            if ordering.numbers is not upper:  # another factorisation came since: its numbers back first
+                ordering.numeric(upper)
+            return ordering.solver.solve(rhs)
+
+        return checked_solve(matrix, ldl_solve, norm)
+
+
+class _Ordering:
+    """A QDLDL factor on one upper-triangle pattern (indices, indptr) and the data it holds."""
+
+    def __init__(self, indices: np.ndarray, indptr: np.ndarray, upper: np.ndarray) -> None:
+        import qdldl  # a core dependency, imported where the two-pole needs it
+
+        self.indices, self.indptr = indices, indptr
+        self.solver = qdldl.Solver(self._matrix(upper), upper=True)
+        self.numbers = upper
+
+    def _matrix(self, upper: np.ndarray) -> sp.csc_matrix:
+        n = self.indptr.shape[0] - 1
+        return sp.csc_matrix((upper, self.indices, self.indptr), shape=(n, n))
+
+    def numeric(self, upper: np.ndarray) -> None:
+        """Refactor the numbers ``upper`` on this pattern (RuntimeError at a zero pivot)."""
+        self.numbers = None
+        self.solver.update(self._matrix(upper), upper=True)
+        self.numbers = upper

@@ -81,7 +81,8 @@ import scipy.sparse as sp
 from edem.coarse_space import COARSE_MIN_SPRINGS, CoarseSpace, coarse_transfer
 from edem.layer_symbols import LayerSymbol, pade_symbol
 from geometries.triangle_kernels import triangle_areas
-from edem.sparse_factors import LOW_RANK_MAX, LOW_RANK_MAX_INDEFINITE, LowRankUpdate, OperatorPattern, StackedPattern, indefinite_solve
+from edem.sparse_factors import (LOW_RANK_MAX, LOW_RANK_MAX_INDEFINITE, KeptOrderingLDL, LowRankUpdate, OperatorPattern, StackedPattern,
+                                 indefinite_solve)
 
 
 # --------------------------------------------------------------------------- surface operators
@@ -325,13 +326,11 @@ class SmoothingTerm:
 
         Z diag(x) Z^T = Q^T diag(c_nl^2 x) Q puts c_nl^2 x / 9 on every corner pair of each
         triangle, all of them entries of H, so only H's data changes. On a coarse space, Q P
-        in place of Q (``CoarseSpace``): only the springs of nonzero weight are summed.
+        in place of Q (``CoarseSpace.pair_sums``).
         """
         if self.coarse is None:
             return self.h.data + self.pattern.sum_at_slots(self.sigma * self.weight**2 * spring_weight / 9.0)
-        pair, spring = self.coarse.pairs_of(np.flatnonzero(spring_weight))
-        added = self.sigma * self.weight[spring] ** 2 * spring_weight[spring] * self.coarse.pair_product[pair]
-        return self.h.data + np.bincount(self.coarse.pair_slot[pair], weights=added, minlength=self.h.data.shape[0])
+        return self.h.data + self.coarse.pair_sums @ (self.sigma * self.weight**2 * spring_weight)
 
 
 @dataclass(frozen=True)
@@ -395,8 +394,9 @@ class LayerCompliance:
     @property
     def low_rank_max(self) -> int:
         """Past this many changed weights a refactorisation is cheaper than the Woodbury correction
-        (the checked LDL^T's factorisation costs more single solves than a Cholesky's)."""
-        return LOW_RANK_MAX if len(self.terms) == 1 or (self.definite and self.stacked) else LOW_RANK_MAX_INDEFINITE
+        (the checked LDL^T's factorisation with a new ordering, on cells that change at every time
+        point, costs more single solves than a Cholesky's or one on a kept ordering)."""
+        return LOW_RANK_MAX_INDEFINITE if len(self.terms) > 1 and not self.stacked else LOW_RANK_MAX
 
     @property
     def definite(self) -> bool:
@@ -426,6 +426,18 @@ class LayerCompliance:
                 self.reuse["stack"] = kept
         stack = kept[1]
         return stack, stack.blocks([t.sigma * t.h.data for t in self.terms]), stack.coupling(self.z_t)
+
+    @property
+    def _kept_ldl(self) -> KeptOrderingLDL:
+        """The stacked indefinite matrices' LDL^T with its ordering kept (``KeptOrderingLDL``), shared
+        over the layers on the same stacked pattern (a run's time points on one cell set)."""
+        stack = self._stack[0]
+        kept = None if self.reuse is None else self.reuse.get("ldl")
+        if kept is None or kept.stack is not stack:
+            kept = KeptOrderingLDL(stack, self.z_t)
+            if self.reuse is not None:
+                self.reuse["ldl"] = kept
+        return kept
 
     def _operator_key(self) -> tuple:
         """What the factored matrix depends on besides the spring weights: each term's sign, its
@@ -458,7 +470,7 @@ class LayerCompliance:
             stack, signed_blocks, coupling = self._stack
             data = signed_blocks + coupling @ spring_weight
             if not self.definite:
-                return indefinite_solve(*stack.present(data))
+                return self._kept_ldl.factorise(data, spring_weight)
             solve = stack.pattern.factorise(sigma * data)
         return solve if sigma > 0 else (lambda rhs: -solve(rhs))
 

@@ -79,36 +79,45 @@ class ThinLayerSolution(UnilateralSolution):
 
 @dataclass(frozen=True)
 class ActiveSystem:
-    """Spring forces of the contact set I as affine functions of u: f_I = F0 + F1 u (module docstring)."""
+    """Spring forces of the contact set I as affine functions of u: f_I = F0 + F1 u (module docstring).
+
+    u is over the free DOFs only (p of them): a fixed DOF never moves, so its columns are never
+    formed (on the stances, with four DOFs fixed, that halves the arrays of every spring).
+    """
 
     active: np.ndarray  # (n_c,) bool
     force0_n: np.ndarray  # (n_I,)
-    force_per_mm: np.ndarray  # (n_I, 6)
+    force_per_mm: np.ndarray  # (n_I, p)
     nonlocal0_mm: np.ndarray  # (n_c,) the smoothing terms' deflection Z^T z at every spring at u = 0 (LayerCompliance)
-    nonlocal_per_mm: np.ndarray  # (n_c, 6)
+    nonlocal_per_mm: np.ndarray  # (n_c, p)
     local_mm_per_n: np.ndarray  # (n_c,) the local compliance it was built with
+    active_rows: np.ndarray  # (n_I, p) the rows of the springs in contact
     carried_force_n: np.ndarray | None = None  # (n_c,) c: f and z are then over the stored state (module docstring)
 
     @staticmethod
     def build(
-        layer: LayerCompliance, directions: np.ndarray, overlap_mm: np.ndarray, active: np.ndarray, local_mm_per_n: np.ndarray | None = None,
+        layer: LayerCompliance, rows: np.ndarray, overlap_mm: np.ndarray, active: np.ndarray, local_mm_per_n: np.ndarray | None = None,
         carried_force_n: np.ndarray | None = None,
     ) -> "ActiveSystem":
-        """``local_mm_per_n`` (n_c,): the local compliance, the layer's unless a nonlinear column
-        is linearised (``solve_thin_layer``). ``carried_force_n`` (n_c,): the forces c whose
-        push-back C c adds to ``overlap_mm`` (module docstring, "Carried forces"); the vertex
-        fields are then the increments zeta over z_c."""
+        """``rows`` (n_c, p): the springs' rows g_j over the free DOFs. ``local_mm_per_n`` (n_c,):
+        the local compliance, the layer's unless a nonlinear column is linearised
+        (``solve_thin_layer``). ``carried_force_n`` (n_c,): the forces c whose push-back C c adds
+        to ``overlap_mm`` (module docstring, "Carried forces"); the vertex fields are then the
+        increments zeta over z_c."""
         local = layer.local_mm_per_n if local_mm_per_n is None else local_mm_per_n
         lam = 1.0 / local[active]
-        rhs = np.column_stack([overlap_mm[active], directions[active]])  # (n_I, 7)
-        forces = lam[:, None] * rhs
-        nonlocal_mm = np.zeros((active.shape[0], 7))  # Z^T z at every spring
+        active_rows = rows[active]
+        forces = np.empty((lam.shape[0], 1 + rows.shape[1]))  # the u-free column, then one per free DOF
+        forces[:, 0] = overlap_mm[active]
+        forces[:, 1:] = active_rows
+        forces *= lam[:, None]
+        nonlocal_mm = None  # Z^T z at every spring (n_c, 1 + p)
         if layer.coupled:
             # Z_I Lam Z_I^T as Z diag(Lam on I, 0 elsewhere) Z^T.
             weight = np.zeros(active.shape[0])
             weight[active] = lam
             solve = layer.factorise_coupled(weight)
-            # A zero column (DEM: no overlap before the increment; a fixed DOF) needs no solves.
+            # A zero column (DEM: no overlap before the increment) needs no solves.
             nonzero = np.any(forces, axis=0)
             released = None if carried_force_n is None else np.where(active, 0.0, carried_force_n)
             if released is not None:
@@ -120,30 +129,40 @@ class ActiveSystem:
                 if released is not None and nonzero[0] == 0:
                     loads[:, 0] -= released  # -Z_N c_N joins the u-free column
                 # Every spring's row, then those in contact: cheaper than cutting Z^T's rows.
-                nonlocal_mm[:, nonzero] = layer.z_t @ solve(layer.z @ loads)
-                forces[:, nonzero] -= lam[:, None] * nonlocal_mm[active][:, nonzero]
+                solved = layer.z_t @ solve(layer.z @ loads)
+                if nonzero.size == forces.shape[1]:  # (the usual case: no column gathers)
+                    nonlocal_mm = solved
+                    forces -= lam[:, None] * solved[active]
+                else:
+                    nonlocal_mm = np.zeros((active.shape[0], forces.shape[1]))
+                    nonlocal_mm[:, nonzero] = solved
+                    forces[:, nonzero] -= lam[:, None] * solved[active]
+        if nonlocal_mm is None:
+            nonlocal_mm = np.zeros((active.shape[0], forces.shape[1]))
         if carried_force_n is not None:
             forces[:, 0] += carried_force_n[active]
-        return ActiveSystem(active, forces[:, 0], forces[:, 1:], nonlocal_mm[:, 0], nonlocal_mm[:, 1:], local, carried_force_n)
+        return ActiveSystem(active, forces[:, 0], forces[:, 1:], nonlocal_mm[:, 0], nonlocal_mm[:, 1:], local, active_rows, carried_force_n)
 
     def forces(self, u: np.ndarray) -> np.ndarray:
+        """f_I (n_I,) under the free DOFs' motion u (p,)."""
         return self.force0_n + self.force_per_mm @ u
 
     def deflection(self, layer: LayerCompliance, u: np.ndarray, force_n: np.ndarray) -> np.ndarray:
-        """w = C f at every candidate for the forces f (n_c,) of this set under u (local part as
-        built); with carried forces c, w - C c (module docstring, "Carried forces")."""
+        """w = C f at every candidate for the forces f (n_c,) of this set under u (p,) (local part
+        as built); with carried forces c, w - C c (module docstring, "Carried forces")."""
         w = self.local_mm_per_n * force_n
         if self.carried_force_n is not None:
             w = w - layer.local_mm_per_n * self.carried_force_n
         return w + self.nonlocal0_mm + self.nonlocal_per_mm @ u
 
-    def stiffness(self, directions: np.ndarray) -> np.ndarray:
-        """Coupled contact stiffness D_I^T dF/du (6, 6), symmetrised against round-off."""
-        k = directions[self.active].T @ self.force_per_mm
+    def stiffness(self) -> np.ndarray:
+        """Coupled contact stiffness D_I^T dF/du (p, p) over the free DOFs, symmetrised against round-off."""
+        k = self.active_rows.T @ self.force_per_mm
         return 0.5 * (k + k.T)
 
-    def pushback(self, directions: np.ndarray) -> np.ndarray:
-        return directions[self.active].T @ self.force0_n
+    def pushback(self) -> np.ndarray:
+        """D_I^T F0 (p,): the generalised force of the set at u = 0."""
+        return self.active_rows.T @ self.force0_n
 
 
 def _others(ligament_rows, ligament_law, ligament_active, shear, active):
@@ -198,9 +217,10 @@ def solve_thin_layer(
     ``ligament_rows`` (n_l, 6) and ``ligament_law``: tension-only ligaments as in
     ``edem.mechanics.solve_unilateral``. ``initial_active`` (n,) bool: the first contact set
     (from the previous time point, so a slowly varying load needs one or two iterations; the
-    programme is strictly convex, so the answer does not depend on it); by default every
-    candidate. ``column``: a nonlinear law's columns, f (n,) -> (excess (n,) mm, its derivative
-    (n,) mm/N) (``ContactLaw.column_excess_mm``): w(f) = C f + excess(f), linearised at the
+    programme is strictly convex, so the answer does not depend on it); by default the
+    candidates that overlap (d0 >= 0), or every candidate where none does. ``column``: a
+    nonlinear law's columns, f (n,) -> (excess (n,) mm, its derivative (n,) mm/N)
+    (``ContactLaw.column_excess_mm``): w(f) = C f + excess(f), linearised at the
     previous iterate's forces (Newton; converged when the forces move by less than
     ``newton_rtol`` of the largest). ``pushback_force_n`` (n,): forces c (N) whose push-back
     C c adds to ``overlap_mm`` (the threshold law's stored forces in EDEM), solved for without
@@ -219,10 +239,15 @@ def solve_thin_layer(
     free_block, dof_scale = np.ix_(free, free), 1.0 / to_newton[free]
     spring_scale = 1.0 / layer.local_mm_per_n  # N/mm: weighs the gap against the force in the NCP
     touchable = np.isfinite(overlap_mm)  # -inf: free layer with no opposing surface
-    # A fixed DOF never moves, so its column of df/du is never used: zero rows skip its solves.
-    free_directions = directions * free
+    # A fixed DOF never moves: the contact set's system is formed over the free DOFs only.
+    rows = np.ascontiguousarray(directions[:, free])
     warm = None if initial_active is None else initial_active & touchable
-    active = warm if warm is not None and np.any(warm) else touchable.copy()  # cold: every candidate, as DEM does
+    # A cold start: the springs whose surfaces overlap before the layer deflects (d0 >= 0, every
+    # candidate of a "carried" law), as ContactHistory.first_set starts a new candidate; on the
+    # gap law's 3k-spring stance the first time point then took 5 iterations instead of 6 (8 for
+    # the two-pole, 9 from every candidate). Without any, every candidate.
+    overlapping = touchable & (overlap_mm >= 0.0)
+    active = warm if warm is not None and np.any(warm) else overlapping if np.any(overlapping) else touchable.copy()
     ligament_active = ligament_law.offset_n > 0.0 if warm is not None else np.ones(ligament_rows.shape[0], bool)
     everything: np.ndarray | None = None
     seen: set[bytes] = set()
@@ -233,18 +258,20 @@ def solve_thin_layer(
         if column is not None:
             local, shift = _linearised(layer, column, linearised_at)
         offset = _offset(layer, overlap_mm, shift, local, pushback_force_n)
-        system = ActiveSystem.build(layer, free_directions, offset, active, local, pushback_force_n)
+        system = ActiveSystem.build(layer, rows, offset, active, local, pushback_force_n)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
-        stiffness = system.stiffness(directions) + k_other
-        rhs = load - system.pushback(directions) - f_other
+        stiffness = np.zeros((6, 6))
+        stiffness[free_block] = system.stiffness() + k_other[free_block]
+        rhs = load[free] - system.pushback() - f_other[free]
         u = np.zeros(6)
         # The 6 x 6's Cholesky factor both solves and says whether a free DOF is unrestrained.
-        solved = _regular_solve(stiffness[free_block], dof_scale, rhs[free])
+        solved = _regular_solve(stiffness[free_block], dof_scale, rhs)
         if solved is None and unrestrained_dofs(stiffness, free, length_scale_mm):
             if everything is None:
-                full = ActiveSystem.build(layer, free_directions, offset, touchable, local, pushback_force_n)
+                full = ActiveSystem.build(layer, rows, offset, touchable, local, pushback_force_n)
                 k_all, _ = _others(ligament_rows, ligament_law, np.ones_like(ligament_active), shear, touchable)
-                everything = full.stiffness(directions) + k_all
+                everything = np.zeros((6, 6))
+                everything[free_block] = full.stiffness() + k_all[free_block]
                 missing = unrestrained_dofs(everything, free, length_scale_mm)
                 if missing:
                     raise singular_stiffness_error(missing)
@@ -252,12 +279,12 @@ def solve_thin_layer(
                 raise SolverError("no equilibrium: no spring stays in compression under this load, so the load pulls the bodies apart")
             stiffness = stiffness + 1e-8 * everything  # a transiently small contact set
         if solved is None:
-            solved = np.linalg.solve(stiffness[free_block], rhs[free])
+            solved = np.linalg.solve(stiffness[free_block], rhs)
         u[free] = solved
         f = np.zeros(n_c)
-        f[active] = system.forces(u)
-        w = system.deflection(layer, u, f) + shift
-        gap = w - overlap_mm - directions @ u
+        f[active] = system.forces(solved)
+        w = system.deflection(layer, solved, f) + shift
+        gap = w - overlap_mm - rows @ solved
         tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
         new_active = np.where(active, f > 0.0, gap < 0.0)
         new_ligaments = tension > 0.0
@@ -353,13 +380,14 @@ def thin_layer_viscoelastic_increment(
         local, shift = (None, 0.0) if column is None else _linearised(layer, column, carried_force_n)
         pushed = carried_force_n if pushback else None
         offset = _offset(layer, overlap_mm, shift, local, pushed)
-        system = ActiveSystem.build(layer, directions * free, offset, active, local, pushed)  # fixed DOFs: no solves (solve_thin_layer)
+        rows = np.ascontiguousarray(directions[:, free])  # the free DOFs' (solve_thin_layer)
+        system = ActiveSystem.build(layer, rows, offset, active, local, pushed)
         k_other, f_other = _others(ligament_rows, ligament_law, ligament_active, shear, active)
         if phi or psi:
-            k = system.stiffness(directions) + k_other
-            rhs = phi * (previous_load - system.pushback(directions) - f_other) + psi * (load - previous_load)
-            u[free] = np.linalg.lstsq(k[np.ix_(free, free)], rhs[free], rcond=None)[0]
-        f[active] = np.maximum(system.forces(u), 0.0)
+            k = system.stiffness() + k_other[np.ix_(free, free)]
+            rhs = phi * (previous_load[free] - system.pushback() - f_other[free]) + psi * (load - previous_load)[free]
+            u[free] = np.linalg.lstsq(k, rhs, rcond=None)[0]
+        f[active] = np.maximum(system.forces(u[free]), 0.0)
     tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
     return u, np.concatenate([f, np.where(ligament_active, np.maximum(tension, 0.0), 0.0)])
 
@@ -441,11 +469,14 @@ class ContactHistory:
         self.recorded += 1
 
     def first_set(self, springs: np.ndarray, overlap_mm: np.ndarray) -> np.ndarray | None:
-        """(n_d,) bool over the layer's springs ``springs`` (indices into M's), whose overlaps d0
-        (n_d,) mm are ``overlap_mm``; None before any record."""
+        """(n_d,) bool over the layer's springs ``springs`` (sorted indices into M's), whose overlaps
+        d0 (n_d,) mm are ``overlap_mm``; None before any record."""
         if not self.recorded:
             return None
-        force, gap, contact = self.force_n[:, springs], self.gap_mm[:, springs], self.in_contact[springs]
+        if springs.shape[0] == self.in_contact.shape[0]:  # every spring, in order (the layer over the whole surface): no gathers
+            force, gap, contact = self.force_n, self.gap_mm, self.in_contact
+        else:
+            force, gap, contact = self.force_n[:, springs], self.gap_mm[:, springs], self.in_contact[springs]
         before = np.isfinite(gap[0]) if self.recorded > 1 else np.zeros(springs.shape[0], bool)
         force_next = np.where(before, 2.0 * force[1] - force[0], force[1])
         gap_next = np.where(before, 2.0 * gap[1] - gap[0], gap[1])
@@ -576,17 +607,24 @@ class CoupledStep:
         solution.deflection_mm, solution.gap_mm = solution.deflection_mm[c], solution.gap_mm[c]
         return solution
 
-    def solve(self, load, fixed_dofs, shear, length_scale_mm, history: "ContactHistory | None" = None) -> ThinLayerSolution:
+    def solve(self, load, fixed_dofs, shear, length_scale_mm, history: "ContactHistory | None" = None,
+              first: np.ndarray | None = None) -> ThinLayerSolution:
         """The coupled solve; forces, contact set, deflection and gap of the candidates (then ligaments).
 
-        ``history``: the previous time points' solutions, whose extrapolation is the active set's
-        first iterate (``ContactHistory.first_set``); None: every candidate (a cold start, as
-        DEM's first time point). The programme's answer does not depend on the first iterate."""
+        ``first`` (n_c,) bool over the candidates: the active set's first iterate; else
+        ``history``: the previous time points' solutions, whose extrapolation is the first iterate
+        (``ContactHistory.first_set``); None: a cold start (``solve_thin_layer``'s default). The
+        programme's answer does not depend on the first iterate."""
+        if first is not None:
+            initial = np.zeros(self.candidate.shape[0], bool)
+            initial[self.candidate] = first
+        else:
+            initial = None if history is None else history.first_set(self.springs, self.overlap_mm)
         return self._to_candidates(
             solve_thin_layer(
                 self.directions, self.layer, self.overlap_mm, load, ligament_rows=self.ligament_rows, ligament_law=self.ligament_law,
                 fixed_dofs=fixed_dofs, shear=self._shear(shear), length_scale_mm=length_scale_mm,
-                initial_active=None if history is None else history.first_set(self.springs, self.overlap_mm), column=self.column,
+                initial_active=initial, column=self.column,
                 pushback_force_n=self.pushback_force_n,
             )
         )

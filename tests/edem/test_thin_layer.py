@@ -384,6 +384,45 @@ def test_two_pole_block_ldlt_agrees_with_pivoted_lu_within_its_condition(monkeyp
     assert np.abs(x - reference).max() <= bound * np.abs(reference).max()
 
 
+def test_two_pole_refactors_on_its_kept_ordering_while_the_contact_stays_within_it(monkeypatch):
+    """The two-pole's stacked block on the whole surface keeps its LDL^T ordering (found for the
+    springs in contact and ORDERING_RINGS rings around them) while the springs in contact stay
+    among those: a contact set that lost half its springs is refactored on it (no new ordering),
+    one with a spring far outside finds a new one; every solve, also the first factor's after the
+    others came (its numbers are put back), is the LDL^T's own (the check sends none to SuperLU)
+    with a residual within 1e-11 of |A| |x| (round-off times the blocks' condition, below about
+    1e3 here, with a safety factor of 50, as for a fresh factor)."""
+    import edem.sparse_factors as sparse_factors
+
+    plate = grid_plate(10.0, 10.0, 12)
+    mesh = SurfaceMesh.from_surface(plate.vertices_mm, plate.triangles)
+    cells = np.arange(plate.n_triangles)
+    layer = layer_compliance(mesh, cells, 1.0 + 0.2 * (cells % 5) / 5, E, 0.49, symbol=two_pole_symbol(0.49))
+    assert layer.stacked and not layer.definite
+    orderings, pivoted = [], []
+    found, splu = sparse_factors._Ordering.__init__, sparse_factors.splu
+    monkeypatch.setattr(sparse_factors._Ordering, "__init__", lambda self, *a: orderings.append(1) or found(self, *a))
+    monkeypatch.setattr(sparse_factors, "splu", lambda *a, **k: pivoted.append(1) or splu(*a, **k))
+    centre = np.linalg.norm(mesh.vertices_mm[mesh.triangles].mean(axis=1)[:, :2] - 5.0, axis=1)
+    rng = np.random.default_rng(11)
+    contact = centre < 3.0
+    fewer = contact & (rng.uniform(size=cells.size) < 0.5)
+    beyond = fewer.copy()
+    beyond[np.argmax(centre)] = True  # a corner spring, more than two rings outside the disc
+    solves = []
+    for springs, new_orderings in ((contact, 1), (fewer, 0), (beyond, 1)):
+        before = len(orderings)
+        weight = np.where(springs, 1.0 / layer.local_mm_per_n, 0.0)
+        solves.append((weight, layer._factorise(weight)))
+        assert len(orderings) - before == new_orderings
+    rhs = rng.standard_normal((layer.z.shape[0], 2))
+    for weight, solve in solves[::-1]:  # the last factor first: the earlier ones put their numbers back
+        matrix = sp.block_diag([t.sigma * t.h for t in layer.terms]) + layer.z @ sp.diags(weight) @ layer.z.T
+        x = solve(rhs)
+        assert np.abs(matrix @ x - rhs).max() <= 1e-11 * abs(matrix).max() * np.abs(x).max()
+    assert not pivoted  # every LDL^T solve was accepted (none fell back to SuperLU)
+
+
 def test_indefinite_solve_pivots_where_diagonal_pivots_would_grow():
     """The 4 x 4 tridiagonal matrix with ones beside a diagonal d = 1e-12 is well conditioned
     (cond_inf = 4) but every diagonal pivot order starts on d, so an LDL^T without pivoting grows

@@ -279,6 +279,35 @@ def test_previous_contact_as_first_guess_finds_the_cold_start_solution():
     assert sum(w.iterations for w in warm[1:]) < sum(c.iterations for c in cold[1:])
 
 
+@pytest.mark.parametrize("symbol", ["pade", "two-pole"])
+def test_the_first_iterates_without_history_all_find_the_same_solution(symbol, monkeypatch):
+    """A solve without two time points of history starts its active set from the independent
+    springs' contact set (``CoupledThinLayer._springs_contact``); without that, a cold start
+    takes the springs whose surfaces overlap before the layer deflects. The programme is strictly
+    convex, so both end where a start from every candidate ends: the same contact set and
+    pressures to round-off (1e-9 of the peak, as above), each in no more iterations than the
+    last (here 4 / 4 / 4 for the Pade, 4 / 5 / 5 for the two-pole)."""
+    import edem.thin_layer_contact as thin_layer_contact
+
+    cylinder, tibia = cylinder_patch(20.0, 28.0, 114.0, 40, 8), plane(lambda x, y: 2.3)
+    scene = coupled(make_scene(cylinder, tibia, ramp(1500.0, 3)[1], fixed_dofs=CYLINDER_DOFS, poissons_ratio=0.45, law="gap",
+                               thickness_mm=2.0), thin_layer_symbol=symbol)
+    springs = run(scene, "dem").steps[0]
+    monkeypatch.setattr(CoupledThinLayer, "_springs_contact", staticmethod(lambda step, load: None))
+    overlapping = run(scene, "dem").steps[0]
+    solve = thin_layer_contact.solve_thin_layer
+
+    def from_every_candidate(directions, layer, overlap_mm, load, **keys):
+        return solve(directions, layer, overlap_mm, load, **{**keys, "initial_active": np.ones(directions.shape[0], bool)})
+
+    monkeypatch.setattr(thin_layer_contact, "solve_thin_layer", from_every_candidate)
+    every = run(scene, "dem").steps[0]
+    for step in (springs, overlapping):
+        np.testing.assert_allclose(step.pressure_mpa, every.pressure_mpa, rtol=0.0, atol=1e-9 * every.peak_pressure_mpa)
+        assert np.array_equal(step.in_contact, every.in_contact)
+    assert springs.iterations <= overlapping.iterations <= every.iterations
+
+
 def test_the_extrapolated_contact_as_first_guess_finds_the_same_edem_path_in_fewer_iterations(monkeypatch):
     """EDEM on the gap law's layer under a growing load: starting each active set from the
     extrapolation of the last two time points' forces and gaps (``ContactHistory.first_set``)
