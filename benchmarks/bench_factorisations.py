@@ -15,7 +15,9 @@ solve:
   factorisation and one solve per factorisation), and CHOLMOD through cholespy if it is
   installed (no numeric-only refactorisation: analysis and factor at every call);
 - two-pole (the indefinite block, whose pattern follows the contact set): the bed's solve (QDLDL,
-  fresh, residual-checked) and SuperLU's symmetric mode with threshold pivoting.
+  residual-checked: fresh on per-time-point cells, on the gap law's whole surface with its
+  ordering kept while the contact stays within it, ``KeptOrderingLDL``) and SuperLU's symmetric
+  mode with threshold pivoting on the same matrix.
 
 Prints per size, law and solver the total and median milliseconds, the total against the banded
 path's, and the largest relative residual |A x - b| / |b|. With ``--resolution r`` > 0 the gap
@@ -108,6 +110,7 @@ def bench(mesh_size_mm: float, law: str, n_steps: int, resolution: float, symbol
     cartilage = replace(base.cartilage, poissons_ratio=0.45, law=law, thickness_mm=2.0 if law != "threshold" else None)
     rng = np.random.default_rng(0)
     factorise, indefinite_solve = sparse_factors.OperatorPattern.factorise, thin_layer.indefinite_solve
+    kept_factorise = sparse_factors.KeptOrderingLDL.factorise
     for symbol in symbols:
         figures: dict[str, list[tuple[float, float]]] = {}
         kept: dict = {}
@@ -131,15 +134,26 @@ def bench(mesh_size_mm: float, law: str, n_steps: int, resolution: float, symbol
                 lambda: splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve(rhs), matrix, rhs))
             return holder[0]
 
+        def kept_indefinite(ldl, data, spring_weight):
+            matrix = ldl.stack.pattern.matrix(data).tocsc()
+            rhs = rng.standard_normal(matrix.shape[0])
+            holder = []
+            record("qdldl, kept ordering (the bed's)", timed(lambda: holder.append(kept_factorise(ldl, data, spring_weight)) or holder[0](rhs), matrix, rhs))
+            record("superlu, threshold pivoting", timed(
+                lambda: splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve(rhs), matrix, rhs))
+            return holder[0]
+
         # The bed's factorisations replayed on its banded path (CHOLMOD, which the bed takes for a
         # large whole surface where cvxopt is installed, is a row of its own).
         sparse_factors.OperatorPattern.factorise, thin_layer.indefinite_solve = pade, indefinite
+        sparse_factors.KeptOrderingLDL.factorise = kept_indefinite
         uses_cholmod, sparse_factors.OperatorPattern.uses_cholmod = sparse_factors.OperatorPattern.uses_cholmod, False
         try:
             layer = on_bed(cartilage, CoupledThinLayer.coupling, thin_layer_symbol=symbol, thin_layer_smoothing_resolution=resolution)
             result = run(replace(base, cartilage=layer), "edem", caster=caster)
         finally:
             sparse_factors.OperatorPattern.factorise, thin_layer.indefinite_solve = factorise, indefinite_solve
+            sparse_factors.KeptOrderingLDL.factorise = kept_factorise
             sparse_factors.OperatorPattern.uses_cholmod = uses_cholmod
         reference = sum(s for s, _ in next(iter(figures.values())))  # the bed's own path, the first recorded
         where = f"{law}{f' r{resolution:g}' if resolution else ''}"
