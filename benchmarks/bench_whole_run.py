@@ -60,12 +60,15 @@ def write_scene(root: Path, mesh_size_mm: float) -> tuple[Path, int]:
     from geometries.builders import build_geometry
     from geometries.mesh_files import write_surface
 
-    built = build_geometry("ideal_ankle", {"mesh_size_mm": mesh_size_mm})
+    built = build_geometry("ideal_ankle", {"mesh_size_mm": mesh_size_mm, "cartilage": False})  # the thesis's cylinder under a plane
     write_surface(root / "talus.stl", built.mobile, binary=True)
     write_surface(root / "tibia.stl", built.fixed, binary=True)
     data = tomllib.loads(resolve_scene_path("ideal-stance").read_text(encoding="utf-8"))
     data["scene"]["name"] = f"stance-files-{built.mobile.n_triangles}"
     data["geometry"] = {"mobile": "talus.stl", "fixed": "tibia.stl"}
+    # the thesis's law on independent springs (the scene's default is the gap law on both cartilage
+    # layers, coupled: a file pair carries no bones to measure the layers to)
+    data["cartilage"].update(law="threshold", coupling="none")
     if built.reference_point_mm is not None:
         data["geometry"]["reference_point_mm"] = [float(x) for x in built.reference_point_mm]
     points = {lig.name: lig for lig in built.ligaments}
