@@ -457,11 +457,6 @@ def pressure_bound_mpa(surface) -> float:
     return float(pressure.max(initial=0.0)) + 1e-6 * float(np.abs(pressure).max(initial=0.0))
 
 
-#: maps left to measure from which they share one disc averaging (building it costs about two
-#: maps measured alone, each then ~1 ms; measured on the 3k and 13k-spring stance, 2026-11-28)
-_SHARED_FROM_MAPS = 3
-
-
 def largest_regularised_peak_mpa(map_at: Callable[[int], Any], bounds_mpa: Sequence[float]) -> float:
     """The largest regularised peak of a run's pressure maps (0 with none), MPa.
 
@@ -475,20 +470,17 @@ def largest_regularised_peak_mpa(map_at: Callable[[int], Any], bounds_mpa: Seque
 
     The maps are measured from the largest bound down until the next bound is below the best
     peak found: no map after it can hold a larger one. The result is the largest of every map's
-    peak; usually a few maps of a run are measured. Each is measured alone
-    (:func:`surface_regularised_peak_mpa`), or, when more than a few are left to measure, on one
-    disc averaging they share (:class:`RegularisedPeaks`).
+    peak (a stance's 65 maps: 1-4 measured). They share one disc averaging
+    (:class:`RegularisedPeaks`); a single map has its own, built for its contact only.
     """
     bounds = np.asarray(bounds_mpa, dtype=np.float64)
-    order = np.argsort(-bounds, kind="stable")
-    best, shared = 0.0, None
-    for position, i in enumerate(order):
+    if len(bounds) == 1:
+        return surface_regularised_peak_mpa(map_at(0))
+    measure, best = RegularisedPeaks(), 0.0
+    for i in np.argsort(-bounds, kind="stable"):
         if bounds[i] < best:
             break
-        if shared is None and int((bounds[order[position:]] >= best).sum()) >= _SHARED_FROM_MAPS:
-            shared = RegularisedPeaks()
-        surface = map_at(int(i))
-        best = max(best, shared(surface) if shared is not None else surface_regularised_peak_mpa(surface))
+        best = max(best, measure(map_at(int(i))))
     return best
 
 

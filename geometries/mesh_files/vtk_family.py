@@ -15,7 +15,6 @@ import signal
 import sys
 import threading
 import warnings
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -348,10 +347,17 @@ _VTK_XML_TYPES = {
 
 #: bytes per zlib block, as VTK's own writer cuts them
 _BLOCK_BYTES = 1 << 15
-#: zlib's fastest level: on a run's pressure maps (float64 points and pressures, int8 flags) it
-#: compresses 2.6x faster than the default level 6 (a 13k-triangle map: 4.0 against 10.2 ms of
-#: CPU), to arrays 5 % larger
-_ZLIB_LEVEL = 1
+try:
+    # ISA-L's deflate (the isal package, a dependency): the same zlib streams, on a run's pressure
+    # maps (float64 points and pressures, int8 flags) 4.4x faster than zlib's fastest level and
+    # 1-2 % smaller (a 13k-triangle map: 0.91 against 3.9 ms of CPU; 2026-11-28). Its level 2 is
+    # as fast as its level 1 there, and level 0 only 20 % faster for files 17 % larger.
+    from isal.isal_zlib import compress as _compress
+    _ZLIB_LEVEL = 2
+except ImportError:  # (an install without it writes the same arrays, through zlib)
+    # zlib's fastest level: 2.6x faster than its default level 6 there, to arrays 5 % larger
+    from zlib import compress as _compress
+    _ZLIB_LEVEL = 1
 
 
 def _xml_data_array(values: np.ndarray, name: str | None = None) -> str:
@@ -366,7 +372,7 @@ def _xml_data_array(values: np.ndarray, name: str | None = None) -> str:
         raise ValueError(f"write_vtp: array {name!r} of {values.dtype} and shape {values.shape} "
                          "(expected (n,) or (n, k) numbers)")
     data = np.ascontiguousarray(values, dtype=values.dtype.newbyteorder("<")).tobytes()
-    blocks = [zlib.compress(data[start:start + _BLOCK_BYTES], _ZLIB_LEVEL) for start in range(0, len(data), _BLOCK_BYTES)]
+    blocks = [_compress(data[start:start + _BLOCK_BYTES], _ZLIB_LEVEL) for start in range(0, len(data), _BLOCK_BYTES)]
     last = len(data) - (len(blocks) - 1) * _BLOCK_BYTES if blocks else 0
     header = np.array([len(blocks), _BLOCK_BYTES, last, *map(len, blocks)], dtype="<u8").tobytes()
     encoded = (base64.b64encode(header) + base64.b64encode(b"".join(blocks))).decode("ascii")

@@ -426,11 +426,30 @@ def test_ply_with_its_header_cut_short_is_refused(tmp_path):
     assert str(cut) in str(err.value)
 
 
-def test_write_vtp_keeps_cell_data(tmp_path):
+def _deflaters() -> list:
+    """(compress, level) pairs the .vtp writer may use: zlib's, and ISA-L's where installed."""
+    import zlib
+
+    found = [pytest.param(zlib.compress, 1, id="zlib")]
+    try:
+        from isal.isal_zlib import compress
+    except ImportError:
+        return found
+    return found + [pytest.param(compress, 2, id="isal")]
+
+
+@pytest.mark.parametrize("compress, level", _deflaters())
+def test_write_vtp_keeps_cell_data(tmp_path, monkeypatch, compress, level):
     """Invariant: write_vtp (also used for the result pressure maps) stores float64 points,
-    int64 connectivity and the per-triangle arrays exactly."""
+    int64 connectivity and the per-triangle arrays exactly, through either deflate (ISA-L's
+    writes the same zlib streams VTK reads, faster)."""
     vtk = pytest.importorskip("vtk")
     from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    from geometries.mesh_files import vtk_family
+
+    monkeypatch.setattr(vtk_family, "_compress", compress)
+    monkeypatch.setattr(vtk_family, "_ZLIB_LEVEL", level)
 
     s = cylinder_patch()
     pressure = np.linspace(0.0, 1.0, s.n_triangles) ** 3
