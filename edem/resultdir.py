@@ -82,7 +82,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -90,6 +90,9 @@ from edem.atomic_dirs import ResultWriteError, atomic_result_dir, verify_manifes
 from edem.pressure_metrics import REGULARISED_PEAK_DEFINITION, has_pressure, largest_regularised_peak_mpa, pressure_bound_mpa
 from geometries.errors import InputError, SolverError
 from geometries.triangle_kernels import triangle_areas
+
+if TYPE_CHECKING:
+    from geometries.mesh_files.vtk_family import VtpSeries
 
 SUMMARY_FILE = "summary.json"
 TIMESERIES_FILE = "timeseries.csv"
@@ -341,15 +344,14 @@ def _write_series(out: Path, prefix: str, frames: Iterable[Frame], collection: s
     """<prefix>_NNNN.vtp per frame and the ParaView collection listing them; with ``bound``, the
     :func:`edem.pressure_metrics.pressure_bound_mpa` of each frame that has a pressure
     (:func:`edem.pressure_metrics.has_pressure`), by its position in ``frames``."""
-    from geometries.mesh_files.vtk_family import vtp_polys
+    from geometries.mesh_files.vtk_family import VtpSeries
 
     entries, bounds = [], {}
-    triangles, polys = None, None  # the frames' mesh, encoded once (it is the same at every time point)
+    series = VtpSeries()  # the frames' mesh and unchanged arrays, encoded once
     for position, frame in enumerate(frames):
         name = f"{prefix}_{frame.step:04d}.vtp"
-        if triangles is None or not (frame.surface.triangles is triangles or np.array_equal(frame.surface.triangles, triangles)):
-            triangles, polys = frame.surface.triangles, vtp_polys(frame.surface.triangles)
-        write_surface_frame(out / name, frame.surface.points_mm, triangles, frame.surface.point_data, frame.surface.cell_data, polys=polys)
+        write_surface_frame(out / name, frame.surface.points_mm, frame.surface.triangles, frame.surface.point_data, frame.surface.cell_data,
+                            series=series)
         entries.append((float(frame.time_s), name))
         if bound and has_pressure(frame.surface):
             bounds[position] = pressure_bound_mpa(frame.surface)
@@ -435,13 +437,14 @@ def write_surface_frame(
     point_data: dict[str, np.ndarray] | None = None,
     cell_data: dict[str, np.ndarray] | None = None,
     *,
-    polys: str | None = None,
+    series: VtpSeries | None = None,
 ) -> Path:
     """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only);
-    ``polys``: the triangles already encoded (:func:`geometries.mesh_files.vtk_family.vtp_polys`)."""
+    ``series``: the :class:`geometries.mesh_files.vtk_family.VtpSeries` of the files of a run's
+    time points (what they share encoded once)."""
     from geometries.mesh_files import write_vtp
 
-    write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data, polys=polys)
+    write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data, series=series)
     return Path(path)
 
 

@@ -468,6 +468,26 @@ def test_write_vtp_keeps_cell_data(tmp_path, monkeypatch, compress, level):
     np.testing.assert_array_equal(vtk_to_numpy(cells.GetArray("in_contact")), contact)
 
 
+def test_vtp_series_writes_each_file_as_it_would_be_written_alone(tmp_path):
+    """Invariant: the files of a series (a run's time points), whose mesh and unchanged arrays
+    are encoded once, are byte for byte the files written one by one; an array changed in place
+    in the caller's buffer, or of another type with equal values, is encoded again."""
+    from geometries.mesh_files.vtk_family import VtpSeries
+
+    s = cylinder_patch()
+    thickness = np.linspace(1.0, 2.0, s.n_triangles)  # the same at every time point
+    buffer = np.zeros(s.n_triangles)
+    series = VtpSeries()
+    for k in range(4):
+        buffer[:] = 0.0 if k >= 2 else np.arange(s.n_triangles) * k  # in place; time point 3 equals time point 2
+        flags = (buffer > 3.0).astype(np.int8 if k < 3 else np.int32)  # time point 3: the values of 2, another type
+        cells = {"pressure_mpa": buffer, "thickness_mm": thickness, "in_contact": flags}
+        points = s.vertices_mm + [0.0, 0.1 * k, 0.0]
+        write_vtp(tmp_path / f"series_{k}.vtp", points, s.triangles, cells, series=series)
+        write_vtp(tmp_path / f"alone_{k}.vtp", points, s.triangles, {name: np.copy(v) for name, v in cells.items()})
+        assert (tmp_path / f"series_{k}.vtp").read_bytes() == (tmp_path / f"alone_{k}.vtp").read_bytes(), k
+
+
 def test_write_vtp_point_arrays_keep_their_type_components_and_values_in_vtk(tmp_path):
     """Invariant: the .vtp writer (Python, no VTK) gives VTK's own reader every point array with
     its numeric type, its number of components and its values exactly (the FE maps write
