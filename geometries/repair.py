@@ -272,10 +272,16 @@ def orient_consistently(surface: TriangleSurface, *, key: str | None = None) -> 
     orientation until :func:`orient_towards` / :func:`orient_pair` choose its global sign.
     Non-manifold edges raise InputError (see :func:`check_manifold`).
     """
+    return _orient_consistently(surface, key)[0]
+
+
+def _orient_consistently(surface: TriangleSurface, key: str | None) -> tuple[TriangleSurface, _Topology | None]:
+    """:func:`orient_consistently`, and the topology it built (None without triangles): its
+    components and open edges are the oriented surface's too (a flip changes no adjacency)."""
     t = surface.triangles
     n = len(t)
     if n == 0:
-        return surface
+        return surface, None
     topo = _Topology(t, len(surface.vertices_mm))
     if (topo.edge_count > 2).any():
         check_manifold(surface, key=key)  # raises, naming the edges
@@ -319,7 +325,7 @@ def orient_consistently(surface: TriangleSurface, *, key: str | None = None) -> 
         turn = closed & (comp_vol < 0)
         if turn.any():
             surface = _new(surface, surface.vertices_mm, _flip(tt, turn[comp]))
-    return surface
+    return surface, topo
 
 
 def _winding_numbers(surface: TriangleSurface, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -363,10 +369,9 @@ def orient_towards(
     docs/method.md#1-two-rigid-bones-and-a-bed-of-springs: the spring normals of M point towards F; F's normals point towards M.
     """
     points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
-    surface = orient_consistently(surface, key=key)
-    if len(points) == 0 or surface.n_triangles == 0:
+    surface, topo = _orient_consistently(surface, key)
+    if len(points) == 0 or topo is None:
         return surface
-    topo = _Topology(surface.triangles, len(surface.vertices_mm))
     comp, nc = topo.component, topo.n_components
     closed = _closed_components(surface, topo)
     turn = np.zeros(nc, dtype=bool)
@@ -441,8 +446,7 @@ def clean_surface(
         raise InputError("every triangle of the mesh is degenerate (zero area)",
                          file=surface.source or None, key=key,
                          expected="a surface with non-degenerate triangles")
-    check_manifold(s, key=key)
-    return orient_consistently(s, key=key)
+    return orient_consistently(s, key=key)  # (which refuses non-manifold edges)
 
 
 def check_units(surface: TriangleSurface, units: str = "mm", *, refuse: bool = False, key: str | None = None) -> float:
