@@ -100,6 +100,23 @@ def _bbox_diagonal_mm(vertices_mm: np.ndarray) -> float:
 # --------------------------------------------------------------------------------------------
 
 
+def _first_equal_rows(rows: np.ndarray) -> np.ndarray:
+    """For each of the (n, k) rows, the index of the first row equal to it (n,): ``first[inverse]``
+    of ``np.unique(rows, axis=0, return_index=True, return_inverse=True)``, by one stable sort of
+    the rows' bits (np.unique compares the rows as structured records: 7-12 ms for the 13k
+    triangles of an STL, against about 1 ms). Float rows compare as numbers (-0.0 equals 0.0)."""
+    rows = np.ascontiguousarray(rows)
+    if rows.dtype.kind == "f":
+        rows = rows + 0.0  # -0.0 + 0.0 = 0.0: equal numbers, equal bits
+    bits = rows.view(np.dtype(f"u{rows.dtype.itemsize}"))
+    order = np.lexsort(bits.T[::-1])  # stable: the first of equal rows comes first
+    ordered = bits[order]
+    starts = np.concatenate([[True], (ordered[1:] != ordered[:-1]).any(axis=1)])
+    first = np.empty(len(rows), dtype=np.int64)
+    first[order] = order[starts][np.cumsum(starts) - 1]
+    return first
+
+
 def merge_duplicate_vertices(surface: TriangleSurface, rel_tol: float = 1e-9) -> TriangleSurface:
     """Merge vertices closer than ``rel_tol`` x bounding-box diagonal; drop unused vertices.
 
@@ -114,8 +131,7 @@ def merge_duplicate_vertices(surface: TriangleSurface, rel_tol: float = 1e-9) ->
     tol = float(rel_tol) * _bbox_diagonal_mm(v)
     if n > 1:
         # exact duplicates first (cheap, and the only kind in STL), then near-coincident ones
-        _, first, inv = np.unique(v, axis=0, return_index=True, return_inverse=True)
-        rep = first[inv.ravel()]
+        rep = _first_equal_rows(v)
         if tol > 0:
             pairs = cKDTree(v).query_pairs(r=tol, output_type="ndarray")
             if len(pairs):
@@ -148,9 +164,7 @@ def drop_degenerate_triangles(
     tiny = areas <= rel_area_tol * mean_area
     degenerate = repeated | tiny
     keep = ~degenerate
-    _, first = np.unique(np.sort(t, axis=1), axis=0, return_index=True)
-    unique_mask = np.zeros(len(t), dtype=bool)
-    unique_mask[first] = True
+    unique_mask = _first_equal_rows(np.sort(t, axis=1)) == np.arange(len(t))
     duplicate = keep & ~unique_mask
     # a duplicate whose first copy is degenerate would be degenerate too: counted there
     keep &= unique_mask
