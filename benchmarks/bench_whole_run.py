@@ -27,7 +27,10 @@ independent springs). Then, median of ``--rounds``, three subprocesses a round:
 Run from the repository root (``PYTHONPATH=$PWD``); ``PYTHONPATH=/path/to/other/tree`` measures
 another version of the code (the mesh files are built by the imported tree's builders).
 
-    PYTHONPATH=$PWD .venv/bin/python benchmarks/bench_whole_run.py [--rounds 5] [--sizes 0.94 0.45]
+``--builtin ideal-stance`` measures a built-in scene as it is the same way (there, the cartilage
+EDEM stance: the gap law on both layers, the coupled layer, its geometry built by gmsh).
+
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/bench_whole_run.py [--rounds 5] [--sizes 0.94 0.45] [--builtin ideal-stance]
 """
 
 from __future__ import annotations
@@ -92,8 +95,8 @@ sys.exit(code)
 """
 
 
-def write_scene(root: Path, mesh_size_mm: float) -> tuple[Path, int]:
-    """ideal-stance on STL files of the ideal ankle at ``mesh_size_mm``: the scene path and its triangle count."""
+def write_scene(root: Path, mesh_size_mm: float) -> tuple[Path, str]:
+    """ideal-stance on STL files of the ideal ankle at ``mesh_size_mm``: the scene path and its name."""
     import tomli_w
 
     from edem.scene import resolve_scene_path
@@ -117,7 +120,7 @@ def write_scene(root: Path, mesh_size_mm: float) -> tuple[Path, int]:
         ligament["fixed_point_mm"] = [float(x) for x in points[ligament["name"]].fixed_point_mm]
     scene = root / "scene.toml"
     scene.write_text(tomli_w.dumps(data), encoding="utf-8")
-    return scene, built.mobile.n_triangles
+    return scene, data["scene"]["name"]
 
 
 def timed(args: list[str], env: dict[str, str], cwd: Path) -> float:
@@ -131,18 +134,26 @@ def timed(args: list[str], env: dict[str, str], cwd: Path) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--sizes", type=float, nargs="+", default=[0.94, 0.45], help="mesh_size_mm of the ideal ankle (0.94: ~3k springs)")
+    parser.add_argument("--sizes", type=float, nargs="*", default=[0.94, 0.45], help="mesh_size_mm of the ideal ankle (0.94: ~3k springs)")
+    parser.add_argument("--builtin", nargs="*", default=[], metavar="SCENE",
+                        help="also built-in scenes as they are (e.g. ideal-stance: the cartilage EDEM stance, coupled layer)")
     args = parser.parse_args()
     import edem
 
     print(f"edem from {Path(edem.__file__).parent}; load {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     with tempfile.TemporaryDirectory(prefix="bench_whole_run_") as tmp:
         root = Path(tmp)
-        env = {**os.environ, "BENCH_MODULES_FILE": str(root / "modules.txt"), "BENCH_STAGES_FILE": str(root / "stages.json")}
-        for size in args.sizes:
-            case = root / f"h{size}"
+        # one BLAS thread, as `edem run` sets before numpy loads (edem.cli.main): the import-only and
+        # the staged runs load numpy before main, and OpenBLAS's threads spin on a busy machine
+        env = {"OPENBLAS_NUM_THREADS": "1", **os.environ, "BENCH_MODULES_FILE": str(root / "modules.txt"),
+               "BENCH_STAGES_FILE": str(root / "stages.json")}
+        for size in [*args.sizes, *args.builtin]:
+            case = root / f"case-{size}"
             case.mkdir()
-            scene, n_triangles = write_scene(case, size)
+            if isinstance(size, float):
+                scene, label = write_scene(case, size)
+            else:
+                scene, label = size, size
 
             def run(script: str, out: Path) -> list[str]:
                 return [sys.executable, "-c", script, "run", str(scene), "--out", str(out)]
@@ -170,7 +181,7 @@ def main() -> None:
                     rounds.setdefault(key, []).append(value)
             m = {key: statistics.median(values) for key, values in rounds.items()}
             beyond = m["whole"] - m["imports"]
-            print(f"{summary['n_springs']:6d} springs ({n_triangles} triangles) x {summary['steps']} points, median of {args.rounds}: "
+            print(f"{label}: {summary['n_springs']} springs x {summary['steps']} points, median of {args.rounds}: "
                   f"whole {m['whole']:.3f} s, imports {m['imports']:.3f} s, solve {m['solve of the whole run']:.3f} s; "
                   f"(whole - imports) / solve = {m['ratio']:.1f} (goal <= 2); the command with its modules imported first, "
                   f"{m['command']:.3f} s, over its solve: {m['ratio in process']:.1f}")
