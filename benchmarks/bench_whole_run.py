@@ -1,21 +1,36 @@
 """The whole `edem run` against its solve: a 65-point EDEM stance from mesh files, independent
 springs, at ~3k and ~13k springs (goal: whole run <= imports + 2 x solve).
 
-For each size the ideal ankle is built (geometries.builders, ``mesh_size_mm``), written as
-binary STL files (as segmentation software writes them), and the built-in ``ideal-stance`` scene is pointed at them (its load, kinematics,
-constraints and ligaments, with the builder's attachment points). Then, median of ``--rounds``:
+For each size the ideal ankle is built (geometries.builders, ``mesh_size_mm``; the thesis's
+geometry, without cartilage), written as binary STL files (as segmentation software writes
+them), and the built-in ``ideal-stance`` scene is pointed at them (its load, kinematics,
+constraints and ligaments, with the builder's attachment points; the thesis's threshold law on
+independent springs). Then, median of ``--rounds``, three subprocesses a round:
 
-* whole: ``python -m edem run scene.toml --out NEW_DIR`` as a subprocess, wall time (start-up,
+* whole: ``python -m edem run scene.toml --out NEW_DIR`` as a user runs it, wall time (start-up,
   imports, scene loading, solve, result directory; a new directory each time, as a first run);
 * imports: a subprocess that only imports every module that run had imported (recorded from
   the run's own ``sys.modules``, in import order), plus the interpreter's start-up;
-* solve: ``wall_time_s`` of the run's summary.json (and ``setup_time_s`` where the summary has it);
-* ratio: (whole - imports) / solve.
+* the same run with those modules imported first and its stages timed inside the process, so
+  that no stage counts an import: scene (``edem.scene.load_scene``: reading, cleaning and
+  orienting the meshes, the load), set-up (``setup_time_s``: the ray caster's scene, the bed,
+  the pre-flight), solve (``wall_time_s``: the time points), writing (``write_results``: the
+  pressure maps, their regularised peak, the manifest and its fsyncs) and other (the rest of
+  whole - imports: start-up and exit, and in the command the provenance's git calls, the
+  checks, the printing, the run outside its two timers);
+* ratio: (whole - imports) / solve, with the solve of the whole run's own summary.json. Both
+  subprocesses start an interpreter and import ~900 modules (0.5-0.8 s, varying by 0.1 s from
+  one to the next on a shared machine), so the difference is noisy at 3k springs; the same
+  ratio measured inside the staged run, its command's wall time over its solve, is printed
+  beside it (no import in it, no start-up or exit).
 
 Run from the repository root (``PYTHONPATH=$PWD``); ``PYTHONPATH=/path/to/other/tree`` measures
 another version of the code (the mesh files are built by the imported tree's builders).
 
-    PYTHONPATH=$PWD .venv/bin/python benchmarks/bench_whole_run.py [--rounds 3] [--sizes 0.94 0.45]
+``--builtin ideal-stance`` measures a built-in scene as it is the same way (there, the cartilage
+EDEM stance: the gap law on both layers, the coupled layer, its geometry built by gmsh).
+
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/bench_whole_run.py [--rounds 5] [--sizes 0.94 0.45] [--builtin ideal-stance]
 """
 
 from __future__ import annotations
@@ -51,21 +66,52 @@ for name in open(os.environ["BENCH_MODULES_FILE"]).read().split():
         pass
 """
 
+#: the run with every module imported first and its stages timed (seconds, to BENCH_STAGES_FILE)
+_RUN_STAGES = _IMPORT_ONLY + """
+import json, sys, time
+import edem.results, edem.scene, edem.solver
+stages = {}
 
-def write_scene(root: Path, mesh_size_mm: float) -> tuple[Path, int]:
-    """ideal-stance on STL files of the ideal ankle at ``mesh_size_mm``: the scene path and its triangle count."""
+def timed(module, name):
+    function = getattr(module, name)
+    def wrapper(*args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            stages[name] = stages.get(name, 0.0) + time.perf_counter() - start
+    setattr(module, name, wrapper)  # (edem.cli imports them when the command runs)
+
+timed(edem.scene, "load_scene")
+timed(edem.solver, "run")
+timed(edem.results, "write_results")
+from edem.cli import main
+start = time.perf_counter()
+code = main(sys.argv[1:])
+stages["main"] = time.perf_counter() - start
+with open(os.environ["BENCH_STAGES_FILE"], "w") as f:
+    json.dump(stages, f)
+sys.exit(code)
+"""
+
+
+def write_scene(root: Path, mesh_size_mm: float) -> tuple[Path, str]:
+    """ideal-stance on STL files of the ideal ankle at ``mesh_size_mm``: the scene path and its name."""
     import tomli_w
 
     from edem.scene import resolve_scene_path
     from geometries.builders import build_geometry
     from geometries.mesh_files import write_surface
 
-    built = build_geometry("ideal_ankle", {"mesh_size_mm": mesh_size_mm})
+    built = build_geometry("ideal_ankle", {"mesh_size_mm": mesh_size_mm, "cartilage": False})  # the thesis's cylinder under a plane
     write_surface(root / "talus.stl", built.mobile, binary=True)
     write_surface(root / "tibia.stl", built.fixed, binary=True)
     data = tomllib.loads(resolve_scene_path("ideal-stance").read_text(encoding="utf-8"))
     data["scene"]["name"] = f"stance-files-{built.mobile.n_triangles}"
     data["geometry"] = {"mobile": "talus.stl", "fixed": "tibia.stl"}
+    # the thesis's law on independent springs (the scene's default is the gap law on both cartilage
+    # layers, coupled: a file pair carries no bones to measure the layers to)
+    data["cartilage"].update(law="threshold", coupling="none")
     if built.reference_point_mm is not None:
         data["geometry"]["reference_point_mm"] = [float(x) for x in built.reference_point_mm]
     points = {lig.name: lig for lig in built.ligaments}
@@ -74,7 +120,7 @@ def write_scene(root: Path, mesh_size_mm: float) -> tuple[Path, int]:
         ligament["fixed_point_mm"] = [float(x) for x in points[ligament["name"]].fixed_point_mm]
     scene = root / "scene.toml"
     scene.write_text(tomli_w.dumps(data), encoding="utf-8")
-    return scene, built.mobile.n_triangles
+    return scene, data["scene"]["name"]
 
 
 def timed(args: list[str], env: dict[str, str], cwd: Path) -> float:
@@ -87,36 +133,61 @@ def timed(args: list[str], env: dict[str, str], cwd: Path) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--sizes", type=float, nargs="+", default=[0.94, 0.45], help="mesh_size_mm of the ideal ankle (0.94: ~3k springs)")
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--sizes", type=float, nargs="*", default=[0.94, 0.45], help="mesh_size_mm of the ideal ankle (0.94: ~3k springs)")
+    parser.add_argument("--builtin", nargs="*", default=[], metavar="SCENE",
+                        help="also built-in scenes as they are (e.g. ideal-stance: the cartilage EDEM stance, coupled layer)")
     args = parser.parse_args()
     import edem
 
-    print(f"edem from {Path(edem.__file__).parent}")
+    print(f"edem from {Path(edem.__file__).parent}; load {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     with tempfile.TemporaryDirectory(prefix="bench_whole_run_") as tmp:
         root = Path(tmp)
-        env = {**os.environ, "BENCH_MODULES_FILE": str(root / "modules.txt")}
-        for size in args.sizes:
-            case = root / f"h{size}"
+        # one BLAS thread, as `edem run` sets before numpy loads (edem.cli.main): the import-only and
+        # the staged runs load numpy before main, and OpenBLAS's threads spin on a busy machine
+        env = {"OPENBLAS_NUM_THREADS": "1", **os.environ, "BENCH_MODULES_FILE": str(root / "modules.txt"),
+               "BENCH_STAGES_FILE": str(root / "stages.json")}
+        for size in [*args.sizes, *args.builtin]:
+            case = root / f"case-{size}"
             case.mkdir()
-            scene, n_triangles = write_scene(case, size)
-            def run(out: Path) -> list[str]:
-                return [sys.executable, "-c", _RUN_AND_RECORD, "run", str(scene), "--out", str(out)]
+            if isinstance(size, float):
+                scene, label = write_scene(case, size)
+            else:
+                scene, label = size, size
 
-            timed(run(case / "warm-up"), env, root)  # file caches, compiled bytecode
-            whole, imports, solve, setup = [], [], [], []
+            def run(script: str, out: Path) -> list[str]:
+                return [sys.executable, "-c", script, "run", str(scene), "--out", str(out)]
+
+            timed(run(_RUN_AND_RECORD, case / "warm-up"), env, root)  # file caches, compiled bytecode, the module list
+            rounds: dict[str, list[float]] = {}
             for k in range(args.rounds):
-                out = case / f"result-{k}"
-                whole.append(timed(run(out), env, root))
-                summary = json.loads((out / "summary.json").read_text())
-                solve.append(summary["wall_time_s"])
-                setup.append(summary.get("setup_time_s"))
-                imports.append(timed([sys.executable, "-c", _IMPORT_ONLY], env, root))
-            w, i, s = statistics.median(whole), statistics.median(imports), statistics.median(solve)
-            setup_text = "" if setup[0] is None else f", set-up {statistics.median(setup):.3f} s"
-            print(f"{summary['n_springs']:6d} springs ({n_triangles} triangles) x {summary['steps']} points: whole {w:.2f} s, "
-                  f"imports {i:.2f} s, solve {s:.3f} s{setup_text}; (whole - imports) / solve = {(w - i) / s:.1f} "
-                  f"(goal <= 2; median of {args.rounds})")
+                figures = {"whole": timed(run(_RUN_AND_RECORD, case / f"whole-{k}"), env, root)}
+                figures["imports"] = timed([sys.executable, "-c", _IMPORT_ONLY], env, root)
+                summary = json.loads((case / f"whole-{k}" / "summary.json").read_text())
+                figures["solve of the whole run"] = summary["wall_time_s"]
+                timed(run(_RUN_STAGES, case / f"stages-{k}"), env, root)
+                stages = json.loads((root / "stages.json").read_text())
+                staged = json.loads((case / f"stages-{k}" / "summary.json").read_text())
+                figures["scene"] = stages["load_scene"]
+                figures["set-up"] = staged.get("setup_time_s", 0.0)
+                figures["solve"] = staged["wall_time_s"]
+                figures["writing"] = stages["write_results"]
+                figures["other"] = figures["whole"] - figures["imports"] - sum(figures[s] for s in ("scene", "set-up", "solve", "writing"))
+                figures["other in main"] = stages["main"] - stages["load_scene"] - stages["run"] - stages["write_results"]
+                figures["ratio"] = (figures["whole"] - figures["imports"]) / figures["solve of the whole run"]
+                figures["command"] = stages["main"]
+                figures["ratio in process"] = stages["main"] / staged["wall_time_s"]
+                for key, value in figures.items():
+                    rounds.setdefault(key, []).append(value)
+            m = {key: statistics.median(values) for key, values in rounds.items()}
+            beyond = m["whole"] - m["imports"]
+            print(f"{label}: {summary['n_springs']} springs x {summary['steps']} points, median of {args.rounds}: "
+                  f"whole {m['whole']:.3f} s, imports {m['imports']:.3f} s, solve {m['solve of the whole run']:.3f} s; "
+                  f"(whole - imports) / solve = {m['ratio']:.1f} (goal <= 2); the command with its modules imported first, "
+                  f"{m['command']:.3f} s, over its solve: {m['ratio in process']:.1f}")
+            print("    whole - imports = " + ", ".join(f"{stage} {m[stage]:.3f} s ({100 * m[stage] / beyond:.0f} %)"
+                                                      for stage in ("scene", "set-up", "solve", "writing", "other"))
+                  + f" (of which {m['other in main']:.3f} s in the command: the provenance's git calls, the checks, the printing)")
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ columns' area ratio, on the points of M under them; a discrete run's spring pres
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -420,25 +421,22 @@ def regularised_peak_pressure_mpa(points_mm: np.ndarray, triangles: np.ndarray, 
 
 
 class RegularisedPeaks:
-    """The regularised peaks of a run's pressure maps, one call per map: the disc averaging
-    (:class:`DiscMeans`) is built once for the surface the maps share, and again only when a map
-    stands on another surface.
+    """The regularised peaks of pressure maps on one surface, one call per map: the disc
+    averaging (:class:`DiscMeans`) is built once for the surface the maps share, and again only
+    when a map stands on another surface.
 
     A discrete run's maps are M at each time point's pose, an FE run's the same contact face at
     every time point: the same triangles, points that differ by a rigid motion at most, which
-    changes no distance, so no disc. ``single=True``: one map only (no averaging is shared: it
-    is built for that map's contact only)."""
+    changes no distance, so no disc (each peak is that of the map alone to the rounding of the
+    posed points)."""
 
-    def __init__(self, *, single: bool = False) -> None:
-        self._single = single
+    def __init__(self) -> None:
         self._surface: tuple[np.ndarray, np.ndarray, bool] | None = None
         self._discs: DiscMeans | None = None
 
     def __call__(self, surface) -> float:
         """:func:`surface_regularised_peak_mpa` of a pressure map (an edem.resultdir.SurfaceFrame), MPa."""
         points, triangles, pressure, at_points = pressure_field_on_mobile(surface)
-        if self._single:
-            return regularised_peak_pressure_mpa(points, triangles, pressure, at_points=at_points)
         if self._discs is None or not self._same_surface(points, triangles, at_points):
             self._discs = DiscMeans(points, triangles, at_points=at_points)
             self._surface = (np.asarray(points, dtype=np.float64), triangles, at_points)
@@ -449,6 +447,41 @@ class RegularisedPeaks:
         if at_points != known_at_points or not (triangles is known_triangles or np.array_equal(triangles, known_triangles)):
             return False
         return _rigidly_moved(known_points, np.asarray(points, dtype=np.float64))
+
+
+def pressure_bound_mpa(surface) -> float:
+    """An upper bound of every disc mean of a pressure map (MPa): its largest pressure (a mean of
+    the field is at most its largest value; the nodal field is linear on each triangle), plus
+    1e-6 of its largest magnitude for the rounding of a computed mean (as :meth:`DiscMeans.peak`)."""
+    pressure = np.asarray(pressure_field_on_mobile(surface)[2], dtype=np.float64)
+    return float(pressure.max(initial=0.0)) + 1e-6 * float(np.abs(pressure).max(initial=0.0))
+
+
+def largest_regularised_peak_mpa(map_at: Callable[[int], Any], bounds_mpa: Sequence[float]) -> float:
+    """The largest regularised peak of a run's pressure maps (0 with none), MPa.
+
+    Parameters
+    ----------
+    map_at : callable
+        ``map_at(i)``: pressure map i (an edem.resultdir.SurfaceFrame), asked only of the maps
+        measured.
+    bounds_mpa : sequence of float
+        :func:`pressure_bound_mpa` of each map.
+
+    The maps are measured from the largest bound down until the next bound is below the best
+    peak found: no map after it can hold a larger one. The result is the largest of every map's
+    peak (a stance's 65 maps: 1-4 measured). They share one disc averaging
+    (:class:`RegularisedPeaks`); a single map has its own, built for its contact only.
+    """
+    bounds = np.asarray(bounds_mpa, dtype=np.float64)
+    if len(bounds) == 1:
+        return surface_regularised_peak_mpa(map_at(0))
+    measure, best = RegularisedPeaks(), 0.0
+    for i in np.argsort(-bounds, kind="stable"):
+        if bounds[i] < best:
+            break
+        best = max(best, measure(map_at(int(i))))
+    return best
 
 
 def _rigidly_moved(a: np.ndarray, b: np.ndarray) -> bool:

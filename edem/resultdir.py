@@ -78,18 +78,21 @@ import math
 import numbers
 import subprocess
 import xml.etree.ElementTree as ET
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from edem.atomic_dirs import ResultWriteError, atomic_result_dir, verify_manifest
-from edem.pressure_metrics import REGULARISED_PEAK_DEFINITION, RegularisedPeaks, has_pressure
+from edem.pressure_metrics import REGULARISED_PEAK_DEFINITION, has_pressure, largest_regularised_peak_mpa, pressure_bound_mpa
 from geometries.errors import InputError, SolverError
 from geometries.triangle_kernels import triangle_areas
+
+if TYPE_CHECKING:
+    from geometries.mesh_files.vtk_family import VtpSeries
 
 SUMMARY_FILE = "summary.json"
 TIMESERIES_FILE = "timeseries.csv"
@@ -221,12 +224,13 @@ def write_result_dir(
                 raise SolverError(f"{out / TIMESERIES_FILE}: time point {row['step']}, column '{column}' is not finite ({value})")
         lines.append([_csv_number(row[c]) for c in columns])
     with atomic_result_dir(out, overwrite=overwrite, durable=durable) as tmp:
-        # the regularised peak of each map as it is written (one map in memory at a time), the
-        # disc averaging built once for the surface the maps share
-        measure = RegularisedPeaks(single=len(frames) == 1) if frames and REGULARISED_PEAK_KEY not in summary else None
-        peaks = _write_series(tmp, "pressure", frames, COLLECTION_FILE, measure)
-        if peaks:
-            summary = {**summary, REGULARISED_PEAK_KEY: max(peaks), REGULARISED_PEAK_DEFINITION_KEY: REGULARISED_PEAK_DEFINITION}
+        # each map's bound as it is written (one map in memory at a time), then the regularised
+        # peak of only the maps whose bound could beat the best found (made again when measured)
+        bounds = _write_series(tmp, "pressure", frames, COLLECTION_FILE, bound=REGULARISED_PEAK_KEY not in summary)
+        if bounds:
+            positions = list(bounds)
+            peak = largest_regularised_peak_mpa(lambda k: frames[positions[k]].surface, list(bounds.values()))
+            summary = {**summary, REGULARISED_PEAK_KEY: peak, REGULARISED_PEAK_DEFINITION_KEY: REGULARISED_PEAK_DEFINITION}
             check_finite_summary(summary, out / SUMMARY_FILE)
         (tmp / SUMMARY_FILE).write_text(json.dumps(dict(summary), indent=2) + "\n", encoding="utf-8")
         if provenance is not None:
@@ -261,7 +265,8 @@ class RunOutput(Protocol):
 
     def frames(self, positions: Sequence[int] | None = None) -> Sequence[Frame]:
         """The pressure maps of the time points at ``positions`` in the run (default: all); the
-        writer reads each once, in order (a sequence may make each map when it is read)."""
+        writer reads each in order, then again the few whose regularised peak it measures (a
+        sequence may make each map when it is read)."""
         ...
 
     def fixed_frames(self, positions: Sequence[int] | None = None) -> Sequence[Frame]:
@@ -335,24 +340,23 @@ def _write_run(run: RunOutput, out_dir: str | Path, frame_steps: Sequence[int] |
                             opensim_sto=run.opensim_sto and not time_series_only, overwrite=overwrite, provenance=provenance, durable=durable)
 
 
-def _write_series(out: Path, prefix: str, frames: Iterable[Frame], collection: str,
-                  measure: Callable[[SurfaceFrame], float] | None = None) -> list[float]:
-    """<prefix>_NNNN.vtp per frame and the ParaView collection listing them; ``measure`` of each
-    frame's surface that has a pressure (:func:`edem.pressure_metrics.has_pressure`)."""
-    from geometries.mesh_files.vtk_family import vtp_polys
+def _write_series(out: Path, prefix: str, frames: Iterable[Frame], collection: str, *, bound: bool = False) -> dict[int, float]:
+    """<prefix>_NNNN.vtp per frame and the ParaView collection listing them; with ``bound``, the
+    :func:`edem.pressure_metrics.pressure_bound_mpa` of each frame that has a pressure
+    (:func:`edem.pressure_metrics.has_pressure`), by its position in ``frames``."""
+    from geometries.mesh_files.vtk_family import VtpSeries
 
-    entries, measured = [], []
-    triangles, polys = None, None  # the frames' mesh, encoded once (it is the same at every time point)
-    for frame in frames:
+    entries, bounds = [], {}
+    series = VtpSeries()  # the frames' mesh and unchanged arrays, encoded once
+    for position, frame in enumerate(frames):
         name = f"{prefix}_{frame.step:04d}.vtp"
-        if triangles is None or not (frame.surface.triangles is triangles or np.array_equal(frame.surface.triangles, triangles)):
-            triangles, polys = frame.surface.triangles, vtp_polys(frame.surface.triangles)
-        write_surface_frame(out / name, frame.surface.points_mm, triangles, frame.surface.point_data, frame.surface.cell_data, polys=polys)
+        write_surface_frame(out / name, frame.surface.points_mm, frame.surface.triangles, frame.surface.point_data, frame.surface.cell_data,
+                            series=series)
         entries.append((float(frame.time_s), name))
-        if measure is not None and has_pressure(frame.surface):
-            measured.append(measure(frame.surface))
+        if bound and has_pressure(frame.surface):
+            bounds[position] = pressure_bound_mpa(frame.surface)
     write_pvd(out / collection, entries)
-    return measured
+    return bounds
 
 
 def write_sto(path: str | Path, columns: Sequence[str], rows: Sequence[Sequence[float]], *, name: str = "edem") -> Path:
@@ -433,13 +437,14 @@ def write_surface_frame(
     point_data: dict[str, np.ndarray] | None = None,
     cell_data: dict[str, np.ndarray] | None = None,
     *,
-    polys: str | None = None,
+    series: VtpSeries | None = None,
 ) -> Path:
     """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only);
-    ``polys``: the triangles already encoded (:func:`geometries.mesh_files.vtk_family.vtp_polys`)."""
+    ``series``: the :class:`geometries.mesh_files.vtk_family.VtpSeries` of the files of a run's
+    time points (what they share encoded once)."""
     from geometries.mesh_files import write_vtp
 
-    write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data, polys=polys)
+    write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data, series=series)
     return Path(path)
 
 

@@ -100,6 +100,23 @@ def _bbox_diagonal_mm(vertices_mm: np.ndarray) -> float:
 # --------------------------------------------------------------------------------------------
 
 
+def _first_equal_rows(rows: np.ndarray) -> np.ndarray:
+    """For each of the (n, k) rows, the index of the first row equal to it (n,): ``first[inverse]``
+    of ``np.unique(rows, axis=0, return_index=True, return_inverse=True)``, by one stable sort of
+    the rows' bits (np.unique compares the rows as structured records: 7-12 ms for the 13k
+    triangles of an STL, against about 1 ms). Float rows compare as numbers (-0.0 equals 0.0)."""
+    rows = np.ascontiguousarray(rows)
+    if rows.dtype.kind == "f":
+        rows = rows + 0.0  # -0.0 + 0.0 = 0.0: equal numbers, equal bits
+    bits = rows.view(np.dtype(f"u{rows.dtype.itemsize}"))
+    order = np.lexsort(bits.T[::-1])  # stable: the first of equal rows comes first
+    ordered = bits[order]
+    starts = np.concatenate([[True], (ordered[1:] != ordered[:-1]).any(axis=1)])
+    first = np.empty(len(rows), dtype=np.int64)
+    first[order] = order[starts][np.cumsum(starts) - 1]
+    return first
+
+
 def merge_duplicate_vertices(surface: TriangleSurface, rel_tol: float = 1e-9) -> TriangleSurface:
     """Merge vertices closer than ``rel_tol`` x bounding-box diagonal; drop unused vertices.
 
@@ -114,8 +131,7 @@ def merge_duplicate_vertices(surface: TriangleSurface, rel_tol: float = 1e-9) ->
     tol = float(rel_tol) * _bbox_diagonal_mm(v)
     if n > 1:
         # exact duplicates first (cheap, and the only kind in STL), then near-coincident ones
-        _, first, inv = np.unique(v, axis=0, return_index=True, return_inverse=True)
-        rep = first[inv.ravel()]
+        rep = _first_equal_rows(v)
         if tol > 0:
             pairs = cKDTree(v).query_pairs(r=tol, output_type="ndarray")
             if len(pairs):
@@ -148,9 +164,7 @@ def drop_degenerate_triangles(
     tiny = areas <= rel_area_tol * mean_area
     degenerate = repeated | tiny
     keep = ~degenerate
-    _, first = np.unique(np.sort(t, axis=1), axis=0, return_index=True)
-    unique_mask = np.zeros(len(t), dtype=bool)
-    unique_mask[first] = True
+    unique_mask = _first_equal_rows(np.sort(t, axis=1)) == np.arange(len(t))
     duplicate = keep & ~unique_mask
     # a duplicate whose first copy is degenerate would be degenerate too: counted there
     keep &= unique_mask
@@ -272,10 +286,16 @@ def orient_consistently(surface: TriangleSurface, *, key: str | None = None) -> 
     orientation until :func:`orient_towards` / :func:`orient_pair` choose its global sign.
     Non-manifold edges raise InputError (see :func:`check_manifold`).
     """
+    return _orient_consistently(surface, key)[0]
+
+
+def _orient_consistently(surface: TriangleSurface, key: str | None) -> tuple[TriangleSurface, _Topology | None]:
+    """:func:`orient_consistently`, and the topology it built (None without triangles): its
+    components and open edges are the oriented surface's too (a flip changes no adjacency)."""
     t = surface.triangles
     n = len(t)
     if n == 0:
-        return surface
+        return surface, None
     topo = _Topology(t, len(surface.vertices_mm))
     if (topo.edge_count > 2).any():
         check_manifold(surface, key=key)  # raises, naming the edges
@@ -319,7 +339,7 @@ def orient_consistently(surface: TriangleSurface, *, key: str | None = None) -> 
         turn = closed & (comp_vol < 0)
         if turn.any():
             surface = _new(surface, surface.vertices_mm, _flip(tt, turn[comp]))
-    return surface
+    return surface, topo
 
 
 def _winding_numbers(surface: TriangleSurface, mask: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -363,10 +383,9 @@ def orient_towards(
     docs/method.md#1-two-rigid-bones-and-a-bed-of-springs: the spring normals of M point towards F; F's normals point towards M.
     """
     points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
-    surface = orient_consistently(surface, key=key)
-    if len(points) == 0 or surface.n_triangles == 0:
+    surface, topo = _orient_consistently(surface, key)
+    if len(points) == 0 or topo is None:
         return surface
-    topo = _Topology(surface.triangles, len(surface.vertices_mm))
     comp, nc = topo.component, topo.n_components
     closed = _closed_components(surface, topo)
     turn = np.zeros(nc, dtype=bool)
@@ -441,8 +460,7 @@ def clean_surface(
         raise InputError("every triangle of the mesh is degenerate (zero area)",
                          file=surface.source or None, key=key,
                          expected="a surface with non-degenerate triangles")
-    check_manifold(s, key=key)
-    return orient_consistently(s, key=key)
+    return orient_consistently(s, key=key)  # (which refuses non-manifold edges)
 
 
 def check_units(surface: TriangleSurface, units: str = "mm", *, refuse: bool = False, key: str | None = None) -> float:

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from edem.pressure_metrics import (MAX_QUADRATURE_POINTS, PEAK_DISC_AREA_MM2, DiscMeans, RegularisedPeaks, check_quadrature_size,
-                                   disc_mean_pressure_mpa, quadrature_size, regularised_peak_pressure_mpa)
+                                   disc_mean_pressure_mpa, largest_regularised_peak_mpa, pressure_bound_mpa, quadrature_size,
+                                   regularised_peak_pressure_mpa, surface_regularised_peak_mpa)
 from geometries.errors import InputError
 from edem.resultdir import SurfaceFrame
 
@@ -166,6 +167,32 @@ def test_maps_of_a_rigidly_moving_surface_share_one_averaging():
     value = peaks(SurfaceFrame(stretched, triangles, {}, {"pressure_mpa": fields[0]}))
     assert peaks._discs is not built[0]
     assert value == regularised_peak_pressure_mpa(stretched, triangles, fields[0], at_points=False)
+
+
+@pytest.mark.parametrize("at_points", [True, False])
+def test_largest_peak_of_many_maps_measures_only_those_that_could_beat_it(at_points):
+    """The largest regularised peak over a run's maps, measured from the largest bound (the map's
+    largest pressure) down and stopped where the bound falls below the best, is exactly the
+    largest of every map's own peak; each map's peak is at most its bound; and a history whose
+    maps rise and fall measures a few of them only. Maps of equal bounds (a flat-topped field
+    repeated) are all measured until one ties, and a history without contact gives 0."""
+    points, triangles = square_mesh(8.0, 0.4)
+    shapes = paraboloid_fields(points, triangles, at_points)
+    history = [s * scale for scale in (0.2, 0.5, 0.9, 1.0, 0.7, 0.3) for s in shapes[:3]]  # a load rising and falling
+    for maps in (history, [shapes[3]] * 4, [shapes[4]] * 3):
+        surfaces = [SurfaceFrame(points, triangles, {"pressure_mpa": p} if at_points else {}, {} if at_points else {"pressure_mpa": p})
+                    for p in maps]
+        alone = [surface_regularised_peak_mpa(s) for s in surfaces]
+        bounds = [pressure_bound_mpa(s) for s in surfaces]
+        assert all(peak <= bound for peak, bound in zip(alone, bounds))
+        asked = []
+        largest = largest_regularised_peak_mpa(lambda i: asked.append(i) or surfaces[i], bounds)
+        assert largest == max(alone)
+        if maps is history:  # the largest field's peak (6.8 MPa) is above every other map's largest pressure (at most 6.3)
+            assert asked == [int(np.argmax(bounds))]
+        elif largest > 0.0:  # flat tops of 2 MPa: every bound is 2 MPa plus the rounding margin, above the peak
+            assert len(asked) == len(maps)
+    assert largest == 0.0
 
 
 def test_a_surface_whose_quadrature_would_not_fit_is_refused_by_name():

@@ -426,11 +426,30 @@ def test_ply_with_its_header_cut_short_is_refused(tmp_path):
     assert str(cut) in str(err.value)
 
 
-def test_write_vtp_keeps_cell_data(tmp_path):
+def _deflaters() -> list:
+    """(compress, level) pairs the .vtp writer may use: zlib's, and ISA-L's where installed."""
+    import zlib
+
+    found = [pytest.param(zlib.compress, 1, id="zlib")]
+    try:
+        from isal.isal_zlib import compress
+    except ImportError:
+        return found
+    return found + [pytest.param(compress, 2, id="isal")]
+
+
+@pytest.mark.parametrize("compress, level", _deflaters())
+def test_write_vtp_keeps_cell_data(tmp_path, monkeypatch, compress, level):
     """Invariant: write_vtp (also used for the result pressure maps) stores float64 points,
-    int64 connectivity and the per-triangle arrays exactly."""
+    int64 connectivity and the per-triangle arrays exactly, through either deflate (ISA-L's
+    writes the same zlib streams VTK reads, faster)."""
     vtk = pytest.importorskip("vtk")
     from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    from geometries.mesh_files import vtk_family
+
+    monkeypatch.setattr(vtk_family, "_compress", compress)
+    monkeypatch.setattr(vtk_family, "_ZLIB_LEVEL", level)
 
     s = cylinder_patch()
     pressure = np.linspace(0.0, 1.0, s.n_triangles) ** 3
@@ -447,6 +466,41 @@ def test_write_vtp_keeps_cell_data(tmp_path):
     cells = out.GetCellData()
     np.testing.assert_array_equal(vtk_to_numpy(cells.GetArray("pressure_mpa")), pressure)
     np.testing.assert_array_equal(vtk_to_numpy(cells.GetArray("in_contact")), contact)
+
+
+def test_vtp_series_writes_each_file_as_it_would_be_written_alone(tmp_path):
+    """Invariant: the files of a series (a run's time points), whose mesh and unchanged arrays
+    are encoded once, are byte for byte the files written one by one; an array changed in place
+    in the caller's buffer, or of another type with equal values, is encoded again."""
+    from geometries.mesh_files.vtk_family import VtpSeries
+
+    s = cylinder_patch()
+    thickness = np.linspace(1.0, 2.0, s.n_triangles)  # the same at every time point
+    buffer = np.zeros(s.n_triangles)
+    series = VtpSeries()
+    for k in range(4):
+        buffer[:] = 0.0 if k >= 2 else np.arange(s.n_triangles) * k  # in place; time point 3 equals time point 2
+        flags = (buffer > 3.0).astype(np.int8 if k < 3 else np.int32)  # time point 3: the values of 2, another type
+        cells = {"pressure_mpa": buffer, "thickness_mm": thickness, "in_contact": flags}
+        points = s.vertices_mm + [0.0, 0.1 * k, 0.0]
+        write_vtp(tmp_path / f"series_{k}.vtp", points, s.triangles, cells, series=series)
+        write_vtp(tmp_path / f"alone_{k}.vtp", points, s.triangles, {name: np.copy(v) for name, v in cells.items()})
+        assert (tmp_path / f"series_{k}.vtp").read_bytes() == (tmp_path / f"alone_{k}.vtp").read_bytes(), k
+
+
+def test_first_equal_rows_is_what_np_unique_gives_for_floats_and_integers():
+    """Invariant: the duplicate finder of mesh cleaning (one sort of the rows' bits) maps every
+    row to the first row equal to it exactly as np.unique(axis=0) does, -0.0 equal to 0.0."""
+    from geometries.repair import _first_equal_rows
+
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        n = int(rng.integers(1, 200))
+        floats = rng.integers(-2, 3, size=(n, 3)) * 0.5
+        floats[rng.random((n, 3)) < 0.3] = -0.0
+        for rows in (floats, rng.integers(0, 4, size=(n, 3))):
+            _, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+            np.testing.assert_array_equal(_first_equal_rows(rows), first[inverse.ravel()])
 
 
 def test_write_vtp_point_arrays_keep_their_type_components_and_values_in_vtk(tmp_path):
