@@ -29,7 +29,7 @@ from verification.fe_comparison import ERROR_PANELS, FE_TABLE_COLUMNS, banded, f
 
 #: wall time with 2 jobs on 2 cores, nothing cached: an estimate, the whole campaign not yet run (2026-11-28, one job at load
 #: 4-5, the Krylov path: the goal's eight two-layer FE runs at :data:`FE_LEVEL` 63-110 s (P2) and 235-271 s (Taylor-Hood),
-#: about 1400 s with their 40 bed cases; the twelve lumped FE runs at 0.7 mm and the nu 0 and 0.42 points not run:
+#: the eight lumped FE runs 20-59 s, about 1800 s for the 48 cases; the nu 0 and 0.42 points not run:
 #: docs/campaigns.md#two-layers-the-lumping-error-and-the-beds-against-the-two-layer-fe)
 EXPECTED_TIME_S = 3600.0
 
