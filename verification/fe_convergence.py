@@ -293,10 +293,15 @@ def fe_relative_error(case: Any, reference: dict[str, Any] | None = None) -> dic
     return {metric: float(value) for metric, value in entry["errors"].items()}
 
 
-def write_reference(summary: dict[str, Any], path: str | Path | None = None) -> Path:
+def write_reference(summary: dict[str, Any], path: str | Path | None = None, *, merge: bool = False) -> Path:
     """Store the errors of an ``fe-convergence`` campaign summary (its analysis's ``entries``)
     in :data:`REFERENCE_FILE` (or ``path``), with the study's figures beside them. InputError
-    when the summary holds no estimate (every point unavailable)."""
+    when the summary holds no estimate (every point unavailable).
+
+    ``merge``: the summary studied some points only (e.g. :func:`verification.campaigns.fe_convergence.summary_from_cached_cases`
+    of a run filtered to them): the stored entries and points stay, and those of the points this
+    summary estimates replace theirs, the entries of its former levels with them (a point it could
+    not estimate changes nothing)."""
     import datetime as _dt
 
     from geometries.errors import InputError
@@ -307,14 +312,27 @@ def write_reference(summary: dict[str, Any], path: str | Path | None = None) -> 
         raise InputError("the fe-convergence campaign produced no error estimate (its FE runs unavailable or failed)", key="analyses",
                          expected="the three meshes of at least one point solved")
     file = Path(path) if path is not None else REFERENCE_FILE
+    points = result["values"]["points"]
+    if merge:
+        stored = load_reference(file)
+        estimated = [p for p in points if "unavailable" not in p]
+        names = {p["point"] for p in estimated}
+        kept = {k: e for k, e in stored["entries"].items() if _point_of_level(e.get("case", "")) not in names}
+        entries = {**kept, **entries}
+        points = [p for p in stored.get("points", []) if p.get("point") not in names] + estimated
     data = {
         "what": "estimated relative discretisation error of FE reference runs (edem verify fe-convergence --refresh-reference; verification.fe_convergence)",
         "refreshed_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "entries": dict(sorted(entries.items())),
-        "points": result["values"]["points"],
+        "points": points,
     }
     file.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     return file
+
+
+def _point_of_level(case_name: str) -> str:
+    """The point a level's case names (``<point>-h<size>[-L<n>]``, quick's ``<point>-P1-h<size>``)."""
+    return case_name.rsplit("-h", 1)[0].removesuffix("-P1")
 
 
 #: what a table cell says for an FE reference whose error is not in the study

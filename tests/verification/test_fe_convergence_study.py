@@ -247,3 +247,28 @@ def test_a_table_gives_the_fe_error_of_the_metrics_it_compares_not_of_the_raw_pe
               "contact_area_rel_error": 0.056, "displacement_rel_error": 0.026, "pressure_l2_rel_error": 0.05}
     assert fe_error_text(errors) == "17.0 % / 5.6 % / 2.6 % / 5.0 %"
     assert [c["fe_error"] for c in FE_ERROR_COLUMNS] == list(ERROR_PANELS)
+
+
+def test_a_merged_refresh_replaces_the_points_it_estimates_and_keeps_every_other(tmp_path):
+    """A study run on some points (merge): their entries and records replace the stored ones (a
+    former level of theirs goes with them), every other point's stay as stored, and a point the
+    summary could not estimate changes nothing."""
+    import json
+
+    from verification.fe_convergence import load_reference, write_reference
+
+    def entry(case: str, error: float) -> dict:
+        return {"case": case, "errors": {"contact_area_rel_error": error}}
+
+    stored = {"entries": {"k-other": entry("other-h1", 0.01), "k-cyl-old": entry("cyl-h1-L1", 0.05), "k-cyl": entry("cyl-h1-L2", 0.04),
+                          "k-gone": entry("gone-h1", 0.02)},
+              "points": [{"point": "other"}, {"point": "cyl", "dofs": [1, 2, 3]}, {"point": "gone"}]}
+    summary = {"analyses": [{"kind": "fe-convergence", "values": {
+        "entries": {"k-cyl": entry("cyl-h1-L2", 0.02), "k-cyl-new": entry("cyl-h0.7-L4", 0.01)},
+        "points": [{"point": "cyl", "dofs": [2, 3, 4]}, {"point": "gone", "unavailable": "case not run"}]}}]}
+    file = tmp_path / "fe_convergence.json"
+    file.write_text(json.dumps(stored), encoding="utf-8")
+    data = load_reference(write_reference(summary, file, merge=True))
+    assert data["entries"] == {"k-other": entry("other-h1", 0.01), "k-gone": entry("gone-h1", 0.02), "k-cyl": entry("cyl-h1-L2", 0.02),
+                               "k-cyl-new": entry("cyl-h0.7-L4", 0.01)}
+    assert data["points"] == [{"point": "other"}, {"point": "gone"}, {"point": "cyl", "dofs": [2, 3, 4]}]

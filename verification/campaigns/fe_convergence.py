@@ -73,9 +73,11 @@ THIN_LAYER_LEVELS = ({"mesh_size_mm": 1.0, "degree": 2}, {"mesh_size_mm": 0.7, "
 
 
 #: the levels of the two-layer cylinder (scene cylinder-two-layers, layers of 0.5-1.5 mm): M's own
-#: 0.96 mm triangles with one and with two element layers in each cartilage layer, then the
-#: triangles halved (0.48 mm) with two; the campaign (two-layers) uses the finest. Refining both
-#: ways at once (0.7 mm with 4 layers, about 0.7M DOFs) would need an LU of about 25 GB
+#: 0.94 mm triangles with one and with two element layers in each cartilage layer, then the
+#: triangles halved (0.47 mm) with two; the campaign (two-layers) uses the finest (Taylor-Hood:
+#: 68k, 112k, 441k DOFs; the finest 4-5 min and 2.7 GB by the Krylov path at load 4-5, measured
+#: 2026-11-28). The next in-plane halving with two layers (about 1.8M DOFs, 9 GB) does not fit a
+#: shared machine; one element per layer at 0.35 mm was solved as a check at three points (docs/campaigns.md)
 TWO_LAYER_CYLINDER_LEVELS = ({"mesh_size_mm": 1.0, "degree": 2, "layers_through_thickness": 1},
                              {"mesh_size_mm": 1.0, "degree": 2, "layers_through_thickness": 2},
                              {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 2})
@@ -110,7 +112,7 @@ def _cost_rank(case: Case) -> int:
     2-4, docs/campaigns.md): the 2 mm layer (0.7 mm: 0.3M DOFs, 1-15 min), the 1 mm layer (0.38M
     with 4 elements through it, 5-8 min), the ideal ankle (0.4M, 5-20 min), the 3 mm layer
     (0.46M, 14-20 min), the subject-like ankle (0.53M, 14-30 min); then (2026-11-28) the two-layer
-    cylinder (0.4M, ...) and the two-layer ankles (0.6M, three loads each: hours by LU)."""
+    cylinder (0.44M, 4-5 min by the Krylov path) and the two-layer ankles (0.6M, three loads each)."""
     if case.sides[-1] == "fe-two-layer":
         return 5 if case.scene == SCENE_TWO_LAYER_CYLINDER else 6
     if case.scene != "cylinder-layer":
