@@ -851,9 +851,10 @@ def _values_by_time(rows: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
         return [[dict(r["metrics"]) for r in rows]]
     from edem.resultdir import read_result_dir
 
-    series = read_result_dir(dirs[-1]).timeseries
+    result = read_result_dir(dirs[-1])
+    series = result.timeseries
     loads = np.linalg.norm(np.column_stack([series[f"force_{x}_n"] for x in "xyz"]), axis=1)
-    return [[{**fe_values(d, k), "load_n": float(loads[k])} for d in dirs] for k in range(n)]
+    return [[{**fe_values(d, k), "load_n": float(loads[k]), "time_s": float(result.time_s[k])} for d in dirs] for k in range(n)]
 
 
 def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -899,8 +900,9 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
             if extra_error is not None:
                 extra_errors[error_metric] = max(extra_error, extra_errors.get(error_metric, 0.0))
 
+        repeated = several and len({at[0]["load_n"] for at in by_time}) < len(by_time)  # a history: its time points by time
         for k, at in enumerate(by_time):
-            label = f" at {_fmt(at[0]['load_n'])} N" if several else ""
+            label = (f" at t = {_fmt(at[0]['time_s'])} s ({_fmt(at[0]['load_n'])} N)" if repeated else f" at {_fmt(at[0]['load_n'])} N") if several else ""
             for quantity, (value_metric, error_metric) in QUANTITIES.items():
                 values = [float(m[value_metric]) for m in at[:len(level_rows)]]
                 est = richardson(sizes, values)

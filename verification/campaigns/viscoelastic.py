@@ -9,7 +9,9 @@ the metrics are the largest over the instants, ``per_time`` in metrics.json keep
   (``cartilage.coupling = "thin-layer"``), each with the contact set of the creeping displacement
   (``viscoelastic.contact_set = "creeping"``, BDF2, the default) and with the thesis's increment
   (``"frozen"``, exact integrator; the same FE run judges both), and DEM with the coupled layer
-  at the same instants (static: what ignoring the creep costs);
+  at the same instants (static: what ignoring the creep costs); on the goal's steps also the
+  coupled layer with the two-pole symbol (``*-coupled-two-pole-*``, reported beside the default
+  Pade one: how much of the area error is the symbol's);
 * scenes: the bonded cylinder layer (``cylinder-layer``, gap law, vs the FE layer) and the ideal
   ankle on its talar and tibial cartilage (``ideal-standing`` without ligaments, gap law, the
   coupled layer as the sandwich of the two layers, vs the two-layer FE: both layers Kelvin-Voigt,
@@ -72,6 +74,10 @@ BEDS = {
     "coupled-frozen": ("edem", {"cartilage.coupling": "thin-layer", **FROZEN}, "viscoelastic EDEM, coupled thin layer, the thesis's frozen contact set"),
     "dem": ("dem", {"cartilage.coupling": "thin-layer"}, "DEM (static), coupled thin layer"),
 }
+#: on the goal's steps only: the coupled layer with the two-pole symbol beside the default Pade one, to tell
+#: the symbol's share of the area error from the FE's (docs/campaigns.md)
+TWO_POLE = ("coupled-two-pole", ("edem", {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole"},
+                                 "viscoelastic EDEM, coupled thin layer with the two-pole symbol, creeping contact set"))
 GOAL = {"metrics": ("displacement_rel_error", "regularised_peak_pressure_rel_error", "contact_area_rel_error"),
         "strict": 0.10, "strict_nu": 0.45, "loose": 0.10, "ratio_metric": "pressure_l2_rel_error", "ratio": 1.0,
         "fe_error": True}
@@ -167,7 +173,8 @@ def _cases() -> list[Case]:
     for model, history, nu, (times, forces) in _points():
         scene, fe_side, fe, what = MODELS[model]
         dt = min(np.diff(times))
-        for bed, (method, extra, bed_what) in BEDS.items():
+        beds = {**BEDS, **(dict([TWO_POLE]) if history == "step" and model in GOAL_MODELS else {})}
+        for bed, (method, extra, bed_what) in beds.items():
             if history.startswith("step-dt") and bed == "dem":
                 continue  # the time step sweep: the viscoelastic beds only
             cases.append(fe_comparison_case(
