@@ -27,11 +27,11 @@ the metrics are the largest over the instants, ``per_time`` in metrics.json keep
   together): the error against the time step and against wall time (reported, not in the goal).
 
 Poisson's ratio 0.3, 0.42, 0.45 on the cylinder layer under the step and the cycle; 0.42 elsewhere.
-FE: the layer P2 at :data:`FE_LAYER` (1.0 mm: two elements through the 2 mm layer on M's own
-triangles), the cartilage ankle's two layers P2 at :data:`FE_ANKLE` (2.0 mm: one element through
-each layer), the thesis's slab P1 at 1.0 mm; their own errors in space are the ``fe-convergence``
-study's (verification.campaigns.fe_convergence.VISCOELASTIC_LEVELS: the same in-plane mesh with 1, 2
-and 4 elements through each layer, every time point). The FE time step is the scenes' (tau/4 for
+FE: the layer P2 at :data:`FE_LAYER` (0.7 mm: M's triangles halved, two elements through the 2 mm
+layer), the cartilage ankle's two layers P2 at :data:`FE_ANKLE` (2.0 mm: one element through each
+layer on M's own triangles), the thesis's slab P1 at 1.0 mm; their own errors in space are the
+``fe-convergence`` study's (verification.campaigns.fe_convergence.VISCOELASTIC_LEVELS, every time
+point). The FE time step is the scenes' (tau/4 for
 the first tau, then coarser), whose error is that of the closed-form tests
 (tests/fem_reference/test_fe_kelvin_voigt.py: BDF2 errs by 2.5 % of the creep at dt = tau/8 just
 after a load raised in one step, about 5 % at tau/4, and by 0.2 % where the load changes
@@ -57,9 +57,10 @@ EXPECTED_TIME_S = 1100.0
 TAU_S = 1.4
 LOAD_N = 333.0
 NUS = (0.3, 0.42, 0.45)
-#: the cylinder layer's FE: two P2 elements through the 2 mm layer on M's own triangles (at 2.0 mm, one
-#: element, one refinement through the thickness moved the displacement by 5.2 % at tau/4: docs/campaigns.md)
-FE_LAYER = {"mesh_size_mm": 1.0, "degree": 2}
+#: the cylinder layer's FE: M's triangles halved (0.48 mm) with two P2 elements through the 2 mm layer. On M's
+#: own 0.97 mm triangles the regularised peak of the narrow early patch moved by 6-11 % when they were
+#: halved (and at 2.0 mm, one element through the layer, the displacement by 5.2 % with a second): docs/campaigns.md
+FE_LAYER = {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 2}
 #: the cartilage ankle's two-layer FE: one P2 element through each layer (118k DOFs; docs/campaigns.md
 #: gives its own error from the fe-convergence levels)
 FE_ANKLE = {"mesh_size_mm": 2.0, "degree": 2}
@@ -143,7 +144,8 @@ def _overrides(times: list[float], forces: list[Any], nu: float, model: str) -> 
 #: (scene, FE side, FE options, what)
 MODELS = {
     "layer": ("cylinder-layer", "fe-layer", FE_LAYER,
-              f"cylinder (R 20 mm) with a bonded 2 mm layer on a plane, gap law vs the FE layer (P2, {FE_LAYER['mesh_size_mm']:g} mm)"),
+              f"cylinder (R 20 mm) with a bonded 2 mm layer on a plane, gap law vs the FE layer (P2, {FE_LAYER['mesh_size_mm']:g} mm, "
+              f"{FE_LAYER['layers_through_thickness']} elements through the layer)"),
     "ankle": ("ideal-standing", "fe-two-layer", FE_ANKLE,
               f"ideal ankle on its talar and tibial cartilage, gap law vs the two-layer FE (P2, {FE_ANKLE['mesh_size_mm']:g} mm), no ligaments"),
     "slab": ("ideal-standing", "fe-slab", FE_SLAB, "the thesis's ankle (no cartilage layers), threshold law vs the FE slab (P1 at 1.0 mm), no ligaments"),
