@@ -52,7 +52,7 @@ from verification.fe_comparison import ERROR_PANELS, FE_TABLE_COLUMNS, fe_compar
 
 #: wall time, nothing cached: an estimate, the whole campaign not yet run at today's levels (2026-11-28, one
 #: job at load 4-5: the cylinder's step at 0.7 mm 241 s, 5.5 times its 2.0 mm run, so its six FE histories
-#: about 50 min; the ankle's step 599 s and ramp 720 s; docs/campaigns.md). At 2.0 mm and with the thesis's
+#: about 50 min; the ankle's step 599 s and ramp 693 s; docs/campaigns.md). At 2.0 mm and with the thesis's
 #: ankle it took 1083 s
 EXPECTED_TIME_S = 4600.0
 
