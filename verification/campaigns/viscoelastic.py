@@ -138,7 +138,8 @@ def _overrides(times: list[float], forces: list[Any], nu: float, model: str) -> 
         out.update(THESIS_ANKLE)  # the threshold law on the thesis's geometry: the FE slab's twin
     if any(f[1] for f in force):
         # frictionless FE contact cannot hold the antero-posterior component of the thesis ramp
-        # while the contact is a line at the top of the dome (docs/method.md, section 6): both sides fix ty
+        # while the contact is a line at the top of the dome (docs/method.md, section 6): both sides fix
+        # ty (on the cartilage ankle too, whose conforming layers would let the talus slide instead)
         out["constraints.fixed_dofs"] = ["tx", "ty", "rx", "ry", "rz"]
     return out
 
