@@ -323,7 +323,9 @@ def solve_thin_layer(
     pushed = float(np.sum((spring_scale * np.clip(overlap_mm, 0.0, None))[touchable]))
     if pushback_force_n is not None:
         pushed += float(np.abs(pushback_force_n).sum())  # stands for spring_scale C c without forming C c
-    scale = float(np.linalg.norm(load * to_newton)) + float(f.sum()) + pushed + 1e-9  # floor: a nanonewton, for a vanishing load
+    # (|f|: under a vanishing load the active set's forces are round-off of either sign, and their
+    # signed sum cancelled the floor: 7e-17 N refused on the cartilage ankle at zero load)
+    scale = float(np.linalg.norm(load * to_newton)) + float(np.abs(f).sum()) + pushed + 1e-9  # floor: a nanonewton, for a vanishing load
     # The 6 x 6 solve balances to round-off; only an accepted cycle or a regularised transient set
     # (1e-8 of the full stiffness) can leave more, and both stay far below 10 cycle_rtol.
     if float(np.linalg.norm(residual * to_newton)) > 10.0 * cycle_rtol * scale:

@@ -474,6 +474,22 @@ def solve_contact(problem: FEContactProblem, comm: Any = None, *,
     return result
 
 
+def solve_from_warm_start(problem: FEContactProblem, comm: Any = None, *, progress: SolveProgress | None = None,
+                          cold_progress: SolveProgress | None = None) -> FEContactResult:
+    """:func:`solve_contact` (fields kept) from the problem's warm start (``initial_translation_mm``,
+    ``initial_rotation_rad``, ``initial_field``: a previous time point's solution); a warm start
+    that does not converge is a bad start, not a bad problem: the problem is solved again from
+    the default start (the warm start cleared; ``cold_progress`` reports that solve)."""
+    warm = any(x is not None for x in (problem.initial_translation_mm, problem.initial_rotation_rad, problem.initial_field))
+    try:
+        return solve_contact(problem, comm, keep_fields=True, progress=progress)
+    except FEConvergenceError:
+        if not warm:
+            raise
+        problem.initial_translation_mm = problem.initial_rotation_rad = problem.initial_field = None
+        return solve_contact(problem, comm, keep_fields=True, progress=cold_progress)
+
+
 def _solve(problem: FEContactProblem, comm: Any, progress: SolveProgress | None) -> FEContactResult:
     """One solve of :func:`solve_contact` (its fields kept)."""
     t_start = time.perf_counter()

@@ -212,7 +212,13 @@ class ContactSetup:
             return gap, nu
         ufl = self.m["ufl"]
         shifted = float(p.gap_scale) * gap
-        return (shifted if p.gap_history is None else shifted + ufl.dot(p.gap_history, nu)), nu
+        return (shifted if p.gap_history is None else shifted + ufl.dot(self.gap_history(), nu)), nu
+
+    def gap_history(self) -> Any:
+        """The history h_n that shifts the gap (:class:`FEContactProblem` ``gap_history``): against
+        a rigid obstacle the body's own (a deformable one subtracts its own history at the paired
+        points, :meth:`fem_reference.two_body.TwoBodySetup.gap_history`)."""
+        return self.problem.gap_history
 
     def shifted_gap(self, dofs: np.ndarray, gap: np.ndarray, normal: np.ndarray,
                     degree: int | None = None) -> np.ndarray:
@@ -221,10 +227,10 @@ class ContactSetup:
         p = self.problem
         if p.gap_history is None:
             return float(p.gap_scale) * gap
-        h = p.gap_history
+        h = self.gap_history()
         if degree is not None and degree != self.degree:
             h = self.m["fem"].Function(self.m["fem"].functionspace(self.mesh, ("Lagrange", degree, (3,))))
-            h.interpolate(p.gap_history)
+            h.interpolate(self.gap_history())
         values = h.x.array.reshape(-1, 3)[dofs]
         return float(p.gap_scale) * gap + np.einsum("ij,ij->i", values, normal)
 

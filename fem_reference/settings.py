@@ -177,9 +177,6 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     if fe_model.name == "two-layer" and not fixed_has_cartilage(scene):
         raise InputError("the FE two-layer model needs cartilage on the fixed body", file=file, key=fixed_key,
                          expected="cartilage.fixed_thickness_mm > 0 or a [geometry] fixed_bone (or the layer model, --model layer)")
-    if fe_model.name == "two-layer" and scene.viscoelastic is not None:
-        raise InputError("the FE two-layer model is elastic only (no Kelvin-Voigt twin of two layers yet)", file=file,
-                         key="viscoelastic", expected="no [viscoelastic] table, or the layer model (--model layer)")
     if fe_model.needs_thickness and scene.cartilage.thickness_mm is None and layered is None:
         raise InputError(f"the FE {fe_model.name} model needs the undeformed cartilage thickness",
                          file=file, key="cartilage.thickness_mm",

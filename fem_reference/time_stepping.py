@@ -43,9 +43,9 @@ from typing import Any
 import numpy as np
 
 from fem_reference.biphasic_contact import BiphasicContactHistory
-from fem_reference.contact import solve_contact
+from fem_reference.contact import solve_from_warm_start
 from fem_reference.models import FE_MODELS, FEGeometry
-from fem_reference.problem import FEContactProblem, FEContactResult, FEConvergenceError, FEMesh
+from fem_reference.problem import FEContactProblem, FEContactResult, FEMesh
 from fem_reference.progress import SolveProgress
 from fem_reference.settings import FESettings
 from fem_reference.viscoelastic import KelvinVoigtHistory, first_load_warning
@@ -111,31 +111,22 @@ class ElasticStepping(TimeStepping):
     def __init__(self, warm_start_scales_with_load: bool) -> None:
         self.warm_start_scales_with_load = warm_start_scales_with_load
         self.previous: dict | None = None  # the last solve: geometry key, motion, field, force
-        self.warm = False  # whether the prepared problem starts from it
 
     def unloaded(self, point: TimePoint) -> tuple[np.ndarray, np.ndarray, str]:
         return np.zeros(3), np.zeros(3), "nothing to solve"
 
     def prepare(self, point: TimePoint, problem: FEContactProblem) -> None:
         previous = self.previous
-        self.warm = previous is not None and previous["key"] == point.geometry.key
-        if self.warm:  # same mesh and obstacle: start from the previous solution, scaled to the load
+        if previous is not None and previous["key"] == point.geometry.key:
+            # same mesh and obstacle: start from the previous solution, scaled to the load
             ratio = float(np.linalg.norm(point.force_n)) / max(float(np.linalg.norm(previous["force"])), 1e-300)
             problem.initial_translation_mm = previous["t"] * (ratio if self.warm_start_scales_with_load else 1.0)
             problem.initial_rotation_rad = previous["q"] * ratio
             problem.initial_field = previous["ut"] * ratio
 
     def solve(self, point: TimePoint, problem: FEContactProblem) -> FEContactResult:
-        try:
-            res = solve_contact(problem, point.comm, keep_fields=True, progress=point.solve_progress())
-        except FEConvergenceError:
-            if not self.warm:
-                raise
-            # the previous time point's motion was a bad start: start afresh
-            problem.initial_translation_mm = problem.initial_rotation_rad = None
-            problem.initial_field = None
-            res = solve_contact(problem, point.comm, keep_fields=True,
-                                progress=point.solve_progress(f"{point.where}, restarted cold"))
+        res = solve_from_warm_start(problem, point.comm, progress=point.solve_progress(),
+                                    cold_progress=point.solve_progress(f"{point.where}, restarted cold"))
         self.previous = {"key": point.geometry.key, "t": res.bone_displacement_mm.copy(),
                          "q": res.bone_rotation_rad.copy(), "ut": res.fields["ut_owned"], "force": point.force_n}
         return res
@@ -185,7 +176,8 @@ class KelvinVoigtStepping(TimeStepping):
         self.step = self.history.prepare(problem, point.time_s)
 
     def solve(self, point: TimePoint, problem: FEContactProblem) -> FEContactResult:
-        res = solve_contact(problem, point.comm, keep_fields=True, progress=point.solve_progress())
+        res = solve_from_warm_start(problem, point.comm, progress=point.solve_progress(),
+                                    cold_progress=point.solve_progress(f"{point.where}, restarted cold"))
         # the solve's unknown was v = u + tau du/dt: report u's motion
         res.bone_displacement_mm, res.bone_rotation_rad = self.history.commit(point.time_s, res, *self.step, problem)
         return res

@@ -29,6 +29,10 @@ assembled with PETSc's sparse products (the pairing and so the sparsity are fixe
 and the sum keep one pattern, computed once). The bordered Newton system, its inner solve and the
 result are the one-body solver's (:class:`TwoBodySystem` only assembles differently).
 
+A Kelvin-Voigt time step (:mod:`fem_reference.viscoelastic`: both layers creep with one tau) is
+the one-body one with the history taken relative to F's: the shifted gap c0 gap + (h - P h) . nu
+(:meth:`TwoBodySetup.gap_history`), since the contact condition acts on u - w.
+
 Heavy imports (dolfinx, PETSc, ufl) happen inside the functions (:mod:`fem_reference.fe_stack`).
 """
 
@@ -63,9 +67,8 @@ class TwoBodySetup(ContactSetup):
         counterpart = problem.obstacle
         if not isinstance(counterpart, DeformableCounterpart):
             raise TypeError("TwoBodySetup needs a DeformableCounterpart obstacle")
-        if problem.gap_history is not None or problem.gap_scale != 1.0:
-            raise ValueError("two deformable layers have no Kelvin-Voigt time step (gap_history, gap_scale)")
         self.counterpart = counterpart
+        self._relative_history: Any = None  # h - P h (gap_history), built on first use
         super().__init__(problem, comm, element)
         fem = self.m["fem"]
         if self.cell_tags is None:
@@ -115,6 +118,24 @@ class TwoBodySetup(ContactSetup):
 
     def relative_displacement(self, u: Any) -> Any:
         return u - self.w
+
+    def gap_history(self) -> Any:
+        """A Kelvin-Voigt step's history relative to F's: h - P h on M's contact face (h holds both
+        layers' histories, and the contact condition acts on the relative displacement, so its
+        shifted gap is c0 gap + (h - P h) . nu); a Function of h's space, or None."""
+        h = self.problem.gap_history
+        if h is not None and self._relative_history is None:
+            fem = self.m["fem"]
+            full = fem.Function(self.V)
+            (full.sub(0) if self.element == "TH" else full).interpolate(h)
+            paired = fem.Function(self.W)  # F's history at the points paired with M's contact face
+            self.P.mult(full.x.petsc_vec, paired.x.petsc_vec)
+            paired.x.scatter_forward()
+            relative = fem.Function(h.function_space)
+            relative.interpolate(paired)
+            relative.x.array[:] = h.x.array - relative.x.array
+            self._relative_history = relative
+        return None if h is None else self._relative_history
 
     def _obstacle_ufl(self) -> tuple[Any, Any]:
         """gap = (Y - Z) . nu and nu, the unit contact normal at the pair (out of F)."""

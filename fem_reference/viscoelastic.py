@@ -35,6 +35,11 @@ u_n - d_n = (h_n - h_n's rigid part) / c0 creeps back freely, and the bone follo
 touching it with no force (D_n the touch distance of the shifted gap along the last load's
 direction: the limit of a vanishing load).
 
+Two deformable layers (:mod:`fem_reference.two_body`, F's layer a
+:class:`~fem_reference.problem.DeformableCounterpart` in the same mesh) creep with the same tau:
+h_n holds both layers' histories, the shifted gap is c0 gap + (h_n - h_n^F) . nu with h_n^F F's
+history at the paired points, and unloaded, F's layer creeps back on its held bone (v_n = 0 there).
+
 The body starts at rest at the first time point. With a load there the FE starts from the elastic
 solution under it (a load held long before t_0), where EDEM starts undeformed with the dashpots
 carrying it: :func:`first_load_warning` says so.
@@ -48,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from edem.viscoelastic import DEFAULT_TIME_SCHEME, TIME_SCHEMES, scheme_weights  # noqa: F401 (the FE's schemes: shared with EDEM)
-from fem_reference.problem import FEContactProblem, FEContactResult
+from fem_reference.problem import DeformableCounterpart, FEContactProblem, FEContactResult
 
 def first_load_warning(force_n: np.ndarray) -> list[str]:
     """The FE and EDEM start differently under a load at the first time point (module docstring)."""
@@ -170,13 +175,15 @@ class KelvinVoigtHistory:
         fem, MPI = mods["fem"], mods["MPI"]
         c0, h, hd, hq = self._history(time_s)
         D = np.zeros(3)
+        mesh = self.mesh.mesh
         if self.last_direction is not None:
-            mesh = self.mesh.mesh
             fdim = mesh.topology.dim - 1
             Q = fem.functionspace(mesh, ("Lagrange", self.degree))
             dofs = fem.locate_dofs_topological(Q, fdim, self.mesh.facet_tags.find(contact_tag))
-            gap, normal = obstacle.gap_and_normal(Q.tabulate_dof_coordinates()[dofs])
-            shifted = c0 * gap + np.einsum("ij,ij->i", h.x.array.reshape(-1, 3)[dofs], normal)
+            points = Q.tabulate_dof_coordinates()[dofs]
+            gap, normal = obstacle.gap_and_normal(points)
+            relative = h.x.array.reshape(-1, 3)[dofs] - self._paired_history(obstacle, Q, h, points)
+            shifted = c0 * gap + np.einsum("ij,ij->i", relative, normal)
             s = normal @ self.last_direction
             approaching = s < -1e-9
             local = float(np.min(shifted[approaching] / -s[approaching])) if approaching.any() else np.inf
@@ -185,12 +192,37 @@ class KelvinVoigtHistory:
                 D = touch * self.last_direction
         v = self._function()
         v.x.array.reshape(-1, 3)[:] = D
+        if isinstance(obstacle, DeformableCounterpart):  # F's layer stays on its held bone: v = 0 there
+            cells = self.mesh.cell_tags.find(obstacle.cell_tag)
+            v.x.array.reshape(-1, 3)[np.unique(self._space.dofmap.list[cells])] = 0.0
         u = self._function()
         u.x.array[:] = (h.x.array + v.x.array) / c0
         d, q = (D + hd) / c0, hq / c0
         self._push(time_s, u, d, q, v, D, np.zeros(3))
         self.last_v = None  # v was rigid: no warm start for the next loaded step
         return d, q
+
+    def _paired_history(self, obstacle: Any, Q: Any, h: Any, points: np.ndarray) -> np.ndarray:
+        """F's history h at the points of F's contact face paired with ``points`` (n, 3), nodes of
+        M's contact face (a Lagrange space ``Q`` of the history's degree locates F's nodes): zero
+        against a rigid obstacle."""
+        if not isinstance(obstacle, DeformableCounterpart):
+            return np.zeros((len(points), 3))
+        from scipy.spatial import cKDTree
+
+        from fem_reference.fe_stack import fe_modules
+
+        mesh = self.mesh.mesh
+        fixed = fe_modules()["fem"].locate_dofs_topological(Q, mesh.topology.dim - 1, self.mesh.facet_tags.find(obstacle.contact_tag))
+        coords = np.concatenate(mesh.comm.allgather(Q.tabulate_dof_coordinates()[fixed]))
+        values = np.concatenate(mesh.comm.allgather(h.x.array.reshape(-1, 3)[fixed]))
+        stencil, weights = obstacle.stencil(points, self.degree)
+        used = weights != 0.0
+        out = np.zeros((len(points), 3))
+        if used.any():
+            _, j = cKDTree(coords).query(stencil[used])
+            np.add.at(out, np.nonzero(used)[0], weights[used][:, None] * values[j])
+        return out
 
 
 @dataclass
@@ -213,7 +245,7 @@ def solve_history(base: FEContactProblem, times_s: Any, forces_n: Any, relaxatio
     """
     from dataclasses import replace
 
-    from fem_reference.contact import solve_contact
+    from fem_reference.contact import solve_from_warm_start
     from fem_reference.contact_setup import materialize_mesh
     from fem_reference.fe_stack import fe_modules
 
@@ -233,7 +265,7 @@ def solve_history(base: FEContactProblem, times_s: Any, forces_n: Any, relaxatio
             continue
         problem = replace(base, mesh=mesh, force_n=force)
         c0, hd, hq = history.prepare(problem, float(t))
-        result = solve_contact(problem, comm, keep_fields=True)
+        result = solve_from_warm_start(problem, comm)
         d, q = history.commit(float(t), result, c0, hd, hq, problem)
         result.fields = None
         steps.append(KelvinVoigtStep(float(t), d, q, result))

@@ -384,13 +384,36 @@ def goal_misses(nu: float, errors: dict[str, float | None], ratio: float | None,
     return misses
 
 
+def unjudged_by_fe_error(errors: dict[str, float | None], fe_errors: dict[str, float] | None, limit: float) -> dict[str, str]:
+    """The metrics of ``errors`` a goal of ``limit`` cannot judge against this FE reference, with
+    why: its own estimated error (``fe_errors``, verification.fe_convergence.fe_relative_error)
+    unknown, or at least the goal ("FE error too large to judge": a band no wider than the
+    reference's own error judges nothing)."""
+    out = {}
+    for metric in errors:
+        label = metric.replace("_rel_error", "").replace("_", " ")
+        fe = None if fe_errors is None else fe_errors.get(metric)
+        if fe is None:
+            out[metric] = f"{label}: FE error unknown"
+        elif not fe < limit:
+            out[metric] = f"{label}: FE error too large to judge ({100 * fe:.1f} % >= {100 * limit:.0f} %)"
+    return out
+
+
 def goal_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """``settings``: pairs ((model case, baseline case), ...), metrics, strict, strict_nu, loose,
-    ratio_metric, ratio, note (optional). The sentences group the points by the model case's name
-    up to its last '-' (e.g. layer-coupled-F333-t2)."""
+    ratio_metric, ratio, note (optional), fe_error (optional: judge each metric only where the
+    model case's FE reference has a known own error below the goal, :func:`unjudged_by_fe_error`).
+    The sentences group the points by the model case's name up to its last '-' (e.g.
+    layer-coupled-F333-t2)."""
     s = analysis.settings
     metrics, ratio_metric = tuple(s["metrics"]), s["ratio_metric"]
-    out_rows, values, missed, met = [], [], {}, {}
+    reference = None
+    if s.get("fe_error"):
+        from verification.fe_convergence import fe_relative_error, load_reference
+
+        reference = load_reference()
+    out_rows, values, missed, met, unjudged_groups = [], [], {}, {}, {}
     for model_name, base_name in s["pairs"]:
         model, base = rows.get(model_name), rows.get(base_name)
         if model is None or not model.get("metrics"):
@@ -401,19 +424,29 @@ def goal_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         errors = {m: _metric(model, m) for m in metrics}
         mine, theirs = _metric(model, ratio_metric), None if base is None else _metric(base, ratio_metric)
         ratio = None if mine is None or not theirs else mine / theirs
-        misses = goal_misses(nu, errors, ratio, s)
+        unjudged = {} if reference is None else unjudged_by_fe_error(
+            errors, fe_relative_error(model, reference), float(s["strict"]) if nu <= float(s["strict_nu"]) else float(s["loose"]))
+        misses = goal_misses(nu, {m: e for m, e in errors.items() if m not in unjudged}, ratio, s)
         group = model_name.rsplit("-", 1)[0]
-        (missed if misses else met).setdefault(group, []).append((nu, misses))
+        if misses or not unjudged:  # met only where every metric was judged
+            (missed if misses else met).setdefault(group, []).append((nu, misses))
+        if unjudged:
+            unjudged_groups.setdefault(group, []).append((nu, list(unjudged.values())))
         values.append({"case": model_name, "baseline": base_name, "poissons_ratio": nu, "errors": errors, ratio_metric: mine,
-                       f"baseline_{ratio_metric}": theirs, "ratio": ratio, "misses": misses})
+                       f"baseline_{ratio_metric}": theirs, "ratio": ratio, "misses": misses, "not_judged": unjudged})
+        verdict = "met" if not misses else "not met: " + "; ".join(misses)
+        if unjudged:
+            verdict = ("not judged: " if len(unjudged) == len(metrics) else verdict + "; not judged: ") + "; ".join(unjudged.values())
         out_rows.append({"cells": [model_name, _fmt(nu)] + [_pct(e) for e in errors.values()]
-                         + [_pct(mine), _pct(theirs), _fmt(ratio, 3), "met" if not misses else "not met: " + "; ".join(misses)], "flag": bool(misses)})
+                         + [_pct(mine), _pct(theirs), _fmt(ratio, 3), verdict], "flag": bool(misses)})
     notes = []
-    for group in dict.fromkeys([*missed, *met]):
+    for group in dict.fromkeys([*missed, *met, *unjudged_groups]):
         bad, good = missed.get(group, []), met.get(group, [])
         text = f"{group}: goal met at nu " + (", ".join(f"{nu:g}" for nu, _m in good) if good else "none")
         if bad:
             text += "; not met at " + "; ".join(f"nu {nu:g} ({', '.join(m)})" for nu, m in bad)
+        if group in unjudged_groups:
+            text += "; not judged at " + "; ".join(f"nu {nu:g} ({', '.join(m)})" for nu, m in unjudged_groups[group])
         notes.append(text + ".")
     columns = ["case", "nu"] + [m.replace("_rel_error", " err").replace("_", " ") for m in metrics] + [f"{ratio_metric.replace('_rel_error', '')} (model)", "(baseline)", "ratio", "goal"]
     return {
@@ -421,7 +454,7 @@ def goal_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         "rows": out_rows,
         "status": UNAVAILABLE if not values else (FLAGGED if any(r["flag"] for r in out_rows) else REPORTED),
         "notes": notes + [s.get("note", "")] if s.get("note") else notes,
-        "values": {"rows": values, "met": sum(1 for v in values if not v["misses"]), "points": len(values)},
+        "values": {"rows": values, "met": sum(1 for v in values if not v["misses"] and not v.get("not_judged")), "points": len(values)},
     }
 
 
@@ -818,9 +851,10 @@ def _values_by_time(rows: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
         return [[dict(r["metrics"]) for r in rows]]
     from edem.resultdir import read_result_dir
 
-    series = read_result_dir(dirs[-1]).timeseries
+    result = read_result_dir(dirs[-1])
+    series = result.timeseries
     loads = np.linalg.norm(np.column_stack([series[f"force_{x}_n"] for x in "xyz"]), axis=1)
-    return [[{**fe_values(d, k), "load_n": float(loads[k])} for d in dirs] for k in range(n)]
+    return [[{**fe_values(d, k), "load_n": float(loads[k]), "time_s": float(result.time_s[k])} for d in dirs] for k in range(n)]
 
 
 def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -866,8 +900,9 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
             if extra_error is not None:
                 extra_errors[error_metric] = max(extra_error, extra_errors.get(error_metric, 0.0))
 
+        repeated = several and len({at[0]["load_n"] for at in by_time}) < len(by_time)  # a history: its time points by time
         for k, at in enumerate(by_time):
-            label = f" at {_fmt(at[0]['load_n'])} N" if several else ""
+            label = (f" at t = {_fmt(at[0]['time_s'])} s ({_fmt(at[0]['load_n'])} N)" if repeated else f" at {_fmt(at[0]['load_n'])} N") if several else ""
             for quantity, (value_metric, error_metric) in QUANTITIES.items():
                 values = [float(m[value_metric]) for m in at[:len(level_rows)]]
                 est = richardson(sizes, values)
