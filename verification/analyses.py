@@ -561,7 +561,7 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         f"Goal (every card metric of the default bed within {100 * goal:.0f} % of the FE at every load, judged where the FE's own estimated error is below "
         f"it): {verdict}" + (" on every ankle compared" if verdict == "met" else "")
         + (f"; outside it: {'; '.join(text for text, _judged in missed)}" if missed else "")
-        + (f"; not judged (the FE's own error unknown or not below the goal): {', '.join(unjudged)}" if unjudged else "")
+        + (f"; the FE's own error unknown or not below the goal for {', '.join(unjudged)}" if unjudged else "")
         + ". The FE's own estimated error at this job's level (fe-convergence, the worst over its loads): " + "; ".join(fe_texts)
         + (". Each miss says why: the FE's own error at least as large as the miss, that error unknown, or beyond it: a model error of the bed "
            "that the reference can see." if missed else "."))

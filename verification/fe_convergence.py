@@ -316,8 +316,8 @@ def write_reference(summary: dict[str, Any], path: str | Path | None = None) -> 
     now = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     before = stored.get("refreshed_at")  # the points stored before per-point dates were refreshed with the whole file
     points = {p["point"]: p if "refreshed_at" in p or before is None else {**p, "refreshed_at": before} for p in stored.get("points", [])}
-    fresh = {p["point"] for p in result["values"]["points"] if "unavailable" not in p}
-    points.update({p["point"]: {**p, "refreshed_at": now} for p in result["values"]["points"] if p["point"] in fresh})
+    fresh = {p["point"]: {**p, "refreshed_at": now} for p in result["values"]["points"] if "unavailable" not in p}
+    points.update(fresh)
     kept = {k: e for k, e in stored["entries"].items() if _point_of(e["case"]) not in fresh}  # a fresh point's old entries go, whatever their keys
     data = {
         "what": "estimated relative discretisation error of FE reference runs (edem verify fe-convergence --refresh-reference; verification.fe_convergence); "

@@ -62,7 +62,7 @@ def test_signed_errors_at_each_load_the_area_growth_and_the_goal(tmp_path):
     assert "independent springs 500 -> 540 mm² (1.08x; the FE 300 -> 600 mm², 2.00x), short of 1.25x" in growth
     goal = next(s for s in sentences if s.startswith("Goal"))
     # only the default bed's misses, each with its load and why (no FE study here: unknown, so no verdict)
-    assert "): not judged; outside it: contact area on the ideal ankle at 333 N (+20 %: FE error unknown); not judged" in goal
+    assert "): not judged; outside it: contact area on the ideal ankle at 333 N (+20 %: FE error unknown); the FE's own error unknown" in goal
     assert "outside it: displacement" not in goal and "the ideal ankle: displacement unknown, regularised peak pressure unknown, contact area unknown" in goal
     threshold = next(s for s in sentences if s.startswith("The thesis's threshold law"))
     assert "463.4 against 420 mm² (+10 %)" in threshold and "set by h_max" in threshold
@@ -93,12 +93,12 @@ def test_goal_met_only_where_the_fes_own_error_is_known_and_below_it(tmp_path, m
     def goal(row) -> str:
         return next(s for s in _analysis({"c": row, "s": springs})["values"]["sentences"] if s.startswith("Goal"))
 
-    assert "): not judged; not judged (the FE's own error unknown" in goal(within)  # no study
+    assert "): not judged; the FE's own error unknown or not below the goal for displacement" in goal(within)  # no study
     known = {"displacement_rel_error": 0.004, "regularised_peak_pressure_rel_error": 0.021, "contact_area_rel_error": 0.013}
     met = goal(_with_fe_error(tmp_path, monkeypatch, within, known))
     assert "): met on every ankle compared." in met and "the ideal ankle: displacement 0.40 %, regularised peak pressure 2.10 %, contact area 1.30 %" in met
     coarse = goal(_with_fe_error(tmp_path, monkeypatch, within, {**known, "contact_area_rel_error": 0.10}))  # as large as the goal: judges nothing
-    assert "): not judged; not judged (the FE's own error unknown or not below the goal): contact area on the ideal ankle." in coarse
+    assert "): not judged; the FE's own error unknown or not below the goal for contact area on the ideal ankle." in coarse
     outside = _row(tmp_path, "c2", [(0.2, 0.2)] * 3, [(1.05, 1.0)] * 3, [(310.0, 300.0), (460.0, 450.0), (690.0, 600.0)])
     missed = goal(_with_fe_error(tmp_path, monkeypatch, outside, known))
     assert "): missed; outside it: contact area on the ideal ankle at 2000 N (+15 %: beyond the FE's own error 1.3 %)" in missed
