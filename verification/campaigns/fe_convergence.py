@@ -47,7 +47,7 @@ PRIORITY = ("ideal-cartilage-nu0.42", "subject-cartilage-nu0.42", "slab-F333-nu0
 #: min each; at load 9-14 a 0.7 mm solve took over 40 min. The two-layer ankles (three loads a run) by the
 #: Krylov path, one job at load 4-5 (2026-11-28): the ideal ankle at nu 0.42 190 / 260 / 1368 s (2.0 / 1.0 /
 #: 0.7 mm; about 100 / 140 / 690 s of CPU; 0.7 / 0.9 / 3.2 GB), the subject-like one 121 / 184 / 1133 s (0.7 mm: 662k
-#: DOFs, 3.0 GB); a Taylor-Hood ankle (nu 0.49) 211 / 229 s at 2.0 / 1.0 mm
+#: DOFs, 3.0 GB); the ideal ankle at nu 0.49 (Taylor-Hood) 211 / 229 / 1456 s (0.7 mm: 753k DOFs, 4.7 GB)
 EXPECTED_TIME_S = 18000.0
 #: what the study found on the subject-like ankle (issue 24, item 3), measured 2026-11-26 (docs/campaigns.md)
 FINDINGS = (
