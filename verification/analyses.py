@@ -557,7 +557,7 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         f"1 mm²) is {_values_text(points, 'peak', 3, 'MPa')}, the contact area {_values_text(points, 'area', 4, 'mm²')}; verdict: {base['status']} "
         f"(verified needs every judged metric at every load inside the declared ±{100 * band:.0f} % band, against an FE whose own error is known to be smaller)."
     ]
-    missed, areas, unstudied = [], [], []
+    missed, areas, unjudged, fe_texts = [], [], [], []
     for ankle, beds in ankles.items():
         for bed, names in beds.items():
             for name in names:
@@ -569,13 +569,17 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
                 sentences.append(f"{ankle[0].upper() + ankle[1:]}, {bed}, against the FE ({at}): "
                                  + "; ".join(f"{what} " + ", ".join(_pct(p[key][2]) for p in pts) for key, what, _m in quantities) + ".")
                 if bed == default_bed:
-                    if fe_relative_error(row, reference) is None:
-                        unstudied.append(name)
+                    fe = fe_relative_error(row, reference) or {}
+                    where = f"the {ankle}" + (f" at nu {_fmt(row['params'].get('poissons_ratio'), 3)}" if len(names) > 1 else "")
+                    fe_texts.append(f"{where}: " + ", ".join(f"{what} {_size_pct(fe[metric]) if metric in fe else 'unknown'}" for _k, what, metric in quantities))
                     for key, what, metric in quantities:
+                        judged = fe.get(metric, math.inf) < goal  # a goal no wider than the FE's own error judges nothing
+                        if not judged:
+                            unjudged.append(f"{what} on {where}")
                         out = [p for p in pts if p[key][2] is None or abs(p[key][2]) > goal]
                         if out:
-                            missed.append(f"{what} on the {ankle} at " + ", ".join(f"{_fmt(p['load_n'], 4)} N" for p in out) + " ("
-                                          + ", ".join(_pct(p[key][2]) + _why_missed(row, metric, p[key][2], reference) for p in out) + ")")
+                            missed.append((f"{what} on {where} at " + ", ".join(f"{_fmt(p['load_n'], 4)} N" for p in out) + " ("
+                                           + ", ".join(_pct(p[key][2]) + _why_missed(row, metric, p[key][2], reference) for p in out) + ")", judged))
                 if len(pts) > 1:
                     lo, hi = min(pts, key=lambda p: p["load_n"]), max(pts, key=lambda p: p["load_n"])
                     ratios = [hi["area"][k] / lo["area"][k] if lo["area"][k] else math.inf for k in (0, 1)]
@@ -585,14 +589,15 @@ def trust_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     if areas:
         sentences.append("The contact area grows with the load, an outcome of the anatomy (the two layers, the bones' incongruity), not of a window: "
                          + "; ".join(areas) + f". The goal: at least {growth:g}x from the smallest load to the largest, DEM and FE.")
-    if missed:
-        sentences.append(f"Goal (every card metric of the default bed within {100 * goal:.0f} % of the FE at every load): not reached for " + "; ".join(missed)
-                         + ". Each miss says why: the FE's own estimated error (its mesh study, fe-convergence) at least as large as the miss, that error "
-                         "unknown, or beyond it: a model error of the bed that the reference can see.")
-    else:
-        sentences.append(f"Goal (every card metric of the default bed within {100 * goal:.0f} % of the FE at every load): reached on every ankle compared, "
-                         "against this job's coarse FE" + (f"; that FE's own error is unknown ({', '.join(unstudied)}: not yet in the mesh study, "
-                                                           "fe-convergence), so this is not yet a verdict." if unstudied else "."))
+    verdict = "missed" if any(judged for _text, judged in missed) else "not judged" if unjudged else "met"
+    sentences.append(
+        f"Goal (every card metric of the default bed within {100 * goal:.0f} % of the FE at every load, judged where the FE's own estimated error is below "
+        f"it): {verdict}" + (" on every ankle compared" if verdict == "met" else "")
+        + (f"; outside it: {'; '.join(text for text, _judged in missed)}" if missed else "")
+        + (f"; the FE's own error unknown or not below the goal for {', '.join(unjudged)}" if unjudged else "")
+        + ". The FE's own estimated error at this job's level (fe-convergence, the worst over its loads): " + "; ".join(fe_texts)
+        + (". Each miss says why: the FE's own error at least as large as the miss, that error unknown, or beyond it: a model error of the bed "
+           "that the reference can see." if missed else "."))
     threshold = ok.get(s["threshold"])
     if threshold is not None:
         tp = _load_points(threshold)[-1]

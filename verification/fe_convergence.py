@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -293,16 +294,15 @@ def fe_relative_error(case: Any, reference: dict[str, Any] | None = None) -> dic
     return {metric: float(value) for metric, value in entry["errors"].items()}
 
 
-def write_reference(summary: dict[str, Any], path: str | Path | None = None, *, merge: bool = False) -> Path:
-    """Store the errors of an ``fe-convergence`` campaign summary (its analysis's ``entries``)
-    in :data:`REFERENCE_FILE` (or ``path``), with the study's figures beside them. InputError
-    when the summary holds no estimate (every point unavailable).
-
-    ``merge``: the summary studied some points only (e.g. :func:`verification.campaigns.fe_convergence.summary_from_cached_cases`
-    of a run filtered to them): the stored entries and points stay, and those of the points this
-    summary estimates replace theirs, the entries of its former levels with them (a point it could
-    not estimate changes nothing)."""
+def write_reference(summary: dict[str, Any], path: str | Path | None = None) -> Path:
+    """Merge the errors of an ``fe-convergence`` campaign summary (its analysis's ``entries`` and
+    ``points``) into :data:`REFERENCE_FILE` (or ``path``): each point estimated in the summary
+    replaces that point's record and entries (its levels' and its P1 run's), stamped with its own
+    ``refreshed_at``; every other stored point stays as it was (a study cut short, or run on a few
+    points, refreshes only what it solved; a point it could not estimate leaves no record).
+    InputError when the summary holds no estimate (every point unavailable)."""
     import datetime as _dt
+    import os
 
     from geometries.errors import InputError
 
@@ -312,27 +312,30 @@ def write_reference(summary: dict[str, Any], path: str | Path | None = None, *, 
         raise InputError("the fe-convergence campaign produced no error estimate (its FE runs unavailable or failed)", key="analyses",
                          expected="the three meshes of at least one point solved")
     file = Path(path) if path is not None else REFERENCE_FILE
-    points = result["values"]["points"]
-    if merge:
-        stored = load_reference(file)
-        estimated = [p for p in points if "unavailable" not in p]
-        names = {p["point"] for p in estimated}
-        kept = {k: e for k, e in stored["entries"].items() if _point_of_level(e.get("case", "")) not in names}
-        entries = {**kept, **entries}
-        points = [p for p in stored.get("points", []) if p.get("point") not in names] + estimated
+    stored = load_reference(file)
+    now = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    before = stored.get("refreshed_at")  # the points stored before per-point dates were refreshed with the whole file
+    points = {p["point"]: p if "refreshed_at" in p or before is None else {**p, "refreshed_at": before} for p in stored.get("points", [])}
+    fresh = {p["point"]: {**p, "refreshed_at": now} for p in result["values"]["points"] if "unavailable" not in p}
+    points.update(fresh)
+    kept = {k: e for k, e in stored["entries"].items() if _point_of(e["case"]) not in fresh}  # a fresh point's old entries go, whatever their keys
     data = {
-        "what": "estimated relative discretisation error of FE reference runs (edem verify fe-convergence --refresh-reference; verification.fe_convergence)",
-        "refreshed_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "entries": dict(sorted(entries.items())),
-        "points": points,
+        "what": "estimated relative discretisation error of FE reference runs (edem verify fe-convergence --refresh-reference; verification.fe_convergence); "
+                "each point's refreshed_at says when its meshes were estimated, the file's when it was last written",
+        "refreshed_at": now,
+        "entries": dict(sorted({**kept, **entries}.items())),
+        "points": list(points.values()),
     }
-    file.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    tmp = file.with_name(file.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    os.replace(tmp, file)  # an interrupted write leaves the previous file whole
     return file
 
 
-def _point_of_level(case_name: str) -> str:
-    """The point a level's case names (``<point>-h<size>[-L<n>]``, quick's ``<point>-P1-h<size>``)."""
-    return case_name.rsplit("-h", 1)[0].removesuffix("-P1")
+def _point_of(case_name: str) -> str:
+    """The point of a study case (verification.campaigns.fe_convergence: ``<point>-h<size>[-L<layers>]``
+    for a level, ``<point>-P1-h<size>`` for quick's P1 run)."""
+    return re.sub(r"(-P1)?-h[0-9.]+(-L[0-9]+)?$", "", case_name)
 
 
 #: what a table cell says for an FE reference whose error is not in the study

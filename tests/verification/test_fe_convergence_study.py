@@ -224,14 +224,14 @@ def test_an_override_that_repeats_the_scene_file_names_the_same_fe_run():
 
 
 def test_every_fe_reference_of_the_judging_campaigns_is_a_mesh_level_of_the_study():
-    """Issue 24, item 1: each FE reference of quick, subject, thin-layer and cylinder-plane is one
-    of the fe-convergence campaign's FE runs (same key), so once the study has run, every such
-    comparison carries its FE's estimated error."""
-    from verification.campaigns import cylinder_plane, fe_convergence, quick, subject, thin_layer
+    """Issue 24, item 1: each FE reference of quick, subject, thin-layer, cylinder-plane and ankles
+    is one of the fe-convergence campaign's FE runs (same key), so once the study has run, every
+    such comparison carries its FE's estimated error."""
+    from verification.campaigns import ankles, cylinder_plane, fe_convergence, quick, subject, thin_layer
 
     study = fe_convergence.campaign()
     studied = {fe_key(c.scene, c.sides[-1], c.overrides, c.options) for c in study.cases if len(c.sides) == 1}
-    missing = [case.name for module in (quick, subject, cylinder_plane, thin_layer) for case in module.campaign().cases
+    missing = [case.name for module in (quick, subject, cylinder_plane, thin_layer, ankles) for case in module.campaign().cases
                if len(case.sides) > 1 and case.sides[-1].startswith("fe-") and fe_key(case.scene, case.sides[-1], case.overrides, case.options) not in studied]
     assert missing == []
     # the Kelvin-Voigt histories the viscoelastic goal judges (cylinder layer, cartilage ankle) too
@@ -254,29 +254,44 @@ def test_a_table_gives_the_fe_error_of_the_metrics_it_compares_not_of_the_raw_pe
     assert [c["fe_error"] for c in FE_ERROR_COLUMNS] == list(ERROR_PANELS)
 
 
-def test_a_merged_refresh_replaces_the_points_it_estimates_and_keeps_every_other(tmp_path):
-    """A study run on some points (merge): their entries and records replace the stored ones (a
-    former level of theirs goes with them), every other point's stay as stored, and a point the
-    summary could not estimate changes nothing."""
+def test_a_refresh_of_some_points_replaces_their_entries_and_keeps_every_other_point(tmp_path):
+    """write_reference merges: a point estimated in the summary replaces its record and all its
+    old entries (even under keys it no longer writes) and gets its own date; a point not in the
+    summary, or unavailable in it, keeps its stored record, entries and date; a point unavailable
+    and not stored gets no record."""
     import json
 
     from verification.fe_convergence import load_reference, write_reference
 
-    def entry(case: str, error: float) -> dict:
-        return {"case": case, "errors": {"contact_area_rel_error": error}}
-
-    stored = {"entries": {"k-other": entry("other-h1", 0.01), "k-cyl-old": entry("cyl-h1-L1", 0.05), "k-cyl": entry("cyl-h1-L2", 0.04),
-                          "k-gone": entry("gone-h1", 0.02)},
-              "points": [{"point": "other"}, {"point": "cyl", "dofs": [1, 2, 3]}, {"point": "gone"}]}
-    summary = {"analyses": [{"kind": "fe-convergence", "values": {
-        "entries": {"k-cyl": entry("cyl-h1-L2", 0.02), "k-cyl-new": entry("cyl-h0.7-L4", 0.01)},
-        "points": [{"point": "cyl", "dofs": [2, 3, 4]}, {"point": "gone", "unavailable": "case not run"}]}}]}
     file = tmp_path / "fe_convergence.json"
-    file.write_text(json.dumps(stored), encoding="utf-8")
-    data = load_reference(write_reference(summary, file, merge=True))
-    assert data["entries"] == {"k-other": entry("other-h1", 0.01), "k-gone": entry("gone-h1", 0.02), "k-cyl": entry("cyl-h1-L2", 0.02),
-                               "k-cyl-new": entry("cyl-h0.7-L4", 0.01)}
-    assert data["points"] == [{"point": "other"}, {"point": "gone"}, {"point": "cyl", "dofs": [2, 3, 4]}]
+    old = {"refreshed_at": "2026-11-27T04:20:03+00:00",
+           "entries": {"kA-old": {"case": "a-h0.7", "errors": {"x": 0.5}}, "kA-P1": {"case": "a-P1-h1", "errors": {"x": 0.5}},
+                       "kB": {"case": "b-h1", "errors": {"x": 0.01}}, "kC": {"case": "c-h1-L4", "errors": {"x": 0.02}}},
+           "points": [{"point": "a", "dofs": [1]}, {"point": "b", "dofs": [2]}, {"point": "c", "dofs": [3]}]}
+    file.write_text(json.dumps(old))
+    summary = {"analyses": [{"kind": "fe-convergence", "values": {
+        "entries": {"kA-new": {"case": "a-h1", "errors": {"x": 0.02}}},
+        "points": [{"point": "a", "dofs": [10]}, {"point": "c", "unavailable": "case not run"}, {"point": "d", "unavailable": "case not run"}]}}]}
+    write_reference(summary, file)
+    data = load_reference(file)
+    assert set(data["entries"]) == {"kA-new", "kB", "kC"}
+    points = {p["point"]: p for p in data["points"]}
+    assert points["a"]["dofs"] == [10] and points["a"]["refreshed_at"] == data["refreshed_at"] != old["refreshed_at"]
+    assert points["b"] == {"point": "b", "dofs": [2], "refreshed_at": old["refreshed_at"]}
+    assert points["c"] == {"point": "c", "dofs": [3], "refreshed_at": old["refreshed_at"]}
+    assert "d" not in points
+
+
+def test_the_fe_of_quicks_ankle_answer_carries_its_own_error_in_the_stored_study():
+    """The main job's verdict rests on the two-layer FE of its ankle answer: each of its cases
+    finds that FE run's estimated error of the three card metrics in the stored study
+    (verification/references/fe_convergence.json), so a change of that FE (level, overrides)
+    without a refreshed study fails here instead of turning the answer into "FE error unknown"."""
+    from verification.campaigns.quick import answer_cases
+
+    metrics = ("displacement_rel_error", "regularised_peak_pressure_rel_error", "contact_area_rel_error")
+    missing = [case.name for case in answer_cases() if not set(metrics) <= set(fe_relative_error(case) or {})]
+    assert missing == []
 
 
 def test_a_goal_judges_a_metric_only_where_the_fe_error_is_known_and_below_it(tmp_path, monkeypatch):

@@ -46,7 +46,10 @@ PRIORITY = ("ideal-cartilage-nu0.42", "subject-cartilage-nu0.42", "slab-F333-nu0
 #: quick's twelve points about 75 min (twelve 0.7 mm solves of about 8 min on a quiet core over two
 #: jobs, plus 28 meshes of 2.0 and 1.0 mm); the 30 points added on 2026-11-26 took 2 h 10 min on two
 #: processes at load 2-4, the six left then (Taylor-Hood and subject-like 0.7 mm solves) about 20-40
-#: min each; at load 9-14 a 0.7 mm solve took over 40 min
+#: min each; at load 9-14 a 0.7 mm solve took over 40 min. The two-layer ankles (three loads a run) by the
+#: Krylov path, one job at load 4-5 (2026-11-28): the ideal ankle at nu 0.42 190 / 260 / 1368 s (2.0 / 1.0 /
+#: 0.7 mm; about 100 / 140 / 690 s of CPU; 0.7 / 0.9 / 3.2 GB), the subject-like one 121 / 184 / 1133 s (0.7 mm: 662k
+#: DOFs, 3.0 GB); the ideal ankle at nu 0.49 (Taylor-Hood) 211 / 229 / 1456 s (0.7 mm: 753k DOFs, 4.7 GB)
 EXPECTED_TIME_S = 18000.0
 #: what the study found on the subject-like ankle (issue 24, item 3), measured 2026-11-26 (docs/campaigns.md)
 FINDINGS = (
@@ -131,7 +134,8 @@ def _cost_rank(case: Case) -> int:
     2-4, docs/campaigns.md): the 2 mm layer (0.7 mm: 0.3M DOFs, 1-15 min), the 1 mm layer (0.38M
     with 4 elements through it, 5-8 min), the ideal ankle (0.4M, 5-20 min), the 3 mm layer
     (0.46M, 14-20 min), the subject-like ankle (0.53M, 14-30 min); then (2026-11-28) the two-layer
-    cylinder (0.44M, 4-5 min by the Krylov path) and the two-layer ankles (0.6M, three loads each)."""
+    cylinder (0.44M, 4-5 min by the Krylov path) and the two-layer ankles (0.7M, three loads each:
+    by the Krylov path 23 min and 3.2 GB on the ideal ankle at nu 0.42, load 4-5)."""
     if any(key.startswith("viscoelastic.") for key in case.overrides) and case.sides[-1] in VISCOELASTIC_LEVELS:
         return 7  # a whole creep history per level
     if case.sides[-1] == "fe-two-layer":

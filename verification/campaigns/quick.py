@@ -40,8 +40,10 @@ from verification.verdicts import BY_CONSTRUCTION, INVARIANT, MODEL_BAND_REL, Ba
 ANSWER_NUS = (0.42,)
 #: the ankle answer's FE: P2 at 2.0 mm, the coarsest level of the ``fe-convergence`` study (M's own
 #: 0.96 mm triangles, two elements through each layer; 118 k DOFs on the ideal ankle). Its own
-#: error is the study's (:func:`verification.fe_convergence.fe_relative_error`), unknown until the
-#: study has run the two-layer ankles
+#: error is the study's (:func:`verification.fe_convergence.fe_relative_error`; measured 2026-11-28:
+#: regularised peak 0.54-0.59 %, area 1.39-1.74 %, displacement 0.25 % subject-like and 4.31 % ideal
+#: at 333 N). The next level below 3 % on every card metric is 0.7 mm: 1368 s of wall time for the
+#: ideal ankle's FE alone against 190 s here (docs/campaigns.md#quick-the-main-job-make-demo)
 FE_ANSWER = {"mesh_size_mm": 2.0, "degree": 2}
 #: the ankles' beds in the answer (keys of verification.campaigns.ankles.BEDS), the scenes' default first
 ANSWER_BEDS = tuple(ANKLE_BEDS)
