@@ -330,3 +330,19 @@ def test_a_goal_judges_a_metric_only_where_the_fe_error_is_known_and_below_it(tm
     assert unknown["misses"] == [] and all("FE error unknown" in why for why in unknown["not_judged"].values()) and len(unknown["not_judged"]) == 3
     assert result["values"]["met"] == 0
     assert result["rows"][1]["cells"][-1].startswith("not judged: ") and not result["rows"][1]["flag"]
+
+
+def test_every_stored_fe_error_belongs_to_a_run_the_study_makes_today():
+    """The stored key leaves out what the scene file already says, so a changed scene default gives
+    the same run a new key: the stored entry is then found by no case and its comparisons read "FE
+    error unknown" without failing anywhere (66 of them did, 2026-11-28). Every stored entry's key
+    and every stored point must be one the fe-convergence study produces now."""
+    from verification.campaigns import fe_convergence
+    from verification.fe_convergence import _point_of, load_reference
+
+    study = [c for c in fe_convergence.campaign().cases if len(c.sides) == 1]
+    keys = {fe_key(c.scene, c.sides[-1], c.overrides, c.options) for c in study}
+    stored = load_reference()
+    assert [e["case"] for k, e in stored["entries"].items() if k not in keys] == []
+    points = {_point_of(c.name) for c in study}
+    assert [p["point"] for p in stored["points"] if p["point"] not in points] == []
