@@ -147,7 +147,7 @@ class DiscMeans:
             raise InputError(f"the regularised peak of this surface needs {self.n_quadrature_points:,} quadrature points, more than the "
                              f"{MAX_QUADRATURE_POINTS:,} it holds in memory", expected=_QUADRATURE_EXPECTED)
         self._quadrature: tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray, np.ndarray] | None = None
-        self._q_tree = self._cells = self._peak_cells = None
+        self._q_tree = self._cells = self._cells_of_centroids = None
         #: discs evaluated so far, over every field given (what the bounds saved)
         self.rows_evaluated = 0
 
@@ -269,30 +269,42 @@ class DiscMeans:
         """Positions (k, 3) of centre indices, mm."""
         return self._centre_mm[self._candidates(centres)]
 
-    def _bounds(self, pressure_mpa: np.ndarray, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """An upper bound (k,) of each candidate's disc mean: the largest value of the triangles
-        whose centroids lie in the 27 cells around its centre's (class docstring); and the
-        triangles there (ascending), among which those within reach of the candidates are."""
-        if self._peak_cells is None:
+    def _peak_cells(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The cells of the peak's bounds (class docstring; mesh only, built once): the triangles
+        cell by cell and where each cell's start, the 27 cells around each cell (27, n_cells;
+        n_cells for none) and every candidate's cell."""
+        if self._cells_of_centroids is None:
             m = len(self._triangles)
             cell, neighbour = _grid(np.concatenate([self._centroids, self._centre_mm]), self.radius_mm + float(self._edge.max(initial=0.0)))
-            order = np.argsort(cell[:m], kind="stable")  # the triangles cell by cell
+            order = np.argsort(cell[:m], kind="stable")
             starts = np.searchsorted(cell[:m][order], np.arange(neighbour.shape[1] + 1))
-            self._peak_cells = (order, starts, neighbour, cell[m:])
-        order, starts, neighbour, centre_cell = self._peak_cells
+            self._cells_of_centroids = (order, starts, neighbour, cell[m:])
+        return self._cells_of_centroids
+
+    def _bounds(self, pressure_mpa: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+        """An upper bound (k,) of each candidate's disc mean: the largest value of the triangles
+        whose centroids lie in the 27 cells around its centre's (class docstring)."""
+        order, starts, neighbour, centre_cell = self._peak_cells()
         p = np.asarray(pressure_mpa, dtype=np.float64).ravel()
         triangle_largest = p[self._triangles].max(axis=1) if self.at_points else p
         largest = np.full(len(starts), -np.inf)  # (the last: no cell)
         occupied = np.flatnonzero(np.diff(starts) > 0)
         if occupied.size:
             largest[occupied] = np.maximum.reduceat(triangle_largest[order], starts[occupied])
-        around = neighbour[:, centre_cell[candidates]]
-        cells = _sorted_unique(around.ravel())
+        bound = largest[neighbour[0]]
+        for around in neighbour[1:]:  # (the 27 cells one at a time: memory of one value a cell)
+            np.maximum(bound, largest[around], out=bound)
+        return bound[centre_cell[candidates]]
+
+    def _near(self, candidates: np.ndarray) -> np.ndarray:
+        """The triangles (ascending) whose centroids lie in the 27 cells around the candidates':
+        every triangle within reach of them is among these."""
+        order, starts, neighbour, centre_cell = self._peak_cells()
+        cells = _sorted_unique(neighbour[:, centre_cell[candidates]].ravel())
         cells = cells[cells < len(starts) - 1]
         lengths = starts[cells + 1] - starts[cells]
         ends = np.cumsum(lengths)
-        near = order[np.arange(ends[-1] if len(ends) else 0) - np.repeat(ends - lengths - starts[cells], lengths)]
-        return largest[around].max(axis=0), np.sort(near)
+        return np.sort(order[np.arange(ends[-1] if len(ends) else 0) - np.repeat(ends - lengths - starts[cells], lengths)])
 
     def peak(self, pressure_mpa: np.ndarray) -> float:
         """The largest of :meth:`means` (0 with no pressure), MPa: the same float, from only the
@@ -304,7 +316,7 @@ class DiscMeans:
         # A computed mean exceeds its bound by rounding only, at most (pairs) x eps x the largest
         # |value|: 1e-6 of that value is far above it for any disc of fewer than 1e9 points.
         margin = 1e-6 * float(np.abs(np.asarray(pressure_mpa, dtype=np.float64)).max(initial=0.0))
-        bound, _ = self._bounds(pressure_mpa, candidates)
+        bound = self._bounds(pressure_mpa, candidates)
         order = np.argsort(-bound, kind="stable")
         descending = bound[order]
         best, start, size = 0.0, 0, _FIRST_PEAK_DISCS
@@ -312,9 +324,8 @@ class DiscMeans:
             # (the next discs whose bound can still beat the best)
             stop = min(start + size, int(np.searchsorted(-descending, margin - best, side="right")))
             chunk = np.sort(order[start:stop])
-            _, near = self._bounds(pressure_mpa, candidates[chunk])
             discs = copy.copy(self)  # (the same surface: its arrays shared)
-            discs._set_centres(centres[chunk], near)
+            discs._set_centres(centres[chunk], self._near(candidates[chunk]))
             best = max(best, float(discs.means(pressure_mpa, centres[chunk])[1].max()))
             self.rows_evaluated += len(chunk)
             start, size = stop, 4 * size

@@ -145,7 +145,7 @@ def test_chunked_and_bounded_peak_equals_the_largest_of_all_disc_means(at_points
         discs = DiscMeans(points, triangles, at_points=at_points, chunk_pairs=2000)
         peak = discs.peak(pressure)
         assert peak == full.max(initial=0.0)
-        bound, _ = discs._bounds(pressure, discs.loaded_centres(pressure))
+        bound = discs._bounds(pressure, discs.loaded_centres(pressure))
         assert np.all(full <= bound + 1e-6 * np.abs(pressure).max(initial=0.0))  # (the rounding margin of DiscMeans.peak)
         assert discs.rows_evaluated >= int((bound + 1e-6 * np.abs(pressure).max(initial=0.0) >= peak).sum())
         if pruned:
