@@ -22,7 +22,11 @@ independent springs). Then, median of ``--rounds``, three subprocesses a round:
   subprocesses start an interpreter and import ~900 modules (0.5-0.8 s, varying by 0.1 s from
   one to the next on a shared machine), so the difference is noisy at 3k springs; the same
   ratio measured inside the staged run, its command's wall time over its solve, is printed
-  beside it (no import in it, no start-up or exit).
+  beside it (no import in it, no start-up or exit);
+* the same by the CPU time (user + system, threads included), which a loaded machine's waits for
+  a core leave out: the whole run's and the import-only subprocess's, over the staged run's
+  ``edem.solver.run`` (set-up and solve: the solve's own CPU time is not recorded), and the
+  writing's.
 
 Run from the repository root (``PYTHONPATH=$PWD``); ``PYTHONPATH=/path/to/other/tree`` measures
 another version of the code (the mesh files are built by the imported tree's builders).
@@ -41,6 +45,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -78,11 +83,12 @@ stages = {}
 def timed(module, name):
     function = getattr(module, name)
     def wrapper(*args, **kwargs):
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         try:
             return function(*args, **kwargs)
         finally:
             stages[name] = stages.get(name, 0.0) + time.perf_counter() - start
+            stages[name + " cpu"] = stages.get(name + " cpu", 0.0) + time.process_time() - cpu
     setattr(module, name, wrapper)  # (edem.cli imports them when the command runs)
 
 timed(edem.scene, "load_scene")
@@ -126,12 +132,13 @@ def write_scene(root: Path, mesh_size_mm: float) -> tuple[Path, str]:
     return scene, data["scene"]["name"]
 
 
-def timed(args: list[str], env: dict[str, str], cwd: Path) -> float:
-    """Wall time of a subprocess, run outside any source tree (``python -c`` puts its working
-    directory first on sys.path: PYTHONPATH alone picks the tree)."""
-    start = time.perf_counter()
+def timed(args: list[str], env: dict[str, str], cwd: Path) -> tuple[float, float]:
+    """Wall time and CPU time (user + system) of a subprocess, run outside any source tree
+    (``python -c`` puts its working directory first on sys.path: PYTHONPATH alone picks the tree)."""
+    start, before = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run(args, env=env, cwd=cwd, check=True, stdout=subprocess.DEVNULL)
-    return time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.perf_counter() - start, (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
 
 
 STAGES = ("scene", "set-up", "solve", "writing", "other")
@@ -139,8 +146,9 @@ STAGES = ("scene", "set-up", "solve", "writing", "other")
 
 def measure(run, case: Path, root: Path, env: dict[str, str], tag: str) -> dict[str, float]:
     """One round of the three subprocesses (whole, imports, staged) of one tree: its figures (s)."""
-    figures = {"whole": timed(run(_RUN_AND_RECORD, case / f"whole-{tag}"), env, root)}
-    figures["imports"] = timed([sys.executable, "-c", _IMPORT_ONLY], env, root)
+    figures: dict[str, float] = {}
+    figures["whole"], figures["whole cpu"] = timed(run(_RUN_AND_RECORD, case / f"whole-{tag}"), env, root)
+    figures["imports"], figures["imports cpu"] = timed([sys.executable, "-c", _IMPORT_ONLY], env, root)
     summary = json.loads((case / f"whole-{tag}" / "summary.json").read_text())
     figures["solve of the whole run"] = summary["wall_time_s"]
     timed(run(_RUN_STAGES, case / f"stages-{tag}"), env, root)
@@ -155,6 +163,10 @@ def measure(run, case: Path, root: Path, env: dict[str, str], tag: str) -> dict[
     figures["ratio"] = (figures["whole"] - figures["imports"]) / figures["solve of the whole run"]
     figures["command"] = stages["main"]
     figures["ratio in process"] = stages["main"] / staged["wall_time_s"]
+    # by the CPU time, which a loaded machine's waits for a core leave out: the run's (set-up and
+    # solve) as the denominator, the solve's own CPU time not being recorded
+    figures["run cpu"], figures["writing cpu"] = stages["run cpu"], stages["write_results cpu"]
+    figures["cpu ratio"] = (figures["whole cpu"] - figures["imports cpu"]) / stages["run cpu"]
     figures["springs"], figures["points"] = summary["n_springs"], summary["steps"]
     return figures
 
@@ -167,6 +179,8 @@ def report(label: str, m: dict[str, float], rounds: int) -> None:
           f"{m['command']:.3f} s, over its solve: {m['ratio in process']:.1f}")
     print("    whole - imports = " + ", ".join(f"{stage} {m[stage]:.3f} s ({100 * m[stage] / beyond:.0f} %)" for stage in STAGES)
           + f" (of which {m['other in main']:.3f} s in the command: the provenance's git calls, the checks, the printing)")
+    print(f"    CPU time: whole {m['whole cpu']:.3f} s, imports {m['imports cpu']:.3f} s, the run (set-up and solve) {m['run cpu']:.3f} s, "
+          f"writing {m['writing cpu']:.3f} s; (whole - imports) / run = {m['cpu ratio']:.1f}")
 
 
 def main() -> None:
@@ -216,7 +230,10 @@ def main() -> None:
                 before, after = medians["baseline"], medians["this tree"]
                 print(f"    before -> after: (whole - imports) / solve {before['ratio']:.2f} -> {after['ratio']:.2f}; "
                       f"whole - imports {before['whole'] - before['imports']:.3f} -> {after['whole'] - after['imports']:.3f} s; "
-                      + ", ".join(f"{stage} {before[stage]:.3f} -> {after[stage]:.3f} s" for stage in ("writing", "scene", "set-up", "solve")))
+                      + ", ".join(f"{stage} {before[stage]:.3f} -> {after[stage]:.3f} s" for stage in ("writing", "scene", "set-up", "solve"))
+                      + f"; CPU: (whole - imports) / run {before['cpu ratio']:.2f} -> {after['cpu ratio']:.2f}, "
+                      f"whole - imports {before['whole cpu'] - before['imports cpu']:.3f} -> {after['whole cpu'] - after['imports cpu']:.3f} s, "
+                      f"writing {before['writing cpu']:.3f} -> {after['writing cpu']:.3f} s")
 
 
 if __name__ == "__main__":

@@ -442,19 +442,18 @@ def write_surface_frame(
     triangles: np.ndarray,
     point_data: dict[str, np.ndarray] | None = None,
     cell_data: dict[str, np.ndarray] | None = None,
-    *,
-    series: VtpSeries | None = None,
 ) -> Path:
-    """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only);
-    ``series``: the :class:`geometries.mesh_files.vtk_family.VtpSeries` of the files of a run's
-    time points (what they share encoded once)."""
-    Path(path).write_text(surface_frame_text(SurfaceFrame(np.asarray(points_mm, dtype=np.float64), triangles, point_data or {}, cell_data or {}),
-                                             series=series), encoding="ascii")
+    """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only)."""
+    from geometries.mesh_files import write_vtp
+
+    write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data)
     return Path(path)
 
 
 def surface_frame_text(surface: SurfaceFrame, *, series: VtpSeries | None = None) -> str:
-    """The .vtp content of a surface frame (:func:`geometries.mesh_files.vtp_text`)."""
+    """The .vtp content of a surface frame (:func:`geometries.mesh_files.vtp_text`); ``series``:
+    the :class:`geometries.mesh_files.vtk_family.VtpSeries` of the files of a run's time points
+    (what they share encoded once)."""
     from geometries.mesh_files import vtp_text
 
     return vtp_text(np.asarray(surface.points_mm, dtype=np.float64), surface.triangles, surface.cell_data, surface.point_data, series=series)
