@@ -118,10 +118,10 @@ def test_averaging_built_once_gives_exactly_the_per_call_values(at_points):
     """A run builds the disc averaging once for its surface and applies it to every time point's
     field: each disc's sum runs over the same quadrature points in the same order as a call for
     that field alone, so every disc mean and the peak are the same floats, whatever was
-    evaluated, kept or bounded before."""
+    evaluated or bounded before."""
     points, triangles = square_mesh(8.0, 0.4)
     discs = DiscMeans(points, triangles, at_points=at_points)
-    for pressure in paraboloid_fields(points, triangles, at_points) * 2:  # twice: the second pass from the kept rows
+    for pressure in paraboloid_fields(points, triangles, at_points) * 2:  # twice: the second pass after the first's
         centres, mean = discs.means(pressure)
         centres_mm, mean_alone = disc_mean_pressure_mpa(points, triangles, pressure, at_points=at_points)
         np.testing.assert_array_equal(discs.centres_mm(centres), centres_mm)
