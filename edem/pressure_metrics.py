@@ -15,6 +15,7 @@ columns' area ratio, on the points of M under them; a discrete run's spring pres
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -35,10 +36,9 @@ _POINTS_PER_RADIUS = 3.0
 MAX_QUADRATURE_POINTS = 20_000_000
 #: (centre, quadrature point) pairs evaluated at once: ~60 bytes each while a chunk is formed
 _CHUNK_PAIRS = 2_000_000
-#: the first chunk's pairs (each next one twice as many)
-_FIRST_CHUNK_PAIRS = 50_000
-#: pairs kept between the pressure fields of one surface (12 bytes each): a run's rows
-_CACHE_PAIRS = 16_000_000
+#: discs the peak evaluates first, from the largest bound (each next chunk four times as many):
+#: on the stances' maps the best of these rules out every other disc
+_FIRST_PEAK_DISCS = 128
 #: what summary.json says of its regularised_peak_pressure_mpa
 REGULARISED_PEAK_DEFINITION = (
     f"the largest mean of the pressure (force per area of M) over a disc of {PEAK_DISC_AREA_MM2:g} mm^2 of the surface, "
@@ -67,25 +67,26 @@ def _subdivided(points_mm: np.ndarray, triangles: np.ndarray, n: int) -> tuple[n
 
 
 class DiscMeans:
-    """The disc averaging of one surface: what depends on the mesh only (the quadrature, its
-    search tree, the bounding cells), built once and applied to any number of pressure fields on
-    it, as a run's time points (:class:`RegularisedPeaks`).
+    """The disc averaging of one surface, applied to any number of pressure fields on it (a
+    run's time points share one, :class:`RegularisedPeaks`).
 
     The mean over the disc of a centre is a sum over the quadrature points within the radius of
-    it, always in the same order (the points' own), so it is the same number whichever other
-    centres are evaluated with it, in whichever chunk. That makes two savings exact:
+    it, always in the same order (the surface's: grouped by subdivision, then by triangle), so it
+    is the same float whichever other centres are evaluated with it, in whichever chunk, and
+    whichever triangles beyond its disc carry quadrature points. That makes the peak's saving
+    exact (:meth:`peak`): a centre whose disc cannot beat the best mean found is never
+    evaluated. A disc's mean is at most the largest value of the triangles with quadrature
+    points in it, and such a triangle's centroid lies within the radius plus its longest edge of
+    the centre: in the 27 cubic cells (side: the radius plus the longest edge of the surface)
+    around the centre's cell, whose triangles' largest value bounds the mean. The centres are
+    evaluated from the largest bound down, in chunks of 128, 512, ... discs, each by an
+    averaging built for those discs only (the quadrature of the triangles within their reach),
+    until the next bound is below the best: the peak never builds the whole surface's quadrature.
 
-    * the rows of the averaging (one per centre: the quadrature points in its disc and their
-      areas) computed for one pressure field are kept (up to ``cache_pairs`` pairs) and reused
-      by the next: over a run a time point is one sparse product for the centres seen before;
-    * a centre whose disc cannot beat the best mean found so far is never evaluated: a disc's
-      mean is at most the largest pressure in the disc, and that is at most the largest value of
-      the triangles with quadrature points in the 27 cubic cells (side >= the radius) around the
-      centre's. The rest are evaluated in chunks (at most ``chunk_pairs`` pairs each) from the
-      largest bound down, until the next bound is below the best.
-
-    Memory is then linear in the quadrature (the mesh), plus one chunk and the kept rows,
-    whatever the size of the contact.
+    :meth:`means` (every loaded centre's) builds the quadrature of the triangles within reach of
+    the candidate centres when first asked, and evaluates the discs in chunks of at most
+    ``chunk_pairs`` pairs. Memory is linear in the quadrature (the mesh) plus one chunk, whatever
+    the size of the contact.
 
     Parameters
     ----------
@@ -102,52 +103,52 @@ class DiscMeans:
         One pressure field this is built for: only its loaded centres are candidates and only the
         triangles within reach of them carry quadrature points (what one evaluation needs). None:
         every centre and triangle, for any field on the surface.
-    chunk_pairs, cache_pairs : int
-        The most (centre, quadrature point) pairs evaluated at once, and kept between fields.
+    centres : (k,) int, optional
+        The candidate centres themselves (ascending centre indices, :meth:`loaded_centres`), in
+        place of ``only_for``; ``near``: triangles among which those within their reach are
+        (default: all).
+    chunk_pairs : int
+        The most (centre, quadrature point) pairs evaluated at once.
     """
 
     def __init__(self, points_mm: np.ndarray, triangles: np.ndarray, *, at_points: bool, disc_area_mm2: float = PEAK_DISC_AREA_MM2,
-                 only_for: np.ndarray | None = None, chunk_pairs: int = _CHUNK_PAIRS, cache_pairs: int = _CACHE_PAIRS) -> None:
+                 only_for: np.ndarray | None = None, centres: np.ndarray | None = None, near: np.ndarray | None = None,
+                 chunk_pairs: int = _CHUNK_PAIRS) -> None:
         points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
         tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-        self.at_points, self.radius_mm = at_points, math.sqrt(disc_area_mm2 / math.pi)
-        self.chunk_pairs, self.cache_pairs = max(int(chunk_pairs), 1), int(cache_pairs)
-        self._triangles, self._n_points = tris, len(points)
-        edge, centroids = _longest_edges(points, tris)
+        self.at_points, self.disc_area_mm2, self.radius_mm = at_points, disc_area_mm2, math.sqrt(disc_area_mm2 / math.pi)
+        self.chunk_pairs = max(int(chunk_pairs), 1)
+        self._points, self._triangles, self._n_points = points, tris, len(points)
+        self._edge, self._centroids = _longest_edges(points, tris)
+        self._set_centres(self.loaded_centres(only_for) if only_for is not None else centres, near)
+
+    def _set_centres(self, centres: np.ndarray | None, near: np.ndarray | None) -> None:
+        """The candidate centres (None: all) and the quadrature of the triangles within their reach."""
+        tris, centroids, points = self._triangles, self._centroids, self._points
         # centre indices: the centroid of triangle t is centre t, point v is centre m + v
-        if only_for is None:
+        if centres is None:
             self._centres = None  # all of them
             self._centre_mm = np.concatenate([centroids, points])
             quadrature_on = np.arange(len(tris))
         else:
-            self._centres = self.loaded_centres(only_for)
+            self._centres = np.asarray(centres, dtype=np.int64)
             self._centre_mm = self._positions(self._centres, centroids, points)
             # only triangles that reach within a radius of a centre can meet a disc (zero pressure counts)
-            reach = np.full(len(tris), np.inf)
-            if len(self._centres):
-                reach = _kdtree(self._centre_mm).query(centroids, distance_upper_bound=self.radius_mm + float(edge.max()))[0]
-            quadrature_on = np.flatnonzero(reach <= self.radius_mm + edge)
+            near = np.arange(len(tris)) if near is None else np.asarray(near, dtype=np.int64)
+            reach = np.full(len(near), np.inf)
+            if len(self._centres) and len(near):
+                reach = _kdtree(self._centre_mm).query(centroids[near], distance_upper_bound=self.radius_mm + float(self._edge[near].max()))[0]
+            quadrature_on = np.sort(near[reach <= self.radius_mm + self._edge[near]])
         # each triangle split into n^2 sub-triangles, n by its longest edge; the quadrature points
         # grouped by n, each group's triangles in their order: the order every sum runs in
-        subdivisions = _subdivisions(edge[quadrature_on], self.radius_mm)
-        needed = int((subdivisions**2).sum())
-        if needed > MAX_QUADRATURE_POINTS:
-            raise InputError(f"the regularised peak of this surface needs {needed:,} quadrature points, more than the "
+        self._quadrature_on = quadrature_on
+        self._subdivisions = _subdivisions(self._edge[quadrature_on], self.radius_mm)
+        if self.n_quadrature_points > MAX_QUADRATURE_POINTS:
+            raise InputError(f"the regularised peak of this surface needs {self.n_quadrature_points:,} quadrature points, more than the "
                              f"{MAX_QUADRATURE_POINTS:,} it holds in memory", expected=_QUADRATURE_EXPECTED)
-        self._groups, positions, areas = [], [], []
-        for n in np.flatnonzero(np.bincount(subdivisions)):
-            group = quadrature_on[subdivisions == n]
-            q_pos, weights, q_area = _subdivided(points, tris[group], int(n))
-            self._groups.append((group, weights))
-            positions.append(q_pos.reshape(-1, 3))
-            areas.append(q_area.ravel())
-        self._q_mm = np.concatenate(positions) if positions else np.zeros((0, 3))
-        self._q_area = np.concatenate(areas) if areas else np.zeros(0)
-        self._q_tree = self._cells = None
-        self._blocks: list[tuple[Any, np.ndarray]] = []  # kept rows: (CSR of areas, disc area per row)
-        self._block_row = np.full(len(self._centre_mm), -1, dtype=np.int64)  # candidate centre -> its kept row
-        self._kept_pairs = 0
-        #: discs evaluated so far, over every field given (what the bounds and the kept rows saved)
+        self._quadrature: tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray, np.ndarray] | None = None
+        self._q_tree = self._cells = self._cells_of_centroids = None
+        #: discs evaluated so far, over every field given (what the bounds saved)
         self.rows_evaluated = 0
 
     @staticmethod
@@ -157,7 +158,22 @@ class DiscMeans:
 
     @property
     def n_quadrature_points(self) -> int:
-        return len(self._q_area)
+        return int((self._subdivisions**2).sum())
+
+    def _built(self) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray, np.ndarray]:
+        """The quadrature (built when first needed): the groups (triangles, barycentric weights)
+        by subdivision, the points' positions (n_q, 3) and areas (n_q,)."""
+        if self._quadrature is None:
+            groups, positions, areas = [], [], []
+            for n in np.flatnonzero(np.bincount(self._subdivisions)):
+                group = self._quadrature_on[self._subdivisions == n]
+                q_pos, weights, q_area = _subdivided(self._points, self._triangles[group], int(n))
+                groups.append((group, weights))
+                positions.append(q_pos.reshape(-1, 3))
+                areas.append(q_area.ravel())
+            self._quadrature = (groups, np.concatenate(positions) if positions else np.zeros((0, 3)),
+                                np.concatenate(areas) if areas else np.zeros(0))
+        return self._quadrature
 
     def loaded_centres(self, pressure_mpa: np.ndarray) -> np.ndarray:
         """Centre indices (k,), ascending: the centroids, then the points, of the triangles that
@@ -183,19 +199,21 @@ class DiscMeans:
     def _values(self, pressure_mpa: np.ndarray) -> np.ndarray:
         """The pressure at every quadrature point (n_q,), MPa."""
         p = np.asarray(pressure_mpa, dtype=np.float64).ravel()
-        if not self._groups:
+        groups = self._built()[0]
+        if not groups:
             return np.zeros(0)
         return np.concatenate([(np.einsum("qk,mk->mq", weights, p[self._triangles[group]]) if self.at_points
-                                else np.repeat(p[group][:, None], weights.shape[0], axis=1)).ravel() for group, weights in self._groups])
+                                else np.repeat(p[group][:, None], weights.shape[0], axis=1)).ravel() for group, weights in groups])
 
     def _rows(self, candidates: np.ndarray) -> tuple[Any, np.ndarray]:
         """The averaging rows of candidate centres: a CSR matrix (k, n_q) of the areas of the
         quadrature points in each disc (columns ascending), and the disc areas (k,)."""
         from scipy.sparse import csr_matrix
 
+        _, q_mm, q_area = self._built()
         if self._q_tree is None:
-            self._q_tree = _kdtree(self._q_mm)
-        n_q = len(self._q_area)
+            self._q_tree = _kdtree(q_mm)
+        n_q = len(q_area)
         pairs = _kdtree(self._centre_mm[candidates]).sparse_distance_matrix(self._q_tree, self.radius_mm, output_type="ndarray")
         # the (row, column) pairs in order as one sorted key: several times cheaper than an argsort
         key = np.sort(pairs["i"] * n_q + pairs["j"])
@@ -204,7 +222,7 @@ class DiscMeans:
         columns = (key - row * n_q).astype(np.int32 if n_q < 2**31 else np.int64)
         indptr = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=len(candidates)))]).astype(columns.dtype)
         del key, row
-        rows = csr_matrix((self._q_area[columns], columns, indptr), shape=(len(candidates), n_q))
+        rows = csr_matrix((q_area[columns], columns, indptr), shape=(len(candidates), n_q))
         # (a product, not a reduction: the sum runs along each row in order, as the mean's does)
         return rows, rows @ np.ones(n_q)
 
@@ -212,83 +230,36 @@ class DiscMeans:
     def _means(rows: Any, area: np.ndarray, values: np.ndarray) -> np.ndarray:
         return np.divide(rows @ values, area, out=np.zeros(len(area)), where=area > 0)
 
-    def _keep(self, candidates: np.ndarray, rows: Any, area: np.ndarray) -> None:
-        if self._kept_pairs + rows.nnz > self.cache_pairs:
-            return
-        self._block_row[candidates] = sum(len(a) for _, a in self._blocks) + np.arange(len(candidates))
-        self._blocks.append((rows, area))
-        self._kept_pairs += rows.nnz
-
-    def _cell_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The bounding cells (mesh only): cubes of side >= the radius, so that a disc lies within
-        the 27 cells around its centre's. Returns the triangles with quadrature points in each
-        cell, cell by cell, and where each cell's start; the 27 neighbours of each cell (27,
-        n_cells; n_cells for none); every candidate's cell; and how many quadrature points the 27
-        cells around each cell hold (an upper bound on the pairs of a disc centred there)."""
-        if self._cells is None:
-            everything = np.concatenate([self._q_mm, self._centre_mm])
-            origin = everything.min(axis=0)
-            side = max(self.radius_mm, float(np.ptp(everything, axis=0).max()) / 2**20)  # <= 2^20 cells a side: the keys fit int64
-            index = np.floor((everything - origin) / side).astype(np.int64) + 1  # (an empty layer of cells on every side)
-            del everything
-            dims = index.max(axis=0) + 2
-            keys = np.ravel_multi_index(index.T, dims)
-            del index
-            cells = _sorted_unique(keys)
-            cell_of = np.searchsorted(cells, keys)
-            del keys
-            n_q, n_cells = len(self._q_area), len(cells)
-            q_cell, centre_cell = cell_of[:n_q], cell_of[n_q:]
-            shifts = np.array([[i, j, k] for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)]) @ np.array([dims[1] * dims[2], dims[2], 1])
-            around = cells[None, :] + shifts[:, None]  # (27, n_cells): the maxima over the 27 run along rows
-            neighbour = np.searchsorted(cells, around)
-            found = cells[np.minimum(neighbour, n_cells - 1)] == around
-            neighbour = np.where(found, neighbour, n_cells).astype(np.int32 if n_cells < 2**31 else np.int64)
-            count = np.append(np.bincount(q_cell, minlength=n_cells), 0)
-            # a triangle's quadrature points are the cells' only values, and none exceeds the
-            # triangle's largest value: the bound needs each (cell, triangle) pair once
-            q_triangle = np.concatenate([np.repeat(group, weights.shape[0]) for group, weights in self._groups]) if self._groups else np.zeros(0, np.int64)
-            pair = _sorted_unique(q_cell * len(self._triangles) + q_triangle)
-            pair_cell = pair // len(self._triangles)
-            self._cells = (pair - pair_cell * len(self._triangles), np.searchsorted(pair_cell, np.arange(n_cells)), neighbour, centre_cell,
-                           count[neighbour].sum(axis=0))
-        return self._cells
-
-    def _bounds(self, pressure_mpa: np.ndarray, candidates: np.ndarray) -> np.ndarray:
-        """An upper bound (k,) of each candidate's disc mean: the largest value of the triangles
-        with quadrature points in its 27 cells."""
-        pair_triangle, starts, neighbour, centre_cell, _ = self._cell_tables()
-        p = np.asarray(pressure_mpa, dtype=np.float64).ravel()
-        triangle_largest = p[self._triangles].max(axis=1) if self.at_points else p
-        largest = np.full(len(starts) + 1, -np.inf)
-        occupied = np.flatnonzero(np.diff(np.append(starts, len(pair_triangle))) > 0)
-        if occupied.size:
-            largest[occupied] = np.maximum.reduceat(triangle_largest[pair_triangle], starts[occupied])
-        return largest[neighbour].max(axis=0)[centre_cell[candidates]]  # (27 x cells: fewer than the candidates of a fine mesh)
-
     def _chunks(self, candidates: np.ndarray) -> list[tuple[int, int]]:
-        """Consecutive slices of ``candidates`` of at most ``chunk_pairs`` pairs each (counted by
-        the quadrature points in the cells around each; at least one centre a slice), the first
-        ones smaller: the bounds usually end the search within a few hundred discs."""
-        _, _, _, centre_cell, around = self._cell_tables()
+        """Consecutive slices of ``candidates`` of at most ``chunk_pairs`` pairs each, counted by
+        the quadrature points in the 27 cells (side: the radius) around each centre's (at least
+        one centre a slice)."""
+        if self._cells is None:
+            _, q_mm, q_area = self._built()
+            cell, neighbour = _grid(np.concatenate([q_mm, self._centre_mm]), self.radius_mm)
+            count = np.append(np.bincount(cell[:len(q_area)], minlength=neighbour.shape[1]), 0)
+            self._cells = (cell[len(q_area):], count[neighbour].sum(axis=0))
+        centre_cell, around = self._cells
         reach = np.cumsum(around[centre_cell[candidates]])
-        slices, start, budget = [], 0, min(_FIRST_CHUNK_PAIRS, self.chunk_pairs)
+        slices, start = [], 0
         while start < len(candidates):
             before = reach[start - 1] if start else 0
-            stop = max(start + 1, int(np.searchsorted(reach, before + budget, side="right")))
+            stop = max(start + 1, int(np.searchsorted(reach, before + self.chunk_pairs, side="right")))
             slices.append((start, stop))
-            start, budget = stop, min(2 * budget, self.chunk_pairs)
+            start = stop
         return slices
 
-    def means(self, pressure_mpa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Every loaded centre's disc mean: centre indices (k,) (:meth:`loaded_centres`) and
-        means (k,), MPa (zero pressure outside the contact counts; off the surface's edge
-        nothing does)."""
-        centres = self.loaded_centres(pressure_mpa)
+    def means(self, pressure_mpa: np.ndarray, centres: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The disc means of ``centres`` (default every loaded one, :meth:`loaded_centres`): centre
+        indices (k,) and means (k,), MPa (zero pressure outside the contact counts; off the
+        surface's edge nothing does)."""
+        centres = self.loaded_centres(pressure_mpa) if centres is None else np.asarray(centres, dtype=np.int64)
         candidates = self._candidates(centres)
-        values = self._values(pressure_mpa)
         out = np.zeros(len(centres))
-        for start, stop in self._chunks(candidates) if len(centres) else []:
+        if not len(centres):
+            return centres, out
+        values = self._values(pressure_mpa)
+        for start, stop in self._chunks(candidates):
             rows, area = self._rows(candidates[start:stop])
             out[start:stop] = self._means(rows, area, values)
             self.rows_evaluated += stop - start
@@ -298,38 +269,90 @@ class DiscMeans:
         """Positions (k, 3) of centre indices, mm."""
         return self._centre_mm[self._candidates(centres)]
 
+    def _peak_cells(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The cells of the peak's bounds (class docstring; mesh only, built once): the triangles
+        cell by cell and where each cell's start, the 27 cells around each cell (27, n_cells;
+        n_cells for none) and every candidate's cell."""
+        if self._cells_of_centroids is None:
+            m = len(self._triangles)
+            cell, neighbour = _grid(np.concatenate([self._centroids, self._centre_mm]), self.radius_mm + float(self._edge.max(initial=0.0)))
+            order = np.argsort(cell[:m], kind="stable")
+            starts = np.searchsorted(cell[:m][order], np.arange(neighbour.shape[1] + 1))
+            self._cells_of_centroids = (order, starts, neighbour, cell[m:])
+        return self._cells_of_centroids
+
+    def _bounds(self, pressure_mpa: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+        """An upper bound (k,) of each candidate's disc mean: the largest value of the triangles
+        whose centroids lie in the 27 cells around its centre's (class docstring)."""
+        order, starts, neighbour, centre_cell = self._peak_cells()
+        p = np.asarray(pressure_mpa, dtype=np.float64).ravel()
+        triangle_largest = p[self._triangles].max(axis=1) if self.at_points else p
+        largest = np.full(len(starts), -np.inf)  # (the last: no cell)
+        occupied = np.flatnonzero(np.diff(starts) > 0)
+        if occupied.size:
+            largest[occupied] = np.maximum.reduceat(triangle_largest[order], starts[occupied])
+        bound = largest[neighbour[0]]
+        for around in neighbour[1:]:  # (the 27 cells one at a time: memory of one value a cell)
+            np.maximum(bound, largest[around], out=bound)
+        return bound[centre_cell[candidates]]
+
+    def _near(self, candidates: np.ndarray) -> np.ndarray:
+        """The triangles (ascending) whose centroids lie in the 27 cells around the candidates':
+        every triangle within reach of them is among these."""
+        order, starts, neighbour, centre_cell = self._peak_cells()
+        cells = _sorted_unique(neighbour[:, centre_cell[candidates]].ravel())
+        cells = cells[cells < len(starts) - 1]
+        lengths = starts[cells + 1] - starts[cells]
+        ends = np.cumsum(lengths)
+        return np.sort(order[np.arange(ends[-1] if len(ends) else 0) - np.repeat(ends - lengths - starts[cells], lengths)])
+
     def peak(self, pressure_mpa: np.ndarray) -> float:
-        """The largest of :meth:`means` (0 with no pressure), MPa: the same number, from only the
-        discs the bounds cannot rule out, and the rows kept from the fields before."""
-        candidates = self._candidates(self.loaded_centres(pressure_mpa))
+        """The largest of :meth:`means` (0 with no pressure), MPa: the same float, from only the
+        discs the bounds cannot rule out (class docstring)."""
+        centres = self.loaded_centres(pressure_mpa)
+        candidates = self._candidates(centres)
         if not candidates.size:
             return 0.0
-        values = self._values(pressure_mpa)
-        best = 0.0
-        kept = self._block_row[candidates]
-        if (kept >= 0).any():
-            means = np.concatenate([self._means(rows, area, values) for rows, area in self._blocks])
-            best = max(best, float(means[kept[kept >= 0]].max()))
-            candidates = candidates[kept < 0]
-        if not candidates.size:
-            return best
         # A computed mean exceeds its bound by rounding only, at most (pairs) x eps x the largest
         # |value|: 1e-6 of that value is far above it for any disc of fewer than 1e9 points.
-        margin = 1e-6 * float(np.abs(values).max(initial=0.0))
+        margin = 1e-6 * float(np.abs(np.asarray(pressure_mpa, dtype=np.float64)).max(initial=0.0))
         bound = self._bounds(pressure_mpa, candidates)
-        possible = bound + margin >= best
-        candidates, bound = candidates[possible], bound[possible]
         order = np.argsort(-bound, kind="stable")
-        candidates, bound = candidates[order], bound[order]
-        for start, stop in self._chunks(candidates):
-            if bound[start] + margin < best:
-                break
-            chunk = candidates[start:stop]
-            rows, area = self._rows(chunk)
-            best = max(best, float(self._means(rows, area, values).max()))
-            self.rows_evaluated += stop - start
-            self._keep(chunk, rows, area)
+        descending = bound[order]
+        best, start, size = 0.0, 0, _FIRST_PEAK_DISCS
+        while start < len(order) and descending[start] + margin >= best:
+            # (the next discs whose bound can still beat the best)
+            stop = min(start + size, int(np.searchsorted(-descending, margin - best, side="right")))
+            chunk = np.sort(order[start:stop])
+            discs = copy.copy(self)  # (the same surface: its arrays shared)
+            discs._set_centres(centres[chunk], self._near(candidates[chunk]))
+            best = max(best, float(discs.means(pressure_mpa, centres[chunk])[1].max()))
+            self.rows_evaluated += len(chunk)
+            start, size = stop, 4 * size
         return best
+
+
+def _grid(positions_mm: np.ndarray, side_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cubic cells of side >= ``side_mm`` (at most 2^20 a side: the keys fit int64) over the
+    occupied space: each position's cell (k,) and the 27 cells around each cell (27, n_cells;
+    n_cells where there is none)."""
+    if not len(positions_mm):
+        return np.zeros(0, np.int64), np.zeros((27, 0), np.int32)
+    origin = positions_mm.min(axis=0)
+    side = max(side_mm, float(np.ptp(positions_mm, axis=0).max()) / 2**20)
+    index = np.floor((positions_mm - origin) / side).astype(np.int64) + 1  # (an empty layer of cells on every side)
+    dims = index.max(axis=0) + 2
+    keys = np.ravel_multi_index(index.T, dims)
+    del index
+    cells = _sorted_unique(keys)
+    cell_of = np.searchsorted(cells, keys)
+    del keys
+    n_cells = len(cells)
+    shifts = np.array([[i, j, k] for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)]) @ np.array([dims[1] * dims[2], dims[2], 1])
+    around = cells[None, :] + shifts[:, None]  # (27, n_cells): the maxima over the 27 run along rows
+    neighbour = np.searchsorted(cells, around)
+    found = cells[np.minimum(neighbour, n_cells - 1)] == around
+    return cell_of, np.where(found, neighbour, n_cells).astype(np.int32 if n_cells < 2**31 else np.int64)
 
 
 _QUADRATURE_EXPECTED = ("a surface of fewer or shorter triangles: each is split into n^2 sub-triangles, n its longest edge over "
@@ -417,7 +440,7 @@ def regularised_peak_pressure_mpa(points_mm: np.ndarray, triangles: np.ndarray, 
                                   disc_area_mm2: float = PEAK_DISC_AREA_MM2) -> float:
     """The regularised peak: the largest :func:`disc_mean_pressure_mpa` (0 with no pressure), MPa
     (by :meth:`DiscMeans.peak`, in memory linear in the mesh)."""
-    return DiscMeans(points_mm, triangles, at_points=at_points, disc_area_mm2=disc_area_mm2, only_for=pressure_mpa).peak(pressure_mpa)
+    return DiscMeans(points_mm, triangles, at_points=at_points, disc_area_mm2=disc_area_mm2).peak(pressure_mpa)
 
 
 class RegularisedPeaks:

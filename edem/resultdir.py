@@ -73,6 +73,7 @@ from __future__ import annotations
 import csv
 import html
 import importlib.metadata
+import io
 import json
 import math
 import numbers
@@ -86,7 +87,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from edem.atomic_dirs import ResultWriteError, atomic_result_dir, verify_manifest
+from edem.atomic_dirs import ResultFiles, ResultWriteError, atomic_result_dir, verify_manifest
 from edem.pressure_metrics import REGULARISED_PEAK_DEFINITION, has_pressure, largest_regularised_peak_mpa, pressure_bound_mpa
 from geometries.errors import InputError, SolverError
 from geometries.triangle_kernels import triangle_areas
@@ -197,8 +198,9 @@ def write_result_dir(
     (otherwise InputError). ``provenance``: the resolved scene (scene.toml) and the provenance
     keys of the summary (:func:`provenance`), written with the rest so that an interrupted run
     never leaves a result without them. Every file is written inside one
-    :func:`edem.atomic_dirs.atomic_result_dir` and so listed in manifest.json; ``durable=False``
-    skips its fsyncs (a campaign's verified cache only).
+    :func:`edem.atomic_dirs.atomic_result_dir` (each hashed from the bytes written) and so
+    listed in manifest.json; ``durable=False`` skips its fsyncs (a campaign's verified cache
+    only).
 
     Raises SolverError naming the file and key when a number is not finite (a result that
     contradicts itself is never written as if it were one), InputError when the directory
@@ -223,28 +225,29 @@ def write_result_dir(
             if not math.isfinite(float(value)):
                 raise SolverError(f"{out / TIMESERIES_FILE}: time point {row['step']}, column '{column}' is not finite ({value})")
         lines.append([_csv_number(row[c]) for c in columns])
-    with atomic_result_dir(out, overwrite=overwrite, durable=durable) as tmp:
+    with atomic_result_dir(out, overwrite=overwrite, durable=durable) as files:
         # each map's bound as it is written (one map in memory at a time), then the regularised
         # peak of only the maps whose bound could beat the best found (made again when measured)
-        bounds = _write_series(tmp, "pressure", frames, COLLECTION_FILE, bound=REGULARISED_PEAK_KEY not in summary)
+        bounds = _write_series(files, "pressure", frames, COLLECTION_FILE, bound=REGULARISED_PEAK_KEY not in summary)
         if bounds:
             positions = list(bounds)
             peak = largest_regularised_peak_mpa(lambda k: frames[positions[k]].surface, list(bounds.values()))
             summary = {**summary, REGULARISED_PEAK_KEY: peak, REGULARISED_PEAK_DEFINITION_KEY: REGULARISED_PEAK_DEFINITION}
             check_finite_summary(summary, out / SUMMARY_FILE)
-        (tmp / SUMMARY_FILE).write_text(json.dumps(dict(summary), indent=2) + "\n", encoding="utf-8")
+        files.write(SUMMARY_FILE, json.dumps(dict(summary), indent=2) + "\n")
         if provenance is not None:
-            (tmp / SCENE_FILE).write_text(provenance.scene_toml, encoding="utf-8")
-        with open(tmp / TIMESERIES_FILE, "w", newline="", encoding="utf-8") as f:
-            writer = csv.writer(f)
-            writer.writerow(columns)
-            writer.writerows(lines)
+            files.write(SCENE_FILE, provenance.scene_toml)
+        table = io.StringIO(newline="")
+        writer = csv.writer(table)
+        writer.writerow(columns)
+        writer.writerows(lines)
+        files.write(TIMESERIES_FILE, table.getvalue())
         if fixed is not None:
-            write_surface_frame(tmp / FIXED_FILE, fixed.points_mm, fixed.triangles, fixed.point_data, fixed.cell_data)
+            files.write(FIXED_FILE, surface_frame_text(fixed))
         if fixed_frames:
-            _write_series(tmp, "fixed", fixed_frames, FIXED_COLLECTION_FILE)
+            _write_series(files, "fixed", fixed_frames, FIXED_COLLECTION_FILE)
         if opensim_sto:
-            write_sto(tmp / STO_FILE, columns, [[float(row[c]) for c in columns] for row in timeseries], name=str(summary.get("scene", "edem")))
+            files.write(STO_FILE, sto_text(columns, [[float(row[c]) for c in columns] for row in timeseries], name=str(summary.get("scene", "edem"))))
     return out
 
 
@@ -340,7 +343,7 @@ def _write_run(run: RunOutput, out_dir: str | Path, frame_steps: Sequence[int] |
                             opensim_sto=run.opensim_sto and not time_series_only, overwrite=overwrite, provenance=provenance, durable=durable)
 
 
-def _write_series(out: Path, prefix: str, frames: Iterable[Frame], collection: str, *, bound: bool = False) -> dict[int, float]:
+def _write_series(files: ResultFiles, prefix: str, frames: Iterable[Frame], collection: str, *, bound: bool = False) -> dict[int, float]:
     """<prefix>_NNNN.vtp per frame and the ParaView collection listing them; with ``bound``, the
     :func:`edem.pressure_metrics.pressure_bound_mpa` of each frame that has a pressure
     (:func:`edem.pressure_metrics.has_pressure`), by its position in ``frames``."""
@@ -350,25 +353,23 @@ def _write_series(out: Path, prefix: str, frames: Iterable[Frame], collection: s
     series = VtpSeries()  # the frames' mesh and unchanged arrays, encoded once
     for position, frame in enumerate(frames):
         name = f"{prefix}_{frame.step:04d}.vtp"
-        write_surface_frame(out / name, frame.surface.points_mm, frame.surface.triangles, frame.surface.point_data, frame.surface.cell_data,
-                            series=series)
+        files.write(name, surface_frame_text(frame.surface, series=series))
         entries.append((float(frame.time_s), name))
         if bound and has_pressure(frame.surface):
             bounds[position] = pressure_bound_mpa(frame.surface)
-    write_pvd(out / collection, entries)
+    files.write(collection, pvd_text(entries))
     return bounds
 
 
-def write_sto(path: str | Path, columns: Sequence[str], rows: Sequence[Sequence[float]], *, name: str = "edem") -> Path:
-    """An OpenSim storage (.sto) file: ``time`` (from the ``time_s`` column) first, then the other
-    columns; every value written with ``repr`` (exact round trip). Values must be finite."""
+def sto_text(columns: Sequence[str], rows: Sequence[Sequence[float]], *, name: str = "edem") -> str:
+    """An OpenSim storage (.sto) file's content: ``time`` (from the ``time_s`` column) first, then
+    the other columns; every value written with ``repr`` (exact round trip). Values must be finite."""
     columns = list(columns)
     order = [columns.index("time_s")] + [i for i, c in enumerate(columns) if c != "time_s"]
     labels = ["time"] + [columns[i] for i in order[1:]]
     lines = [name, "version=1", f"nRows={len(rows)}", f"nColumns={len(labels)}", "inDegrees=no", "endheader", "\t".join(labels)]
     lines += ["\t".join(repr(float(row[i])) for i in order) for row in rows]
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return Path(path)
+    return "\n".join(lines) + "\n"
 
 
 def write_static_result_dir(
@@ -422,12 +423,17 @@ def check_finite_summary(summary: Mapping[str, Any], file: str | Path = SUMMARY_
             raise SolverError(f"{file}: summary value {key} is not finite: {value}")
 
 
-def write_pvd(path: Path, entries: list[tuple[float, str]]) -> None:
-    """A ParaView collection file listing one dataset per time value."""
+def pvd_text(entries: list[tuple[float, str]]) -> str:
+    """A ParaView collection file's content, listing one dataset (time value, file name) per entry."""
     lines = ['<?xml version="1.0"?>', '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">', "  <Collection>"]
     lines += [f'    <DataSet timestep="{t!r}" part="0" file="{html.escape(name, quote=True)}"/>' for t, name in entries]
     lines += ["  </Collection>", "</VTKFile>", ""]
-    Path(path).write_text("\n".join(lines), encoding="utf-8")
+    return "\n".join(lines)
+
+
+def write_pvd(path: Path, entries: list[tuple[float, str]]) -> None:
+    """A ParaView collection file listing one dataset per time value (:func:`pvd_text`)."""
+    Path(path).write_text(pvd_text(entries), encoding="utf-8")
 
 
 def write_surface_frame(
@@ -436,16 +442,21 @@ def write_surface_frame(
     triangles: np.ndarray,
     point_data: dict[str, np.ndarray] | None = None,
     cell_data: dict[str, np.ndarray] | None = None,
-    *,
-    series: VtpSeries | None = None,
 ) -> Path:
-    """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only);
-    ``series``: the :class:`geometries.mesh_files.vtk_family.VtpSeries` of the files of a run's
-    time points (what they share encoded once)."""
+    """A .vtp with point and cell arrays (the FE layout; discrete runs write cell data only)."""
     from geometries.mesh_files import write_vtp
 
-    write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data, series=series)
+    write_vtp(path, np.asarray(points_mm, dtype=np.float64), triangles, cell_data, point_data)
     return Path(path)
+
+
+def surface_frame_text(surface: SurfaceFrame, *, series: VtpSeries | None = None) -> str:
+    """The .vtp content of a surface frame (:func:`geometries.mesh_files.vtp_text`); ``series``:
+    the :class:`geometries.mesh_files.vtk_family.VtpSeries` of the files of a run's time points
+    (what they share encoded once)."""
+    from geometries.mesh_files import vtp_text
+
+    return vtp_text(np.asarray(surface.points_mm, dtype=np.float64), surface.triangles, surface.cell_data, surface.point_data, series=series)
 
 
 # --------------------------------------------------------------------------------------------

@@ -161,20 +161,22 @@ class RunResult:
         scene = self.scene
         spring_triangle = scene.spring_triangle
         n_tri = scene.mobile.triangles.shape[0]
-        pressure = np.zeros(n_tri)
-        pressure[spring_triangle] = s.pressure_mpa
+        every = len(spring_triangle) == n_tri  # (a spring on each triangle, in their order: no scatter)
+
+        def on_triangles(values: np.ndarray, dtype: type) -> np.ndarray:
+            if every:
+                return values.astype(dtype)
+            out = np.zeros(n_tri, dtype)
+            out[spring_triangle] = values
+            return out
+
         hit = np.isfinite(s.spring_length_mm)
-        length = np.zeros(n_tri)
-        length[spring_triangle] = np.where(hit, s.spring_length_mm, 0.0)
-        ray_hit = np.zeros(n_tri, np.int8)
-        ray_hit[spring_triangle] = hit
-        contact = np.zeros(n_tri, np.int8)
-        contact[spring_triangle] = s.in_contact
+        cells = {"pressure_mpa": on_triangles(s.pressure_mpa, np.float64),
+                 "spring_length_mm": on_triangles(np.where(hit, s.spring_length_mm, 0.0), np.float64),
+                 "in_contact": on_triangles(s.in_contact, np.int8), "ray_hit": on_triangles(hit, np.int8)}
         points = s.mobile_placement.points(scene.mobile.vertices_mm)
-        cells = {"pressure_mpa": pressure, "spring_length_mm": length, "in_contact": contact, "ray_hit": ray_hit}
         if scene.cartilage.layers is not None:  # measured thickness: M's own layer per triangle
-            cells["thickness_mm"] = np.zeros(n_tri)
-            cells["thickness_mm"][spring_triangle] = scene.cartilage.layers.mobile.thickness_mm
+            cells["thickness_mm"] = on_triangles(scene.cartilage.layers.mobile.thickness_mm, np.float64)
         return Frame(s.step, s.time_s, SurfaceFrame(points, scene.mobile.triangles, {}, cells))
 
     def fixed_frames(self, positions: Sequence[int] | None = None) -> Sequence[Frame]:

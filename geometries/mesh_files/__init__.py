@@ -20,10 +20,10 @@ import numpy as np
 from geometries.errors import InputError
 from geometries.mesh_files import meshio_family, vtk_family
 from geometries.mesh_files.common import MAX_COORDINATE_MM, SUPPORTED_FORMATS, Cells, fmt_point
-from geometries.mesh_files.vtk_family import write_vtp
+from geometries.mesh_files.vtk_family import vtp_text, write_vtp
 from geometries.surface import TriangleSurface
 
-__all__ = ["MAX_COORDINATE_MM", "SUPPORTED_FORMATS", "read_surface", "write_surface", "write_vtp"]
+__all__ = ["MAX_COORDINATE_MM", "SUPPORTED_FORMATS", "read_surface", "vtp_text", "write_surface", "write_vtp"]
 
 #: the module that reads and writes each format, by extension
 FAMILIES: dict[str, ModuleType] = {suffix: family for family in (meshio_family, vtk_family) for suffix in family.FORMATS}

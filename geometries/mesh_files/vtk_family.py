@@ -448,6 +448,19 @@ def write_vtp(
     Python, not by VTK, so that a run needs no VTK (the ``vtk`` extra) to write its results.
     A full disk is an OSError (ENOSPC): VTK's own file output crashed (SIGSEGV) there.
     """
+    with open(path, "w", encoding="ascii") as f:
+        f.write(vtp_text(points_mm, triangles, cell_data, point_data, series=series))
+
+
+def vtp_text(
+    points_mm: np.ndarray, triangles: np.ndarray,
+    cell_data: dict[str, np.ndarray] | None = None,
+    point_data: dict[str, np.ndarray] | None = None,
+    *,
+    series: VtpSeries | None = None,
+) -> str:
+    """The content of the .vtp file :func:`write_vtp` writes (ASCII text; arguments as there),
+    for a writer that writes the file itself (a result directory's writer hashes it as written)."""
     points = np.asarray(points_mm, dtype=np.float64).reshape(-1, 3)
     n_triangles = np.asarray(triangles).reshape(-1, 3).shape[0]
 
@@ -455,7 +468,7 @@ def write_vtp(
         encoded = (_xml_data_array(values, name) if series is None else series.array(tag, name, values) for name, values in (arrays or {}).items())
         return f"<{tag}>" + "".join(encoded) + f"</{tag}>"
 
-    text = ('<?xml version="1.0"?>\n'
+    return ('<?xml version="1.0"?>\n'
             '<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" header_type="UInt64" '
             'compressor="vtkZLibDataCompressor">\n<PolyData>\n'
             f'<Piece NumberOfPoints="{len(points)}" NumberOfVerts="0" NumberOfLines="0" NumberOfStrips="0" '
@@ -464,8 +477,6 @@ def write_vtp(
             + "<Points>" + _xml_data_array(points, "Points") + "</Points>\n"
             + (_vtp_polys(triangles) if series is None else series.polys(triangles))
             + "\n</Piece>\n</PolyData>\n</VTKFile>\n")
-    with open(path, "w", encoding="ascii") as f:
-        f.write(text)
 
 
 def write(path: Path, surface: TriangleSurface, binary: bool | None) -> None:

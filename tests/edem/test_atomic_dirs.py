@@ -70,6 +70,30 @@ def test_a_campaign_cache_write_skips_only_the_flush(tmp_path, plates_run, monke
         assert (cached / name).read_bytes() == (durable / name).read_bytes()
 
 
+def test_manifest_entries_are_the_files_on_disk_and_the_files_those_of_the_direct_writers(tmp_path, plates_run):
+    """Every file's manifest entry, taken from the bytes the writer wrote, is the file on disk
+    (size and sha256 of a read back); the files are byte for byte those the format's own
+    writers write directly (a map without a series, the collections); a file put into the
+    directory by other means is read back and hashed by the manifest."""
+    import hashlib
+
+    out = results.write_results(plates_run, tmp_path / "r")
+    entries = json.loads((out / "manifest.json").read_text())["files"]
+    for name, entry in entries.items():
+        data = (out / name).read_bytes()
+        assert entry == {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}, name
+    frame = plates_run.frames()[0]
+    resultdir.write_surface_frame(tmp_path / "map.vtp", frame.surface.points_mm, frame.surface.triangles, frame.surface.point_data,
+                                  frame.surface.cell_data)
+    assert (tmp_path / "map.vtp").read_bytes() == (out / f"pressure_{frame.step:04d}.vtp").read_bytes()
+    resultdir.write_pvd(tmp_path / "p.pvd", [(frame.time_s, f"pressure_{frame.step:04d}.vtp")])
+    assert (tmp_path / "p.pvd").read_bytes() == (out / "pressure.pvd").read_bytes()
+    with atomic_result_dir(tmp_path / "mixed") as files:
+        files.write("a.txt", "written by the writer")
+        (files.root / "b.txt").write_text("put there directly")
+    assert verify_manifest(tmp_path / "mixed") and set(json.loads((tmp_path / "mixed" / "manifest.json").read_text())["files"]) == {"a.txt", "b.txt"}
+
+
 def test_missing_changed_and_extra_files_are_refused_by_readers(tmp_path, plates_run):
     out = results.write_results(plates_run, tmp_path / "r")
     (out / "pressure_0064.vtp").write_text("left by an earlier run")  # two runs mixed
@@ -115,22 +139,28 @@ def test_a_directory_that_is_not_a_result_is_never_replaced(tmp_path):
     home.mkdir()
     (home / "thesis.tex").write_text("precious")
     with pytest.raises(InputError, match="not a result directory"):
-        with atomic_result_dir(home, overwrite=True) as tmp:
-            (tmp / "summary.json").write_text("{}")
+        with atomic_result_dir(home, overwrite=True) as files:
+            files.write("summary.json", "{}")
     assert (home / "thesis.tex").read_text() == "precious" and leftovers(tmp_path) == []
 
 
 @pytest.mark.parametrize("code", [errno.ENOSPC, errno.EIO])
 def test_write_error_keeps_the_previous_result(tmp_path, plates_run, monkeypatch, code):
-    """A write error half-way (simulated in the .pvd writer, after the maps) ends in InputError
-    and leaves the previous result byte for byte, with no temporary sibling behind."""
+    """A write error half-way (simulated where the writer writes each file, at the .pvd, after
+    the maps) ends in InputError and leaves the previous result byte for byte, with no temporary
+    sibling behind."""
+    import edem.atomic_dirs as atomic_dirs
+
     out = results.write_results(plates_run, tmp_path / "r")
     before = {p.name: p.read_bytes() for p in out.iterdir()}
+    real = atomic_dirs._write_file
 
-    def failing(path, entries):
-        raise OSError(code, os.strerror(code), str(path))
+    def failing(path, data):
+        if path.suffix == ".pvd":
+            raise OSError(code, os.strerror(code), str(path))
+        return real(path, data)
 
-    monkeypatch.setattr(resultdir, "write_pvd", failing)
+    monkeypatch.setattr(atomic_dirs, "_write_file", failing)
     with pytest.raises(InputError, match="disk is full" if code == errno.ENOSPC else "cannot write the result") as info:
         results.write_results(plates_run, out, overwrite=True)
     assert "previous result is unchanged" in str(info.value)
@@ -165,8 +195,8 @@ def test_full_disk_is_exit_2_with_a_message_and_keeps_the_previous_result(tmp_pa
 
 def test_exceptions_inside_the_block_leave_nothing(tmp_path):
     with pytest.raises(KeyboardInterrupt):
-        with atomic_result_dir(tmp_path / "r") as tmp:
-            (tmp / "summary.json").write_text("{}")
+        with atomic_result_dir(tmp_path / "r") as files:
+            files.write("summary.json", "{}")
             raise KeyboardInterrupt
     assert list(tmp_path.iterdir()) == []
 

@@ -208,14 +208,14 @@ def test_library_versions_are_in_the_cache_key(monkeypatch):
 def test_a_full_disk_in_a_side_is_a_crash_run_again_not_a_refusal(tmp_path, monkeypatch):
     import errno
 
-    import edem.resultdir as resultdir
+    import edem.atomic_dirs as atomic_dirs
 
-    def full(path, entries):
+    def full(path, data):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
     out = tmp_path / "out"
     campaign = tiny(2)
-    monkeypatch.setattr(resultdir, "write_pvd", full)
+    monkeypatch.setattr(atomic_dirs, "_write_file", full)
     first = run_campaign(campaign, out, jobs=1)
     assert first["counts"]["error"] == 2 and first["exit_status"] == 1
     assert "disk is full" in first["cases"][0]["sides"][0]["message"]
