@@ -30,10 +30,6 @@ def read(path: Path, key: str | None) -> MeshCells:
             head = stream.read(_PLY_HEADER_BYTES)
         if b"end_header" not in head:
             raise unreadable(f"no 'end_header' line in its first {_PLY_HEADER_BYTES // 1024} KiB: a PLY header cut short", str(path), key)
-    if file_format == "stl":
-        binary = read_binary_stl(path)
-        if binary is not None:
-            return np.asarray(binary[0], dtype=np.float64), [block(binary[1])], [], ["triangle"]
     mesh = read_meshio(path, file_format, key)
     points = np.asarray(mesh.points, dtype=np.float64)
     if points.ndim == 2 and points.shape[1] == 2:
@@ -41,41 +37,6 @@ def read(path: Path, key: str | None) -> MeshCells:
     polys = [block(cells.data) for cells in mesh.cells
              if cells.type in ("triangle", "quad", "polygon") and np.ndim(cells.data) == 2]
     return points, polys, [], [cells.type for cells in mesh.cells]
-
-
-#: one facet of a binary STL: normal, three corners (float32), attribute byte count
-_STL_FACET = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("attributes", "<u2")])
-
-
-def read_binary_stl(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
-    """The points (k, 3) float32 and triangles (m, 3) of a binary STL exactly as meshio reads
-    them, or None when the file is not binary STL by meshio's test (84 + 50 bytes a facet), is
-    empty or holds a non-finite corner (left to meshio).
-
-    meshio keeps one point per distinct corner (compared as numbers, so -0.0 and 0.0 are one),
-    with the value and in the order of its first appearance, by ``np.unique`` of the corner rows:
-    a sort of structured rows, 5x slower on a 13k-triangle mesh than the one sort of integer keys
-    here (the corners' bits, -0.0 made 0.0), which groups the same corners the same way."""
-    size = path.stat().st_size
-    if size < 84:
-        return None
-    with path.open("rb") as stream:
-        count = int.from_bytes(stream.read(84)[80:], "little")
-    if count == 0 or 84 + 50 * count != size:
-        return None
-    corners = np.fromfile(path, dtype=_STL_FACET, count=count, offset=84)["corners"].reshape(-1, 3)
-    if not np.isfinite(corners).all():
-        return None
-    bits = (corners + np.float32(0.0)).view(np.uint32)  # (x + 0.0: -0.0 becomes 0.0, nothing else changes)
-    order = np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0]))  # stable: each corner's first appearance leads its run
-    ordered = bits[order]
-    starts = np.concatenate([[True], (ordered[1:] != ordered[:-1]).any(axis=1)])
-    first = order[starts]  # each distinct corner's first appearance
-    position = np.empty(len(first), dtype=np.int64)
-    position[np.argsort(first)] = np.arange(len(first))  # the points in the order of first appearance
-    index = np.empty(len(corners), dtype=np.int64)
-    index[order] = position[np.cumsum(starts) - 1]
-    return corners[np.sort(first)], index.reshape(-1, 3)
 
 
 def read_meshio(path: Path, file_format: str, key: str | None):

@@ -189,41 +189,6 @@ def test_stl_duplicates_merge_into_connected_manifold(tmp_path, binary):
     assert len(merged.vertices_mm) - n_e + merged.n_triangles == 2
 
 
-def test_binary_stl_reads_exactly_as_meshio_reads_it(tmp_path):
-    """Invariant: the binary STL reader gives meshio's points and triangles exactly: one point per
-    distinct corner (-0.0 and 0.0 one point, with the value and at the place of its first
-    appearance; 1e-45 apart: two), on a subdivided icosahedron, a mesh with signed zeros and
-    near-equal corners, and a binary file whose header starts with "solid"; an ascii STL, an
-    empty one and one with a NaN corner are left to meshio (None)."""
-    from geometries.mesh_files.meshio_family import _STL_FACET, read_binary_stl, read_meshio
-
-    def binary_stl(path, corners, header=b"binary"):
-        facets = np.zeros(len(corners), dtype=_STL_FACET)
-        facets["corners"] = corners
-        path.write_bytes(header.ljust(80, b" ") + len(corners).to_bytes(4, "little") + facets.tobytes())
-        return path
-
-    ico = icosahedron(subdivisions=2)
-    tiny = np.float32(1e-45)  # the smallest float32 above 0: another number, another point
-    signed = np.array([[[0.0, 1.0, 2.0], [-0.0, 1.0, 2.0], [1.0, -0.0, 0.0]],
-                       [[1.0, 0.0, -0.0], [tiny, 1.0, 2.0], [0.0, 1.0, 2.0]],
-                       [[3.0, 3.0, 3.0], [1.0, 0.0, 0.0], [-0.0, 1.0, 2.0]]], dtype=np.float32)
-    for name, corners, header in (("ico", ico.vertices_mm[ico.triangles], b"binary"), ("signed", signed, b"binary"),
-                                  ("solid", ico.vertices_mm[ico.triangles], b"solid but binary")):
-        path = binary_stl(tmp_path / f"{name}.stl", corners, header)
-        points, triangles = read_binary_stl(path)
-        mesh = read_meshio(path, "stl", None)
-        assert points.dtype == mesh.points.dtype and np.array_equal(points, mesh.points)
-        assert np.array_equal(np.signbit(points), np.signbit(mesh.points))  # the first appearance's zero
-        assert np.array_equal(triangles, mesh.cells[0].data)
-    assert len(read_binary_stl(tmp_path / "signed.stl")[0]) == 4
-    write_surface(tmp_path / "ascii.stl", ico, binary=False)
-    nan = signed.copy()
-    nan[1, 1, 1] = np.nan
-    for path in (tmp_path / "ascii.stl", binary_stl(tmp_path / "empty.stl", signed[:0]), binary_stl(tmp_path / "nan.stl", nan)):
-        assert read_binary_stl(path) is None
-
-
 def test_near_duplicate_vertices_merge_within_tolerance():
     """Invariant: vertices closer than 1e-9 x bbox diagonal are one vertex; 1e-6 apart are not."""
     s = grid_patch()
