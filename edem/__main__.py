@@ -1,5 +1,5 @@
 import sys
 
-from edem.cli import main
+from edem.cli import console_main
 
-sys.exit(main())
+sys.exit(console_main())
