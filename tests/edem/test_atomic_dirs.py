@@ -300,7 +300,8 @@ def test_under_mpi_only_rank_zero_writes_and_every_rank_raises_its_failure(tmp_p
 def test_a_ctrl_c_after_the_command_finished_leaves_its_exit_status():
     """`edem` returns its status with SIGINT ignored (edem.cli.console_main): at exit Python resets
     its own SIGINT handler to the default action, and a Ctrl-C while numpy, scipy and VTK unload
-    killed a finished run (status -2, nothing printed; seen once in the suite at load 3). Here the
+    could kill a finished run (status -2, nothing printed: what the Ctrl-C test above saw once in
+    the suite at load 3, not reproduced in 28 tries at load 2). Here the
     command's work is a stand-in that returns 0 and the Ctrl-C comes right after it."""
     code = ("import os, signal, sys; from edem import cli; cli.main = lambda: 0; status = cli.console_main(); "
             "os.kill(os.getpid(), signal.SIGINT); sys.exit(status)")
