@@ -823,18 +823,46 @@ def _size_pct(x: float | None) -> str:
     return "–" if x is None or not math.isfinite(x) else f"{100.0 * x:.2f} %"
 
 
-def _field_estimate(level_rows: list[dict[str, Any]], sizes: list[float], extra: dict[str, Any] | None, k: int = -1):
-    """The pressure field's estimated L2 error on each mesh (verification.fe_convergence.field_errors)
-    and that of the extra (P1) run (its difference from the finest plus the finest's error), at
-    time point ``k``, read from the result directories; None when a row does not say where they are."""
-    from verification.fe_convergence import field_difference, field_errors
+def _field_estimate(level_rows: list[dict[str, Any]], dofs: list[float], layers: list[int | None], extra: dict[str, Any] | None, k: int = -1):
+    """The pressure field's estimated L2 error on each mesh (verification.fe_convergence.field_errors
+    on the finest three meshes that contain it, as the quantities) and that of the extra (P1) run
+    (its difference from the finest plus the finest's error), at time point ``k``, read from the
+    result directories, as (finest three's estimate, each mesh's error, its record, the extra's
+    error); None when a row does not say where they are."""
+    from verification.fe_convergence import field_difference, field_errors, finest_windows, in_plane_windows, representative_sizes
 
     dirs = _result_dirs(level_rows + ([extra] if extra is not None else []))
     if dirs is None:
         return None
-    est = field_errors(sizes, (field_difference(dirs[0], dirs[2], k), field_difference(dirs[1], dirs[2], k)), field_difference(dirs[0], dirs[1], k))
-    extra_error = None if extra is None else field_difference(dirs[3], dirs[2], k) + est.errors[-1]
-    return est, extra_error
+    firsts, flat, by_first = finest_windows(len(level_rows)), in_plane_windows(layers), {}
+    for j in sorted(set(firsts)):
+        a, b, c = dirs[j:j + 3]
+        by_first[j] = field_errors(representative_sizes(dofs[j:j + 3], flat[j]), (field_difference(a, c, k), field_difference(b, c, k)), field_difference(a, b, k))
+    errors, record = _levels_record([by_first[j] for j in firsts], firsts)
+    extra_error = None if extra is None else field_difference(dirs[-1], dirs[len(level_rows) - 1], k) + errors[-1]
+    return by_first[firsts[-1]], errors, record, extra_error
+
+
+def _level_estimates(dofs: list[float], values: list[float], layers: list[int | None]):
+    """One quantity on a point's meshes (verification.fe_convergence.level_estimates): the finest
+    three's estimate, each mesh's error and the quantity's record (:func:`_levels_record`)."""
+    from verification.fe_convergence import finest_windows, level_estimates
+
+    ests = level_estimates(dofs, values, layers)
+    errors, record = _levels_record(list(ests), finest_windows(len(values)))
+    return ests[-1], errors, {**record, "values": list(values)}
+
+
+def _levels_record(ests: list[Any], firsts: tuple[int, ...]) -> tuple[list[float], dict[str, Any]]:
+    """Each mesh's error from its estimate (``ests[i]`` on the three meshes from ``firsts[i]``,
+    verification.fe_convergence.finest_windows), and the record of a quantity: the finest three's
+    estimate (order, extrapolation, asymptotic), with, past three meshes, every mesh's error and
+    the first of the three meshes it was estimated from (``estimated_from``)."""
+    errors = [est.errors[i - j] for i, (est, j) in enumerate(zip(ests, firsts))]
+    record = ests[-1].to_dict()
+    if len(ests) > 3:
+        record.update(errors=errors, estimated_from=list(firsts))
+    return errors, record
 
 
 def _result_dirs(rows: list[dict[str, Any]]) -> list[Path] | None:
@@ -863,12 +891,14 @@ def _values_by_time(rows: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
 
 
 def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """Per point and quantity: the three meshes' values, order, extrapolation and errors; the
-    errors keyed for :func:`verification.fe_convergence.fe_relative_error` in ``values["entries"]``.
-    A point whose FE run has several time points (loads) is estimated at each, one row per
+    """Per point and quantity: the meshes' values, order, extrapolation and errors; the errors
+    keyed for :func:`verification.fe_convergence.fe_relative_error` in ``values["entries"]``.
+    A point of more than three meshes takes each mesh's error from the finest three that contain
+    it (verification.fe_convergence.level_estimates), its order and extrapolation from the finest
+    three. A point whose FE run has several time points (loads) is estimated at each, one row per
     quantity and load, and each mesh's error is the largest over them (as a comparison's error
     is its largest over the time points)."""
-    from verification.fe_convergence import QUANTITIES, fe_key, richardson
+    from verification.fe_convergence import QUANTITIES, fe_key
 
     out_rows, entries, points, notes = [], {}, [], []
     for point in analysis.settings["points"]:
@@ -887,7 +917,7 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
             out_rows.append({"cells": [point["point"], "all", why, "–", "–", "–", "–", "–", "–"]})
             points.append({"point": point["point"], "unavailable": why})
             continue
-        sizes = [n ** (-1.0 / 3.0) for n in dofs]  # representative size h ~ N^(-1/3)
+        layers = [r["options"].get("layers_through_thickness") for r in level_rows]  # one number for all: refined in plane only
         extra = rows.get(point["extra"]) if point.get("extra") else None
         extra_ok = extra is not None and all(s.get("status") == OK for s in extra.get("sides", []))
         by_time = _values_by_time(level_rows + ([extra] if extra_ok else []))
@@ -910,37 +940,35 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
             label = (f" at t = {_fmt(at[0]['time_s'])} s ({_fmt(at[0]['load_n'])} N)" if repeated else f" at {_fmt(at[0]['load_n'])} N") if several else ""
             for quantity, (value_metric, error_metric) in QUANTITIES.items():
                 values = [float(m[value_metric]) for m in at[:len(level_rows)]]
-                est = richardson(sizes, values)
-                record["quantities"][quantity + label] = est.to_dict()
+                est, errors, record["quantities"][quantity + label] = _level_estimates(dofs, values, layers)
                 cells = [point["point"], quantity + label, ", ".join(_fmt(v, 4) for v in values), _fmt(est.order, 3),
-                         _fmt(est.extrapolated, 4) if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in est.errors)]
+                         _fmt(est.extrapolated, 4) if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in errors)]
                 extra_error = None
                 if extra_ok:
                     v = float(at[-1][value_metric])
                     ref = est.extrapolated if est.asymptotic else values[-1]
-                    spread = 0.0 if est.asymptotic else est.errors[-1]
+                    spread = 0.0 if est.asymptotic else errors[-1]
                     extra_error = abs(v - ref) / abs(ref) + spread
                     record["quantities"][quantity + label].update(p1_value=v, p1_error=extra_error)
                     cells.append(f"{_fmt(v, 4)} ({_size_pct(extra_error)})")
                 else:
                     cells.append("–")
-                keep(error_metric, est.errors, extra_error)
+                keep(error_metric, errors, extra_error)
                 out_rows.append({"cells": cells + cost, "flag": not est.asymptotic})
-            fields = _field_estimate(level_rows, sizes, extra if extra_ok else None, k if several else -1)
+            fields = _field_estimate(level_rows, dofs, layers, extra if extra_ok else None, k if several else -1)
             if fields is not None:
-                est, extra_error = fields
-                record["quantities"]["pressure field (L2)" + label] = est.to_dict()
-                keep("pressure_l2_rel_error", est.errors, extra_error)
+                est, errors, record["quantities"]["pressure field (L2)" + label], extra_error = fields
+                keep("pressure_l2_rel_error", errors, extra_error)
                 if extra_error is not None:
                     record["quantities"]["pressure field (L2)" + label]["p1_error"] = extra_error
                 cells = [point["point"], "pressure field (L2)" + label, "differences from the finest: " + ", ".join(_size_pct(v) for v in est.values[:2]),
-                         _fmt(est.order, 3), "on a line" if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in est.errors),
+                         _fmt(est.order, 3), "on a line" if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in errors),
                          "–" if extra_error is None else f"({_size_pct(extra_error)})"]
                 out_rows.append({"cells": cells + cost, "flag": not est.asymptotic})
         last = by_time[-1][:len(level_rows)]
         ratios = [float(m["fe_peak_pressure_mpa"]) / float(m["fe_p98_pressure_mpa"]) if float(m["fe_p98_pressure_mpa"]) > 0 else math.nan for m in last]
         record["peak_over_p98"] = ratios
-        notes.append(f"{point['point']}: raw peak / 98th percentile by area = {', '.join(_fmt(r, 3) for r in ratios)} on the three meshes "
+        notes.append(f"{point['point']}: raw peak / 98th percentile by area = {', '.join(_fmt(r, 3) for r in ratios)} on its meshes "
                      + (f"at {_fmt(by_time[-1][0]['load_n'])} N " if several else "") + ("(a few nodes set the raw peak)" if max(ratios) > 1.2 else "(a smooth maximum)"))
         for name, row, errors in zip(point["levels"], level_rows, level_errors):
             entries[fe_key(point["scene"], point["side"], point["overrides"], row["options"])] = {"case": name, "errors": errors}
@@ -949,12 +977,14 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
         points.append(record)
     notes.extend(analysis.settings.get("findings", []))
     notes.append("Values coarsest mesh first; h ~ N_dofs^(-1/3) represents each mesh (the mesher halves M's triangles and sets ceil(t / size) layers, so the "
-                 "refinement ratios differ); order from f(h) = f0 + C h^p through the three values; error of each mesh |f_i - f0| / |f0|. Not asymptotic (flagged): "
+                 "refinement ratios differ), h ~ N_dofs^(-1/2) three meshes of one number of elements through the layers (refined in plane only); order from "
+                 "f(h) = f0 + C h^p through three values; error of each mesh |f_i - f0| / |f0|. Not asymptotic (flagged): "
                  "the differences change sign or the order is outside 0.5-4; each mesh's error is then the largest difference to the other meshes. A point "
-                 "solved at several loads (its time points) is estimated at each; its stored error is the largest over them.")
+                 "of four meshes: each mesh's error from the finest three that contain it (the coarsest from the first three), the order and extrapolation "
+                 "shown from the finest three. A point solved at several loads (its time points) is estimated at each; its stored error is the largest over them.")
     notes.append("P1 column: quick's P1 reference at 1.0 mm and its error against the extrapolation (against the finest mesh plus that mesh's error when not asymptotic).")
     return {
-        "columns": ["point", "quantity", "values (3 meshes)", "order", "extrapolated", "error of each mesh", "P1 1.0 mm (error)", "DOFs", "time / peak memory"],
+        "columns": ["point", "quantity", "values (coarsest first)", "order", "extrapolated", "error of each mesh", "P1 1.0 mm (error)", "DOFs", "time / peak memory"],
         "rows": out_rows,
         "status": REPORTED if entries else UNAVAILABLE,
         "notes": notes,

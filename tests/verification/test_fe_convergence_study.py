@@ -51,6 +51,89 @@ def test_richardson_refuses_meshes_that_are_not_refined():
         richardson((1.0, 0.5), (1.0, 2.0))
 
 
+def test_each_mesh_is_estimated_from_the_finest_three_meshes_that_contain_it():
+    """Three meshes: one estimate for all; more: every mesh but the coarsest from the finest three."""
+    from verification.fe_convergence import finest_windows
+
+    assert finest_windows(3) == (0, 0, 0)
+    assert finest_windows(4) == (0, 1, 1, 1)
+    assert finest_windows(5) == (0, 1, 2, 2, 2)
+    with pytest.raises(ValueError):
+        finest_windows(2)
+
+
+@pytest.mark.parametrize("order", [1.0, 2.0, 3.0])
+def test_meshes_refined_in_plane_only_read_their_order_from_the_triangles(order):
+    """Halving the triangles of a layer of fixed elements through it multiplies the DOFs by 4:
+    with one ``layers_through_thickness`` the size is N^(-1/2) and f0 + C h^p reads order p; the
+    same DOFs taken as a refinement in 3D (N^(-1/3)) would read 1.5 p. Tolerance 1e-9 relative:
+    the fixed-point order stops at 1e-12, the rest is round-off."""
+    from verification.fe_convergence import level_estimates
+
+    dofs = (1e5, 4e5, 16e5)
+    h = [n ** -0.5 for n in dofs]
+    values = [2.0 + 0.1 * (x / h[0]) ** order for x in h]  # a 5 % correction on the coarsest: no cancellation
+    (flat, *_), (general, *_) = level_estimates(dofs, values, [2, 2, 2]), level_estimates(dofs, values, [1, 2, 2])
+    assert flat.order == pytest.approx(order, rel=1e-9) and flat.extrapolated == pytest.approx(2.0, rel=1e-9)
+    assert general.order == pytest.approx(1.5 * order, rel=1e-9)
+
+
+def test_a_finer_mesh_estimates_the_campaigns_level_from_the_finest_three_not_the_coarse_jump():
+    """Four meshes: one element per layer at the coarse triangles, then two elements per layer with
+    the triangles halved twice (f0 + C h^2 exactly on those three, h = N^(-1/2)), the coarsest off
+    that line so that the first three oscillate. The first three alone give the third mesh the
+    spread (its jump from the second); the four give it its Richardson error C h^2 / f0 from the
+    finest three, and the coarsest keeps the first three's spread. Tolerance 1e-9 relative: a
+    closed-form sequence, round-off only."""
+    from verification.fe_convergence import level_estimates
+
+    f0, c = 170.0, -2e7
+    dofs = (6e4, 1e5, 4e5, 16e5)
+    layers = (1, 2, 2, 2)
+    fine = [f0 + c * n ** -1.0 for n in dofs[1:]]  # C h^2 with h = N^(-1/2)
+    values = [fine[0] + 2.0, *fine]  # the coarsest above the second, the second far below the third: the first three oscillate
+    three = level_estimates(dofs[:3], values[:3], layers[:3])
+    assert not three[2].asymptotic and three[2].errors[2] == pytest.approx(abs(values[2] - values[1]) / values[2], rel=1e-9)
+    four = level_estimates(dofs, values, layers)
+    assert four[2] is four[3] is four[1] and four[2].asymptotic and four[2].order == pytest.approx(2.0, rel=1e-9)
+    assert four[2].errors[1] == pytest.approx(abs(c) / dofs[2] / f0, rel=1e-9)  # mesh 2 is the middle of the finest three
+    assert four[0].errors == pytest.approx(three[0].errors, rel=1e-12)  # the coarsest: the first three's estimate
+
+
+def test_the_study_stores_each_level_of_a_four_mesh_point_with_the_error_of_its_finest_three():
+    """The fe-convergence analysis of a point on four meshes: the third mesh's stored error is
+    the finest three's Richardson error (closed form), its record says which three each mesh was
+    estimated from, and the table shows four values. Tolerance 1e-9 relative: round-off."""
+    from verification.analyses import fe_convergence_analysis
+    from verification.campaign_model import Analysis
+    from verification.fe_convergence import FE_VALUE_METRICS
+    from verification.status import OK
+
+    f0, c = 3.0, -2e4
+    dofs = (6e4, 1e5, 4e5, 16e5)
+    layers = (1, 2, 2, 2)
+    values = [f0 + 0.2, *(f0 + c / n for n in dofs[1:])]
+    names = [f"p-h{k}" for k in range(4)]
+    options = [{"mesh_size_mm": s, "degree": 2, "layers_through_thickness": n} for s, n in zip((1.0, 1.0, 0.7, 0.35), layers)]
+
+    def row(n: float, value: float, opts: dict) -> dict:
+        metrics = {m: value for m in FE_VALUE_METRICS}
+        metrics.update(fe_n_dofs=n, fe_wall_time_s=1.0, fe_peak_memory_mb=1.0)
+        return {"sides": [{"side": "fe-two-layer", "status": OK}], "metrics": metrics, "options": opts}
+
+    rows = {name: row(n, v, o) for name, n, v, o in zip(names, dofs, values, options)}
+    point = {"point": "p", "levels": names, "extra": None, "scene": "cylinder-two-layers", "side": "fe-two-layer", "overrides": {}}
+    result = fe_convergence_analysis(Analysis("c", "c", "fe-convergence", tuple(rows), {"points": [point], "findings": []}), rows)
+    entry = result["values"]["entries"][fe_key("cylinder-two-layers", "fe-two-layer", {}, options[2])]
+    assert entry["case"] == "p-h2"
+    assert entry["errors"]["displacement_rel_error"] == pytest.approx(abs(c) / dofs[2] / f0, rel=1e-9)
+    record = result["values"]["points"][0]["quantities"]["displacement"]
+    assert record["estimated_from"] == [0, 1, 1, 1] and record["asymptotic"] and record["order"] == pytest.approx(2.0, rel=1e-9)
+    cells = [r["cells"] for r in result["rows"] if r["cells"][1] == "displacement"][0]
+    assert len(cells[2].split(", ")) == 4 and len(cells[5].split(", ")) == 4
+    assert len(result["values"]["entries"]) == 4
+
+
 def _grid(n: int) -> tuple[np.ndarray, np.ndarray]:
     x, y = np.meshgrid(np.linspace(0.0, 1.0, n + 1), np.linspace(0.0, 1.0, n + 1))
     vertices = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])

@@ -8,7 +8,8 @@ Poisson's ratios 0 and 0.499, layer thicknesses, toe-off, the viscoelastic step,
 histories the viscoelastic goal judges), each on three meshes of the FE's own mesher
 (:func:`point_levels`: ``mesh_size_mm`` 2.0, 1.0 and 0.7 mm, P2 or Taylor-Hood; the 1 mm layer
 on 1.0, 0.7 and 0.7 mm with 4 elements through it; quick's viscoelastic slab in its own P1; the
-Kelvin-Voigt histories on :data:`VISCOELASTIC_LEVELS`),
+Kelvin-Voigt histories on :data:`VISCOELASTIC_LEVELS`; the two-layer cylinder on four,
+:data:`TWO_LAYER_CYLINDER_LEVELS`, each mesh's error from the finest three that contain it),
 plus the P1 run ``quick`` uses at 1.0 mm where P1 does not lock. Every reference is one of its
 point's meshes (the campaigns use the 1.0 mm level, ``thin-layer``'s base sweep the 0.7 mm one).
 The analysis gives, per point and quantity, the three values, the observed order, the Richardson
@@ -19,7 +20,8 @@ references find their errors (:func:`verification.fe_convergence.fe_relative_err
 
 The mesher refines M's triangles by midpoint subdivision (powers of 2 in plane) and sets the
 layers through the thickness to ceil(thickness / size): the three meshes are not one uniform
-refinement, so each is represented by its DOFs (h ~ N^(-1/3), the usual representative size)
+refinement, so each is represented by its DOFs (h ~ N^(-1/3), the usual representative size;
+N^(-1/2) for three meshes of one number of elements through the layers, refined in plane only)
 and the order is solved for the unequal ratios.
 """
 
@@ -79,13 +81,16 @@ THIN_LAYER_LEVELS = ({"mesh_size_mm": 1.0, "degree": 2}, {"mesh_size_mm": 0.7, "
 
 #: the levels of the two-layer cylinder (scene cylinder-two-layers, layers of 0.5-1.5 mm): M's own
 #: 0.94 mm triangles with one and with two element layers in each cartilage layer, then the
-#: triangles halved (0.47 mm) with two; the campaign (two-layers) uses the finest (Taylor-Hood:
-#: 68k, 112k, 441k DOFs; the finest 4-5 min and 2.7 GB by the Krylov path at load 4-5, measured
-#: 2026-11-28). The next in-plane halving with two layers (about 1.8M DOFs, 9 GB) does not fit a
-#: shared machine; one element per layer at 0.35 mm was solved as a check at three points (docs/campaigns.md)
+#: triangles halved (0.47 mm) and halved again (0.24 mm) with two; the campaign (two-layers) uses
+#: the third, 0.7 mm with two, so its error comes from the finest three, a uniform in-plane
+#: refinement (verification.fe_convergence.level_estimates), and the first three alone, where one
+#: step refines through the layers and one in plane, estimated it only as their largest difference.
+#: P2: 64k, 107k, 419k, 1.66M DOFs, the finest 4.5-8 min and 7.1-7.2 GB by the Krylov path;
+#: Taylor-Hood: 68k, 112k, 441k, 1.75M, the finest 8-9 min and 9.9-10.1 GB (load 2-4, 2026-11-28)
 TWO_LAYER_CYLINDER_LEVELS = ({"mesh_size_mm": 1.0, "degree": 2, "layers_through_thickness": 1},
                              {"mesh_size_mm": 1.0, "degree": 2, "layers_through_thickness": 2},
-                             {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 2})
+                             {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 2},
+                             {"mesh_size_mm": 0.35, "degree": 2, "layers_through_thickness": 2})
 
 
 #: the levels of a Kelvin-Voigt layer's history (the viscoelastic campaign's goal), every time point,
@@ -104,8 +109,9 @@ VISCOELASTIC_LEVELS = {
 
 
 def point_levels(source: Case) -> list[dict[str, Any]]:
-    """The three FE options of a point, coarsest first: :data:`LEVELS_MM` at P2 (Taylor-Hood
-    from nu 0.49, the FE's own choice), :data:`THIN_LAYER_LEVELS` for a layer of at most
+    """The FE options of a point, coarsest first (three; four for the two-layer cylinder):
+    :data:`LEVELS_MM` at P2 (Taylor-Hood from nu 0.49, the FE's own choice),
+    :data:`THIN_LAYER_LEVELS` for a layer of at most
     :data:`THIN_LAYER_MM`, :data:`TWO_LAYER_CYLINDER_LEVELS` for the two-layer cylinder, or
     :data:`VISCOELASTIC_LEVELS` for a Kelvin-Voigt layer's history. A viscoelastic slab keeps its
     own element (quick's is P1 at nu 0.42, where P1 does not lock): each of its levels is a whole
@@ -134,8 +140,9 @@ def _cost_rank(case: Case) -> int:
     2-4, docs/campaigns.md): the 2 mm layer (0.7 mm: 0.3M DOFs, 1-15 min), the 1 mm layer (0.38M
     with 4 elements through it, 5-8 min), the ideal ankle (0.4M, 5-20 min), the 3 mm layer
     (0.46M, 14-20 min), the subject-like ankle (0.53M, 14-30 min); then (2026-11-28) the two-layer
-    cylinder (0.44M, 4-5 min by the Krylov path) and the two-layer ankles (0.7M, three loads each:
-    by the Krylov path 23 min and 3.2 GB on the ideal ankle at nu 0.42, load 4-5)."""
+    cylinder (0.7 mm: 0.44M, 4-5 min by the Krylov path; 0.35 mm: 1.7M, 5-9 min and 7-10 GB) and
+    the two-layer ankles (0.7M, three loads each: by the Krylov path 23 min and 3.2 GB on
+    the ideal ankle at nu 0.42, load 4-5)."""
     if any(key.startswith("viscoelastic.") for key in case.overrides) and case.sides[-1] in VISCOELASTIC_LEVELS:
         return 7  # a whole creep history per level
     if case.sides[-1] == "fe-two-layer":
@@ -252,7 +259,7 @@ def campaign() -> Campaign:
     # the points item 3 of issue 24 rests on complete first, then every point's cheap meshes, then
     # the other points' finest meshes (on 2 shared cores each takes 10-40 min): a campaign cut
     # short still has whole points; the other campaigns' points after quick's, cheapest first,
-    # each point's three meshes together
+    # each point's meshes together
     rank = {p: k for k, p in enumerate(PRIORITY)}
     quick = {p for p, _ in quick_points()}
     cost = {p: (_cost_rank(source), k) for k, (p, source) in enumerate(all_points)}
@@ -282,7 +289,7 @@ def campaign() -> Campaign:
 def summary_from_cached_cases(out_dir: str | Path) -> dict[str, Any]:
     """An ``fe-convergence`` summary (its analyses) from the finished cases of a campaign
     directory, without running the others: for a study cut short (each finest mesh takes 10-40
-    min on two shared cores), the points whose three meshes all finished, each FE run's values
+    min on two shared cores), the points whose meshes all finished, each FE run's values
     measured again from its result directory (:func:`verification.fe_convergence.fe_values`).
     Cases whose record is missing are "case not run" to the analysis."""
     study = campaign()
