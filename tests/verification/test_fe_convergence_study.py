@@ -418,7 +418,7 @@ def test_a_goal_judges_a_metric_only_where_the_fe_error_is_known_and_below_it(tm
 def test_every_stored_fe_error_belongs_to_a_run_the_study_makes_today():
     """The stored key leaves out what the scene file already says, so a changed scene default gives
     the same run a new key: the stored entry is then found by no case and its comparisons read "FE
-    error unknown" without failing anywhere (66 of them did, 2026-11-28). Every stored entry's key
+    error unknown" without failing anywhere (67 of them did, 2026-11-28). Every stored entry's key
     and every stored point must be one the fe-convergence study produces now."""
     from verification.campaigns import fe_convergence
     from verification.fe_convergence import _point_of, load_reference
