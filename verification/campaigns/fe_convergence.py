@@ -52,7 +52,11 @@ PRIORITY = ("ideal-cartilage-nu0.42", "subject-cartilage-nu0.42", "slab-F333-nu0
 #: Krylov path, one job at load 4-5 (2026-11-28): the ideal ankle at nu 0.42 190 / 260 / 1368 s (2.0 / 1.0 /
 #: 0.7 mm; about 100 / 140 / 690 s of CPU; 0.7 / 0.9 / 3.2 GB), the subject-like one 121 / 184 / 1133 s (0.7 mm: 662k
 #: DOFs, 3.0 GB); the ideal ankle at nu 0.49 (Taylor-Hood) 211 / 229 / 1456 s (0.7 mm: 753k DOFs, 4.7 GB)
-EXPECTED_TIME_S = 18000.0
+#: The stored study (2026-11-28, 62 points): the 20 points estimated that day by the Krylov path took 5.1 h of wall
+#: time, one solve at a time at load 2-5 (the two-layer cylinder's eight 0.35 mm solves 5-9 min and 7-10 GB each, so
+#: never two at once); the 42 older points 10.6 h by LU at load 2-14, which the Krylov path takes in about a half to a
+#: third of that at their sizes: about 9 h, two jobs gaining little where memory allows only one.
+EXPECTED_TIME_S = 32400.0
 #: what the study found on the subject-like ankle (issue 24, item 3), measured 2026-11-26 (docs/campaigns.md)
 FINDINGS = (
     "Subject-like ankle (issue 24, item 3): the FE's raw peak at 1.0 mm is not converged: refining in plane lowers it 22 % (1.913 -> 1.499 MPa; "
