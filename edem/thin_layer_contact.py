@@ -252,6 +252,7 @@ def solve_thin_layer(
     everything: np.ndarray | None = None
     seen: set[bytes] = set()
     force_scale = 1e-300
+    regularised = False  # the last iterate's set held a free DOF only through the 1e-8 regularisation
     # A nonlinear column, linearised at these forces: w(f) ~ (local + slope) f + nonlocal f + shift.
     linearised_at, local, shift = np.zeros(n_c), None, 0.0
     for iteration in range(1, max_iterations + 1):
@@ -266,6 +267,7 @@ def solve_thin_layer(
         u = np.zeros(6)
         # The 6 x 6's Cholesky factor both solves and says whether a free DOF is unrestrained.
         solved = _regular_solve(stiffness[free_block], dof_scale, rhs)
+        regularised = False
         if solved is None and unrestrained_dofs(stiffness, free, length_scale_mm):
             if everything is None:
                 full = ActiveSystem.build(layer, rows, offset, touchable, local, pushback_force_n)
@@ -278,6 +280,7 @@ def solve_thin_layer(
             if not np.any(active) and not np.any(ligament_active):
                 raise SolverError("no equilibrium: no spring stays in compression under this load, so the load pulls the bodies apart")
             stiffness = stiffness + 1e-8 * everything  # a transiently small contact set
+            regularised = True
         if solved is None:
             solved = np.linalg.solve(stiffness[free_block], rhs)
         u[free] = solved
@@ -313,6 +316,14 @@ def solve_thin_layer(
     else:
         raise SolverError(f"the thin-layer active-set iteration did not converge in {max_iterations} iterations")
     f = np.where(active, f, 0.0)
+    if regularised and not np.any(load) and not np.any(ligament_active):
+        # No load and a set too small to hold the free DOFs: the only equilibrium is no force. Its
+        # springs are the last of an overlap at rest pushed back (the cartilage ankle's layers
+        # overlap by microns where they touch; on 0.44 mm springs one was left at 1e-7 N, which
+        # the regularisation alone balanced and the check below refused).
+        active, f = np.zeros(n_c, bool), np.zeros(n_c)
+        w = np.zeros(n_c) + shift
+        gap = w - overlap_mm - rows @ u[free]
     ligament_force = np.where(ligament_active, tension, 0.0)
     resultant = directions.T @ f + ligament_rows.T @ ligament_force
     if shear is not None:
