@@ -317,13 +317,15 @@ def solve_thin_layer(
         raise SolverError(f"the thin-layer active-set iteration did not converge in {max_iterations} iterations")
     f = np.where(active, f, 0.0)
     if regularised and not np.any(load) and not np.any(ligament_active):
-        # No load and a set too small to hold the free DOFs: the only equilibrium is no force. Its
-        # springs are the last of an overlap at rest pushed back (the cartilage ankle's layers
-        # overlap by microns where they touch; on 0.44 mm springs one was left at 1e-7 N, which
-        # the regularisation alone balanced and the check below refused).
-        active, f = np.zeros(n_c, bool), np.zeros(n_c)
+        # No load and a set too small to hold the free DOFs: the bodies are free, the only
+        # equilibrium carries no force, and the pose is the reference one (as with no set at all,
+        # above). What the set held were overlaps of microns at rest: springs resampled on M's
+        # chordal facets (on 0.44 mm springs of the cartilage ankle one was left at 1e-7 N, which
+        # only the regularisation balanced; the check below refused it, and the pose it took
+        # had slid 15 um along the dome's free ty).
+        active, f, u = np.zeros(n_c, bool), np.zeros(n_c), np.zeros(6)
         w = np.zeros(n_c) + shift
-        gap = w - overlap_mm - rows @ u[free]
+        gap = w - overlap_mm
     ligament_force = np.where(ligament_active, tension, 0.0)
     resultant = directions.T @ f + ligament_rows.T @ ligament_force
     if shear is not None:
