@@ -257,14 +257,17 @@ class StackedPattern:
         as the layers' Z^T will be)."""
         offsets = np.cumsum([0] + [p.n_vertices for p in patterns])
         n = int(offsets[-1])
-        block_keys = [(np.repeat(np.arange(p.n_vertices), np.diff(p.indptr)) + o) * n + p.indices + o for p, o in zip(patterns, offsets)]
+        # keys row * n + column in int64: scipy's int32 indices would wrap past n = 46341 stacked fields
+        block_keys = [(np.repeat(np.arange(p.n_vertices, dtype=np.int64), np.diff(p.indptr)) + o) * n + p.indices.astype(np.int64) + o
+                      for p, o in zip(patterns, offsets)]
         # every ordered pair of entries (first, second) of each row of Z^T
         count = np.diff(z_t.indptr)
         spring = np.repeat(np.arange(count.shape[0]), count * count)
         k = np.arange(spring.shape[0]) - np.repeat(np.cumsum(count * count) - count * count, count * count)
         first, second = z_t.indptr[spring] + k // count[spring], z_t.indptr[spring] + k % count[spring]
         # canonical CSC: by column, then row
-        stored, slot = np.unique(np.concatenate(block_keys + [z_t.indices[second] * n + z_t.indices[first]]), return_inverse=True)
+        columns = z_t.indices.astype(np.int64)
+        stored, slot = np.unique(np.concatenate(block_keys + [columns[second] * n + columns[first]]), return_inverse=True)
         indptr = np.zeros(n + 1, np.int64)
         np.cumsum(np.bincount(stored // n, minlength=n), out=indptr[1:])
         ends = np.cumsum([keys.shape[0] for keys in block_keys])

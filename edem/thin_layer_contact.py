@@ -252,6 +252,7 @@ def solve_thin_layer(
     everything: np.ndarray | None = None
     seen: set[bytes] = set()
     force_scale = 1e-300
+    regularised = False  # the last iterate's set held a free DOF only through the 1e-8 regularisation
     # A nonlinear column, linearised at these forces: w(f) ~ (local + slope) f + nonlocal f + shift.
     linearised_at, local, shift = np.zeros(n_c), None, 0.0
     for iteration in range(1, max_iterations + 1):
@@ -266,6 +267,7 @@ def solve_thin_layer(
         u = np.zeros(6)
         # The 6 x 6's Cholesky factor both solves and says whether a free DOF is unrestrained.
         solved = _regular_solve(stiffness[free_block], dof_scale, rhs)
+        regularised = False
         if solved is None and unrestrained_dofs(stiffness, free, length_scale_mm):
             if everything is None:
                 full = ActiveSystem.build(layer, rows, offset, touchable, local, pushback_force_n)
@@ -278,6 +280,7 @@ def solve_thin_layer(
             if not np.any(active) and not np.any(ligament_active):
                 raise SolverError("no equilibrium: no spring stays in compression under this load, so the load pulls the bodies apart")
             stiffness = stiffness + 1e-8 * everything  # a transiently small contact set
+            regularised = True
         if solved is None:
             solved = np.linalg.solve(stiffness[free_block], rhs)
         u[free] = solved
@@ -313,6 +316,16 @@ def solve_thin_layer(
     else:
         raise SolverError(f"the thin-layer active-set iteration did not converge in {max_iterations} iterations")
     f = np.where(active, f, 0.0)
+    if regularised and not np.any(load) and not np.any(ligament_active):
+        # No load and a set too small to hold the free DOFs: the bodies are free, the only
+        # equilibrium carries no force, and the pose is the reference one (as with no set at all,
+        # above). What the set held were overlaps of microns at rest: springs resampled on M's
+        # chordal facets (on 0.44 mm springs of the cartilage ankle one was left at 1e-7 N, which
+        # only the regularisation balanced; the check below refused it, and the pose it took
+        # had slid 15 um along the dome's free ty).
+        active, f, u = np.zeros(n_c, bool), np.zeros(n_c), np.zeros(6)
+        w = np.zeros(n_c) + shift
+        gap = w - overlap_mm
     ligament_force = np.where(ligament_active, tension, 0.0)
     resultant = directions.T @ f + ligament_rows.T @ ligament_force
     if shear is not None:

@@ -118,19 +118,31 @@ def against_cycle_peak(per_time: list[dict[str, Any]]) -> list[dict[str, Any]]:
     error is (a - b) divided by the largest |b| up to that instant, the displacement error is
     |u_a - u_b| / max |u_b| (its sign as :func:`displacement_error`'s) and the pressure field's is
     its L2 misfit over the largest L2 norm of b's field so far; those entries say so
-    (``relative_to``: "cycle peak"). Loading branches are unchanged. Returns new dicts.
+    (``relative_to``: "cycle peak"). Unloaded time points before the first load are taken against
+    b's largest magnitude over the whole history (``relative_to``: "history peak"): their reference
+    is zero and their relative error otherwise 0 or inf. Loading branches are unchanged. Returns
+    new dicts.
     """
     if not per_time:
         return per_time
-    down = unloading_branch(np.array([e["load_n"] for e in per_time], dtype=np.float64))
-    peaks = {b: np.fmax.accumulate([abs(float(e[b])) for e in per_time]) for _, _, b in _CYCLE_PEAK_ERRORS}
-    disp_peak = np.fmax.accumulate([float(np.linalg.norm(e["displacement_b_mm"])) for e in per_time])
+    load = np.abs(np.array([e["load_n"] for e in per_time], dtype=np.float64))
+    down = unloading_branch(load)
+    # unloaded before the first load: the response is zero on both sides but for round-off and a
+    # pose at rest (EDEM's bone pushed back out of an overlap by microns); against the history's peak
+    before = (np.maximum.accumulate(load) == 0.0) & (load.max() > 0.0)
+
+    def running_peak(values: list[float]) -> np.ndarray:
+        peak = np.fmax.accumulate(values)
+        return np.where(before, peak.max(), peak)
+
+    peaks = {b: running_peak([abs(float(e[b])) for e in per_time]) for _, _, b in _CYCLE_PEAK_ERRORS}
+    disp_peak = running_peak([float(np.linalg.norm(e["displacement_b_mm"])) for e in per_time])
     has_field = all("pressure_l2_reference_norm" in e for e in per_time)
-    field_peak = np.fmax.accumulate([e["pressure_l2_reference_norm"] for e in per_time]) if has_field else None
+    field_peak = running_peak([e["pressure_l2_reference_norm"] for e in per_time]) if has_field else None
     out = []
     for k, entry in enumerate(per_time):
         entry = dict(entry)
-        if down[k]:
+        if down[k] or before[k]:
             for error, a, b in _CYCLE_PEAK_ERRORS:
                 entry[error] = signed_relative_error(float(entry[a]), float(entry[b])) if peaks[b][k] == 0.0 else (float(entry[a]) - float(entry[b])) / peaks[b][k]
             u_a, u_b = np.asarray(entry["displacement_a_mm"]), np.asarray(entry["displacement_b_mm"])
@@ -138,7 +150,7 @@ def against_cycle_peak(per_time: list[dict[str, Any]]) -> list[dict[str, Any]]:
             entry["displacement_rel_error"] = -magnitude if np.linalg.norm(u_a) < np.linalg.norm(u_b) else magnitude
             if field_peak is not None and field_peak[k] > 0.0:
                 entry["pressure_l2_rel_error"] = entry["pressure_l2_misfit_norm"] / field_peak[k]
-            entry["relative_to"] = "cycle peak"
+            entry["relative_to"] = "cycle peak" if down[k] else "history peak"
         out.append(entry)
     return out
 

@@ -76,7 +76,9 @@ ANY_MODULES = ("geometries", "edem", "fem_reference", "verification")
 #: without them (side_inputs), so their results cannot depend on them.
 DEM_ONLY_OVERRIDES = tuple(f"cartilage.{key}" for key in bed_keys()) + (
     # how the discrete Kelvin-Voigt springs step (edem.viscoelastic); the FE twin steps by [fe] time_scheme
-    "viscoelastic.contact_set", "viscoelastic.integrator", "viscoelastic.allow_unstable")
+    "viscoelastic.contact_set", "viscoelastic.integrator", "viscoelastic.allow_unstable",
+    # the springs' resolution (M resampled, its geometry unchanged): the FE meshes the scene's own M
+    "geometry.spring_spacing_mm")
 #: options of a case that reach the FE reference of its scene as fem_reference.run_scene's
 #: settings (fem_reference.settings.resolve_settings: they override the scene's [fe] table)
 FE_SCENE_OPTIONS = ("mesh_size_mm", "degree", "element", "layers_through_thickness")

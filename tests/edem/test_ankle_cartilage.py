@@ -125,3 +125,21 @@ def test_the_thesis_geometry_and_law_are_two_sets_away():
              .steps[0].contact_area_mm2 for f in (333.0, 2000.0)]
     assert areas[0] == pytest.approx(463.0, abs=5.0) and areas[1] == pytest.approx(areas[0], rel=1e-12)
     assert math.isclose(scene.cartilage.max_spring_length_mm, 3.5)
+
+
+@pytest.mark.parametrize("symbol", ["pade", "two-pole"])
+def test_no_load_on_resampled_springs_that_overlap_at_rest_carries_no_force(symbol):
+    """The builder places the bones so that no spring of M's own mesh starts compressed; springs
+    resampled finer sit on M's chordal facets, and a few then overlap F by microns at rest. With no
+    load and no ligament the bodies are free and the only equilibrium carries no force: the
+    coupled bed reports the reference pose with no spring in contact (it refused once, one spring
+    left at 1e-7 N that only its 1e-8 regularisation balanced, the bone slid 15 um along ty)."""
+    scene = load_scene("ideal-standing", {"ligaments": [], "load.force_n": [0.0, 0.0, 0.0], "geometry.spring_spacing_mm": 0.5,
+                                          "cartilage.thin_layer_symbol": symbol})
+    caster = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles)
+    length = caster.cast(scene.spring_centroid_mm, scene.spring_normal, 3.5).spring_length_mm
+    assert np.nanmin(length) < 0.0  # the premise: some resampled spring starts inside F
+    step = run(scene, "dem").steps[0]
+    assert step.contact_area_mm2 == 0.0 and not np.any(step.pressure_mpa)
+    assert np.linalg.norm(step.contact_force_n) == 0.0
+    assert not np.any(step.displacement_mm) and not np.any(step.rotation_rad)  # free bodies at no load: the reference pose, not a slide along ty

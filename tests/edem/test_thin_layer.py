@@ -688,3 +688,23 @@ def test_coarse_smoothing_converges_to_the_fine_operator_as_its_cells_shrink(mon
         errors.append(np.linalg.norm(w - fine) / np.linalg.norm(fine))
     assert errors[0] > errors[1] > errors[2] > 1e3 * errors[3]
     assert errors[3] < 1e-12
+
+
+def test_a_stacked_pattern_past_46341_fields_is_the_assembled_matrix():
+    # Keys row * n + column exceed 2^31 once n > 46341 stacked fields (two terms of ~25k vertices:
+    # a two-pole bed on ~0.12 mm springs of the 30 x 40 mm cylinder layer); scipy's int32 indices
+    # wrapped there and the build failed. The stacked data must equal diag(H_1, H_2) + Z diag(x) Z^T.
+    from edem.sparse_factors import OperatorPattern, StackedPattern
+
+    v = 24_000
+    diagonal = OperatorPattern(np.arange(v, dtype=np.int32), np.arange(v + 1, dtype=np.int32))
+    m = v
+    rows = np.repeat(np.arange(m), 2)
+    columns = np.column_stack([np.arange(m), v + (np.arange(m) * 7) % v]).ravel()  # spring j couples j and a far field
+    z_t = sp.csr_matrix((np.tile([1.0, -0.5], m), (rows, columns)), shape=(m, 2 * v))
+    assert z_t.indices.dtype == np.int32
+    stacked = StackedPattern.build([diagonal, diagonal], z_t)
+    x = np.linspace(0.5, 2.0, m)
+    data = stacked.blocks([np.full(v, 3.0), np.full(v, 4.0)]) + stacked.coupling(z_t) @ x
+    expected = sp.block_diag([3.0 * sp.eye(v), 4.0 * sp.eye(v)]) + z_t.T @ sp.diags(x) @ z_t
+    assert abs(stacked.pattern.matrix(data) - expected).max() == 0.0  # the same sums, each of the same terms

@@ -401,3 +401,26 @@ def test_unloading_errors_are_taken_against_the_cycle_peak_and_loading_errors_ar
             assert out[k][name] == pytest.approx(0.01 / 1.0, rel=1e-12), name
     # a held load is not unloading, however the response moves
     assert not unloading_branch(np.array([333.0, 333.0 * (1 - 1e-12), 333.0])).any()
+
+
+def test_unloaded_instants_before_the_first_load_are_taken_against_the_history_peak():
+    """A history that starts unloaded (the viscoelastic campaign's t = 0): the reference is zero
+    there, so a's rest offset of 0.01 (EDEM's bone pushed back out of an overlap by microns) gave
+    an infinite relative error; against the largest b of the whole history it is 0.01 / 1.0. The
+    loaded instants are untouched, and a history that is never loaded keeps 0 / inf (no peak)."""
+    rest = _cycle_entry(0.0, 1.0, 0.01)  # then b set to zero, a to the offset: as compare_result_dirs writes it
+    for key in list(rest):
+        if key.endswith("_b_mpa") or key.endswith("_b_mm2") or key == "pressure_l2_reference_norm":
+            rest[key] = 0.0
+        elif key.endswith("_a_mpa") or key.endswith("_a_mm2"):
+            rest[key] = 0.01
+    rest.update({"displacement_a_mm": [0.0, 0.0, -0.01], "displacement_b_mm": [0.0, 0.0, 0.0]})
+    rest.update({key: math.inf for key in rest if key.endswith("_rel_error")})
+    per_time = [rest, _cycle_entry(333.0, 0.5, 0.01), _cycle_entry(333.0, 1.0, 0.01)]
+    out = against_cycle_peak(per_time)
+    assert out[0]["relative_to"] == "history peak"
+    for name in ("contact_area_rel_error", "regularised_peak_pressure_rel_error", "displacement_rel_error"):
+        assert out[0][name] == pytest.approx(0.01 / 1.0, rel=1e-12), name
+    assert out[1] == per_time[1] and out[2] == per_time[2]
+    never = [{**rest, "load_n": 0.0}]
+    assert against_cycle_peak(never) == never
