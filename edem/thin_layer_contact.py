@@ -295,6 +295,8 @@ def solve_thin_layer(
         linearised_at = np.where(active, f, 0.0)
         if settled and np.array_equal(new_active, active) and np.array_equal(new_ligaments, ligament_active):
             break
+        if regularised and not np.any(load) and not np.any(new_ligaments):
+            break  # free bodies: no force (below); the sets' round-off forces would only alternate
         if not np.any(new_active) and not np.any(new_ligaments) and not np.any(load):
             active, ligament_active, u = new_active, new_ligaments, np.zeros(6)  # nothing to carry
             f, gap, w = np.zeros(n_c), overlap_mm.copy(), np.zeros(n_c)
@@ -316,14 +318,15 @@ def solve_thin_layer(
     else:
         raise SolverError(f"the thin-layer active-set iteration did not converge in {max_iterations} iterations")
     f = np.where(active, f, 0.0)
-    if regularised and not np.any(load) and not np.any(ligament_active):
+    if regularised and not np.any(load) and not np.any(new_ligaments):
         # No load and a set too small to hold the free DOFs: the bodies are free, the only
         # equilibrium carries no force, and the pose is the reference one (as with no set at all,
         # above). What the set held were overlaps of microns at rest: springs resampled on M's
-        # chordal facets (on 0.44 mm springs of the cartilage ankle one was left at 1e-7 N, which
-        # only the regularisation balanced; the check below refused it, and the pose it took
-        # had slid 15 um along the dome's free ty).
-        active, f, u = np.zeros(n_c, bool), np.zeros(n_c), np.zeros(6)
+        # chordal facets. On 0.44 mm springs of the cartilage ankle one was left at 1e-7 N, which
+        # only the regularisation balanced (the check below refused it, and the pose it took had
+        # slid 15 um along the dome's free ty); on 0.22 mm springs sets of 1 and 3 springs at
+        # 1e-7 N alternated until the iteration limit.
+        active, ligament_active, f, u = np.zeros(n_c, bool), new_ligaments, np.zeros(n_c), np.zeros(6)
         w = np.zeros(n_c) + shift
         gap = w - overlap_mm
     ligament_force = np.where(ligament_active, tension, 0.0)
