@@ -51,11 +51,10 @@ import numpy as np
 from verification.campaign_model import THESIS_ANKLE, Analysis, Campaign, Case, Figure
 from verification.fe_comparison import ERROR_PANELS, FE_TABLE_COLUMNS, fe_comparison_case
 
-#: wall time, nothing cached: an estimate, the whole campaign not yet run at today's levels (2026-11-28, one
-#: job at load 4-5: the cylinder's step at 0.7 mm 241 s, 5.5 times its 2.0 mm run, so its six FE histories
-#: about 50 min; the ankle's step 599 s and ramp 693 s; docs/campaigns.md). At 2.0 mm and with the thesis's
-#: ankle it took 1083 s
-EXPECTED_TIME_S = 4600.0
+#: wall time, nothing cached: 4805 s with --jobs 1 (2026-11-28 evening, load about 2: the six cylinder FE
+#: histories 147-224 s each, the ankle's step and ramp 475 / 766 s, its two-pole EDEM on 50k springs 190-270 s
+#: a history; docs/campaigns.md)
+EXPECTED_TIME_S = 4800.0
 
 TAU_S = 1.4
 LOAD_N = 333.0
