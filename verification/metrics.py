@@ -127,8 +127,8 @@ def against_cycle_peak(per_time: list[dict[str, Any]]) -> list[dict[str, Any]]:
         return per_time
     load = np.abs(np.array([e["load_n"] for e in per_time], dtype=np.float64))
     down = unloading_branch(load)
-    # unloaded before the first load: the response is zero on both sides but for round-off and a
-    # pose at rest (EDEM's bone pushed back out of an overlap by microns); against the history's peak
+    # unloaded before the first load: the reference is zero, and any round-off on the other side
+    # (a spring at 1e-7 N, a micron of pose) read as an infinite error; against the history's peak
     before = (np.maximum.accumulate(load) == 0.0) & (load.max() > 0.0)
 
     def running_peak(values: list[float]) -> np.ndarray:

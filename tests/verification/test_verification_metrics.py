@@ -405,8 +405,8 @@ def test_unloading_errors_are_taken_against_the_cycle_peak_and_loading_errors_ar
 
 def test_unloaded_instants_before_the_first_load_are_taken_against_the_history_peak():
     """A history that starts unloaded (the viscoelastic campaign's t = 0): the reference is zero
-    there, so a's rest offset of 0.01 (EDEM's bone pushed back out of an overlap by microns) gave
-    an infinite relative error; against the largest b of the whole history it is 0.01 / 1.0. The
+    there, so a's rest offset of 0.01 (round-off, or a pose at rest a micron away) gave an
+    infinite relative error; against the largest b of the whole history it is 0.01 / 1.0. The
     loaded instants are untouched, and a history that is never loaded keeps 0 / inf (no peak)."""
     rest = _cycle_entry(0.0, 1.0, 0.01)  # then b set to zero, a to the offset: as compare_result_dirs writes it
     for key in list(rest):
