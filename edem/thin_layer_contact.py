@@ -252,7 +252,6 @@ def solve_thin_layer(
     everything: np.ndarray | None = None
     seen: set[bytes] = set()
     force_scale = 1e-300
-    regularised = False  # the last iterate's set held a free DOF only through the 1e-8 regularisation
     # A nonlinear column, linearised at these forces: w(f) ~ (local + slope) f + nonlocal f + shift.
     linearised_at, local, shift = np.zeros(n_c), None, 0.0
     for iteration in range(1, max_iterations + 1):
@@ -267,7 +266,7 @@ def solve_thin_layer(
         u = np.zeros(6)
         # The 6 x 6's Cholesky factor both solves and says whether a free DOF is unrestrained.
         solved = _regular_solve(stiffness[free_block], dof_scale, rhs)
-        regularised = False
+        regularised = False  # this iterate's set holds a free DOF only through the 1e-8 regularisation
         if solved is None and unrestrained_dofs(stiffness, free, length_scale_mm):
             if everything is None:
                 full = ActiveSystem.build(layer, rows, offset, touchable, local, pushback_force_n)
@@ -291,16 +290,22 @@ def solve_thin_layer(
         tension = ligament_law.offset_n + ligament_law.stiffness_n_per_mm * (ligament_rows @ u)
         new_active = np.where(active, f > 0.0, gap < 0.0)
         new_ligaments = tension > 0.0
+        if not np.any(load) and not np.any(new_ligaments) and (regularised or not np.any(new_active)):
+            # No load and no set that holds the free DOFs (none left, or one held only by the 1e-8
+            # regularisation): the bodies are free, the only equilibrium carries no force, and the
+            # pose is the reference one. Such sets are the last of overlaps of microns at rest
+            # (springs resampled on M's chordal facets): on the cartilage ankle's 0.44 mm springs
+            # one was left at 1e-7 N, which the balance check below refused (the pose it took had
+            # slid 15 um along the dome's free ty); on 0.22 mm springs sets of 1 and 3 springs at
+            # 1e-7 N alternated to the iteration limit.
+            active, ligament_active, u = np.zeros(n_c, bool), new_ligaments, np.zeros(6)
+            f, w = np.zeros(n_c), np.zeros(n_c)
+            gap = -overlap_mm  # y = w - d0 - g u at u = 0
+            tension = ligament_law.offset_n.copy()
+            break
         settled = column is None or float(np.abs(f - linearised_at).max(initial=0.0)) <= newton_rtol * float(np.abs(f).max(initial=0.0))
         linearised_at = np.where(active, f, 0.0)
         if settled and np.array_equal(new_active, active) and np.array_equal(new_ligaments, ligament_active):
-            break
-        if regularised and not np.any(load) and not np.any(new_ligaments):
-            break  # free bodies: no force (below); the sets' round-off forces would only alternate
-        if not np.any(new_active) and not np.any(new_ligaments) and not np.any(load):
-            active, ligament_active, u = new_active, new_ligaments, np.zeros(6)  # nothing to carry
-            f, gap, w = np.zeros(n_c), overlap_mm.copy(), np.zeros(n_c)
-            tension = ligament_law.offset_n.copy()
             break
         # Springs at zero force to round-off can flip for ever: accept a repeated set whose
         # violations (negative forces, penetrations) are below cycle_rtol of the force scale.
@@ -318,17 +323,6 @@ def solve_thin_layer(
     else:
         raise SolverError(f"the thin-layer active-set iteration did not converge in {max_iterations} iterations")
     f = np.where(active, f, 0.0)
-    if regularised and not np.any(load) and not np.any(new_ligaments):
-        # No load and a set too small to hold the free DOFs: the bodies are free, the only
-        # equilibrium carries no force, and the pose is the reference one (as with no set at all,
-        # above). What the set held were overlaps of microns at rest: springs resampled on M's
-        # chordal facets. On 0.44 mm springs of the cartilage ankle one was left at 1e-7 N, which
-        # only the regularisation balanced (the check below refused it, and the pose it took had
-        # slid 15 um along the dome's free ty); on 0.22 mm springs sets of 1 and 3 springs at
-        # 1e-7 N alternated until the iteration limit.
-        active, ligament_active, f, u = np.zeros(n_c, bool), new_ligaments, np.zeros(n_c), np.zeros(6)
-        w = np.zeros(n_c) + shift
-        gap = w - overlap_mm
     ligament_force = np.where(ligament_active, tension, 0.0)
     resultant = directions.T @ f + ligament_rows.T @ ligament_force
     if shear is not None:

@@ -829,18 +829,20 @@ def _field_estimate(level_rows: list[dict[str, Any]], dofs: list[float], layers:
     (its difference from the finest plus the finest's error), at time point ``k``, read from the
     result directories, as (finest three's estimate, each mesh's error, its record, the extra's
     error); None when a row does not say where they are."""
-    from verification.fe_convergence import field_difference, field_errors, finest_windows, in_plane_windows, representative_sizes
+    from verification.fe_convergence import field_difference, field_errors, finest_windows, window_estimates
 
     dirs = _result_dirs(level_rows + ([extra] if extra is not None else []))
     if dirs is None:
         return None
-    firsts, flat, by_first = finest_windows(len(level_rows)), in_plane_windows(layers), {}
-    for j in sorted(set(firsts)):
+
+    def estimate(j: int, sizes: tuple[float, ...]):
         a, b, c = dirs[j:j + 3]
-        by_first[j] = field_errors(representative_sizes(dofs[j:j + 3], flat[j]), (field_difference(a, c, k), field_difference(b, c, k)), field_difference(a, b, k))
-    errors, record = _levels_record([by_first[j] for j in firsts], firsts)
+        return field_errors(sizes, (field_difference(a, c, k), field_difference(b, c, k)), field_difference(a, b, k))
+
+    ests = window_estimates(dofs, layers, estimate)
+    errors, record = _levels_record(list(ests), finest_windows(len(level_rows)))
     extra_error = None if extra is None else field_difference(dirs[-1], dirs[len(level_rows) - 1], k) + errors[-1]
-    return by_first[firsts[-1]], errors, record, extra_error
+    return ests[-1], errors, record, extra_error
 
 
 def _level_estimates(dofs: list[float], values: list[float], layers: list[int | None]):

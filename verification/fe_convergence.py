@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -175,9 +176,18 @@ def level_estimates(dofs: list[float] | tuple[float, ...], values: list[float] |
     estimate ``est`` whose meshes start at ``first``. ``dofs`` increasing, three or more meshes."""
     if len(dofs) != len(values):
         raise ValueError("one value per mesh")
+    return window_estimates(dofs, layers, lambda j, sizes: richardson(sizes, values[j:j + 3]))
+
+
+def window_estimates(dofs: list[float] | tuple[float, ...], layers: list[int | None] | tuple[int | None, ...] | None,
+                     estimate: Callable[[int, tuple[float, ...]], Richardson]) -> tuple[Richardson, ...]:
+    """Each mesh's estimate on the finest three consecutive meshes that contain it: ``estimate(j,
+    sizes)`` of the three meshes from ``j`` (their :func:`representative_sizes`, in plane for a
+    window of one ``layers_through_thickness``), once per window (:func:`level_estimates` of a
+    quantity, the analysis's of the pressure field)."""
     firsts = finest_windows(len(dofs))
     flat = in_plane_windows(layers if layers is not None else [None] * len(dofs))
-    by_first = {j: richardson(representative_sizes(dofs[j:j + 3], flat[j]), values[j:j + 3]) for j in set(firsts)}
+    by_first = {j: estimate(j, representative_sizes(dofs[j:j + 3], flat[j])) for j in set(firsts)}
     return tuple(by_first[j] for j in firsts)
 
 
