@@ -55,8 +55,9 @@ from verification.fe_comparison import ERROR_PANELS, FE_TABLE_COLUMNS, fe_compar
 #: wall time, nothing cached, with --jobs 1: an estimate. Measured 4805 s on 2026-11-28 evening (load about 2: the
 #: six cylinder FE histories 147-224 s each, the ankle's step and ramp at 2.0 mm 475 / 766 s, its two-pole EDEM
 #: on 50k springs 190-270 s a history); since, the ankle's FE at 0.7 mm took 2686 s for the step (ten solves of
-#: 0.72M DOFs, 3.2 GB, load about 3) and RAMP_S s for the ramp, and its Pade beds about 20 s a history (docs/campaigns.md)
-EXPECTED_TIME_S = 10800.0
+#: 0.72M DOFs, 3.2 GB, load about 3) and 4028 s for the ramp (21), and its Pade beds 20-75 s a history where the
+#: two-pole took 190-270 s (docs/campaigns.md)
+EXPECTED_TIME_S = 9600.0
 
 TAU_S = 1.4
 LOAD_N = 333.0
