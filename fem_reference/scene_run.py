@@ -265,10 +265,13 @@ def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: S
     if not mask.any():
         return None  # the model refuses this with its own message
     edge = mean_edge(scene.mobile.vertices_mm, scene.mobile.triangles[mask])
-    cells, vertices = solid_size(int(mask.sum()), edge, thickness, settings.mesh_size_mm, settings.layers_through_thickness)
-    cells, vertices = fe_model.bodies * cells, fe_model.bodies * vertices
-    size = estimate(cells, vertices, settings.element, linear_solver=settings.linear_solver)
-    check_fits(size, settings.mesh_size_mm, file=scene.source, key="mesh_size_mm (--mesh-size, or [fe] in the scene)")
+
+    def size_at(mesh_size_mm: float):
+        cells, vertices = solid_size(int(mask.sum()), edge, thickness, mesh_size_mm, settings.layers_through_thickness)
+        return estimate(fe_model.bodies * cells, fe_model.bodies * vertices, settings.element, linear_solver=settings.linear_solver)
+
+    size = size_at(settings.mesh_size_mm)
+    check_fits(size, settings.mesh_size_mm, file=scene.source, key="mesh_size_mm (--mesh-size, or [fe] in the scene)", size_at=size_at)
     return size
 
 

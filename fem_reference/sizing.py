@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -183,19 +184,23 @@ def peak_memory_bytes() -> float | None:
     return None
 
 
-def check_fits(size: FESize, mesh_size_mm: float, *, file: str | None, key: str, available_bytes: float | None = None) -> None:
+def check_fits(size: FESize, mesh_size_mm: float, *, file: str | None, key: str, available_bytes: float | None = None,
+               size_at: Callable[[float], FESize] | None = None) -> None:
     """Refuse (InputError, exit 2) a solve whose memory estimate times :data:`SAFETY` exceeds
-    what is available, naming the mesh size, the estimate and the available memory."""
+    what is available, naming the mesh size, the estimate and the available memory, and a mesh
+    size that fits: the finest whose estimate ``size_at(mesh_size_mm)`` fits when given (the
+    mesher's discrete rules, :func:`solid_size`), else :func:`suggest_size`'s scaling."""
     available = available_memory_bytes() if available_bytes is None else available_bytes
     need = SAFETY * size.memory_bytes
     if need > available:
+        fitting = suggest_size(size, mesh_size_mm, available) if size_at is None else fitting_size(size_at, mesh_size_mm, available)
         raise InputError(
             f"mesh size {mesh_size_mm:g} mm gives about {size.cells:,} cells and {size.dofs:,} DOFs; the "
             f"{size.solver} solve needs an estimated {size.memory_bytes / 1e9:.3g} GB ({need / 1e9:.3g} GB with "
             f"a x{SAFETY:g} margin) but {available / 1e9:.3g} GB are available",
             file=file,
             key=key,
-            expected=f"a mesh size whose estimate fits (e.g. {suggest_size(size, mesh_size_mm, available):.3g} mm or larger)"
+            expected=f"a mesh size whose estimate fits (e.g. {_three_digits_up(fitting):g} mm or larger)"
                      + (", or the Krylov solver (linear_solver auto or iterative)" if size.solver == "direct" else ""),
         )
 
@@ -207,6 +212,31 @@ def suggest_size(size: FESize, mesh_size_mm: float, available_bytes: float) -> f
     excess = max((size.memory_bytes - BASE_BYTES) / room, 1.0)
     power = 1.0 if size.solver == "iterative" else 4.0 / 3.0
     return float(mesh_size_mm * excess ** (1.0 / (3.0 * power)))
+
+
+def _three_digits_up(value: float) -> float:
+    """``value`` rounded up to three significant digits (a suggested size rounded down could fall
+    back below the mesher's threshold)."""
+    quantum = 10.0 ** (math.floor(math.log10(value)) - 2)
+    return math.ceil(value / quantum - 1e-9) * quantum
+
+
+#: the steps of :func:`fitting_size`'s search (ratio between candidate mesh sizes, and how many)
+_FIT_STEP, _FIT_STEPS = 1.02, 400
+
+
+def fitting_size(size_at: Callable[[float], FESize], mesh_size_mm: float, available_bytes: float) -> float:
+    """The finest mesh size from ``mesh_size_mm`` up (in steps of 2 %) whose estimate ``size_at``
+    fits in ``available_bytes`` with the :data:`SAFETY` margin. The mesher refines in factors of 2
+    and sets the layers by ceil(thickness / size), or keeps a given number: a size just above a
+    refused one often builds the same mesh (with the layers given, anything short of the next
+    halving does), which a continuous scaling would suggest. The last candidate when none fits."""
+    candidate = float(mesh_size_mm)
+    for _ in range(_FIT_STEPS):
+        candidate *= _FIT_STEP
+        if SAFETY * size_at(candidate).memory_bytes <= available_bytes:
+            break
+    return candidate
 
 
 def candidate_surface(lengths_mm: np.ndarray, h_max_mm: float, areas_mm2: np.ndarray) -> np.ndarray:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -87,3 +88,21 @@ def test_edem_fe_with_a_tiny_mesh_size_exits_2_before_meshing(capsys):
     err = capsys.readouterr().err
     assert status == 2
     assert "mesh size 0.01 mm" in err and "GB are available" in err and "Traceback" not in err
+
+
+def test_the_suggested_mesh_size_builds_a_mesh_that_fits():
+    """With the layers given (a study's in-plane level) every size short of the next halving of
+    the triangles builds the same mesh: the suggestion must be one whose own estimate fits, the
+    finest such within the search's 2 % step."""
+    def size_at(mesh_size_mm):
+        cells, vertices = solid_size(6000, 0.9, 1.4, mesh_size_mm, 2)  # the ideal ankle's talar surface, two layers
+        return estimate(2 * cells, 2 * vertices, "P2", linear_solver="iterative")
+
+    refused = size_at(0.35)  # M's triangles halved twice
+    available = SAFETY * refused.memory_bytes * 0.9
+    with pytest.raises(InputError) as err:
+        check_fits(refused, 0.35, file="scene.toml", key="mesh_size_mm", available_bytes=available, size_at=size_at)
+    suggested = float(re.search(r"e\.g\. ([0-9.]+) mm", str(err.value)).group(1))
+    assert SAFETY * size_at(suggested).memory_bytes <= available  # the suggestion fits ...
+    assert SAFETY * size_at(suggested / 1.03).memory_bytes > available  # ... and is the finest that does, to the step and rounding
+    assert size_at(suggested).dofs < refused.dofs / 3  # the next halving, not the same mesh

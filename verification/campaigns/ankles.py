@@ -7,14 +7,14 @@ Poisson's ratio :data:`NUS`, loaded 333, 1000 and 2000 N as the three time point
 (:data:`LOADS_N`: the FE solves them in turn from the last solution), no ligaments (the FE models
 none). Each bed of :data:`BEDS` (the scenes' default, the coupled layer as a sandwich of the two
 layers, and the independent springs) against the two-layer FE (``fe-two-layer``: both layers
-elastic, each bonded to its bone, frictionless between them; P2 at 1.0 mm, Taylor-Hood from nu
-0.49), one FE run per ankle and nu shared by the beds. Each case is judged against the model band
+elastic, each bonded to its bone, frictionless between them; P2 at 0.7 mm, M's triangles halved,
+Taylor-Hood from nu 0.49: :data:`FE_ANKLES`), one FE run per ankle and nu shared by the beds. Each case is judged against the model band
 (:func:`verification.fe_comparison.banded`) over its three loads, the FE's own error from
 ``fe-convergence``; the analysis ``goal`` gives every load apart, against the 10 % goal where the
 FE's own error is below it, and the contact area's growth from 333 to 2000 N (at least
 :data:`AREA_GROWTH` times, DEM and FE). The analysis ``lumping`` measures the lumping error on the
 ankles: the FE of one layer of the summed thickness on the talus (``fe-lumped``) against the
-two-layer FE.
+two-layer FE (the beds' run).
 
 For another campaign: :func:`ankle_case_name` and :func:`ankle_cases` (any ankles, beds, nus,
 options) build these cases; :func:`case_names` lists them.
@@ -25,11 +25,11 @@ from __future__ import annotations
 from typing import Any
 
 from verification.campaign_model import COUPLED_BED, THESIS_BED, Analysis, Campaign, Case
-from verification.fe_comparison import FE_COARSE, FE_TABLE_COLUMNS, banded, fe_comparison_case
+from verification.fe_comparison import FE_TABLE_COLUMNS, banded, fe_comparison_case
 
-#: wall time with 2 jobs on 2 cores, nothing cached: an estimate, the whole campaign not yet run (2026-11-28: the two-layer
-#: FE runs at 2.0 mm took 245-1277 s each, the ideal ankle's at 1.0 mm 514 s:
-#: docs/campaigns.md#ankles-the-cartilage-ankles-against-their-fe-twin)
+#: wall time with 2 jobs on 2 cores, nothing cached: an estimate, the whole campaign not yet run at :data:`FE_ANKLES`
+#: (2026-11-28: the fe-convergence study's two-layer runs at 0.7 mm took 614-1456 s each, 6.8k s for the six, at
+#: load 2-5, and as many lumped runs of about as many DOFs: docs/campaigns.md#ankles-the-cartilage-ankles-against-their-fe-twin)
 EXPECTED_TIME_S = 7200.0
 
 #: the ankles: case-name prefix -> (scene, what)
@@ -42,6 +42,10 @@ BEDS = {
     "sandwich": ({**COUPLED_BED, "cartilage.thin_layer_stack": "sandwich"}, "coupled layer (the two layers as a sandwich, Pade)"),
     "springs": (dict(THESIS_BED), "independent springs"),
 }
+#: the beds' FE: M's triangles halved, two P2 elements through each layer (Taylor-Hood from nu 0.49). On M's own
+#: triangles (1.0 mm) the talus slides antero-posteriorly under the vertical load by a mesh-dependent 2.5-5.3 um on
+#: the ideal ankle at 333 N (0.1-0.4 um on these; the two displacements differ by 8.6 % at nu 0.49: docs/campaigns.md)
+FE_ANKLES = {"mesh_size_mm": 0.7, "degree": 2}
 #: the goal on each load: displacement, regularised peak and contact area within 10 % of the FE
 GOAL_REL = 0.10
 #: the contact area at 2000 N at least this many times the area at 333 N, DEM and FE
@@ -75,9 +79,9 @@ def lumping_case_name(ankle: str, nu: float) -> str:
 def ankle_cases(ankles: tuple[str, ...] = tuple(ANKLES), beds: tuple[str, ...] = tuple(BEDS), nus: tuple[float, ...] = NUS,
                 options: dict[str, Any] | None = None) -> list[Case]:
     """DEM with each bed against the two-layer FE on each ankle and nu (:func:`ankle_case_name`),
-    banded (:func:`verification.fe_comparison.banded`); the FE at ``options`` (default P2 at
-    1.0 mm, Taylor-Hood from nu 0.49). The beds of an ankle and nu share one FE run."""
-    options = dict(FE_COARSE if options is None else options)
+    banded (:func:`verification.fe_comparison.banded`); the FE at ``options`` (default
+    :data:`FE_ANKLES`). The beds of an ankle and nu share one FE run."""
+    options = dict(FE_ANKLES if options is None else options)
     cases = []
     for nu in sorted(nus, reverse=True):  # the slowest FE (Taylor-Hood) first
         for ankle in ankles:
@@ -97,8 +101,8 @@ def ankle_cases(ankles: tuple[str, ...] = tuple(ANKLES), beds: tuple[str, ...] =
 def lumping_cases(ankles: tuple[str, ...] = tuple(ANKLES), nus: tuple[float, ...] = NUS, options: dict[str, Any] | None = None) -> list[Case]:
     """The lumped FE (one layer of the summed thickness on the talus, the tibial bone rigid)
     against the two-layer FE (:func:`lumping_case_name`): the lumping error, signed (lumped - two
-    layers) / two layers. Reported (sanity bounds)."""
-    options = dict(FE_COARSE if options is None else options)
+    layers) / two layers, both at ``options`` (default :data:`FE_ANKLES`, the beds' run). Reported (sanity bounds)."""
+    options = dict(FE_ANKLES if options is None else options)
     return [fe_comparison_case(
         lumping_case_name(ankle, nu),
         f"{ANKLES[ankle][1]} standing, nu {nu:g}, {', '.join(f'{f:g}' for f in LOADS_N)} N: the FE of one layer of the summed thickness on the talus "

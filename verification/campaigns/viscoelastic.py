@@ -6,13 +6,14 @@ run with it at every time point (peak pressure, contact area and displacement at
 the metrics are the largest over the instants, ``per_time`` in metrics.json keeps them all):
 
 * beds: viscoelastic EDEM with the independent springs and with the coupled thin layer
-  (``cartilage.coupling = "thin-layer"``, the two-pole symbol), each with the contact set of the
+  (``cartilage.coupling = "thin-layer"``; the symbol per scene, :data:`SYMBOL`: the two-pole on the
+  cylinder layer, the Pade on the cartilage ankle), each with the contact set of the
   creeping displacement (``viscoelastic.contact_set = "creeping"``, BDF2, the default) and with
   the thesis's increment (``"frozen"``, exact integrator; the same FE run judges both), and DEM
   with the coupled layer at the same instants (static: what ignoring the creep costs); on the
-  goal's steps also the coupled layer with the default Pade symbol (``*-coupled-pade-*``: the
-  symbol's share of the error); every discrete bed on springs that resolve the two-pole's
-  shortest smoothing length (:data:`SPRING_SPACING_MM`);
+  goal's steps also the coupled layer with the other symbol (``*-coupled-pade-*``,
+  ``*-coupled-two-pole-*``: the symbol's share of the error); every discrete bed on springs that
+  resolve the two-pole's shortest smoothing length (:data:`SPRING_SPACING_MM`);
 * scenes: the bonded cylinder layer (``cylinder-layer``, gap law, vs the FE layer) and the ideal
   ankle on its talar and tibial cartilage (``ideal-standing`` without ligaments, gap law, the
   coupled layer as the sandwich of the two layers, vs the two-layer FE: both layers Kelvin-Voigt,
@@ -29,8 +30,8 @@ the metrics are the largest over the instants, ``per_time`` in metrics.json keep
 
 Poisson's ratio 0.3, 0.42, 0.45 on the cylinder layer under the step and the cycle; 0.42 elsewhere.
 FE: the layer P2 at :data:`FE_LAYER` (0.7 mm: M's triangles halved, two elements through the 2 mm
-layer), the cartilage ankle's two layers P2 at :data:`FE_ANKLE` (2.0 mm: one element through each
-layer on M's own triangles), the thesis's slab P1 at 1.0 mm; their own errors in space are the
+layer), the cartilage ankle's two layers P2 at :data:`FE_ANKLE` (0.7 mm: M's triangles halved, two
+elements through each layer), the thesis's slab P1 at 1.0 mm; their own errors in space are the
 ``fe-convergence`` study's (verification.campaigns.fe_convergence.VISCOELASTIC_LEVELS, every time
 point). The FE time step is the scenes' (tau/4 for
 the first tau, then coarser), whose error is that of the closed-form tests
@@ -51,10 +52,12 @@ import numpy as np
 from verification.campaign_model import THESIS_ANKLE, Analysis, Campaign, Case, Figure
 from verification.fe_comparison import ERROR_PANELS, FE_TABLE_COLUMNS, fe_comparison_case
 
-#: wall time, nothing cached: 4805 s with --jobs 1 (2026-11-28 evening, load about 2: the six cylinder FE
-#: histories 147-224 s each, the ankle's step and ramp 475 / 766 s, its two-pole EDEM on 50k springs 190-270 s
-#: a history; docs/campaigns.md)
-EXPECTED_TIME_S = 4800.0
+#: wall time, nothing cached, with --jobs 1: an estimate. Measured 4805 s on 2026-11-28 evening (load about 2: the
+#: six cylinder FE histories 147-224 s each, the ankle's step and ramp at 2.0 mm 475 / 766 s, its two-pole EDEM
+#: on 50k springs 190-270 s a history); since, the ankle's FE at 0.7 mm took 2686 s for the step (ten solves of
+#: 0.72M DOFs, 3.2 GB, load about 3) and 4028 s for the ramp (21), and its Pade beds 20-75 s a history where the
+#: two-pole took 190-270 s (docs/campaigns.md)
+EXPECTED_TIME_S = 9600.0
 
 TAU_S = 1.4
 LOAD_N = 333.0
@@ -63,31 +66,36 @@ NUS = (0.3, 0.42, 0.45)
 #: own 0.97 mm triangles the regularised peak of the narrow early patch moved by 6-11 % when they were
 #: halved (and at 2.0 mm, one element through the layer, the displacement by 5.2 % with a second): docs/campaigns.md
 FE_LAYER = {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 2}
-#: the cartilage ankle's two-layer FE: one P2 element through each layer (118k DOFs; docs/campaigns.md
-#: gives its own error from the fe-convergence levels)
-FE_ANKLE = {"mesh_size_mm": 2.0, "degree": 2}
+#: the cartilage ankle's two-layer FE: M's triangles halved, two P2 elements through each layer (0.6M DOFs a
+#: time point). On M's own triangles (2.0 mm, one element each) the talus slid 9.3 um antero-posteriorly at
+#: tau/4 under the vertical step, 0.6 um on these: 27 % of the displacement then, 12 % at tau/2 (docs/campaigns.md)
+FE_ANKLE = {"mesh_size_mm": 0.7, "degree": 2}
 #: the thesis's ankle (the time-step sweep): the FE slab
 FE_SLAB = {"mesh_size_mm": 1.0, "degree": 1}
 #: the thesis's increment (edem.viscoelastic.FrozenContactSet), named where a case uses it
 FROZEN = {"viscoelastic.contact_set": "frozen", "viscoelastic.integrator": "exact"}
-#: the coupled layer's symbol: the two-pole, which follows the bonded layer's compliance up to kh = 12 where the
-#: Pade levels off (too soft at the contact edge: the cylinder's early area 24-28 % too large on converged springs)
-COUPLED = {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "two-pole"}
+#: the coupled layer's symbol per model, the goal's bed (edem.thin_layer): on the cylinder layer the two-pole, which
+#: follows the bonded layer's compliance up to kh = 12 where the Pade levels off (too soft at the contact edge: the
+#: cylinder's early area 24-28 % too large on converged springs); on the cartilage ankle the Pade, the ankles'
+#: default (docs/campaigns.md#ankles-the-cartilage-ankles-against-their-fe-twin), whose edge there is within 7 % in
+#: area at tau/4 where the two-pole's edge spike doubles the field error; the thesis's ankle keeps the scene's default
+SYMBOL = {"layer": "two-pole", "ankle": "pade"}
+COUPLED = {"cartilage.coupling": "thin-layer"}
 BEDS = {
     "springs": ("edem", {"cartilage.coupling": "none"}, "viscoelastic EDEM, independent springs, creeping contact set"),
-    "coupled": ("edem", COUPLED, "viscoelastic EDEM, coupled thin layer (two-pole), creeping contact set"),
+    "coupled": ("edem", COUPLED, "viscoelastic EDEM, coupled thin layer, creeping contact set"),
     "springs-frozen": ("edem", {"cartilage.coupling": "none", **FROZEN}, "viscoelastic EDEM, independent springs, the thesis's frozen contact set"),
-    "coupled-frozen": ("edem", {**COUPLED, **FROZEN}, "viscoelastic EDEM, coupled thin layer (two-pole), the thesis's frozen contact set"),
-    "dem": ("dem", COUPLED, "DEM (static), coupled thin layer (two-pole)"),
+    "coupled-frozen": ("edem", {**COUPLED, **FROZEN}, "viscoelastic EDEM, coupled thin layer, the thesis's frozen contact set"),
+    "dem": ("dem", COUPLED, "DEM (static), coupled thin layer"),
 }
-#: on the goal's steps only: the coupled layer with the default Pade symbol beside the two-pole, on the same springs,
-#: to tell the symbol's share of the error (docs/campaigns.md)
-PADE = ("coupled-pade", ("edem", {"cartilage.coupling": "thin-layer", "cartilage.thin_layer_symbol": "pade"},
-                         "viscoelastic EDEM, coupled thin layer with the Pade symbol, creeping contact set"))
+#: on the goal's steps only: the coupled layer with the other symbol beside the goal's (``*-coupled-pade-*`` on the
+#: cylinder, ``*-coupled-two-pole-*`` on the ankle), on the same springs: the symbol's share of the error
+OTHER_SYMBOL = {"two-pole": "pade", "pade": "two-pole"}
 #: the springs' spacing per model (``geometry.spring_spacing_mm``, every discrete bed; the FE never sees it): the
 #: two-pole's shortest smoothing length (sqrt(b) h, 0.52 mm on the 2 mm layer, 0.34 mm on the ankle's thinner layer)
 #: must be resolved, or its pressure zigzags at the contact edge (the cylinder's peak 25-27 % off on M's own 0.97 mm
-#: springs, within 7 % on 0.49 mm; 0.24 and 0.12 mm move every metric by under 1.5 %: docs/campaigns.md). The
+#: springs, within 7 % on 0.49 mm; 0.24 and 0.12 mm move every metric by under 1.5 %), and on the ankle the Pade's
+#: displacement at tau/4 is 15 % off on M's own 0.9 mm springs, 3.6 % on 0.22 mm (docs/campaigns.md). The
 #: resampling halves M's edges until none is longer: 0.5 gives the layer's 0.49 mm, 0.3 the ankle's 0.22 mm
 SPRING_SPACING_MM = {"layer": 0.5, "ankle": 0.3}
 GOAL = {"metrics": ("displacement_rel_error", "regularised_peak_pressure_rel_error", "contact_area_rel_error"),
@@ -189,14 +197,19 @@ def _cases() -> list[Case]:
     for model, history, nu, (times, forces) in _points():
         scene, fe_side, fe, what = MODELS[model]
         dt = min(np.diff(times))
-        beds = {**BEDS, **(dict([PADE]) if history == "step" and model in GOAL_MODELS else {})}
+        symbol = SYMBOL.get(model)
+        beds = dict(BEDS)
+        if symbol is not None and history == "step" and model in GOAL_MODELS:
+            beds[f"coupled-{OTHER_SYMBOL[symbol]}"] = ("edem", {**COUPLED, "cartilage.thin_layer_symbol": OTHER_SYMBOL[symbol]},
+                                                       "viscoelastic EDEM, coupled thin layer, creeping contact set")
         for bed, (method, extra, bed_what) in beds.items():
             if history.startswith("step-dt") and bed == "dem":
                 continue  # the time step sweep: the viscoelastic beds only
-            if model not in SPRING_SPACING_MM:
-                # the thesis's ankle keeps M's own springs, which would not resolve the two-pole: the default symbol
-                extra = {k: v for k, v in extra.items() if k != "cartilage.thin_layer_symbol"}
-                bed_what = bed_what.replace(" (two-pole)", "")
+            if extra.get("cartilage.coupling") == "thin-layer":
+                named = extra.get("cartilage.thin_layer_symbol", symbol)
+                if named is not None:
+                    extra = {**extra, "cartilage.thin_layer_symbol": named}
+                    bed_what = bed_what.replace("coupled thin layer", f"coupled thin layer ({named})")
             cases.append(fe_comparison_case(
                 case_name(model, history, bed, nu),
                 f"{what}; {bed_what}; {history} ({len(times)} time points, smallest dt {dt:g} s, tau {TAU_S:g} s), nu {nu:g}. Measured, not judged",
