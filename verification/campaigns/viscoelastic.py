@@ -66,7 +66,7 @@ NUS = (0.3, 0.42, 0.45)
 #: own 0.97 mm triangles the regularised peak of the narrow early patch moved by 6-11 % when they were
 #: halved (and at 2.0 mm, one element through the layer, the displacement by 5.2 % with a second): docs/campaigns.md
 FE_LAYER = {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 2}
-#: the cartilage ankle's two-layer FE: M's triangles halved, two P2 elements through each layer (0.6M DOFs a
+#: the cartilage ankle's two-layer FE: M's triangles halved, two P2 elements through each layer (0.72M DOFs a
 #: time point). On M's own triangles (2.0 mm, one element each) the talus slid 9.3 um antero-posteriorly at
 #: tau/4 under the vertical step, 0.6 um on these: 27 % of the displacement then, 12 % at tau/2 (docs/campaigns.md)
 FE_ANKLE = {"mesh_size_mm": 0.7, "degree": 2}
