@@ -271,7 +271,7 @@ def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: S
         return estimate(fe_model.bodies * cells, fe_model.bodies * vertices, settings.element, linear_solver=settings.linear_solver)
 
     size = size_at(settings.mesh_size_mm)
-    check_fits(size, settings.mesh_size_mm, file=scene.source, key="mesh_size_mm (--mesh-size, or [fe] in the scene)", size_at=size_at)
+    check_fits(size, settings.mesh_size_mm, size_at, file=scene.source, key="mesh_size_mm (--mesh-size, or [fe] in the scene)")
     return size
 
 

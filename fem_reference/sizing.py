@@ -184,34 +184,24 @@ def peak_memory_bytes() -> float | None:
     return None
 
 
-def check_fits(size: FESize, mesh_size_mm: float, *, file: str | None, key: str, available_bytes: float | None = None,
-               size_at: Callable[[float], FESize] | None = None) -> None:
+def check_fits(size: FESize, mesh_size_mm: float, size_at: Callable[[float], FESize], *, file: str | None, key: str,
+               available_bytes: float | None = None) -> None:
     """Refuse (InputError, exit 2) a solve whose memory estimate times :data:`SAFETY` exceeds
-    what is available, naming the mesh size, the estimate and the available memory, and a mesh
-    size that fits: the finest whose estimate ``size_at(mesh_size_mm)`` fits when given (the
-    mesher's discrete rules, :func:`solid_size`), else :func:`suggest_size`'s scaling."""
+    what is available, naming the mesh size, the estimate, the available memory and a mesh size
+    that fits: the finest whose estimate ``size_at(mesh_size_mm)`` (the mesher's discrete rules,
+    :func:`solid_size`) does (:func:`fitting_size`)."""
     available = available_memory_bytes() if available_bytes is None else available_bytes
     need = SAFETY * size.memory_bytes
     if need > available:
-        fitting = suggest_size(size, mesh_size_mm, available) if size_at is None else fitting_size(size_at, mesh_size_mm, available)
         raise InputError(
             f"mesh size {mesh_size_mm:g} mm gives about {size.cells:,} cells and {size.dofs:,} DOFs; the "
             f"{size.solver} solve needs an estimated {size.memory_bytes / 1e9:.3g} GB ({need / 1e9:.3g} GB with "
             f"a x{SAFETY:g} margin) but {available / 1e9:.3g} GB are available",
             file=file,
             key=key,
-            expected=f"a mesh size whose estimate fits (e.g. {_three_digits_up(fitting):g} mm or larger)"
+            expected=f"a mesh size whose estimate fits (e.g. {_three_digits_up(fitting_size(size_at, mesh_size_mm, available)):g} mm or larger)"
                      + (", or the Krylov solver (linear_solver auto or iterative)" if size.solver == "direct" else ""),
         )
-
-
-def suggest_size(size: FESize, mesh_size_mm: float, available_bytes: float) -> float:
-    """A mesh size whose estimate would fit: DOFs scale like size^-3 (surface refinement and
-    layers both follow the size), memory like DOFs^(4/3) (direct) or DOFs (iterative)."""
-    room = max(available_bytes / SAFETY - BASE_BYTES, 1.0)
-    excess = max((size.memory_bytes - BASE_BYTES) / room, 1.0)
-    power = 1.0 if size.solver == "iterative" else 4.0 / 3.0
-    return float(mesh_size_mm * excess ** (1.0 / (3.0 * power)))
 
 
 def _three_digits_up(value: float) -> float:
@@ -230,7 +220,7 @@ def fitting_size(size_at: Callable[[float], FESize], mesh_size_mm: float, availa
     fits in ``available_bytes`` with the :data:`SAFETY` margin. The mesher refines in factors of 2
     and sets the layers by ceil(thickness / size), or keeps a given number: a size just above a
     refused one often builds the same mesh (with the layers given, anything short of the next
-    halving does), which a continuous scaling would suggest. The last candidate when none fits."""
+    halving does). The last candidate when none fits."""
     candidate = float(mesh_size_mm)
     for _ in range(_FIT_STEPS):
         candidate *= _FIT_STEP

@@ -71,14 +71,14 @@ def test_dofs_per_element_and_the_direct_solver_below_its_threshold_while_its_me
 def test_a_solve_that_does_not_fit_is_refused_naming_size_and_memory():
     size = FESize(cells=10**9, vertices=2 * 10**8, dofs=3 * 10**9, solver="iterative", memory_bytes=4e11)
     with pytest.raises(InputError) as err:
-        check_fits(size, 0.01, file="scene.toml", key="mesh_size_mm", available_bytes=8e9)
+        check_fits(size, 0.01, lambda h: size, file="scene.toml", key="mesh_size_mm", available_bytes=8e9)
     text = str(err.value)
     assert "0.01 mm" in text and "400 GB" in text and "8 GB are available" in text and "scene.toml" in text
-    check_fits(size, 0.01, file=None, key="k", available_bytes=SAFETY * 4e11 + 1)  # fits: no error
+    check_fits(size, 0.01, lambda h: size, file=None, key="k", available_bytes=SAFETY * 4e11 + 1)  # fits: no error
     assert "Krylov" not in text  # already the iterative solver
     forced_lu = FESize(cells=10**6, vertices=2 * 10**5, dofs=3 * 10**6, solver="direct", memory_bytes=4e11)
     with pytest.raises(InputError, match="Krylov solver"):  # a forced LU that does not fit names the way out
-        check_fits(forced_lu, 0.1, file="scene.toml", key="linear_solver", available_bytes=8e9)
+        check_fits(forced_lu, 0.1, lambda h: forced_lu, file="scene.toml", key="linear_solver", available_bytes=8e9)
 
 
 def test_edem_fe_with_a_tiny_mesh_size_exits_2_before_meshing(capsys):
@@ -101,7 +101,7 @@ def test_the_suggested_mesh_size_builds_a_mesh_that_fits():
     refused = size_at(0.35)  # M's triangles halved twice
     available = SAFETY * refused.memory_bytes * 0.9
     with pytest.raises(InputError) as err:
-        check_fits(refused, 0.35, file="scene.toml", key="mesh_size_mm", available_bytes=available, size_at=size_at)
+        check_fits(refused, 0.35, size_at, file="scene.toml", key="mesh_size_mm", available_bytes=available)
     suggested = float(re.search(r"e\.g\. ([0-9.]+) mm", str(err.value)).group(1))
     assert SAFETY * size_at(suggested).memory_bytes <= available  # the suggestion fits ...
     assert SAFETY * size_at(suggested / 1.03).memory_bytes > available  # ... and is the finest that does, to the step and rounding
