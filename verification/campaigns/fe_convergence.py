@@ -55,8 +55,9 @@ PRIORITY = ("ideal-cartilage-nu0.42", "subject-cartilage-nu0.42", "slab-F333-nu0
 #: The stored study (2026-11-28, 62 points): the 20 points estimated that day by the Krylov path took 5.1 h of wall
 #: time, one solve at a time at load 2-5 (the two-layer cylinder's eight 0.35 mm solves 5-9 min and 7-10 GB each, so
 #: never two at once); the 42 older points 10.6 h by LU at load 2-14, which the Krylov path takes in about a half to a
-#: third of that at their sizes: about 9 h, two jobs gaining little where memory allows only one.
-EXPECTED_TIME_S = 32400.0
+#: third of that at their sizes: about 9 h, two jobs gaining little where memory allows only one. The cylinder layer's
+#: six Kelvin-Voigt histories on M's triangles quartered (2026-11-28 night): 847-1871 s each, 2.6 GB, 2-4 jobs on 2 cores.
+EXPECTED_TIME_S = 37400.0
 #: what the study found on the subject-like ankle (issue 24, item 3), measured 2026-11-26 (docs/campaigns.md)
 FINDINGS = (
     "Subject-like ankle (issue 24, item 3): the FE's raw peak at 1.0 mm is not converged: refining in plane lowers it 22 % (1.913 -> 1.499 MPa; "
@@ -98,16 +99,18 @@ TWO_LAYER_CYLINDER_LEVELS = ({"mesh_size_mm": 1.0, "degree": 2, "layers_through_
 
 
 #: the levels of a Kelvin-Voigt layer's history (the viscoelastic campaign's goal), every time point,
-#: by FE side. The cylinder layer (fe-layer, 2 mm): M's own 0.97 mm triangles with 2 P2 elements
-#: through it, the triangles halved (0.7 mm) with 2, and with 4; the campaign uses the middle one
-#: (halving the triangles moved the regularised peak by 6-11 % in the first tau, refining through the
-#: thickness by 1-2 %: docs/campaigns.md). The cartilage ankle (fe-two-layer): the elastic ankles' levels
+#: by FE side. The cylinder layer (fe-layer, 2 mm): M's own 0.97 mm triangles, halved (0.7 mm) and
+#: quartered (0.35 mm), each with 2 P2 elements through it (53k / 210k / 832k DOFs): a uniform
+#: in-plane refinement, what moves the early creep (the regularised peak at tau/2 by 11-13 % per
+#: halving, order about 1: the patch's edge advancing into the layer; 4 elements through it instead
+#: of 2 moved it by 1-1.5 %, not in these errors: docs/campaigns.md); the campaign uses the finest.
+#: The cartilage ankle (fe-two-layer): the elastic ankles' levels
 #: (:data:`LEVELS_MM`: M's own triangles with one and two elements through each layer, then the triangles
 #: halved), the campaign on the finest: on M's own triangles the talus slid 9.3 um antero-posteriorly at
 #: tau/4 under the vertical step (0.6 um on the triangles halved), 27 % of its displacement
 VISCOELASTIC_LEVELS = {
-    "fe-layer": ({"mesh_size_mm": 1.0, "degree": 2}, {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 2},
-                 {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 4}),
+    "fe-layer": ({"mesh_size_mm": 1.0, "degree": 2, "layers_through_thickness": 2}, {"mesh_size_mm": 0.7, "degree": 2, "layers_through_thickness": 2},
+                 {"mesh_size_mm": 0.35, "degree": 2, "layers_through_thickness": 2}),
     "fe-two-layer": tuple({"mesh_size_mm": size, "degree": 2} for size in LEVELS_MM),
 }
 
