@@ -80,8 +80,9 @@ FROZEN = {"viscoelastic.contact_set": "frozen", "viscoelastic.integrator": "exac
 #: the coupled layer's symbol per model, the goal's bed (edem.thin_layer): on the cylinder layer the two-pole, which
 #: follows the bonded layer's compliance up to kh = 12 where the Pade levels off (too soft at the contact edge: the
 #: cylinder's early area 24-28 % too large on converged springs); on the cartilage ankle the Pade, the ankles'
-#: default (docs/campaigns.md#ankles-the-cartilage-ankles-against-their-fe-twin), whose edge there is within 7 % in
-#: area at tau/4 where the two-pole's edge spike doubles the field error; the thesis's ankle keeps the scene's default
+#: default (docs/campaigns.md#ankles-the-cartilage-ankles-against-their-fe-twin), whose field error there is 0.5-0.7x
+#: the two-pole's (against the 0.7 and the 0.35 mm FE) while its area at the ramp's first instant is 10 % large (the
+#: two-pole's within 2 %); the thesis's ankle keeps the scene's default
 SYMBOL = {"layer": "two-pole", "ankle": "pade"}
 COUPLED = {"cartilage.coupling": "thin-layer"}
 BEDS = {
@@ -94,7 +95,7 @@ BEDS = {
 #: the coupled layer with the other symbol beside the goal's (``*-coupled-pade-*`` on the cylinder's steps,
 #: ``*-coupled-two-pole-*`` on the ankle's step and ramp), on the same springs: the symbol's share of the error
 OTHER_SYMBOL = {"two-pole": "pade", "pade": "two-pole"}
-#: the histories that carry the other symbol, per model (the cylinder's cycle repeats its step's first 5 tau)
+#: the histories that carry the other symbol, per model (the cylinder's cycle repeats its step's first 2 tau)
 OTHER_SYMBOL_HISTORIES = {"layer": ("step",), "ankle": ("step", "ramp")}
 #: the springs' spacing per model (``geometry.spring_spacing_mm``, every discrete bed; the FE never sees it): the
 #: two-pole's shortest smoothing length (sqrt(b) h, 0.52 mm on the 2 mm layer, 0.34 mm on the ankle's thinner layer)
