@@ -206,8 +206,7 @@ def _cases() -> list[Case]:
         symbol = SYMBOL.get(model)
         beds = dict(BEDS)
         if symbol is not None and history in OTHER_SYMBOL_HISTORIES.get(model, ()):
-            beds[f"coupled-{OTHER_SYMBOL[symbol]}"] = ("edem", {**COUPLED, "cartilage.thin_layer_symbol": OTHER_SYMBOL[symbol]},
-                                                       "viscoelastic EDEM, coupled thin layer, creeping contact set")
+            beds[f"coupled-{OTHER_SYMBOL[symbol]}"] = ("edem", {**COUPLED, "cartilage.thin_layer_symbol": OTHER_SYMBOL[symbol]}, BEDS["coupled"][2])
         for bed, (method, extra, bed_what) in beds.items():
             if history.startswith("step-dt") and bed == "dem":
                 continue  # the time step sweep: the viscoelastic beds only
