@@ -48,6 +48,7 @@ MANIFEST_FORMAT = 1
 _HOST = hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
 #: Bytes the temporary sibling's name adds to the result's name (".", ".tmp-", host, pid, 16 hex).
 _SIBLING_EXTRA = 48
+_PROBE_PREFIX = ".probe-"
 _CHUNK = 1 << 20
 #: threads hashing and flushing a result's files (the waits overlap; the hashing releases the GIL)
 _SYNC_THREADS = 16
@@ -117,10 +118,13 @@ def check_out_dir(out: str | Path, *, overwrite: bool = False, reuse_if: tuple[s
     if len(out.name.encode()) + _SIBLING_EXTRA > limit:
         raise InputError(f"the name has {len(out.name.encode())} bytes", file=out, key="--out",
                          expected=f"at most {limit - _SIBLING_EXTRA} bytes (room for the temporary sibling written first)")
-    if out.is_dir() and reuse and any(out.iterdir()) and not any(os.path.lexists(out / name) for name in reuse_if):
+    # another command's write probe (created and removed within microseconds) does not make the
+    # directory "not empty": two campaigns started together would otherwise refuse for it
+    entries = [p for p in out.iterdir() if not p.name.startswith(_PROBE_PREFIX)] if out.is_dir() else []
+    if entries and reuse and not any(os.path.lexists(out / name) for name in reuse_if):
         raise InputError(f"the directory exists and holds no '{reuse_if[0]}' of an earlier run; it is never written into",
                          file=out, key="--out", expected="a new or empty directory, or one this command wrote")
-    if out.is_dir() and not reuse and any(out.iterdir()):
+    if entries and not reuse:
         if not is_result_dir(out):
             raise InputError("the directory exists and is not a result directory (no manifest.json); it is never replaced",
                              file=out, key="--out", expected="a new or empty directory")
@@ -129,11 +133,11 @@ def check_out_dir(out: str | Path, *, overwrite: bool = False, reuse_if: tuple[s
                              expected="--overwrite to replace it, or another --out")
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        probe = tempfile.mkdtemp(prefix=".probe-", dir=out.parent)
+        probe = tempfile.mkdtemp(prefix=_PROBE_PREFIX, dir=out.parent)
         os.rmdir(probe)
         if reuse:
             out.mkdir(exist_ok=True)
-            probe = tempfile.mkdtemp(prefix=".probe-", dir=out)
+            probe = tempfile.mkdtemp(prefix=_PROBE_PREFIX, dir=out)
             os.rmdir(probe)
     except OSError as exc:
         raise InputError(f"cannot write here: {exc.strerror or exc}", file=out, key="--out",

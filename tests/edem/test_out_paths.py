@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 import edem.solver
+from geometries.errors import InputError
 from edem.cli import main
 from verification.campaigns import SCENES_DIR
 
@@ -80,6 +81,19 @@ def test_verify_never_writes_into_a_directory_it_did_not_make(tmp_path, capsys, 
     out = bad_out(tmp_path, "non-result directory")
     assert main(["verify", "quick", "--out", str(out)]) == 2
     assert "holds no 'cases'" in capsys.readouterr().err and sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+
+
+def test_another_commands_write_probe_does_not_make_a_directory_foreign(tmp_path):
+    """Two campaigns started together: the first one's probe (a hidden directory it makes and
+    removes within microseconds) is all the second may see in OUT; it is still OUT's first use."""
+    from edem.atomic_dirs import check_out_dir
+
+    out = tmp_path / "out"
+    (out / ".probe-abc123").mkdir(parents=True)
+    assert check_out_dir(out, reuse_if=("cases", ".lock")) == out
+    (out / "notes.txt").write_text("x")
+    with pytest.raises(InputError, match="holds no 'cases'"):
+        check_out_dir(out, reuse_if=("cases", ".lock"))
 
 
 @pytest.fixture
