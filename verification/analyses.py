@@ -845,6 +845,15 @@ def _field_estimate(level_rows: list[dict[str, Any]], dofs: list[float], layers:
     return ests[-1], errors, record, extra_error
 
 
+def _error_scale(est: Any) -> float:
+    """What a Richardson estimate's relative errors are relative to
+    (verification.fe_convergence.richardson): |f0|, or the finest value's magnitude outside the
+    asymptotic range (the largest value's where f0 is 0)."""
+    if est.asymptotic:
+        return abs(est.extrapolated) if est.extrapolated else max(abs(v) for v in est.values)
+    return abs(est.values[-1])
+
+
 def _level_estimates(dofs: list[float], values: list[float], layers: list[int | None]):
     """One quantity on a point's meshes (verification.fe_convergence.level_estimates): the finest
     three's estimate, each mesh's error and the quantity's record (:func:`_levels_record`)."""
@@ -901,6 +910,7 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
     quantity and load, and each mesh's error is the largest over them (as a comparison's error
     is its largest over the time points)."""
     from verification.fe_convergence import QUANTITIES, fe_key
+    from verification.metrics import unloading_branch
 
     out_rows, entries, points, notes = [], {}, [], []
     for point in analysis.settings["points"]:
@@ -938,19 +948,31 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
                 extra_errors[error_metric] = max(extra_error, extra_errors.get(error_metric, 0.0))
 
         repeated = several and len({at[0]["load_n"] for at in by_time}) < len(by_time)  # a history: its time points by time
+        # On a history's unloading branch the comparisons take their errors against the FE's peak in
+        # the cycle (verification.metrics.against_cycle_peak); the FE's own error there is taken the
+        # same way, so that the band and the reference's error are in one measure. (The pressure
+        # field's stays against that instant's field: larger, on the safe side.)
+        down = unloading_branch([at[0]["load_n"] for at in by_time]) if repeated else np.zeros(len(by_time), bool)
+        peak_so_far: dict[str, float] = {}
         for k, at in enumerate(by_time):
             label = (f" at t = {_fmt(at[0]['time_s'])} s ({_fmt(at[0]['load_n'])} N)" if repeated else f" at {_fmt(at[0]['load_n'])} N") if several else ""
             for quantity, (value_metric, error_metric) in QUANTITIES.items():
                 values = [float(m[value_metric]) for m in at[:len(level_rows)]]
                 est, errors, record["quantities"][quantity + label] = _level_estimates(dofs, values, layers)
-                cells = [point["point"], quantity + label, ", ".join(_fmt(v, 4) for v in values), _fmt(est.order, 3),
-                         _fmt(est.extrapolated, 4) if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in errors)]
+                scale = _error_scale(est)
+                peak = peak_so_far[quantity] = max(peak_so_far.get(quantity, 0.0), scale)
+                to_peak = scale / peak if down[k] and peak > 0.0 else 1.0
+                if down[k]:
+                    errors = [e * to_peak for e in errors]
+                    record["quantities"][quantity + label].update(relative_to="cycle peak", cycle_peak_errors=errors)
+                cells = [point["point"], quantity + label + (" (against the cycle's peak)" if down[k] else ""), ", ".join(_fmt(v, 4) for v in values),
+                         _fmt(est.order, 3), _fmt(est.extrapolated, 4) if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in errors)]
                 extra_error = None
                 if extra_ok:
                     v = float(at[-1][value_metric])
                     ref = est.extrapolated if est.asymptotic else values[-1]
-                    spread = 0.0 if est.asymptotic else errors[-1]
-                    extra_error = abs(v - ref) / abs(ref) + spread
+                    spread = 0.0 if est.asymptotic else errors[-1] / to_peak
+                    extra_error = (abs(v - ref) / abs(ref) + spread) * to_peak
                     record["quantities"][quantity + label].update(p1_value=v, p1_error=extra_error)
                     cells.append(f"{_fmt(v, 4)} ({_size_pct(extra_error)})")
                 else:
@@ -983,7 +1005,9 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
                  "f(h) = f0 + C h^p through three values; error of each mesh |f_i - f0| / |f0|. Not asymptotic (flagged): "
                  "the differences change sign or the order is outside 0.5-4; each mesh's error is then the largest difference to the other meshes. A point "
                  "of four meshes: each mesh's error from the finest three that contain it (the coarsest from the first three), the order and extrapolation "
-                 "shown from the finest three. A point solved at several loads (its time points) is estimated at each; its stored error is the largest over them.")
+                 "shown from the finest three. A point solved at several loads (its time points) is estimated at each; its stored error is the largest over them. "
+                 "On a history's unloading branch a quantity's errors are taken against its largest value in the cycle so far, as the comparisons' are "
+                 "(verification.metrics.against_cycle_peak); the pressure field's against that instant's field.")
     notes.append("P1 column: quick's P1 reference at 1.0 mm and its error against the extrapolation (against the finest mesh plus that mesh's error when not asymptotic).")
     return {
         "columns": ["point", "quantity", "values (coarsest first)", "order", "extrapolated", "error of each mesh", "P1 1.0 mm (error)", "DOFs", "time / peak memory"],

@@ -273,6 +273,36 @@ def test_field_errors_off_a_line_are_the_largest_differences_seen():
     assert est.errors == pytest.approx((0.06, 0.06, 0.05))
 
 
+def test_a_historys_unloading_branch_takes_the_fes_own_error_against_the_cycles_peak(monkeypatch):
+    """A Kelvin-Voigt cycle (333 N held, then 33.3 N held) whose quantities are f0(t) + A h^2 on
+    three meshes (h ~ N^(-1/3)) with f0 ten times smaller after the unloading: against each
+    instant's own value the unloaded instants' error would be ten times the loaded ones'; taken
+    against the cycle's peak, as the comparisons take theirs (verification.metrics.against_cycle_peak),
+    each mesh's stored error is A h^2 / f0_peak at every instant. Tolerance 1e-9 relative: round-off."""
+    import verification.analyses as analyses
+    from verification.campaign_model import Analysis
+    from verification.fe_convergence import FE_VALUE_METRICS
+    from verification.status import OK
+
+    dofs, a = (1e3, 8e3, 64e3), 2.0
+    f0 = (10.0, 10.0, 1.0, 1.0)
+    loads = (333.0, 333.0, 33.3, 33.3)
+    h = [n ** (-1.0 / 3.0) for n in dofs]
+    names = ["cycle-h2", "cycle-h1", "cycle-h0.7"]
+    rows = {n: {"sides": [{"side": "fe-layer", "status": OK}], "options": {"mesh_size_mm": s, "degree": 2},
+                "metrics": {"fe_n_dofs": d, "fe_wall_time_s": 1.0, "fe_peak_memory_mb": 1.0}} for n, s, d in zip(names, (2.0, 1.0, 0.7), dofs)}
+    by_time = [[{**{m: f + a * hi * hi for m in FE_VALUE_METRICS}, "load_n": load, "time_s": float(k)} for hi in h]
+               for k, (f, load) in enumerate(zip(f0, loads))]
+    monkeypatch.setattr(analyses, "_values_by_time", lambda level_rows: by_time)
+    point = {"point": "cycle", "levels": names, "extra": None, "scene": "cylinder-layer", "side": "fe-layer", "overrides": {}}
+    result = analyses.fe_convergence_analysis(Analysis("c", "c", "fe-convergence", tuple(rows), {"points": [point], "findings": []}), rows)
+    for name, hi in zip(names, h):
+        entry = result["values"]["entries"][fe_key("cylinder-layer", "fe-layer", {}, rows[name]["options"])]
+        assert entry["errors"]["displacement_rel_error"] == pytest.approx(a * hi * hi / max(f0), rel=1e-9)
+    unloaded = result["values"]["points"][0]["quantities"]["displacement at t = 2 s (33.3 N)"]
+    assert unloaded["relative_to"] == "cycle peak" and unloaded["errors"][2] == pytest.approx(a * h[2] ** 2 / f0[2], rel=1e-9)
+
+
 def test_a_point_whose_meshes_are_not_distinct_is_reported_without_an_estimate_and_the_others_still_are():
     """A 1 mm layer gets one element through it at 2.0 and at 1.0 mm: the same mesh twice. That
     point says so (no three-level estimate); a properly refined point beside it is estimated."""
