@@ -962,21 +962,19 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
                 scale = _error_scale(est)
                 peak = peak_so_far[quantity] = max(peak_so_far.get(quantity, 0.0), scale)
                 to_peak = scale / peak if down[k] and peak > 0.0 else 1.0
-                if down[k]:
-                    errors = [e * to_peak for e in errors]
-                    record["quantities"][quantity + label].update(relative_to="cycle peak", cycle_peak_errors=errors)
-                cells = [point["point"], quantity + label + (" (against the cycle's peak)" if down[k] else ""), ", ".join(_fmt(v, 4) for v in values),
-                         _fmt(est.order, 3), _fmt(est.extrapolated, 4) if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in errors)]
                 extra_error = None
                 if extra_ok:
                     v = float(at[-1][value_metric])
                     ref = est.extrapolated if est.asymptotic else values[-1]
-                    spread = 0.0 if est.asymptotic else errors[-1] / to_peak
+                    spread = 0.0 if est.asymptotic else errors[-1]
                     extra_error = (abs(v - ref) / abs(ref) + spread) * to_peak
                     record["quantities"][quantity + label].update(p1_value=v, p1_error=extra_error)
-                    cells.append(f"{_fmt(v, 4)} ({_size_pct(extra_error)})")
-                else:
-                    cells.append("–")
+                errors = [e * to_peak for e in errors]
+                if down[k]:
+                    record["quantities"][quantity + label].update(relative_to="cycle peak", cycle_peak_errors=errors)
+                cells = [point["point"], quantity + label + (" (against the cycle's peak)" if down[k] else ""), ", ".join(_fmt(v, 4) for v in values),
+                         _fmt(est.order, 3), _fmt(est.extrapolated, 4) if est.asymptotic else "not asymptotic", ", ".join(_size_pct(e) for e in errors),
+                         "–" if extra_error is None else f"{_fmt(float(at[-1][value_metric]), 4)} ({_size_pct(extra_error)})"]
                 keep(error_metric, errors, extra_error)
                 out_rows.append({"cells": cells + cost, "flag": not est.asymptotic})
             fields = _field_estimate(level_rows, dofs, layers, extra if extra_ok else None, k if several else -1)
