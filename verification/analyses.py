@@ -908,7 +908,9 @@ def fe_convergence_analysis(analysis, rows: dict[str, dict[str, Any]]) -> dict[s
     it (verification.fe_convergence.level_estimates), its order and extrapolation from the finest
     three. A point whose FE run has several time points (loads) is estimated at each, one row per
     quantity and load, and each mesh's error is the largest over them (as a comparison's error
-    is its largest over the time points)."""
+    is its largest over the time points); on a history's unloading branch each quantity's errors
+    are taken against its largest value in the cycle so far, as the comparisons' are
+    (verification.metrics.against_cycle_peak)."""
     from verification.fe_convergence import QUANTITIES, fe_key
     from verification.metrics import unloading_branch
 
