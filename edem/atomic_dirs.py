@@ -48,6 +48,7 @@ MANIFEST_FORMAT = 1
 _HOST = hashlib.sha256(socket.gethostname().encode()).hexdigest()[:8]
 #: Bytes the temporary sibling's name adds to the result's name (".", ".tmp-", host, pid, 16 hex).
 _SIBLING_EXTRA = 48
+#: Name prefix of the write probes check_out_dir makes and removes at once (never content of a directory).
 _PROBE_PREFIX = ".probe-"
 _CHUNK = 1 << 20
 #: threads hashing and flushing a result's files (the waits overlap; the hashing releases the GIL)

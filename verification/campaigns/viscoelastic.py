@@ -67,7 +67,8 @@ NUS = (0.3, 0.42, 0.45)
 #: the cylinder layer's FE: M's triangles quartered (0.24 mm) with two P2 elements through the 2 mm layer (832k
 #: DOFs). The regularised peak at tau/2, where the patch's edge advances into the creeping layer, moved by 11-13 %
 #: when M's own 0.97 mm triangles were halved and by 5-6 % when halved again (order about 1): on the halved
-#: triangles its own error was 10 %, as large as the goal; on these 5 % (docs/campaigns.md)
+#: triangles its own error was 10 %, as large as the goal; on these 4.7-6.6 % by the three levels, 3.4-4.4 % by a
+#: fourth, once more halved, at the steps' first instants (docs/campaigns.md, "A fourth level at tau/2")
 FE_LAYER = {"mesh_size_mm": 0.35, "degree": 2, "layers_through_thickness": 2}
 #: the cartilage ankle's two-layer FE: M's triangles halved, two P2 elements through each layer (0.72M DOFs a
 #: time point). On M's own triangles (2.0 mm, one element each) the talus slid 9.3 um antero-posteriorly at
