@@ -61,7 +61,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geometries.errors import SolverError
+from geometries.errors import InputError, SolverError
 from edem.laws import LinearElements
 from edem.mechanics import DOF_NAMES, ShearTerms, UnilateralSolution, _regular_solve, singular_stiffness_error, unrestrained_dofs
 from edem.thin_layer import LayerCompliance, SurfaceMesh, layer_compliance
@@ -407,6 +407,32 @@ def thin_layer_viscoelastic_increment(
 def coupled_layer_mesh(scene) -> SurfaceMesh:
     """The intrinsic surface of the scene's springs (one per non-degenerate mobile triangle)."""
     return SurfaceMesh.from_surface(scene.mobile.vertices_mm, scene.mobile.triangles[scene.spring_triangle])
+
+
+def overlap_and_deflection_mm(scene, geometry, force_n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What the layer must deflect and what it does deflect under given forces, at every one of M's springs.
+
+    ``geometry``: M's springs at a pose (:func:`edem.springs.spring_geometry`); ``force_n`` (n,)
+    N: a normal force on each spring (a pressure times the spring's area). Returns the overlap
+    d = t - h (n,) mm of the undeformed articular surfaces along each spring (-inf where the ray
+    meets no F), and the coupled layer's deflection w = C f (n,) mm, C built over the whole
+    spring-bearing surface with the scene's symbol, stack and thickness as :meth:`CoupledStep.build`
+    builds it. Where the bodies touch, w = d: so a reference's contact pressure put through C and
+    set against d at the reference's pose measures the bed's compliance against the reference's
+    (``verification.bed_compliance``). Only for the gap laws (``thin_layer = "overlap"``) on the
+    coupled layer: InputError (key ``cartilage.law`` or ``cartilage.coupling``) otherwise.
+    """
+    cartilage = scene.cartilage
+    if cartilage.spring_law.thin_layer != "overlap":
+        raise InputError(f"the {cartilage.law} law has no overlap t - h for the layer to deflect", key="cartilage.law", expected='a gap law ("gap")')
+    if cartilage.coupling != "thin-layer":
+        raise InputError(f'the "{cartilage.coupling}" bed has no layer operator', key="cartilage.coupling", expected='the coupled layer ("thin-layer")')
+    n = geometry.spring_length_mm.shape[0]
+    thickness = geometry.thickness_mm if geometry.thickness_mm is not None else np.full(n, float(cartilage.thickness_mm))
+    mesh, domain = coupled_layer_mesh(scene), np.arange(n)
+    stack = sandwich_thickness_mm(thickness, geometry, cartilage, domain)
+    layer = layer_compliance(mesh, domain, stack, cartilage.youngs_modulus_mpa, cartilage.poissons_ratio, False, cartilage.layer_symbol)
+    return thickness - geometry.spring_length_mm, layer.deflection(np.asarray(force_n, float))
 
 
 def coupled_domain(mesh: SurfaceMesh, candidates: np.ndarray, band_mm: float) -> np.ndarray:

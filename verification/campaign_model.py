@@ -25,6 +25,7 @@ from typing import Any
 from edem.beds import CoupledThinLayer, IndependentSprings
 from geometries.errors import InputError
 from verification.analyses import ANALYSES
+from verification.bed_compliance import BED_COMPLIANCE_DESCRIPTIONS
 from verification.fe_convergence import FE_VALUE_DESCRIPTIONS
 from verification.metrics import COMPARISON_METRICS, COP_METRICS, SERIES_METRICS
 from verification.sides import check_side
@@ -79,6 +80,7 @@ VALUES_AT_REFERENCE_TIMES = (
 
 METRICS.update(COP_METRICS)
 METRICS.update(FE_VALUE_DESCRIPTIONS)
+METRICS.update(BED_COMPLIANCE_DESCRIPTIONS)
 
 #: the beds a case can pin with its overrides (``[cartilage] coupling``, edem.beds.BEDS). The
 #: built-in ankle scenes default to the coupled thin layer (Pade symbol); a case that compares a

@@ -74,6 +74,7 @@ from edem.resultdir import non_finite_count, read_result_dir
 from edem.scene import apply_overrides, read_scene_toml, resolve_scene_path
 from verification import sources
 from verification.analyses import format_analysis, run_analysis
+from verification.bed_compliance import BED_COMPLIANCE_METRICS, add_bed_compliance, bed_compliance_of_run
 from verification.campaign_model import Campaign, Case, validate_campaign
 from verification.campaign_safety import CampaignInterrupted, campaign_lock, init_worker, sigint_blocked, stop_children
 from verification.fe_analytic import FE_PROBLEMS, half_width_errors
@@ -308,6 +309,8 @@ def compute_metrics(case: Case, sides: list[dict[str, Any]]) -> tuple[dict[str, 
     if both and wanted & set(COMPARISON_METRICS):
         comparison = compare_result_dirs(a["result_dir"], b["result_dir"])
         metrics.update(comparison["metrics"])
+    if comparison is not None and wanted & set(BED_COMPLIANCE_METRICS):
+        metrics.update(add_bed_compliance(comparison, bed_compliance_of_run(a["result_dir"], b["result_dir"])))
     if a["status"] == OK and wanted & {"thickness_mean_mm", "thickness_sd_mm", "thickness_mean_rel_error", "thickness_faceting_ratio"}:
         metrics.update(_thickness_metrics(a["result_dir"], b["result_dir"] if both else None))
     metrics.update(_series_metrics(wanted, a, b))

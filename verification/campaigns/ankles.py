@@ -12,7 +12,9 @@ Taylor-Hood from nu 0.49: :data:`FE_ANKLES`), one FE run per ankle and nu shared
 (:func:`verification.fe_comparison.banded`) over its three loads, the FE's own error from
 ``fe-convergence``; the analysis ``goal`` gives every load apart, against the 10 % goal where the
 FE's own error is below it, and the contact area's growth from 333 to 2000 N (at least
-:data:`AREA_GROWTH` times, DEM and FE). The analysis ``lumping`` measures the lumping error on the
+:data:`AREA_GROWTH` times, DEM and FE), and beside the coupled bed's errors its deflection under
+the FE's own pressure against the FE's (:mod:`verification.bed_compliance`: the bed's operator
+without the contact solve). The analysis ``lumping`` measures the lumping error on the
 ankles: the FE of one layer of the summed thickness on the talus (``fe-lumped``) against the
 two-layer FE (the beds' run).
 
@@ -22,8 +24,10 @@ options) build these cases; :func:`case_names` lists them.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
+from verification.bed_compliance import BED_COMPLIANCE_METRICS
 from verification.campaign_model import COUPLED_BED, THESIS_BED, Analysis, Campaign, Case
 from verification.fe_comparison import FE_TABLE_COLUMNS, banded, fe_comparison_case
 
@@ -53,6 +57,9 @@ AREA_GROWTH = 1.25
 GOAL_QUANTITIES = (("displacement", "displacement_rel_error"), ("regularised peak", "regularised_peak_pressure_rel_error"),
                    ("contact area", "contact_area_rel_error"))
 REPORTED_QUANTITIES = (("pressure L2", "pressure_l2_rel_error"),)
+#: the coupled bed's deflection under the FE's own pressure against the FE's (verification.bed_compliance), beside its errors
+BED_COMPLIANCE_QUANTITIES = (("bed deflection under the FE's pressure (contact)", "bed_deflection_contact_rel_error"),
+                             ("(edge band)", "bed_deflection_edge_rel_error"))
 
 
 def load_history(loads_n: tuple[float, ...] = LOADS_N) -> dict[str, Any]:
@@ -89,12 +96,15 @@ def ankle_cases(ankles: tuple[str, ...] = tuple(ANKLES), beds: tuple[str, ...] =
             for bed in beds:
                 overrides, what = BEDS[bed]
                 element = "Taylor-Hood P2-P1" if nu >= 0.49 else "P2"
-                cases.append(banded(fe_comparison_case(
+                case = banded(fe_comparison_case(
                     ankle_case_name(ankle, bed, nu),
                     f"{where} standing on its cartilage, gap law, {what}: DEM vs the two-layer FE (both layers deformable) at "
                     f"{', '.join(f'{f:g}' for f in LOADS_N)} N (one run), nu {nu:g}, no ligaments; FE {element} at {options['mesh_size_mm']:g} mm",
                     scene, ("dem", "fe-two-layer"), overrides={**ankle_overrides(ankle, nu), **overrides}, options=options,
-                    params={"poissons_ratio": nu}, maps=(ankle == "ideal" and bed == "sandwich" and nu == 0.42))))
+                    params={"poissons_ratio": nu}, maps=(ankle == "ideal" and bed == "sandwich" and nu == 0.42)))
+                # the coupled bed's operator under the FE's own pressure (verification.bed_compliance; reported)
+                coupled = overrides.get("cartilage.coupling") == COUPLED_BED["cartilage.coupling"]
+                cases.append(dataclasses.replace(case, metrics=case.metrics + BED_COMPLIANCE_METRICS) if coupled else case)
     return cases
 
 
@@ -125,7 +135,8 @@ def campaign() -> Campaign:
     analyses = (
         Analysis("goal", f"The default bed (coupled sandwich) against the two-layer FE at each load: goal {GOAL_REL:.0%} (displacement, regularised peak, area) "
                          f"where the FE's own error is below it; contact area at {LOADS_N[-1]:g} N at least {AREA_GROWTH:g}x its area at {LOADS_N[0]:g} N",
-                 "per-load", default, {"quantities": GOAL_QUANTITIES, "reported": REPORTED_QUANTITIES, "goal": GOAL_REL, "area_growth": AREA_GROWTH}),
+                 "per-load", default, {"quantities": GOAL_QUANTITIES, "reported": REPORTED_QUANTITIES + BED_COMPLIANCE_QUANTITIES, "goal": GOAL_REL,
+                                       "area_growth": AREA_GROWTH}),
         Analysis("springs", "The independent springs against the two-layer FE at each load (beside the default bed; reported)", "per-load",
                  tuple(c.name for c in beds if c.name not in default), {"quantities": GOAL_QUANTITIES, "reported": REPORTED_QUANTITIES, "goal": None, "area_growth": AREA_GROWTH}),
         Analysis("lumping", "The lumping error on the ankles: one layer of the summed thickness on the talus (lumped FE) against the two-layer FE, "
