@@ -58,8 +58,8 @@ GOAL_QUANTITIES = (("displacement", "displacement_rel_error"), ("regularised pea
                    ("contact area", "contact_area_rel_error"))
 REPORTED_QUANTITIES = (("pressure L2", "pressure_l2_rel_error"),)
 #: the coupled bed's deflection under the FE's own pressure against the FE's (verification.bed_compliance), beside its errors
-BED_COMPLIANCE_QUANTITIES = (("bed deflection under the FE's pressure (contact)", "bed_deflection_contact_rel_error"),
-                             ("(edge band)", "bed_deflection_edge_rel_error"))
+BED_COMPLIANCE_QUANTITIES = (("bed deflection under the FE's pressure, contact", "bed_deflection_contact_rel_error"),
+                             ("bed deflection under the FE's pressure, edge band", "bed_deflection_edge_rel_error"))
 
 
 def load_history(loads_n: tuple[float, ...] = LOADS_N) -> dict[str, Any]:
