@@ -4,7 +4,10 @@ A DEM-FE comparison mixes two errors: the bed's operator (how the layers deflect
 pressure) and the contact solve that finds the pressure. This check takes the second out. At the
 reference's pose, where the reference is in contact its deformed articular surfaces touch, so the
 layers there have deflected by the overlap of the undeformed surfaces along each spring,
-d = t - h. Put the reference's own contact pressure through the bed's compliance,
+d = t - h0 + g u: the overlap at M's reference pose plus the approach of the reference's rigid
+motion u along the spring (g = (n, (c - G) x n)), linearised as the DEM's solve and the FE's
+small-sliding contact both take it (re-casting the rays at the moved pose instead reads the DEM's
+own solution on the subject-like ankle 3 % short). Put the reference's own contact pressure through the bed's compliance,
 w = C (p A) (:func:`edem.thin_layer_contact.overlap_and_deflection_mm`), and a bed exact to the
 reference gives w = d at every spring in contact. Reported per time point as the ratio of the
 integrals over the contact, int w dA / int d dA, and the same over the contact's interior and over
@@ -22,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from edem.mechanics import rotation_matrix
+from edem.mechanics import generalised_directions
 from edem.pressure_metrics import pressure_field_on_mobile
 from edem.resultdir import read_result_dir
 from edem.raycast import RayCaster
@@ -85,13 +88,13 @@ def bed_compliance(scene: Scene, reference_dir: str | Path, scene_file: str | Pa
     caster = RayCaster(scene.fixed.vertices_mm, scene.fixed.triangles)
     centroid, normal, area = scene.spring_centroid_mm, scene.spring_normal, scene.spring_area_mm2
     rows = []
+    directions = generalised_directions(centroid, normal, scene.reference_point_mm)
     for k, t in enumerate(reference.time_s):
         load_n = float(np.linalg.norm([series[f"force_{x}_n"][k] for x in "xyz"]))
         if load_n == 0.0:
             continue
-        pose = Placement(rotation_matrix([series[f"rot_{x}_rad"][k] for x in "xyz"]),
-                         np.array([series[f"disp_{x}_mm"][k] for x in "xyz"]), scene.reference_point_mm)
-        geometry = spring_geometry(centroid, normal, area, pose, caster, scene.fixed_placement(k), scene.cartilage)
+        motion = np.array([series[f"{q}_{x}_{unit}"][k] for q, unit in (("disp", "mm"), ("rot", "rad")) for x in "xyz"])
+        geometry = spring_geometry(centroid, normal, area, Placement.identity(scene.reference_point_mm), caster, scene.fixed_placement(k), scene.cartilage)
         try:
             points, triangles, pressure, at_points = pressure_field_on_mobile(reference.frame(frame_index(reference, k)))
         except ValueError:
@@ -108,6 +111,7 @@ def bed_compliance(scene: Scene, reference_dir: str | Path, scene_file: str | Pa
             overlap, deflection = overlap_and_deflection_mm(scene, geometry, pressure_mpa * area)
         except InputError as exc:
             raise InputError(exc.problem, file=scene_file, key=exc.key, expected=exc.expected) from None
+        overlap = overlap + directions @ motion  # the approach of the reference's rigid motion along each spring
         total = geometry.thickness_mm if geometry.thickness_mm is not None else np.full(area.shape, float(scene.cartilage.thickness_mm))
         rows.append({"time_s": float(t), "load_n": load_n, **_ratios(centroid, area, overlap, deflection, pressure_mpa > 0.0, total)})
     return rows

@@ -100,7 +100,7 @@ SOURCE_ROOT = sources.ROOT
 #: the glue every case runs through: their own source is hashed (what they import, per side)
 CASE_GLUE_MODULES = ("verification.runner", "verification.sides", "verification.fe_analytic")
 #: what computes the metrics of every case (hashed with everything it imports)
-METRIC_MODULES = ("verification.metrics", "edem.resultdir")
+METRIC_MODULES = ("verification.metrics", "verification.bed_compliance", "edem.resultdir")
 #: the glue a shared side runs through (its own source; the side's modules are hashed with all they import)
 SIDE_GLUE_MODULES = ("verification.sides",)
 #: the shared sides' store, under the campaign directory
