@@ -7,15 +7,18 @@ layers there have deflected by the overlap of the undeformed surfaces along each
 d = t - h0 + g u: the overlap at M's reference pose plus the approach of the reference's rigid
 motion u along the spring (g = (n, (c - G) x n)), linearised as the DEM's solve and the FE's
 small-sliding contact both take it (re-casting the rays at the moved pose instead reads the DEM's
-own solution on the subject-like ankle 3 % short). Put the reference's own contact pressure through the bed's compliance,
-w = C (p A) (:func:`edem.thin_layer_contact.overlap_and_deflection_mm`), and a bed exact to the
-reference gives w = d at every spring in contact. Reported per time point as the ratio of the
+own solution on the subject-like ankle 3 % short). Put the reference's own contact pressure
+through the bed's compliance, w = C (p A) (:func:`edem.thin_layer_contact.overlap_and_deflection_mm`),
+and a bed exact to the reference gives w = d at every spring in contact. Reported per time point as the ratio of the
 integrals over the contact, int w dA / int d dA, and the same over the contact's interior and over
 the band within one layer thickness of its edge (the width over which a layer's edge effects
 decay: its total thickness T, the median over the contact). The contact is where the reference's
 pressure and d are both positive; where the reference presses but d <= 0 its layers' bulge closed
 the gap, w and d change sign there and a ratio of integrals would mean nothing, so those springs
 are counted (``n_bulge``) but not compared. A ratio below 1 is a bed stiffer than the reference.
+The reference's pressure must be resolved: an FE's nodal pressure (a lumped L2 projection onto
+P1) spreads the contact's edge over a face element, which reads as a stiff bed
+(docs/method.md#7-comparison-metrics).
 """
 
 from __future__ import annotations
@@ -24,11 +27,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from edem.mechanics import generalised_directions
 from edem.pressure_metrics import pressure_field_on_mobile
-from edem.resultdir import read_result_dir
 from edem.raycast import RayCaster
+from edem.resultdir import read_result_dir
 from edem.scene import Scene, load_scene
 from edem.springs import Placement, spring_geometry
 from edem.thin_layer_contact import overlap_and_deflection_mm
@@ -120,8 +124,6 @@ def bed_compliance(scene: Scene, reference_dir: str | Path, scene_file: str | Pa
 def _ratios(centroid_mm: np.ndarray, area_mm2: np.ndarray, overlap_mm: np.ndarray, deflection_mm: np.ndarray,
             pressed: np.ndarray, thickness_mm: np.ndarray) -> dict[str, Any]:
     """The ratios over the contact (pressed and overlapping springs), its interior and its edge band."""
-    from scipy.spatial import cKDTree
-
     contact = pressed & (overlap_mm > 0.0)
     band_mm = float(np.median(thickness_mm[contact])) if contact.any() else 0.0
     outside = ~contact
