@@ -50,6 +50,9 @@ BED_COMPLIANCE_DESCRIPTIONS = {
     for region, what in zip(REGIONS, ("contact", "contact farther than one layer thickness from its edge", "contact within one layer thickness of its edge"), strict=True)
 }
 BED_COMPLIANCE_METRICS = tuple(BED_COMPLIANCE_DESCRIPTIONS)
+#: a per-load analysis's reported columns (name, metric) beside a coupled bed's errors: the contact and its edge band
+BED_COMPLIANCE_QUANTITIES = (("bed deflection under the FE's pressure, contact", "bed_deflection_contact_rel_error"),
+                             ("bed deflection under the FE's pressure, edge band", "bed_deflection_edge_rel_error"))
 
 
 def add_bed_compliance(comparison: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, float]:

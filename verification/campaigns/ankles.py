@@ -27,7 +27,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from verification.bed_compliance import BED_COMPLIANCE_METRICS
+from verification.bed_compliance import BED_COMPLIANCE_METRICS, BED_COMPLIANCE_QUANTITIES
 from verification.campaign_model import COUPLED_BED, THESIS_BED, Analysis, Campaign, Case
 from verification.fe_comparison import FE_TABLE_COLUMNS, banded, fe_comparison_case
 
@@ -57,9 +57,6 @@ AREA_GROWTH = 1.25
 GOAL_QUANTITIES = (("displacement", "displacement_rel_error"), ("regularised peak", "regularised_peak_pressure_rel_error"),
                    ("contact area", "contact_area_rel_error"))
 REPORTED_QUANTITIES = (("pressure L2", "pressure_l2_rel_error"),)
-#: the coupled bed's deflection under the FE's own pressure against the FE's (verification.bed_compliance), beside its errors
-BED_COMPLIANCE_QUANTITIES = (("bed deflection under the FE's pressure, contact", "bed_deflection_contact_rel_error"),
-                             ("bed deflection under the FE's pressure, edge band", "bed_deflection_edge_rel_error"))
 
 
 def load_history(loads_n: tuple[float, ...] = LOADS_N) -> dict[str, Any]:

@@ -14,7 +14,8 @@ its own (scene ``cylinder-two-layers``), 333 N, the two layers frictionless agai
   on one face, Pade and two-pole), and the independent springs. Goal (analysis ``goal``): the
   sandwich within 10 % of the FE in displacement, regularised peak and contact area at nu 0.3,
   0.45, 0.49 and 0.499 (:data:`GOAL_NUS`) for both splits, judged where the FE's own error
-  (``fe-convergence``) is below it.
+  (``fe-convergence``) is below it. Beside it, the sandwich's deflection under the FE's own
+  pressure against the FE's (:mod:`verification.bed_compliance`, reported).
 
 Every FE run is P2 (Taylor-Hood from nu 0.49) at :data:`FE_LEVEL`; the beds of a split and nu
 share its two-layer FE run.
@@ -22,8 +23,10 @@ share its two-layer FE run.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
+from verification.bed_compliance import BED_COMPLIANCE_METRICS, BED_COMPLIANCE_QUANTITIES
 from verification.campaign_model import Analysis, Campaign, Case, Figure
 from verification.fe_comparison import ERROR_PANELS, FE_TABLE_COLUMNS, banded, fe_comparison_case
 
@@ -94,7 +97,10 @@ def _cases() -> list[Case]:
                     f"two-layer cylinder {layers}, nu {nu:g}, {LOAD_N:g} N: DEM, {what}, against the two-layer FE; {element} at {FE_LEVEL['mesh_size_mm']:g} mm",
                     SCENE, ("dem", "fe-two-layer"), overrides={**split_overrides(split, nu), **overrides}, options=FE_LEVEL,
                     params={"poissons_ratio": nu}, maps=(bed == "sandwich" and split == "1-1" and nu == 0.49))
-                cases.append(banded(case) if bed.startswith("sandwich") else case)
+                if bed.startswith("sandwich"):  # the sandwich's operator under the FE's own pressure (verification.bed_compliance; reported)
+                    case = banded(case)
+                    case = dataclasses.replace(case, metrics=case.metrics + BED_COMPLIANCE_METRICS)
+                cases.append(case)
     return cases
 
 
@@ -119,7 +125,8 @@ def campaign() -> Campaign:
                  "table", lumping, {"columns": FE_TABLE_COLUMNS}),
         Analysis("goal", f"The coupled sandwich (Pade, two-pole) against the two-layer FE at nu {', '.join(f'{nu:g}' for nu in GOAL_NUS)}: goal {GOAL_REL:.0%} "
                          "(displacement, regularised peak, area) where the FE's own error is below it",
-                 "per-load", goal_cases, {"quantities": GOAL_QUANTITIES, "reported": (("pressure L2", "pressure_l2_rel_error"),), "goal": GOAL_REL}),
+                 "per-load", goal_cases, {"quantities": GOAL_QUANTITIES, "reported": (("pressure L2", "pressure_l2_rel_error"), *BED_COMPLIANCE_QUANTITIES),
+                                          "goal": GOAL_REL}),
         Analysis("before", "Before the sandwich: the coupled lumped layer (Pade, two-pole) against the two-layer FE, the same goal", "per-load", before,
                  {"quantities": GOAL_QUANTITIES, "reported": (("pressure L2", "pressure_l2_rel_error"),), "goal": GOAL_REL}),
         Analysis("table", "Every bed against the two-layer FE", "table", tuple(c.name for c in cases if not c.name.endswith("-lumping")),
