@@ -118,9 +118,10 @@ def bed_compliance(scene: Scene, reference_dir: str | Path, scene_file: str | Pa
             overlap, deflection = overlap_and_deflection_mm(scene, geometry, pressure_mpa * area)
         except InputError as exc:
             raise InputError(exc.problem, file=scene_file, key=exc.key, expected=exc.expected) from None
+        with np.errstate(invalid="ignore"):  # -inf + inf where a ray meets no F: no thickness there (NaN)
+            thickness = overlap + geometry.spring_length_mm  # t, the springs' total T with both layers
         overlap = overlap + directions @ motion  # the approach of the reference's rigid motion along each spring
-        total = geometry.thickness_mm if geometry.thickness_mm is not None else np.full(area.shape, float(scene.cartilage.thickness_mm))
-        rows.append({"time_s": float(t), "load_n": load_n, **_ratios(centroid, area, overlap, deflection, pressure_mpa > 0.0, total)})
+        rows.append({"time_s": float(t), "load_n": load_n, **_ratios(centroid, area, overlap, deflection, pressure_mpa > 0.0, thickness)})
     return rows
 
 

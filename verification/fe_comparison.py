@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+from verification.bed_compliance import BED_COMPLIANCE_METRICS
 from verification.campaign_model import VALUES_AT_REFERENCE_TIMES, Case, uniform_basis
 from verification.fe_convergence import FE_ERROR_TEXT_METRICS
 from verification.metrics import COMPARISON_METRICS
@@ -79,3 +80,9 @@ def banded(case: Case, area_basis: Basis | None = None) -> Case:
     description = case.description.replace("Generous tolerances (measured, not judged)", "").replace(". Generous tolerances", "").rstrip(" ;.")
     description += f"; {judged} judged against the declared +-{MODEL_BAND_REL:.0%} model band, the raw peak and mean pressure reported"
     return dataclasses.replace(case, tolerance=tolerance, basis=basis, description=description)
+
+
+def with_bed_compliance(case: Case) -> Case:
+    """A DEM-vs-FE case on a coupled gap-law bed that also reports the bed's deflection under the
+    FE's own pressure (:data:`verification.bed_compliance.BED_COMPLIANCE_METRICS`; reported, no tolerance)."""
+    return dataclasses.replace(case, metrics=case.metrics + BED_COMPLIANCE_METRICS)

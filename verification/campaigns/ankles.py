@@ -24,12 +24,11 @@ options) build these cases; :func:`case_names` lists them.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
-from verification.bed_compliance import BED_COMPLIANCE_METRICS, BED_COMPLIANCE_QUANTITIES
+from verification.bed_compliance import BED_COMPLIANCE_QUANTITIES
 from verification.campaign_model import COUPLED_BED, THESIS_BED, Analysis, Campaign, Case
-from verification.fe_comparison import FE_TABLE_COLUMNS, banded, fe_comparison_case
+from verification.fe_comparison import FE_TABLE_COLUMNS, banded, fe_comparison_case, with_bed_compliance
 
 #: wall time with 2 jobs on 2 cores, nothing cached: an estimate, the whole campaign not yet run at :data:`FE_ANKLES`
 #: (2026-11-28: the fe-convergence study's two-layer runs at 0.7 mm took 614-1456 s each, 6.8k s for the six, at
@@ -101,7 +100,7 @@ def ankle_cases(ankles: tuple[str, ...] = tuple(ANKLES), beds: tuple[str, ...] =
                     params={"poissons_ratio": nu}, maps=(ankle == "ideal" and bed == "sandwich" and nu == 0.42)))
                 # the coupled bed's operator under the FE's own pressure (verification.bed_compliance; reported)
                 coupled = overrides.get("cartilage.coupling") == COUPLED_BED["cartilage.coupling"]
-                cases.append(dataclasses.replace(case, metrics=case.metrics + BED_COMPLIANCE_METRICS) if coupled else case)
+                cases.append(with_bed_compliance(case) if coupled else case)
     return cases
 
 
