@@ -116,16 +116,17 @@ def _fe(args: argparse.Namespace) -> int:
         overrides = dict(parse_override(o) for o in args.set)
         scene = load_scene(args.scene, overrides)
         settings = resolve_settings(scene, model=args.model, mesh_size_mm=args.mesh_size, degree=args.degree,
-                                    linear_solver=args.linear_solver, argument_keys=FE_FLAGS)
+                                    linear_solver=args.linear_solver, contact_mesh_size_mm=args.contact_mesh_size, argument_keys=FE_FLAGS)
         steps = parse_steps(args.steps, len(scene.load.time_s))
         out = _out_dir(args, scene.name, settings.method, overrides=overrides)
         record = provenance(args.scene, overrides, {"model": settings.model, "mesh_size_mm": settings.mesh_size_mm, "degree": settings.degree,
-                                                        "linear_solver": settings.linear_solver})
+                                                        "linear_solver": settings.linear_solver,
+                                                        "contact_mesh_size_mm": settings.contact_mesh_size_mm})
         n_solves = len(scene.load.time_s) if steps is None else len(steps)
         if rank == 0 and n_solves > 1 and sys.stderr.isatty():
             bar = _step_bar(n_solves, f"{scene.name} ({settings.method})")
         result = run_scene(scene, model=settings.model, mesh_size_mm=args.mesh_size, degree=args.degree,
-                           linear_solver=args.linear_solver, steps=steps, out_dir=out,
+                           linear_solver=args.linear_solver, contact_mesh_size_mm=args.contact_mesh_size, steps=steps, out_dir=out,
                            overwrite=args.overwrite, provenance=record, progress=None if bar is None else (lambda k: bar.update(1)),
                            on_size=_print_fe_size if rank == 0 else None,
                            solve_progress=_fe_solve_progress(args.progress, bar) if rank == 0 else None)
@@ -153,7 +154,8 @@ def _fe(args: argparse.Namespace) -> int:
 
 
 #: the `edem fe` flag of each resolve_settings argument (errors name what the user typed)
-FE_FLAGS = {"model": "--model", "mesh_size_mm": "--mesh-size", "degree": "--degree", "linear_solver": "--linear-solver"}
+FE_FLAGS = {"model": "--model", "mesh_size_mm": "--mesh-size", "degree": "--degree", "linear_solver": "--linear-solver",
+            "contact_mesh_size_mm": "--contact-mesh-size"}
 
 
 def parse_steps(text: str | None, n: int) -> list[int] | None:
@@ -320,6 +322,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="result directory (default results/<scene>-fe-<model>, plus -set-<hash> with --set)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing result directory (never another kind of directory)")
     p.add_argument("--mesh-size", type=float, metavar="MM", help="element size in mm; overrides [fe] mesh_size_mm")
+    p.add_argument("--contact-mesh-size", type=float, metavar="MM",
+                   help="a finer element size in mm where the contact can reach (the layer models; red-green transition around it); "
+                        "overrides [fe] contact_mesh_size_mm")
     p.add_argument("--degree", type=int, choices=(1, 2), help="element degree (2: P2, or Taylor-Hood at nu >= 0.49); overrides [fe] degree")
     p.add_argument("--linear-solver", metavar="NAME",
                    help="inner linear solve: auto (Krylov from 20,000 unknowns for P2 and Taylor-Hood, or where the LU does not fit in memory, MUMPS LU below), direct or iterative "

@@ -52,7 +52,7 @@ SECTIONS = {
     "ligaments": {"name", "mobile_point_mm", "fixed_point_mm", "youngs_modulus_mpa", "area_mm2", "rest_length_mm"},
     "viscoelastic": {"relaxation_time_s", "contact_set", "integrator", "allow_unstable"},
     "solver": {"method", "allow_bone_overlap"},
-    "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness", "time_scheme", "material"},
+    "fe": {"model", "mesh_size_mm", "degree", "element", "layers_through_thickness", "contact_mesh_size_mm", "time_scheme", "material"},
     "biphasic": {"permeability_mm4_per_n_s", "counter_surface"},  # the FE's (fem_reference.settings.biphasic_settings)
     "opensim": None,  # checked by edem.opensim_model
 }

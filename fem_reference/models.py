@@ -33,6 +33,7 @@ from edem.raycast import RayCaster
 from edem.springs import Placement, spring_geometry
 from fem_reference.problem import DeformableCounterpart, RigidSurface
 from geometries import fe_solids
+from geometries.fe_solids import ContactRefinement
 from geometries.errors import SolverError
 
 
@@ -75,14 +76,21 @@ class FEModel(ABC):
 
     @abstractmethod
     def build(self, scene: Any, mesh_size_mm: float, layers: int | None, caster: RayCaster, f_pose: Placement,
-              obstacle: RigidSurface, pose_key: tuple, cache: dict) -> FEGeometry:
-        """The solid of this time point (``cache`` keeps solids between time points)."""
+              obstacle: RigidSurface, pose_key: tuple, cache: dict, contact_mesh_size_mm: float | None = None) -> FEGeometry:
+        """The solid of this time point (``cache`` keeps solids between time points); with
+        ``contact_mesh_size_mm``, its surface refined to that size where the contact can reach
+        (:func:`contact_refinement`; the models built on M's layer)."""
         ...
 
-    @abstractmethod
     def reach(self, scene: Any, gap_mm: np.ndarray, facing: np.ndarray) -> np.ndarray:
-        """(n,) bool: contact-surface vertices that face F and can reach it under load."""
-        ...
+        """(n,) bool: contact-surface vertices that face F and can reach it under load: within
+        :meth:`reach_depth_mm` of the closest approach (or of touching, where the bodies start apart)."""
+        g0 = float(gap_mm[facing].min()) if facing.any() else 0.0
+        return facing & (gap_mm <= max(g0, 0.0) + self.reach_depth_mm(scene))
+
+    def reach_depth_mm(self, scene: Any) -> float:
+        """How far beyond the closest approach the contact can reach F (mm): half the cartilage."""
+        raise NotImplementedError(f"the FE {self.name} model has its own reach")
 
     @abstractmethod
     def sizing_surface(self, scene: Any, caster: RayCaster, f_pose: Placement) -> tuple[np.ndarray, float]:
@@ -169,7 +177,7 @@ class SlabModel(FEModel):
     name = "slab"
     what = "twin of the threshold law"
 
-    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
+    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache, contact_mesh_size_mm=None):
         key = ("slab", pose_key)
         warnings: list[str] = []
         cached = cache.get(key)
@@ -229,9 +237,10 @@ class LayerModel(FEModel):
     mesh_follows_pose = False
     warm_start_scales_with_load = False
 
-    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
+    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache, contact_mesh_size_mm=None):
         if "solid" not in cache:
-            cache["solid"], cache["solid_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers))
+            contact = contact_refinement(self.reach_depth_mm(scene), obstacle, contact_mesh_size_mm)
+            cache["solid"], cache["solid_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers, contact))
         warnings: list[str] = cache.pop("solid_notes", [])  # the construction's notes, given once
         pts, _, _ = contact_surface(cache["solid"])
         gap, _ = obstacle.gap_and_normal(pts)
@@ -242,10 +251,9 @@ class LayerModel(FEModel):
                 f"({int(np.sum(gap < 0))} contact-surface nodes): it starts pre-compressed")
         return FEGeometry(cache["solid"], obstacle, ("layer", pose_key), warnings)
 
-    def reach(self, scene, gap_mm, facing):
-        t = _largest_thickness_mm(scene)
-        g0 = float(gap_mm[facing].min()) if facing.any() else 0.0
-        return facing & (gap_mm <= max(g0, 0.0) + 0.5 * t)
+    def reach_depth_mm(self, scene: Any) -> float:
+        """Half the layer's largest thickness."""
+        return 0.5 * _largest_thickness_mm(scene)
 
     def thickness_mm(self, scene, solid, used, points_mm):
         # the column under each contact point (uniform: t; measured: the vertex's thickness)
@@ -259,6 +267,25 @@ class LayerModel(FEModel):
 
     def spring_length_mm(self, thickness_mm, gap_mm):
         return thickness_mm + gap_mm
+
+
+def contact_refinement(depth_mm: float, obstacle: RigidSurface, size_mm: float | None) -> ContactRefinement | None:
+    """M's surface refined to ``size_mm`` where the contact can reach F (None: no size, none).
+
+    The layer models' reach (:meth:`FEModel.reach`), judged on M's surface before its layer is
+    built: the vertices within ``depth_mm`` (half the cartilage) of M's closest approach to F
+    (``obstacle``, F at the first time point's pose). For a uniform layer this is the reach of its
+    contact face, whose gap to F is M's less the thickness; it holds for every later pose as long
+    as F's approach stays within that depth, the cartilage's half.
+    """
+    if size_mm is None:
+        return None
+
+    def reaches(points_mm: np.ndarray) -> np.ndarray:
+        gap, _ = obstacle.gap_and_normal(points_mm)
+        return np.isfinite(gap) & (gap <= float(np.nanmin(gap)) + depth_mm)
+
+    return ContactRefinement(float(size_mm), reaches)
 
 
 def _layer_mobile_points_mm(scene: Any, solid: Any, used: np.ndarray) -> np.ndarray:
@@ -277,7 +304,7 @@ def _largest_thickness_mm(scene: Any) -> float:
     return float(scene.cartilage.thickness_mm) if layers is None else float(layers.mobile.thickness_mm.max())
 
 
-def scene_layer_solid(scene: Any, mesh_size_mm: float, n_layers: int | None) -> Any:
+def scene_layer_solid(scene: Any, mesh_size_mm: float, n_layers: int | None, contact: ContactRefinement | None = None) -> Any:
     """The layer model's solid: a uniform ``thickness_mm`` layer on M, or with per-side layers
     (:mod:`edem.thickness`) M's own: with a bone mesh the cartilage between M's articular surface
     and its bone (:func:`geometries.cartilage_solids.measured_layer_solid`), each vertex measured
@@ -288,16 +315,16 @@ def scene_layer_solid(scene: Any, mesh_size_mm: float, n_layers: int | None) -> 
     construction's repairs are issued as warnings (the run's notes)."""
     layers = scene.cartilage.layers
     if layers is None:
-        return fe_solids.layer_solid(scene.mobile, float(scene.cartilage.thickness_mm), mesh_size_mm, n_layers)
+        return fe_solids.layer_solid(scene.mobile, float(scene.cartilage.thickness_mm), mesh_size_mm, n_layers, contact)
     mobile = layers.mobile
     if not mobile.has_bone:
-        return fe_solids.layer_solid(scene.mobile, float(mobile.thickness_mm.max()), mesh_size_mm, n_layers)
+        return fe_solids.layer_solid(scene.mobile, float(mobile.thickness_mm.max()), mesh_size_mm, n_layers, contact)
     import warnings as python_warnings
 
     from geometries.cartilage_solids import measured_layer_solid
 
     solid, notes = measured_layer_solid(scene.mobile, scene.mobile.areas_mm2 > 0, _measured_thickness(mobile, mobile.bone),
-                                        mesh_size_mm, n_layers)
+                                        mesh_size_mm, n_layers, contact)
     for note in notes:  # collected by _build_solid as the construction's notes
         python_warnings.warn(note, stacklevel=2)
     return solid
@@ -375,12 +402,12 @@ def fixed_has_cartilage(scene: Any) -> bool:
     return layers is not None and (layers.fixed.has_bone or float(layers.fixed.thickness_mm.max()) > 0.0)
 
 
-def _cache_mobile_layer(cache: dict, scene, mesh_size_mm, layers) -> list[str]:
+def _cache_mobile_layer(cache: dict, scene, mesh_size_mm, layers, contact: ContactRefinement | None) -> list[str]:
     """M's layer solid (as :class:`LayerModel` builds it), built once per run into ``cache["mobile"]``
     (it does not depend on F's pose); the warnings of building it, once."""
     if "mobile" in cache:
         return []
-    cache["mobile"], notes = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers))
+    cache["mobile"], notes = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers, contact))
     return list(notes)
 
 
@@ -402,9 +429,10 @@ class TwoLayerModel(FEModel):
     warm_start_scales_with_load = False
     bodies = 2
 
-    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
+    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache, contact_mesh_size_mm=None):
         key = ("two-layer", pose_key)
-        warnings = _cache_mobile_layer(cache, scene, mesh_size_mm, layers)
+        contact = contact_refinement(self.reach_depth_mm(scene), obstacle, contact_mesh_size_mm)
+        warnings = _cache_mobile_layer(cache, scene, mesh_size_mm, layers, contact)
         if cache.get("key") != key:
             solid, notes = _build_solid("two-layer solid", lambda: self._paired(scene, cache["mobile"], f_pose, layers))
             cache.update(key=key, solid=solid)
@@ -437,10 +465,9 @@ class TwoLayerModel(FEModel):
             python_warnings.warn(note, stacklevel=2)
         return solid
 
-    def reach(self, scene, gap_mm, facing):
-        t = _largest_thickness_mm(scene) + float(scene.cartilage.layers.fixed.thickness_mm.max())
-        g0 = float(gap_mm[facing].min()) if facing.any() else 0.0
-        return facing & (gap_mm <= max(g0, 0.0) + 0.5 * t)
+    def reach_depth_mm(self, scene: Any) -> float:
+        """Half the two layers' largest thicknesses together."""
+        return 0.5 * (_largest_thickness_mm(scene) + float(scene.cartilage.layers.fixed.thickness_mm.max()))
 
     def sizing_surface(self, scene, caster, f_pose):
         # F's layer stands on M's contact face: as many columns as M's (bodies = 2), the thicker layer's
@@ -477,9 +504,10 @@ class LumpedLayerModel(FEModel):
     needs_thickness = True
     warm_start_scales_with_load = False
 
-    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache):
+    def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache, contact_mesh_size_mm=None):
         key = ("lumped", pose_key)
-        warnings = _cache_mobile_layer(cache, scene, mesh_size_mm, layers)
+        contact = contact_refinement(self.reach_depth_mm(scene), obstacle, contact_mesh_size_mm)
+        warnings = _cache_mobile_layer(cache, scene, mesh_size_mm, layers, contact)
         if cache.get("key") != key:
             (solid, on_mobile), _ = _build_solid("lumped layer", lambda: self._summed(scene, cache["mobile"], f_pose, mesh_size_mm, layers))
             cache.update(key=key, solid=solid, on_mobile=on_mobile)
@@ -517,10 +545,7 @@ class LumpedLayerModel(FEModel):
         on_mobile = points_mm if scene.cartilage.layers.mobile.has_bone else bone
         return solid, on_mobile[column]
 
-    def reach(self, scene, gap_mm, facing):
-        t = _largest_thickness_mm(scene) + float(scene.cartilage.layers.fixed.thickness_mm.max())
-        g0 = float(gap_mm[facing].min()) if facing.any() else 0.0
-        return facing & (gap_mm <= max(g0, 0.0) + 0.5 * t)
+    reach_depth_mm = TwoLayerModel.reach_depth_mm  # the summed layer reaches as the two do
 
     def sizing_surface(self, scene, caster, f_pose):
         return scene.mobile.areas_mm2 > 0, _largest_thickness_mm(scene) + float(scene.cartilage.layers.fixed.thickness_mm.max())

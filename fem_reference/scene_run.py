@@ -54,6 +54,7 @@ Only rank 0 writes files; the sums and gathers are collective, so ``mpirun -n N`
 
 from __future__ import annotations
 
+import math
 import re
 import time
 from collections.abc import Callable, Sequence
@@ -68,7 +69,7 @@ from edem.mechanics import DOF_NAMES
 from edem.raycast import RayCaster
 from edem.resultdir import Frame, Provenance, SurfaceFrame, timeseries_row, write_run
 from fem_reference.fe_stack import fe_modules
-from fem_reference.models import FE_MODELS, FEGeometry, contact_surface
+from fem_reference.models import FE_MODELS, FEGeometry, contact_refinement, contact_surface
 from fem_reference.problem import (
     AREA_DEFINITION_NITSCHE,
     FEContactProblem,
@@ -195,6 +196,7 @@ class FERunResult:
             "element": s.element,
             "degree": s.degree,
             "mesh_size_mm": float(s.mesh_size_mm),
+            "contact_mesh_size_mm": s.contact_mesh_size_mm,
             "mean_edge_mm": max(float(x.mean_edge_mm) for x in steps),
             "layers_through_thickness": max(int(x.layers) for x in steps),
             "newton_iterations": int(sum(x.iterations for x in steps)),
@@ -265,13 +267,30 @@ def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: S
     if not mask.any():
         return None  # the model refuses this with its own message
     edge = mean_edge(scene.mobile.vertices_mm, scene.mobile.triangles[mask])
+    fine_size = settings.contact_mesh_size_mm
+    fine = np.zeros_like(mask)
+    if fine_size is not None:  # the triangles refined further (the model's build, contact_refinement)
+        f_pose = scene.fixed_placement(selected[0])
+        obstacle = RigidSurface(f_pose.points(scene.fixed.vertices_mm), scene.fixed.triangles, candidates=16)
+        fine = mask & contact_refinement(fe_model.reach_depth_mm(scene), obstacle, fine_size).triangles(
+            scene.mobile.vertices_mm, scene.mobile.triangles)
+    layers = settings.layers_through_thickness or max(1, math.ceil(thickness / settings.mesh_size_mm - 1e-9))
 
-    def size_at(mesh_size_mm: float):
-        cells, vertices = solid_size(int(mask.sum()), edge, thickness, mesh_size_mm, settings.layers_through_thickness)
-        return estimate(fe_model.bodies * cells, fe_model.bodies * vertices, settings.element, linear_solver=settings.linear_solver)
+    def size_at(size_mm: float):
+        """The estimate with the size asked about: the contact's where one is given (the finer), else the mesh's."""
+        coarse_mm, fine_mm = (settings.mesh_size_mm, size_mm) if fine_size is not None else (size_mm, size_mm)
+        # the layers follow the mesh size, the solid's (the fine part has as many as the rest)
+        cells, vertices = solid_size(int((mask & ~fine).sum()), edge, thickness, coarse_mm,
+                                     settings.layers_through_thickness if fine_size is None else layers)
+        fine_cells, fine_vertices = solid_size(int(fine.sum()), edge, thickness, fine_mm, layers) if fine.any() else (0, 0)
+        return estimate(fe_model.bodies * (cells + fine_cells), fe_model.bodies * (vertices + fine_vertices), settings.element,
+                        linear_solver=settings.linear_solver)
 
-    size = size_at(settings.mesh_size_mm)
-    check_fits(size, settings.mesh_size_mm, size_at, file=scene.source, key="mesh_size_mm (--mesh-size, or [fe] in the scene)")
+    asked = settings.mesh_size_mm if fine_size is None else fine_size
+    size = size_at(asked)
+    check_fits(size, asked, size_at, file=scene.source,
+               key="mesh_size_mm (--mesh-size, or [fe] in the scene)" if fine_size is None
+               else "contact_mesh_size_mm (--contact-mesh-size, or [fe] in the scene)")
     return size
 
 
@@ -282,7 +301,8 @@ def _build_geometry(scene: Any, settings: FESettings, k: int, caster: RayCaster,
     obstacle = RigidSurface(f_pose.points(scene.fixed.vertices_mm), scene.fixed.triangles, candidates=16)
     pose_key = (np.round(rotation, 14).tobytes(), np.round(translation, 12).tobytes())
     fe_model = FE_MODELS[settings.model]
-    geom = fe_model.build(scene, settings.mesh_size_mm, settings.layers_through_thickness, caster, f_pose, obstacle, pose_key, solid_cache)
+    geom = fe_model.build(scene, settings.mesh_size_mm, settings.layers_through_thickness, caster, f_pose, obstacle, pose_key, solid_cache,
+                          settings.contact_mesh_size_mm)
     if geom.mobile_points_mm is None:
         geom.mobile_points_mm = fe_model.mobile_points_mm(scene, geom.solid, contact_surface(geom.solid)[2])
     return geom
@@ -411,7 +431,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
               degree: int | None = None, element: str | None = None,
               linear_solver: str | None = None,
               steps: Sequence[int] | None = None, out_dir: str | Path | None = None,
-              layers_through_thickness: int | None = None, comm: Any = None,
+              layers_through_thickness: int | None = None, contact_mesh_size_mm: float | None = None, comm: Any = None,
               progress: Callable[[int], None] | None = None, overwrite: bool = False,
               on_size: Callable[[Any], None] | None = None, provenance: Provenance | None = None,
               solve_progress: SolveProgress | None = None) -> FERunResult:
@@ -419,7 +439,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     points and, with ``out_dir``, write the result directory (docs/result-format.md) (rank 0 only).
 
     Settings come from the arguments, then the scene's ``[fe]`` table (model, mesh_size_mm,
-    degree, element, layers_through_thickness, linear_solver), then the defaults
+    degree, element, layers_through_thickness, contact_mesh_size_mm, linear_solver), then the defaults
     (:func:`resolve_settings`).
     ``steps``: None (all) or time point indices (negative ones count from the end).
     ``progress(k)`` is called after each solved time point. ``overwrite``: replace an existing
@@ -439,7 +459,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
     reset_peak_memory()
     settings = resolve_settings(scene, model=model, mesh_size_mm=mesh_size_mm, degree=degree,
                                 element=element, layers_through_thickness=layers_through_thickness,
-                                linear_solver=linear_solver)
+                                linear_solver=linear_solver, contact_mesh_size_mm=contact_mesh_size_mm)
     n_times = len(scene.load.time_s)
     selected = _selected_steps(steps, n_times)
     try:

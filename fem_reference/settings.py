@@ -62,6 +62,8 @@ class FESettings:
     linear_solver: str = "auto"
     # [fe] material = "biphasic": the scene's [biphasic] (None: elastic)
     biphasic: BiphasicSettings | None = None
+    # the surface refined further to this size where the contact can reach (None: mesh_size_mm everywhere)
+    contact_mesh_size_mm: float | None = None
 
     @property
     def method(self) -> str:
@@ -71,7 +73,7 @@ class FESettings:
 def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: float | None = None,
                      degree: int | None = None, element: str | None = None,
                      layers_through_thickness: int | None = None, time_scheme: str | None = None,
-                     linear_solver: str | None = None,
+                     linear_solver: str | None = None, contact_mesh_size_mm: float | None = None,
                      argument_keys: Mapping[str, str] | None = None) -> FESettings:
     """Arguments first, then the scene's ``[fe]`` table, then the defaults.
 
@@ -80,6 +82,8 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     element: "auto" (default) is P1 for degree 1 and P2 for degree 2, and Taylor-Hood (P2-P1 u-p,
     degree 2) when nu >= 0.49 unless the degree is given as 1 (P1 then locks: the core warns).
     mesh_size_mm: default :data:`DEFAULT_MESH_SIZE_MM` of the degree.
+    contact_mesh_size_mm: a finer size where the contact can reach (the models built on M's layer,
+    :func:`fem_reference.models.contact_refinement`); default None, ``mesh_size_mm`` everywhere.
     time_scheme: the implicit scheme of a viscoelastic or biphasic scene (:mod:`fem_reference.viscoelastic`,
     :mod:`fem_reference.biphasic`), default BDF2.
     The scene's ``[fe] material`` (:data:`MATERIALS`, default elastic): "biphasic" takes its
@@ -149,6 +153,14 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
             math.isfinite(size) and size > 0):
         raise InputError(f"{size!r} is not a mesh size", file=file, key=size_key,
                          expected="a length in mm > 0")
+    fine, fine_key = pick(contact_mesh_size_mm, "contact_mesh_size_mm")
+    if fine is not None and (isinstance(fine, bool) or not isinstance(fine, (int, float)) or not (
+            math.isfinite(fine) and 0 < fine < size)):
+        raise InputError(f"{fine!r} is not a contact mesh size", file=file, key=fine_key,
+                         expected=f"a length in mm > 0 and below the mesh size, {size:g} mm")
+    if fine is not None and fe_model.name == "slab":
+        raise InputError("the FE slab is built under the threshold law's candidates, all in contact: it has no region to refine",
+                         file=file, key=fine_key, expected="no contact mesh size (or the layer, two-layer or lumped model)")
     layers, layers_key = pick(layers_through_thickness, "layers_through_thickness")
     if layers is not None and (isinstance(layers, bool) or not isinstance(layers, int)
                                or layers < 1):
@@ -195,7 +207,8 @@ def resolve_settings(scene: Any, *, model: str | None = None, mesh_size_mm: floa
     if solver not in LINEAR_SOLVERS:
         raise InputError(f"unknown linear solver {solver!r}", file=file, key=solver_key,
                          expected="; ".join(f"{k} ({v})" for k, v in LINEAR_SOLVERS.items()))
-    return FESettings(fe_model.name, el, el_degree, float(size), layers, scheme, solver, biphasic_table)
+    return FESettings(fe_model.name, el, el_degree, float(size), layers, scheme, solver, biphasic_table,
+                      None if fine is None else float(fine))
 
 
 def biphasic_settings(scene: Any) -> BiphasicSettings:

@@ -24,7 +24,8 @@ from collections.abc import Callable
 import numpy as np
 
 from geometries.fe_solids import (
-    FESolid, extrude, inverted_prisms, layers_for, levels_for, mean_edge, refine, rim_triangles, submesh, vertex_normals,
+    ContactRefinement, FESolid, extrude, inverted_prisms, layers_for, levels_for, mean_edge, refine, rim_triangles, submesh,
+    vertex_normals,
 )
 from geometries.surface import TriangleSurface
 
@@ -116,6 +117,7 @@ def measured_layer_solid(
     thickness_at: Callable[[np.ndarray, np.ndarray], np.ndarray],
     mesh_size_mm: float | None = None,
     layers_through_thickness: int | None = None,
+    contact: ContactRefinement | None = None,
 ) -> tuple[FESolid, list[str]]:
     """The cartilage between an articular surface and its bone, bonded to the bone.
 
@@ -134,6 +136,9 @@ def measured_layer_solid(
         mean edge is at most this; every vertex then has its thickness measured.
     layers_through_thickness : int, optional
         Element layers (default: ceil(largest thickness / mesh size)).
+    contact : ContactRefinement, optional
+        Where the contact can reach (judged on the articular vertices), the surface is refined
+        further, to its size.
 
     Returns
     -------
@@ -150,7 +155,7 @@ def measured_layer_solid(
     # subdivided first, so that every vertex of the solid has its own measured thickness
     verts, tris, _ = submesh(articular, mask)
     size = mesh_size_mm if mesh_size_mm is not None else mean_edge(verts, tris)
-    verts, tris, _ = refine(verts, tris, [], levels_for(mesh_size_mm, verts, tris))
+    verts, tris, _ = refine(verts, tris, [], levels_for(mesh_size_mm, verts, tris), contact)
     surface = TriangleSurface(verts, tris, name=articular.name, source=articular.source)
     notes: list[str] = []
     smoothed = 0

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from geometries.builders.gmsh_session import gmsh_model
-from geometries.surface import TriangleSurface, midpoint_subdivision
+from geometries.surface import TriangleSurface, midpoint_subdivision, red_green_subdivision
 from geometries.triangle_kernels import triangle_areas
 
 
@@ -484,20 +484,66 @@ def extrude(name: str, bottom: np.ndarray, triangles: np.ndarray, normals: np.nd
 
 
 def refine(vertices: np.ndarray, triangles: np.ndarray, vertex_fields: list[np.ndarray],
-            levels: int) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
-    """Midpoint subdivision (1 -> 4), fields interpolated linearly; vector fields renormalised
-    when they are unit normals (shape (n, 3))."""
+           levels: int, contact: "ContactRefinement | None" = None) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Midpoint subdivision (1 -> 4) ``levels`` times, then where ``contact`` asks, its further
+    levels on the triangles that can reach the other body (red-green closure around them:
+    :func:`geometries.surface.red_green_subdivision`). Fields are interpolated linearly; vector
+    fields renormalised when they are unit normals (shape (n, 3))."""
+    fine = np.zeros(len(triangles), bool) if contact is None else contact.triangles(vertices, triangles)
     for _ in range(levels):
         triangles, pairs = midpoint_subdivision(triangles, len(vertices))
-        vertices = np.vstack([vertices, 0.5 * (vertices[pairs[:, 0]] + vertices[pairs[:, 1]])])
-        new_fields = []
-        for f in vertex_fields:
-            mid = 0.5 * (f[pairs[:, 0]] + f[pairs[:, 1]])
-            if f.ndim == 2:
-                mid /= np.linalg.norm(mid, axis=1)[:, None]
-            new_fields.append(np.concatenate([f, mid]))
-        vertex_fields = new_fields
+        fine = np.repeat(fine, 4)  # child k of triangle i is row 4 i + k
+        vertices, vertex_fields = _with_midpoints(vertices, vertex_fields, pairs)
+    local = contact.levels_beyond(levels, vertices, triangles) if contact is not None and fine.any() else 0
+    green = np.zeros(len(triangles), bool)
+    for level in range(local):
+        # Each pass marks the reach grown by two rings of its triangles per pass still to come, so a
+        # pass's marked triangles lie at least two of the last pass's rings inside its marked ones,
+        # away from its bisected (green) border, and the finest size covers the reach itself.
+        marked = _grown(fine, triangles, 2 * (local - 1 - level))
+        triangles, pairs, parent, green = red_green_subdivision(triangles, len(vertices), marked, green)
+        fine = fine[parent] & marked[parent]  # the reach's triangles, all split 1 -> 4
+        vertices, vertex_fields = _with_midpoints(vertices, vertex_fields, pairs)
     return vertices, triangles, vertex_fields
+
+
+def _grown(mask: np.ndarray, triangles: np.ndarray, rings: int) -> np.ndarray:
+    """(n,) bool: ``mask`` grown by ``rings`` rings of triangles (sharing a vertex)."""
+    for _ in range(rings):
+        touched = np.zeros(int(triangles.max()) + 1, bool)
+        touched[triangles[mask]] = True
+        mask = touched[triangles].any(axis=1)
+    return mask
+
+
+def _with_midpoints(vertices: np.ndarray, vertex_fields: list[np.ndarray], pairs: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The vertices and fields with the midpoints of the edges ``pairs`` (e, 2) appended."""
+    fields = []
+    for f in vertex_fields:
+        mid = 0.5 * (f[pairs[:, 0]] + f[pairs[:, 1]])
+        if f.ndim == 2:
+            mid /= np.linalg.norm(mid, axis=1)[:, None]
+        fields.append(np.concatenate([f, mid]))
+    return np.vstack([vertices, 0.5 * (vertices[pairs[:, 0]] + vertices[pairs[:, 1]])]), fields
+
+
+@dataclass(frozen=True)
+class ContactRefinement:
+    """A finer surface where the contact can reach: the triangles with a vertex that ``reaches``
+    are subdivided until their edges are at most ``mesh_size_mm`` (the rest keep the solid's
+    mesh size), with a conforming red-green transition around them."""
+
+    mesh_size_mm: float
+    #: ``reaches(vertices (k, 3) mm) -> (k,) bool``: where the contact can reach
+    reaches: Any
+
+    def triangles(self, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+        """(n,) bool: the triangles to refine (a vertex of theirs reaches)."""
+        return np.asarray(self.reaches(vertices), bool)[triangles].any(axis=1)
+
+    def levels_beyond(self, levels: int, vertices: np.ndarray, triangles: np.ndarray) -> int:
+        """Local levels after ``levels`` uniform ones (the surface then at hand) to reach the size."""
+        return levels_for(self.mesh_size_mm, vertices, triangles)
 
 
 def mean_edge(vertices: np.ndarray, triangles: np.ndarray) -> float:
@@ -570,12 +616,14 @@ def layer_solid(
     thickness_mm: float,
     mesh_size_mm: float | None = None,
     layers_through_thickness: int | None = None,
+    contact: ContactRefinement | None = None,
 ) -> FESolid:
     """Uniform cartilage layer of thickness t bonded to the whole mobile surface (docs/method.md#6-the-fe-reference-and-its-discrete-twins).
 
     Every vertex of M is offset along its area-weighted vertex normal by ``thickness_mm``
     (exactly t at the vertices); layers default to ceil(t / mesh size); the surface is
-    midpoint-subdivided first when ``mesh_size_mm`` is below its mean edge length.
+    midpoint-subdivided first when ``mesh_size_mm`` is below its mean edge length, and further
+    where ``contact`` reaches (:class:`ContactRefinement`, judged on M's vertices).
     """
     t = float(thickness_mm)
     if not (math.isfinite(t) and t > 0):
@@ -584,6 +632,6 @@ def layer_solid(
     verts, tris, _, normals, _ = _trim_inverting_rim("layer", mobile, mask, lambda v, *_: np.full(len(v), t))
     size = mesh_size_mm if mesh_size_mm is not None else mean_edge(verts, tris)
     levels = levels_for(mesh_size_mm, verts, tris)
-    verts, tris, (normals,) = refine(verts, tris, [normals], levels)
+    verts, tris, (normals,) = refine(verts, tris, [normals], levels, contact)
     nl = layers_for(layers_through_thickness, t, size)
     return extrude("layer", verts, tris, normals, np.full(len(verts), t), nl)

@@ -81,7 +81,7 @@ DEM_ONLY_OVERRIDES = tuple(f"cartilage.{key}" for key in bed_keys()) + (
     "geometry.spring_spacing_mm")
 #: options of a case that reach the FE reference of its scene as fem_reference.run_scene's
 #: settings (fem_reference.settings.resolve_settings: they override the scene's [fe] table)
-FE_SCENE_OPTIONS = ("mesh_size_mm", "degree", "element", "layers_through_thickness")
+FE_SCENE_OPTIONS = ("mesh_size_mm", "degree", "element", "layers_through_thickness", "contact_mesh_size_mm")
 #: the options of a case the FE reference of a scene reads: its settings and the time points to solve
 FE_OPTIONS = FE_SCENE_OPTIONS + ("steps",)
 

@@ -227,6 +227,33 @@ def test_layer_contact_only_after_the_gap_closes(tmp_path):
         assert np.allclose(fr.point_data["pressure_mpa"], f[k] / 400.0, rtol=1e-8)
 
 
+def test_refining_where_the_contact_reaches_gives_what_refining_everywhere_gives(tmp_path):
+    """[fe] contact_mesh_size_mm (fem_reference.models.contact_refinement): the cylinder layer
+    (10 mm long, 111 N: the scene's line load; P2, two elements through the layer) on M's own
+    triangles (1.0 mm), halved everywhere, and halved only where the contact can reach
+    (red-green around it). Away from the contact the bonded layer carries almost no load, so the
+    graded mesh must recover what the halving changes: its regularised peak and area within 1 %
+    of that change from the halved mesh's (the option's purpose, not a measured value), with
+    fewer DOFs. (The displacement, which the halving moves by 0.04 % at P2, is left out.)"""
+    common = ("--set", "fe.layers_through_thickness=2", "--set", "geometry.width_mm=10.0", "--set", "load.force_n=[0.0, 0.0, 111.0]")
+    runs = {name: edem_fe(tmp_path / name, "cylinder-layer", *common, *args) for name, args in (
+        ("coarse", ("--mesh-size", "1.0")), ("halved", ("--mesh-size", "0.5")),
+        ("graded", ("--mesh-size", "1.0", "--contact-mesh-size", "0.5")))}
+    keys = ("regularised_peak_pressure_mpa", "contact_area_on_mobile_mm2")
+
+    def value(run: dict, key: str) -> float:
+        return float(np.ravel(run[key])[-1])
+
+    report("graded mesh", **{f"{name}_{key}": value(run, key) for name, run in runs.items() for key in keys},
+           dofs=[run["n_dofs"] for run in runs.values()])
+    for key in keys:
+        change = value(runs["halved"], key) - value(runs["coarse"], key)
+        assert abs(change) > 1e-3 * abs(value(runs["halved"], key))  # the halving moves it: the check can fail
+        assert abs(value(runs["graded"], key) - value(runs["halved"], key)) <= 0.01 * abs(change)
+    assert runs["coarse"]["n_dofs"] < runs["graded"]["n_dofs"] < runs["halved"]["n_dofs"]
+    assert runs["graded"]["contact_mesh_size_mm"] == 0.5
+
+
 def test_steps_pick_time_points(tmp_path):
     """Invariant: --steps solves only the chosen time points, each as an independent static
     solve: the rows and .vtp files are those time points, and their answers are the closed form
@@ -382,6 +409,9 @@ def test_fe_refuses_per_side_layers_it_cannot_model_naming_the_key(capsys, model
     (["--set", "fe.model=shell"], "fe.model"),
     (["--set", "fe.element=P2", "--degree", "1"], "--degree"),
     (["--mesh-size", "-1"], "--mesh-size"),
+    (["--contact-mesh-size", "-1"], "--contact-mesh-size"),
+    (["--contact-mesh-size", "0.5"], "--contact-mesh-size"),  # the slab: every candidate is in contact, nothing to refine
+    (["--mesh-size", "1", "--contact-mesh-size", "1"], "--contact-mesh-size"),  # not finer than the mesh
     (["--set", 'fe.time_scheme="rk4"'], "fe.time_scheme"),
     (["--linear-solver", "cholesky"], "--linear-solver"),
     (["--set", 'fe.linear_solver="lu"'], "fe.linear_solver"),
