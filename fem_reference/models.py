@@ -48,6 +48,8 @@ class FEGeometry:
     #: (n, 3) per contact-face point (contact_surface's order) where its column crosses M's scene
     #: surface (FEModel.mobile_points_mm; fem_reference.scene_run sets it)
     mobile_points_mm: np.ndarray | None = None
+    #: where the solid's surface was refined further (contact_refinement), or None
+    refinement: ContactRefinement | None = None
 
 
 def contact_surface(solid: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -239,8 +241,8 @@ class LayerModel(FEModel):
 
     def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache, contact_mesh_size_mm=None):
         if "solid" not in cache:
-            contact = contact_refinement(self.reach_depth_mm(scene), obstacle, contact_mesh_size_mm)
-            cache["solid"], cache["solid_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers, contact))
+            cache["refinement"] = contact_refinement(scene, self.reach_depth_mm(scene), obstacle, contact_mesh_size_mm)
+            cache["solid"], cache["solid_notes"] = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers, cache["refinement"]))
         warnings: list[str] = cache.pop("solid_notes", [])  # the construction's notes, given once
         pts, _, _ = contact_surface(cache["solid"])
         gap, _ = obstacle.gap_and_normal(pts)
@@ -249,7 +251,7 @@ class LayerModel(FEModel):
             warnings.append(
                 f"the layer overlaps the fixed body by up to {overlap:.3g} mm "
                 f"({int(np.sum(gap < 0))} contact-surface nodes): it starts pre-compressed")
-        return FEGeometry(cache["solid"], obstacle, ("layer", pose_key), warnings)
+        return FEGeometry(cache["solid"], obstacle, ("layer", pose_key), warnings, refinement=cache["refinement"])
 
     def reach_depth_mm(self, scene: Any) -> float:
         """Half the layer's largest thickness."""
@@ -269,21 +271,24 @@ class LayerModel(FEModel):
         return thickness_mm + gap_mm
 
 
-def contact_refinement(depth_mm: float, obstacle: RigidSurface, size_mm: float | None) -> ContactRefinement | None:
+def contact_refinement(scene: Any, depth_mm: float, obstacle: RigidSurface, size_mm: float | None) -> ContactRefinement | None:
     """M's surface refined to ``size_mm`` where the contact can reach F (None: no size, none).
 
-    The layer models' reach (:meth:`FEModel.reach`), judged on M's surface before its layer is
-    built: the vertices within ``depth_mm`` (half the cartilage) of M's closest approach to F
-    (``obstacle``, F at the first time point's pose). For a uniform layer this is the reach of its
-    contact face, whose gap to F is M's less the thickness; it holds for every later pose as long
-    as F's approach stays within that depth, the cartilage's half.
+    The layer models' reach (:meth:`FEModel.reach`), judged on M's scene surface (the surface the
+    layer is built on) before its layer is built: the points within ``depth_mm`` (half the
+    cartilage) of M's closest approach to F (``obstacle``, F at the first time point's pose). For a
+    uniform layer this is the reach of its contact face, whose gap to F is M's less the thickness;
+    it holds for every later pose as long as F's approach stays within that depth (the run warns
+    where the contact goes beyond it, :func:`fem_reference.scene_run.run_scene`).
     """
     if size_mm is None:
         return None
+    gap, _ = obstacle.gap_and_normal(scene.mobile.vertices_mm)
+    within_mm = float(np.nanmin(gap)) + depth_mm
 
     def reaches(points_mm: np.ndarray) -> np.ndarray:
         gap, _ = obstacle.gap_and_normal(points_mm)
-        return np.isfinite(gap) & (gap <= float(np.nanmin(gap)) + depth_mm)
+        return np.isfinite(gap) & (gap <= within_mm)
 
     return ContactRefinement(float(size_mm), reaches)
 
@@ -402,12 +407,15 @@ def fixed_has_cartilage(scene: Any) -> bool:
     return layers is not None and (layers.fixed.has_bone or float(layers.fixed.thickness_mm.max()) > 0.0)
 
 
-def _cache_mobile_layer(cache: dict, scene, mesh_size_mm, layers, contact: ContactRefinement | None) -> list[str]:
-    """M's layer solid (as :class:`LayerModel` builds it), built once per run into ``cache["mobile"]``
+def _cache_mobile_layer(cache: dict, scene, mesh_size_mm, layers, depth_mm: float, obstacle: RigidSurface,
+                        contact_mesh_size_mm: float | None) -> list[str]:
+    """M's layer solid (as :class:`LayerModel` builds it, refined within ``depth_mm`` of the contact
+    to ``contact_mesh_size_mm``), built once per run into ``cache["mobile"]`` with its refinement
     (it does not depend on F's pose); the warnings of building it, once."""
     if "mobile" in cache:
         return []
-    cache["mobile"], notes = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers, contact))
+    cache["refinement"] = contact_refinement(scene, depth_mm, obstacle, contact_mesh_size_mm)
+    cache["mobile"], notes = _build_solid("layer", lambda: scene_layer_solid(scene, mesh_size_mm, layers, cache["refinement"]))
     return list(notes)
 
 
@@ -431,8 +439,7 @@ class TwoLayerModel(FEModel):
 
     def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache, contact_mesh_size_mm=None):
         key = ("two-layer", pose_key)
-        contact = contact_refinement(self.reach_depth_mm(scene), obstacle, contact_mesh_size_mm)
-        warnings = _cache_mobile_layer(cache, scene, mesh_size_mm, layers, contact)
+        warnings = _cache_mobile_layer(cache, scene, mesh_size_mm, layers, self.reach_depth_mm(scene), obstacle, contact_mesh_size_mm)
         if cache.get("key") != key:
             solid, notes = _build_solid("two-layer solid", lambda: self._paired(scene, cache["mobile"], f_pose, layers))
             cache.update(key=key, solid=solid)
@@ -446,7 +453,7 @@ class TwoLayerModel(FEModel):
         if overlap > 1e-9 * float(scene.cartilage.max_spring_length_mm):
             warnings.append(f"the two layers overlap by up to {overlap:.3g} mm ({int(np.sum(gap < 0))} contact-surface "
                             "nodes): they start pre-compressed")
-        return FEGeometry(solid, counterpart, key, warnings)
+        return FEGeometry(solid, counterpart, key, warnings, refinement=cache["refinement"])
 
     @staticmethod
     def _paired(scene: Any, mobile: Any, f_pose: Placement, n_layers: int | None) -> Any:
@@ -506,8 +513,7 @@ class LumpedLayerModel(FEModel):
 
     def build(self, scene, mesh_size_mm, layers, caster, f_pose, obstacle, pose_key, cache, contact_mesh_size_mm=None):
         key = ("lumped", pose_key)
-        contact = contact_refinement(self.reach_depth_mm(scene), obstacle, contact_mesh_size_mm)
-        warnings = _cache_mobile_layer(cache, scene, mesh_size_mm, layers, contact)
+        warnings = _cache_mobile_layer(cache, scene, mesh_size_mm, layers, self.reach_depth_mm(scene), obstacle, contact_mesh_size_mm)
         if cache.get("key") != key:
             (solid, on_mobile), _ = _build_solid("lumped layer", lambda: self._summed(scene, cache["mobile"], f_pose, mesh_size_mm, layers))
             cache.update(key=key, solid=solid, on_mobile=on_mobile)
@@ -520,7 +526,7 @@ class LumpedLayerModel(FEModel):
         if overlap > 1e-9 * float(scene.cartilage.max_spring_length_mm):
             warnings.append(f"the lumped layer overlaps F's bone by up to {overlap:.3g} mm ({int(np.sum(gap < 0))} contact-surface "
                             "nodes): it starts pre-compressed")
-        return FEGeometry(cache["solid"], bone_obstacle, key, warnings, cache["on_mobile"])
+        return FEGeometry(cache["solid"], bone_obstacle, key, warnings, cache["on_mobile"], cache["refinement"])
 
     @staticmethod
     def _summed(scene: Any, mobile: Any, f_pose: Placement, mesh_size_mm: float, n_layers: int | None) -> tuple[Any, np.ndarray]:

@@ -272,7 +272,7 @@ def _check_size(scene: Any, settings: FESettings, caster: RayCaster, selected: S
     if fine_size is not None:  # the triangles refined further (the model's build, contact_refinement)
         f_pose = scene.fixed_placement(selected[0])
         obstacle = RigidSurface(f_pose.points(scene.fixed.vertices_mm), scene.fixed.triangles, candidates=16)
-        fine = mask & contact_refinement(fe_model.reach_depth_mm(scene), obstacle, fine_size).triangles(
+        fine = mask & contact_refinement(scene, fe_model.reach_depth_mm(scene), obstacle, fine_size).triangles(
             scene.mobile.vertices_mm, scene.mobile.triangles)
     layers = settings.layers_through_thickness or max(1, math.ceil(thickness / settings.mesh_size_mm - 1e-9))
 
@@ -561,6 +561,7 @@ def run_scene(scene: Any, *, model: str | None = None, mesh_size_mm: float | Non
         step_warnings += [w for w in res.warnings if not w.startswith("max nominal strain")]
         results.append(_step_result(k, t, force, moment, geom, settings, res, clock, scene))
         res.fields = None  # the dolfinx objects of this solve are no longer needed
+        step_warnings += _beyond_refinement(geom, results[-1], settings)
         if results[-1].max_nominal_strain > STRAIN_WARNING:
             step_warnings.append(
                 f"nominal strain {results[-1].max_nominal_strain:.3f} (compression / thickness) "
@@ -585,6 +586,20 @@ def world_rank() -> int:
         return int(fe_modules()["MPI"].COMM_WORLD.rank)
     except ImportError:
         return 0
+
+
+def _beyond_refinement(geom: FEGeometry, step: FEStepResult, settings: FESettings) -> list[str]:
+    """A warning where the contact reaches beyond the region refined to the contact mesh size
+    (judged at the first time point's pose; there the mesh is the coarser one), else none."""
+    if geom.refinement is None:
+        return []
+    touching = step.point_data["in_contact"].astype(bool)
+    beyond = touching & ~geom.refinement.reaches(geom.mobile_points_mm)
+    if not beyond.any():
+        return []
+    return [f"the contact reaches {int(beyond.sum())} of its {int(touching.sum())} contact-face nodes beyond the region refined to "
+            f"{settings.contact_mesh_size_mm:g} mm (where it could reach at the first time point's pose): the mesh there is "
+            f"{settings.mesh_size_mm:g} mm (a finer mesh_size_mm, or a run per pose)"]
 
 
 def _add(warnings: list[tuple[str, str]], step_warnings: list[str], where: str) -> None:

@@ -254,6 +254,19 @@ def test_refining_where_the_contact_reaches_gives_what_refining_everywhere_gives
     assert runs["graded"]["contact_mesh_size_mm"] == 0.5
 
 
+def test_a_contact_beyond_the_refined_region_is_warned(tmp_path):
+    """The refined region is where the contact can reach at the first pose: within half the 2 mm
+    layer (1 mm) of the closest approach. At 333 N the approach is 0.25 mm: the contact stays
+    inside, no warning. At 4190 N it is 1.4 mm, past that reach: the run warns at that time
+    point, naming both sizes."""
+    s = edem_fe(tmp_path / "fe", "cylinder-layer", "--degree", "1", "--mesh-size", "1.0", "--contact-mesh-size", "0.5",
+                "--set", "load.time_s=[0.0, 1.0]", "--set", "load.force_n=[[0.0, 0.0, 333.0], [0.0, 0.0, 4190.0]]")
+    beyond = [w for w in s["warnings"] if "beyond the region refined to 0.5 mm" in w]
+    assert len(beyond) == 1 and "time point 1" in beyond[0] and "time point 0" not in beyond[0] and "the mesh there is 1 mm" in beyond[0]
+    _, rows = timeseries(tmp_path / "fe")
+    assert rows[0]["disp_z_mm"] < 1.0 < rows[1]["disp_z_mm"]
+
+
 def test_steps_pick_time_points(tmp_path):
     """Invariant: --steps solves only the chosen time points, each as an independent static
     solve: the rows and .vtp files are those time points, and their answers are the closed form
