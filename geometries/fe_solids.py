@@ -502,7 +502,7 @@ def refine(vertices: np.ndarray, triangles: np.ndarray, vertex_fields: list[np.n
         # away from its bisected (green) border, and the finest size covers the reach itself.
         marked = _grown(fine, triangles, 2 * (local - 1 - level))
         triangles, pairs, parent, green = red_green_subdivision(triangles, len(vertices), marked, green)
-        fine = fine[parent] & marked[parent]  # the reach's triangles, all split 1 -> 4
+        fine = fine[parent]  # the reach's triangles' children (all of them split 1 -> 4)
         vertices, vertex_fields = _with_midpoints(vertices, vertex_fields, pairs)
     return vertices, triangles, vertex_fields
 

@@ -67,20 +67,13 @@ class TriangleSurface:
 def midpoint_subdivision(triangles: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """One 1 -> 4 midpoint subdivision of a triangulation, orientation kept.
 
-    Returns the new triangles and the (n_edges, 2) vertex pairs of the unique edges: the caller
-    appends one new vertex per edge, in that order, after the ``n_vertices`` existing ones (the
-    edge midpoint, projected or interpolated as the caller needs).
+    Returns the new triangles (child k of triangle i is row 4 i + k) and the (n_edges, 2) vertex
+    pairs of the unique edges, sorted: the caller appends one new vertex per edge, in that order,
+    after the ``n_vertices`` existing ones (the edge midpoint, projected or interpolated as the
+    caller needs). Every triangle marked in :func:`red_green_subdivision`.
     """
-    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
-    pairs, inverse = np.unique(edges, axis=0, return_inverse=True)
-    mid = inverse.reshape(3, -1).T + n_vertices
-    ab, bc, ca = mid[:, 0], mid[:, 1], mid[:, 2]
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    children = np.stack(
-        [np.column_stack([a, ab, ca]), np.column_stack([ab, b, bc]), np.column_stack([ca, bc, c]), np.column_stack([ab, bc, ca])],
-        axis=1,
-    )
-    return children.reshape(-1, 3), pairs
+    children, pairs, _, _ = red_green_subdivision(triangles, n_vertices, np.ones(len(triangles), bool))
+    return children, pairs
 
 
 def red_green_subdivision(
