@@ -90,9 +90,10 @@ class FEModel(ABC):
         g0 = float(gap_mm[facing].min()) if facing.any() else 0.0
         return facing & (gap_mm <= max(g0, 0.0) + self.reach_depth_mm(scene))
 
+    @abstractmethod
     def reach_depth_mm(self, scene: Any) -> float:
-        """How far beyond the closest approach the contact can reach F (mm): half the cartilage."""
-        raise NotImplementedError(f"the FE {self.name} model has its own reach")
+        """How far beyond the closest approach the contact can reach F (mm)."""
+        ...
 
     @abstractmethod
     def sizing_surface(self, scene: Any, caster: RayCaster, f_pose: Placement) -> tuple[np.ndarray, float]:
@@ -213,8 +214,9 @@ class SlabModel(FEModel):
         cache[key] = solid
         return FEGeometry(solid, obstacle, key, warnings)
 
-    def reach(self, scene, gap_mm, facing):
-        return facing & (gap_mm <= 1e-3 * float(scene.cartilage.max_spring_length_mm))
+    def reach_depth_mm(self, scene):
+        # the slab starts touching F wherever it stands: its reach is the touching face, to round-off of its placing
+        return 1e-3 * float(scene.cartilage.max_spring_length_mm)
 
     def sizing_surface(self, scene, caster, f_pose):
         from fem_reference.sizing import candidate_surface
